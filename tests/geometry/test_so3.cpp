@@ -54,8 +54,10 @@ TEST(So3, RightJacobianMatchesFiniteDifferences) {
 
 TEST(So3, RpyRoundTripAndConvention) {
   // Rz(yaw)·Ry(pitch)·Rx(roll): a pure yaw of 90° maps x to y.
-  EXPECT_LT((FromRpy(0, 0, std::numbers::pi / 2) * Eigen::Vector3d::UnitX() -
-             Eigen::Vector3d::UnitY()).norm(), 1e-15);
+  EXPECT_LT(
+      (FromRpy(0, 0, std::numbers::pi / 2) * Eigen::Vector3d::UnitX() - Eigen::Vector3d::UnitY())
+          .norm(),
+      1e-15);
   std::mt19937 rng(4);
   std::uniform_real_distribution<double> u(-1.5, 1.5);
   for (int i = 0; i < 100; ++i) {

@@ -114,7 +114,9 @@ Eigen::Vector4d QuatMultiply(const Eigen::Vector4d& a, const Eigen::Vector4d& b)
           a(0) * b(3) + a(1) * b(2) - a(2) * b(1) + a(3) * b(0)};
 }
 
-Eigen::Vector4d QuatConjugate(const Eigen::Vector4d& q) { return {q(0), -q(1), -q(2), -q(3)}; }
+Eigen::Vector4d QuatConjugate(const Eigen::Vector4d& q) {
+  return {q(0), -q(1), -q(2), -q(3)};
+}
 
 Eigen::Matrix3d Orthonormalize(const Eigen::Matrix3d& M) {
   Eigen::JacobiSVD<Eigen::Matrix3d> svd(M, Eigen::ComputeFullU | Eigen::ComputeFullV);

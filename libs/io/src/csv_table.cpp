@@ -112,8 +112,8 @@ double CsvTable::At(int row, const std::string& column) const {
   if (std::isnan(v) && !text_[row][c].empty()) {
     const std::string& s = text_[row][c];
     if (s != "nan" && s != "NaN" && s != "NAN")
-      throw std::runtime_error(source_ + ": row " + std::to_string(row + 1) + " column '" +
-                               column + "' is not a number: '" + s + "'");
+      throw std::runtime_error(source_ + ": row " + std::to_string(row + 1) + " column '" + column +
+                               "' is not a number: '" + s + "'");
   }
   return v;
 }

@@ -32,7 +32,8 @@ bool PlotPng(const PlotSpec& spec, const std::filesystem::path& png) {
     std::ofstream d(data);
     d.precision(10);
     for (const Series& s : spec.series) {
-      for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) d << s.x[i] << ' ' << s.y[i] << '\n';
+      for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i)
+        d << s.x[i] << ' ' << s.y[i] << '\n';
       d << "\n\n";  // gnuplot data block separator: one `index` per series
     }
   }

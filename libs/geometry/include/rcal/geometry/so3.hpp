@@ -36,7 +36,9 @@ Eigen::Matrix3d Rz(double angle);
 
 /// R = Rz(yaw) · Ry(pitch) · Rx(roll); angles [rad].
 Eigen::Matrix3d FromRpy(double roll, double pitch, double yaw);
-inline Eigen::Matrix3d FromRpy(const Eigen::Vector3d& rpy) { return FromRpy(rpy(0), rpy(1), rpy(2)); }
+inline Eigen::Matrix3d FromRpy(const Eigen::Vector3d& rpy) {
+  return FromRpy(rpy(0), rpy(1), rpy(2));
+}
 /// Inverse of FromRpy: [roll, pitch, yaw] with pitch in [−π/2, π/2].
 Eigen::Vector3d ToRpy(const Eigen::Matrix3d& R);
 

@@ -1,0 +1,165 @@
+// Kinematic model of a serial arm and its measurement set-up, as a sequence of elementary
+// transforms (ETs), each a translation along or a rotation about a unit axis of the frame reached
+// so far. Every parameterisation rcal supports is a way of laying out ETs:
+//
+//   standard D–H link i    Rz(θᵢ + qᵢ) · Tz(dᵢ) · Tx(aᵢ) · Rx(αᵢ)
+//   Hayati link i          Rz(θᵢ + qᵢ) · Tx(aᵢ) · Rx(αᵢ) · Ry(βᵢ)        (axis i ∥ axis i+1)
+//   modified D–H link i    Rx(αᵢ₋₁) · Tx(aᵢ₋₁) · Rz(θᵢ + qᵢ) · Tz(dᵢ)
+//   modified D–H, Hayati   Rx(αᵢ₋₁) · Tx(aᵢ₋₁) · Ry(βᵢ) · Rz(θᵢ + qᵢ)    (axis i ∥ axis i−1)
+//   URDF-style joint i     T(xyz, rpy) · Tx Ty Tz Rz Ry Rx (6 errors) · R_axis(qᵢ)
+//
+// Each ET's value is  nominal + x[param] + q[joint]  (an absent index contributes nothing), so the
+// parameter vector x holds the *errors* from the drawing (the paper's Δv, Eq. 2).
+//
+// The set-up the model describes (ARCHITECTURE.md, "Frames"):
+//
+//   p_WM_W = T_WB · T_BF(q) · p_FM              position of the marker, world (position sensor)
+//   R_EI   = R_EW · R_WB · R_BF(q) · R_FI        orientation of the IMU, earth frame
+//
+// In ET terms the model has three segments:
+//   earth  (rotations only, orientation output only): R_EW
+//   chain  base ETs (T_WB), links (T_BF), tool/marker ETs; position output = end of chain
+//   imu    (rotations only, orientation output only): R_FI
+// The paper's set-up is the special case of an empty earth and imu segment, a D–H tool link, and
+// measurements of the tool frame in the base frame.
+//
+// Identification Jacobian convention: rows 0–2 are ∂p_WM_W/∂x [m per unit of x]; rows 3–5 are
+// ∂δθ_E/∂x [rad per unit], δθ_E the left rotation error in the earth frame,
+// R_EI(x + dx) = Exp(δθ_E) · R_EI(x). Units of x: m for translations, rad for rotations.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <string>
+#include <vector>
+
+namespace rcal::kinematics {
+
+enum class JointType { kRevolute, kPrismatic };
+
+/// One elementary transform: a translation along, or rotation about, `axis` of the current frame.
+struct ElementaryTransform {
+  enum class Kind { kTranslation, kRotation };
+  Kind kind = Kind::kRotation;
+  Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();  ///< unit vector, current frame
+  double nominal = 0.0;                             ///< [m] or [rad]: the drawing value
+  int param = -1;  ///< index of this ET's error in x, or −1 when the ET is not identified
+  int joint = -1;  ///< index of the joint variable added to the value, or −1
+};
+
+/// Where an ET acts (see the file comment).
+enum class Segment { kEarth, kChain, kImu };
+
+/// A model parameter: the error of one ET from its nominal value.
+struct Parameter {
+  std::string name;       ///< e.g. "a2", "alpha2", "d3", "theta1", "beta2", "base_x", "tool_d"
+  bool is_angle = false;  ///< true: [rad]; false: [m]
+  double nominal = 0.0;   ///< the nominal value of the ET it belongs to [m] or [rad]
+  std::string group;      ///< "base", "link 3", "tool", "marker", "imu", "earth", joint name
+};
+
+struct Joint {
+  std::string name;
+  JointType type = JointType::kRevolute;
+  double lower = -3.14159265358979;  ///< [rad] or [m]
+  double upper = 3.14159265358979;   ///< [rad] or [m]
+};
+
+/// What the sensors see at one pose.
+struct ToolPose {
+  Eigen::Vector3d p_WM_W;  ///< marker (position sensor target) in the world frame [m]
+  Eigen::Matrix3d R_EI;    ///< IMU orientation, imu → earth
+};
+
+/// The geometric model of an arm and its measurement set-up. Immutable once built; every query
+/// takes the joint vector q [rad | m] and the parameter-error vector x [rad | m].
+class KinematicModel {
+ public:
+  KinematicModel() = default;
+
+  const std::string& name() const { return name_; }
+  int num_joints() const { return static_cast<int>(joints_.size()); }
+  int num_params() const { return static_cast<int>(params_.size()); }
+  const std::vector<Joint>& joints() const { return joints_; }
+  const std::vector<Parameter>& parameters() const { return params_; }
+  const std::vector<ElementaryTransform>& ets(Segment s) const;
+  /// Index of the parameter called `name`, or −1.
+  int FindParameter(const std::string& name) const;
+  /// A zero parameter-error vector (the nominal model).
+  Eigen::VectorXd Nominal() const { return Eigen::VectorXd::Zero(num_params()); }
+  /// Joints inside their limits?
+  bool WithinLimits(const Eigen::VectorXd& q) const;
+
+  /// Marker position and IMU orientation at joints q with parameter errors x.
+  ToolPose Forward(const Eigen::VectorXd& q, const Eigen::VectorXd& x) const;
+
+  /// Pose of the end of the chain (the tool/marker frame) in the world frame, T_WT. This is the
+  /// frame the IK corrector places.
+  Eigen::Isometry3d ToolFrame(const Eigen::VectorXd& q, const Eigen::VectorXd& x) const;
+
+  /// Identification Jacobian, 6 × num_params (convention in the file comment). `pose`, when not
+  /// null, receives the forward pose at the same point (computed on the way).
+  void IdentificationJacobian(const Eigen::VectorXd& q, const Eigen::VectorXd& x,
+                              Eigen::Ref<Eigen::MatrixXd> J, ToolPose* pose = nullptr) const;
+
+  /// Geometric Jacobian of the tool frame w.r.t. the joints, 6 × num_joints, in the world frame:
+  /// rows 0–2 the velocity of the tool-frame origin [m/s per joint unit/s], rows 3–5 the angular
+  /// velocity [rad/s per joint unit/s].
+  Eigen::MatrixXd JointJacobian(const Eigen::VectorXd& q, const Eigen::VectorXd& x) const;
+
+ private:
+  friend class ModelBuilder;
+  std::string name_;
+  std::vector<Joint> joints_;
+  std::vector<Parameter> params_;
+  std::vector<ElementaryTransform> earth_, chain_, imu_;
+};
+
+/// Builds a KinematicModel ET by ET. Links are numbered from 1 in parameter names, as the paper.
+/// Every `identify` flag decides whether that ET's error becomes a parameter.
+class ModelBuilder {
+ public:
+  explicit ModelBuilder(std::string name);
+
+  /// World ← base, 6 DoF: Tx Ty Tz Rz Ry Rx (parameters base_x … base_rx) with the nominal
+  /// translation [m] and roll-pitch-yaw [rad] of T_WB.
+  ModelBuilder& BaseFrame(const Eigen::Vector3d& p_WB_W, const Eigen::Vector3d& rpy_WB,
+                          bool identify = true);
+  /// Standard D–H link; `hayati` replaces d by β (for a link whose next axis is parallel):
+  /// d stays at its nominal value and is not a parameter. Lengths [m], angles [rad].
+  ModelBuilder& DhLink(double a, double alpha, double d, double theta, const Joint& joint,
+                       bool hayati = false);
+  /// Modified (Craig) D–H link; `hayati` replaces dᵢ by βᵢ (axis i parallel to axis i−1).
+  ModelBuilder& ModifiedDhLink(double a_prev, double alpha_prev, double d, double theta,
+                               const Joint& joint, bool hayati = false);
+  /// URDF-style joint: fixed origin (xyz [m], rpy [rad]) then a 6-parameter placement error
+  /// (name_dx … name_drx) then the motion about/along the unit `axis`.
+  ModelBuilder& UrdfJoint(const Eigen::Vector3d& xyz, const Eigen::Vector3d& rpy,
+                          const Eigen::Vector3d& axis, const Joint& joint, bool identify = true);
+  /// A fixed URDF origin with no joint and no parameters (fixed joints, links between).
+  ModelBuilder& FixedTransform(const Eigen::Vector3d& xyz, const Eigen::Vector3d& rpy);
+  /// The paper's 4-parameter D–H tool transform after the last joint (tool_a … tool_theta).
+  ModelBuilder& ToolDh(double a, double alpha, double d, double theta, bool identify = true);
+  /// Flange → marker translation p_FM [m] (marker_x, marker_y, marker_z).
+  ModelBuilder& MarkerOffset(const Eigen::Vector3d& p_FM, bool identify = true);
+  /// Flange → IMU rotation as roll-pitch-yaw [rad] (imu_rz, imu_ry, imu_rx): orientation only.
+  ModelBuilder& ImuMounting(const Eigen::Vector3d& rpy_FI, bool identify = true);
+  /// Earth ← world rotation as roll-pitch-yaw [rad] (earth_rz, earth_ry, earth_rx).
+  ModelBuilder& EarthFrame(const Eigen::Vector3d& rpy_EW, bool identify = true);
+
+  KinematicModel Build() const { return model_; }
+
+ private:
+  int AddParam(const std::string& name, bool is_angle, double nominal, const std::string& group);
+  void Push(Segment s, ElementaryTransform::Kind kind, const Eigen::Vector3d& axis, double nominal,
+            int param, int joint = -1);
+  void PushRpy(Segment s, const Eigen::Vector3d& rpy, const std::string& prefix,
+               const std::string& group, bool identify);
+  KinematicModel model_;
+  int link_ = 0;
+};
+
+/// The transform of one ET at value v.
+Eigen::Isometry3d EtTransform(const ElementaryTransform& et, double value);
+
+}  // namespace rcal::kinematics
