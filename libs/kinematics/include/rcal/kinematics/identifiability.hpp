@@ -1,0 +1,56 @@
+// Which parameter errors a pose set can identify.
+//
+// The stacked identification Jacobian J (6m × n for m full poses, 3m × n for positions only) is
+// column-scaled to unit norm, J_s = J·D, so that lengths [m] and angles [rad] compare. Its
+// numerical rank r (singular values above `rank_tolerance`·σ_max) is the number of identifiable
+// combinations. The n − r null-space directions are the parameter changes that move no measured
+// pose; reduced to row-echelon form they read as sentences ("d2 and d3 enter only as d2 − d3").
+// Each null direction is removed by fixing one parameter (its pivot) at nominal; the rest form the
+// base (identifiable) parameter set. Pivots are taken from the end of the parameter list first,
+// so tool and wrist parameters are dropped before base and shoulder ones.
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "rcal/kinematics/model.hpp"
+
+namespace rcal::kinematics {
+
+enum class MeasurementKind { kFullPose, kPositionOnly };
+
+struct IdentifiabilitySettings {
+  double rank_tolerance = 1e-9;    ///< relative to the largest singular value of J_s
+  double coefficient_zero = 1e-6;  ///< null-vector entries below this (relative) are zero
+};
+
+/// One direction of the parameter space that no measurement sees.
+struct UnidentifiableCombination {
+  int dropped = -1;               ///< parameter fixed at nominal to remove this direction
+  std::vector<int> params;        ///< parameters involved (dropped first)
+  std::vector<double> direction;  ///< Δx along `params` [m | rad], dropped entry = 1
+  std::string explanation;        ///< in words
+};
+
+struct IdentifiabilityReport {
+  int num_params = 0;
+  int num_equations = 0;
+  int rank = 0;
+  Eigen::VectorXd singular_values;  ///< of the column-scaled Jacobian, descending
+  std::vector<int> identifiable;    ///< base parameter indices, ascending
+  std::vector<UnidentifiableCombination> unidentifiable;
+  double condition_number = 0;  ///< of the column-scaled Jacobian restricted to `identifiable`
+};
+
+/// Stacks the identification Jacobians at joint vectors `qs` around parameter errors `x`.
+Eigen::MatrixXd StackedJacobian(const KinematicModel& model, const std::vector<Eigen::VectorXd>& qs,
+                                const Eigen::VectorXd& x, MeasurementKind kind);
+
+/// Rank, null-space combinations in words and a base parameter set.
+IdentifiabilityReport AnalyzeIdentifiability(const KinematicModel& model,
+                                             const std::vector<Eigen::VectorXd>& qs,
+                                             const Eigen::VectorXd& x, MeasurementKind kind,
+                                             const IdentifiabilitySettings& settings = {});
+
+}  // namespace rcal::kinematics

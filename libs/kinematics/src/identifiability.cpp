@@ -1,0 +1,136 @@
+#include "rcal/kinematics/identifiability.hpp"
+
+#include <Eigen/SVD>
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+namespace rcal::kinematics {
+namespace {
+
+std::string FormatCoefficient(double c) {
+  std::ostringstream s;
+  s.precision(4);
+  s << c;
+  return s.str();
+}
+
+std::string Explain(const KinematicModel& m, const std::vector<int>& params,
+                    const std::vector<double>& dir) {
+  const auto& P = m.parameters();
+  const std::string& p0 = P[params[0]].name;
+  if (params.size() == 1) return p0 + " has no effect on the measured poses";
+  if (params.size() == 2 && P[params[0]].is_angle == P[params[1]].is_angle &&
+      std::abs(std::abs(dir[1]) - 1.0) < 1e-6) {
+    // Δ(p0, p1) ∝ (1, ±1) is invisible, so only p0 ∓ p1 is seen.
+    const std::string& p1 = P[params[1]].name;
+    return p0 + " and " + p1 + " enter only as " + p0 + (dir[1] < 0 ? " + " : " - ") + p1;
+  }
+  std::ostringstream s;
+  s << p0 << " cannot be separated from ";
+  for (size_t i = 1; i < params.size(); ++i) {
+    if (i > 1) s << (i + 1 == params.size() ? " and " : ", ");
+    s << P[params[i]].name;
+  }
+  s << ": changing " << p0 << " by 1" << (P[params[0]].is_angle ? " rad" : " m");
+  for (size_t i = 1; i < params.size(); ++i)
+    s << ", " << P[params[i]].name << " by " << FormatCoefficient(dir[i])
+      << (P[params[i]].is_angle ? " rad" : " m");
+  s << " moves no measured pose";
+  return s.str();
+}
+
+}  // namespace
+
+Eigen::MatrixXd StackedJacobian(const KinematicModel& model, const std::vector<Eigen::VectorXd>& qs,
+                                const Eigen::VectorXd& x, MeasurementKind kind) {
+  const int rows_per = kind == MeasurementKind::kFullPose ? 6 : 3;
+  Eigen::MatrixXd J(rows_per * static_cast<int>(qs.size()), model.num_params());
+  Eigen::MatrixXd Ji(6, model.num_params());
+  for (size_t k = 0; k < qs.size(); ++k) {
+    model.IdentificationJacobian(qs[k], x, Ji);
+    J.middleRows(rows_per * k, rows_per) = Ji.topRows(rows_per);
+  }
+  return J;
+}
+
+IdentifiabilityReport AnalyzeIdentifiability(const KinematicModel& model,
+                                             const std::vector<Eigen::VectorXd>& qs,
+                                             const Eigen::VectorXd& x, MeasurementKind kind,
+                                             const IdentifiabilitySettings& settings) {
+  const int n = model.num_params();
+  IdentifiabilityReport report;
+  report.num_params = n;
+  const Eigen::MatrixXd J = StackedJacobian(model, qs, x, kind);
+  report.num_equations = static_cast<int>(J.rows());
+
+  // Column scaling. A column at round-off level is a parameter nothing sees: it stays zero rather
+  // than being scaled up into a unit column of noise.
+  Eigen::VectorXd d(n);
+  double max_norm = 0;
+  for (int i = 0; i < n; ++i) max_norm = std::max(max_norm, J.col(i).norm());
+  Eigen::MatrixXd Js = J;
+  for (int i = 0; i < n; ++i) {
+    const double norm = J.col(i).norm();
+    const bool seen = norm > 1e-12 * max_norm;
+    d(i) = seen ? 1.0 / norm : 1.0;
+    Js.col(i) = seen ? Eigen::VectorXd(J.col(i) * d(i)) : Eigen::VectorXd::Zero(J.rows());
+  }
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(Js, Eigen::ComputeFullV);
+  report.singular_values = svd.singularValues();
+  const double smax = report.singular_values.size() ? report.singular_values(0) : 0.0;
+  int rank = 0;
+  for (int i = 0; i < report.singular_values.size(); ++i)
+    if (report.singular_values(i) > settings.rank_tolerance * smax) ++rank;
+  report.rank = rank;
+
+  // Null space in unscaled parameter units, reduced to row-echelon form with pivots taken from
+  // the last parameter backwards.
+  const int k = n - rank;
+  Eigen::MatrixXd N = (d.asDiagonal() * svd.matrixV().rightCols(k)).transpose();  // k × n
+  std::vector<int> pivots;
+  int row = 0;
+  for (int col = n - 1; col >= 0 && row < k; --col) {
+    int best = row;
+    for (int r = row + 1; r < k; ++r)
+      if (std::abs(N(r, col)) > std::abs(N(best, col))) best = r;
+    if (std::abs(N(best, col)) < settings.coefficient_zero * N.cwiseAbs().maxCoeff()) continue;
+    N.row(row).swap(N.row(best));
+    N.row(row) /= N(row, col);
+    for (int r = 0; r < k; ++r)
+      if (r != row) N.row(r) -= N(r, col) * N.row(row);
+    pivots.push_back(col);
+    ++row;
+  }
+  for (int r = 0; r < static_cast<int>(pivots.size()); ++r) {
+    UnidentifiableCombination c;
+    c.dropped = pivots[r];
+    c.params.push_back(pivots[r]);
+    c.direction.push_back(1.0);
+    for (int col = n - 1; col >= 0; --col) {
+      if (col == pivots[r]) continue;
+      if (std::abs(N(r, col)) > settings.coefficient_zero) {
+        c.params.push_back(col);
+        c.direction.push_back(N(r, col));
+      }
+    }
+    c.explanation = Explain(model, c.params, c.direction);
+    report.unidentifiable.push_back(std::move(c));
+  }
+  for (int i = 0; i < n; ++i)
+    if (std::find(pivots.begin(), pivots.end(), i) == pivots.end())
+      report.identifiable.push_back(i);
+
+  // Condition number of the base parameter columns.
+  Eigen::MatrixXd Jb(Js.rows(), report.identifiable.size());
+  for (size_t i = 0; i < report.identifiable.size(); ++i)
+    Jb.col(i) = Js.col(report.identifiable[i]);
+  if (Jb.cols() > 0) {
+    const Eigen::VectorXd s = Eigen::JacobiSVD<Eigen::MatrixXd>(Jb).singularValues();
+    report.condition_number =
+        s(s.size() - 1) > 0 ? s(0) / s(s.size() - 1) : std::numeric_limits<double>::infinity();
+  }
+  return report;
+}
+
+}  // namespace rcal::kinematics
