@@ -128,9 +128,9 @@ void CompiledChain::JointJacobian(const Eigen::Ref<const Eigen::VectorXd>& q,
   for (const JointStep& j : joints_) {
     const double v = q(j.index);
     auto col = J.col(j.index);
-    const Eigen::Vector3d u_W =
-        j.axis == Axis::kGeneral ? Eigen::Vector3d(R * j.u)
-                                 : Eigen::Vector3d(j.sign * R.col(static_cast<int>(j.axis)));
+    const Eigen::Vector3d u_W = j.axis == Axis::kGeneral
+                                    ? Eigen::Vector3d(R * j.u)
+                                    : Eigen::Vector3d(j.sign * R.col(static_cast<int>(j.axis)));
     if (j.revolute) {
       col.head<3>() = p;
       col.tail<3>() = u_W;

@@ -62,12 +62,12 @@ class CompiledChain {
     bool identity = true;                             ///< skip when the transform is identity
   };
   struct JointStep {
-    int index = 0;                                ///< column of q / of the Jacobian
-    bool revolute = true;                         ///< rotation ET (else translation ET)
-    Axis axis = Axis::kZ;                         ///< fast-path axis
-    double sign = 1.0;                            ///< +1 / −1 for ±x, ±y, ±z
+    int index = 0;                                 ///< column of q / of the Jacobian
+    bool revolute = true;                          ///< rotation ET (else translation ET)
+    Axis axis = Axis::kZ;                          ///< fast-path axis
+    double sign = 1.0;                             ///< +1 / −1 for ±x, ±y, ±z
     Eigen::Vector3d u = Eigen::Vector3d::UnitZ();  ///< unit axis in the joint frame
-    Fixed after;                                  ///< F_k: fixed transform after this joint
+    Fixed after;                                   ///< F_k: fixed transform after this joint
   };
 
   Fixed base_;  ///< F₀
