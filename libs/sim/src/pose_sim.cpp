@@ -1,0 +1,91 @@
+#include "rcal/sim/pose_sim.hpp"
+
+#include <numbers>
+#include <string>
+
+#include "rcal/geometry/so3.hpp"
+
+namespace rcal::sim {
+
+Eigen::VectorXd Table3Errors(const kinematics::KinematicModel& model) {
+  // Du, Zhang, Li 2014, Table 3 (EKF row), joints 1–6.
+  constexpr double kDa[6] = {3.596, 3.945, 2.545, 2.957, 2.425, 2.636};           // mm
+  constexpr double kDalpha[6] = {-0.589, -0.234, -1.296, -0.385, -0.424, 0.654};  // deg
+  constexpr double kDd[6] = {3.157, 3.321, 3.598, 3.475, 3.235, 2.474};           // mm
+  constexpr double kDtheta[6] = {2.385, -0.838, 0.454, 0.168, -0.325, -0.368};    // deg
+  constexpr double kDeg = std::numbers::pi / 180.0;
+  Eigen::VectorXd x = model.Nominal();
+  for (int j = 0; j < 6; ++j) {
+    const std::string n = std::to_string(j + 1);
+    const auto set = [&](const std::string& name, double v) {
+      const int i = model.FindParameter(name);
+      if (i >= 0) x(i) = v;
+    };
+    set("a" + n, kDa[j] * 1e-3);
+    set("alpha" + n, kDalpha[j] * kDeg);
+    set("d" + n, kDd[j] * 1e-3);
+    set("theta" + n, kDtheta[j] * kDeg);
+  }
+  return x;
+}
+
+Eigen::VectorXd RandomErrors(const kinematics::KinematicModel& model, Rng& rng, double sigma_length,
+                             double sigma_angle) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  Eigen::VectorXd x(model.num_params());
+  for (int i = 0; i < model.num_params(); ++i)
+    x(i) = n(rng) * (model.parameters()[i].is_angle ? sigma_angle : sigma_length);
+  return x;
+}
+
+std::vector<Eigen::VectorXd> SampleJoints(const kinematics::KinematicModel& model, int count,
+                                          Rng& rng, double margin) {
+  std::vector<Eigen::VectorXd> qs;
+  qs.reserve(count);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (int k = 0; k < count; ++k) {
+    Eigen::VectorXd q(model.num_joints());
+    for (int j = 0; j < model.num_joints(); ++j) {
+      const auto& J = model.joints()[j];
+      const double span = J.upper - J.lower;
+      q(j) = J.lower + span * (margin + (1.0 - 2.0 * margin) * u(rng));
+    }
+    qs.push_back(q);
+  }
+  return qs;
+}
+
+kinematics::PoseMeasurement MeasurePose(const kinematics::KinematicModel& model,
+                                        const Eigen::VectorXd& x_true, const Eigen::VectorXd& q,
+                                        const PoseNoise& noise, Rng& rng) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  const kinematics::ToolPose truth = model.Forward(q, x_true);
+  kinematics::PoseMeasurement m;
+  m.q = q;
+  m.p_WM_W = truth.p_WM_W + noise.position_sigma * Eigen::Vector3d(n(rng), n(rng), n(rng));
+  m.has_orientation = noise.orientation;
+  const int dim = noise.orientation ? 6 : 3;
+  m.covariance = Eigen::MatrixXd::Zero(dim, dim);
+  m.covariance.topLeftCorner<3, 3>().diagonal().setConstant(noise.position_sigma *
+                                                            noise.position_sigma);
+  if (noise.orientation) {
+    const Eigen::Vector3d dtheta =
+        noise.orientation_sigma * Eigen::Vector3d(n(rng), n(rng), n(rng));
+    m.R_EI = geometry::Exp(dtheta) * truth.R_EI;  // left error, earth frame (measurement.hpp)
+    m.covariance.bottomRightCorner<3, 3>().diagonal().setConstant(noise.orientation_sigma *
+                                                                  noise.orientation_sigma);
+  }
+  return m;
+}
+
+std::vector<kinematics::PoseMeasurement> MeasurePoses(const kinematics::KinematicModel& model,
+                                                      const Eigen::VectorXd& x_true,
+                                                      const std::vector<Eigen::VectorXd>& qs,
+                                                      const PoseNoise& noise, Rng& rng) {
+  std::vector<kinematics::PoseMeasurement> out;
+  out.reserve(qs.size());
+  for (const auto& q : qs) out.push_back(MeasurePose(model, x_true, q, noise, rng));
+  return out;
+}
+
+}  // namespace rcal::sim

@@ -1,0 +1,100 @@
+#include "rcal/identification/batch_lm.hpp"
+
+#include <gtest/gtest.h>
+
+#include "identification_fixture.hpp"
+
+namespace rcal::identification {
+namespace {
+
+using namespace testing;
+using kinematics::testing::Grb3016;
+using kinematics::testing::SevenJointSetup;
+using kinematics::testing::UrLikeUrdf;
+
+void ExpectRecovers(const Scenario& s, const LmResult& r, const char* what) {
+  ASSERT_TRUE(r.converged) << what;
+  int beyond3 = 0;
+  for (int i : s.identified) {
+    const double z = (r.x(i) - s.x_equivalent(i)) / r.sigma(i);
+    EXPECT_LT(std::abs(z), 4.5) << what << " " << s.model.parameters()[i].name;
+    if (std::abs(z) > 3.0) ++beyond3;
+  }
+  EXPECT_LE(beyond3, 1) << what;
+  // Whitened cost at the optimum ≈ its χ² expectation (equations − parameters).
+  int equations = 0;
+  for (const auto& m : s.cal) equations += m.dimension();
+  const double dof = equations - static_cast<double>(s.identified.size());
+  EXPECT_LT(std::abs(r.cost - dof), 5 * std::sqrt(2 * dof)) << what;
+  // Accuracy where it matters: the test poses, within 1.5x of what the noise allows.
+  EXPECT_LT(MeanTestPositionError(s, r.x), 1.5 * CramerRaoMeanTestPositionError(s)) << what;
+}
+
+TEST(BatchLm, BaseSetReproducesTheTruthExactly) {
+  for (const auto& model : {Grb3016(), SevenJointSetup(), UrLikeUrdf()}) {
+    const Scenario s = MakeScenario(model, sim::PoseNoise{}, 7);
+    for (const auto& q : s.test_q) {
+      const auto a = model.Forward(q, s.x_equivalent), b = model.Forward(q, s.x_true);
+      EXPECT_LT((a.p_WM_W - b.p_WM_W).norm(), 1e-8) << model.name();
+    }
+  }
+}
+
+TEST(BatchLm, RecoversRandomErrorsOnThreeRobots) {
+  unsigned seed = 100;
+  for (const auto& model : {Grb3016(), SevenJointSetup(), UrLikeUrdf()}) {
+    const Scenario s = MakeScenario(model, sim::PoseNoise{}, seed++);
+    ExpectRecovers(s, BatchLm(model, s.identified).Solve(s.cal, model.Nominal()),
+                   model.name().c_str());
+  }
+}
+
+TEST(BatchLm, RecoversFromPositionsOnly) {
+  sim::PoseNoise noise;
+  noise.orientation = false;
+  unsigned seed = 200;
+  for (const auto& model : {Grb3016(), SevenJointSetup(), UrLikeUrdf()}) {
+    const Scenario s = MakeScenario(model, noise, seed++, 60);
+    ExpectRecovers(s, BatchLm(model, s.identified).Solve(s.cal, model.Nominal()),
+                   model.name().c_str());
+  }
+}
+
+TEST(BatchLm, RejectsInvalidMeasurementNamingIt) {
+  const auto model = Grb3016();
+  Scenario s = MakeScenario(model, sim::PoseNoise{}, 5, 10);
+  s.cal[3].p_WM_W(1) = std::nan("");
+  try {
+    BatchLm(model, s.identified).Solve(s.cal, model.Nominal());
+    FAIL() << "no exception";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("measurement 3: p_WM_W"), std::string::npos) << e.what();
+  }
+}
+
+TEST(CramerRao, MatchesTheSpreadOfEstimatesOverNoiseDraws) {
+  // The CRB is the covariance of the efficient estimator: the spread of LM over 40 noise draws
+  // on the same poses must match it (ratio of traces within sampling error).
+  const auto model = SevenJointSetup();
+  const Scenario s = MakeScenario(model, sim::PoseNoise{}, 11, 30);
+  const Eigen::MatrixXd C = CramerRaoBound(model, s.identified, s.cal, s.x_true);
+  sim::Rng rng(12);
+  Eigen::MatrixXd scatter = Eigen::MatrixXd::Zero(C.rows(), C.cols());
+  const int draws = 40;
+  std::vector<Eigen::VectorXd> qs;
+  for (const auto& m : s.cal) qs.push_back(m.q);
+  for (int d = 0; d < draws; ++d) {
+    const auto ms = sim::MeasurePoses(model, s.x_true, qs, sim::PoseNoise{}, rng);
+    const LmResult r = BatchLm(model, s.identified).Solve(ms, s.x_equivalent);
+    Eigen::VectorXd e(s.identified.size());
+    for (size_t i = 0; i < s.identified.size(); ++i)
+      e(i) = r.x(s.identified[i]) - s.x_equivalent(s.identified[i]);
+    scatter += e * e.transpose() / draws;
+  }
+  // Compare in whitened coordinates: tr(C⁻¹·scatter)/n ≈ 1, with σ ≈ sqrt(2/draws).
+  const double ratio = (C.ldlt().solve(scatter)).trace() / C.rows();
+  EXPECT_NEAR(ratio, 1.0, 0.3);
+}
+
+}  // namespace
+}  // namespace rcal::identification

@@ -1,0 +1,70 @@
+#include "rcal/sim/pose_sim.hpp"
+
+#include <gtest/gtest.h>
+
+#include "../kinematics/test_robots.hpp"
+#include "rcal/geometry/so3.hpp"
+
+namespace rcal::sim {
+namespace {
+
+using kinematics::testing::Grb3016;
+
+TEST(PoseSim, Table3ErrorsLandOnTheirParametersInSiUnits) {
+  const auto m = Grb3016();
+  const Eigen::VectorXd x = Table3Errors(m);
+  EXPECT_DOUBLE_EQ(x(m.FindParameter("a1")), 3.596e-3);
+  EXPECT_DOUBLE_EQ(x(m.FindParameter("d6")), 2.474e-3);
+  EXPECT_NEAR(x(m.FindParameter("theta1")), 2.385 * M_PI / 180, 1e-15);
+  EXPECT_NEAR(x(m.FindParameter("alpha3")), -1.296 * M_PI / 180, 1e-15);
+  EXPECT_EQ(x(m.FindParameter("tool_a")), 0.0);
+}
+
+TEST(PoseSim, Table3MovesTheToolByTensOfMillimetres) {
+  // NOTES.md: Table 3 applied to Table 1 moves the tool by about 32 mm on average.
+  const auto m = Grb3016();
+  Rng rng(1);
+  const Eigen::VectorXd x = Table3Errors(m);
+  double sum = 0;
+  const auto qs = SampleJoints(m, 2000, rng, 0.0);
+  for (const auto& q : qs)
+    sum += (m.Forward(q, x).p_WM_W - m.Forward(q, m.Nominal()).p_WM_W).norm();
+  EXPECT_NEAR(sum / qs.size(), 0.032, 0.008);
+}
+
+TEST(PoseSim, SamplesStayInsideTheShrunkLimits) {
+  const auto m = Grb3016();
+  Rng rng(2);
+  for (const auto& q : SampleJoints(m, 500, rng, 0.1)) {
+    ASSERT_TRUE(m.WithinLimits(q));
+    for (int j = 0; j < 6; ++j) {
+      const double span = m.joints()[j].upper - m.joints()[j].lower;
+      EXPECT_GE(q(j), m.joints()[j].lower + 0.1 * span - 1e-12);
+    }
+  }
+}
+
+TEST(PoseSim, MeasurementNoiseHasTheStatedSpread) {
+  const auto m = Grb3016();
+  Rng rng(3);
+  PoseNoise noise;
+  const Eigen::VectorXd q = Eigen::VectorXd::Constant(6, 0.3), x = Table3Errors(m);
+  const auto truth = m.Forward(q, x);
+  double sp = 0, so = 0;
+  const int n = 4000;
+  for (int k = 0; k < n; ++k) {
+    const auto z = MeasurePose(m, x, q, noise, rng);
+    sp += (z.p_WM_W - truth.p_WM_W).squaredNorm();
+    so += geometry::Log(z.R_EI * truth.R_EI.transpose()).squaredNorm();
+    ASSERT_EQ(z.covariance.rows(), 6);
+  }
+  EXPECT_NEAR(std::sqrt(sp / (3 * n)) / noise.position_sigma, 1.0, 0.03);
+  EXPECT_NEAR(std::sqrt(so / (3 * n)) / noise.orientation_sigma, 1.0, 0.03);
+  noise.orientation = false;
+  const auto z = MeasurePose(m, x, q, noise, rng);
+  EXPECT_FALSE(z.has_orientation);
+  EXPECT_EQ(z.covariance.rows(), 3);
+}
+
+}  // namespace
+}  // namespace rcal::sim
