@@ -1,0 +1,82 @@
+// Pose datasets: still poses of the arm with what was measured there (ARCHITECTURE.md, "Data
+// formats that people bring").
+//
+// rcal layout: CSV, one row per still pose (or per marker measured at a pose), `#` comment lines
+// before the header, columns found by name in any order, SI units:
+//   q1..qN          joint positions as read [rad | m]                         required
+//   x, y, z         measured marker position p_WM_W, world frame [m]          required
+//   qw, qx, qy, qz  measured tool orientation q_EI (imu → earth), [w,x,y,z]   optional, all four
+//   marker          integer id of the measured point (own flange→marker offset) optional, 0
+//   temperature [°C], payload [kg], time [s]                                  optional, NaN
+//   dq1..dqN        sign (−1, 0, +1) of each joint's last motion before the stop  optional
+//   set             `cal` | `test` (empty: unspecified)                        optional
+// Other columns are ignored with a warning naming them (PoseDataset::ignored_columns).
+//
+// FIGAROH layout (e.g. ../shared/data/figaroh_ur10/calibration.csv), recognised by its `x1` and
+// `phix1` columns: per measured marker k = 1, 2, ... the columns xk, yk, zk [m] and optionally
+// phixk, phiyk, phizk (roll, pitch, yaw [rad], R = Rz(yaw)·Ry(pitch)·Rx(roll)), world frame; every
+// other column is a joint position named after its joint, in the model's joint order. Marker k
+// becomes PoseSample::marker = k − 1, one sample per marker and row.
+#pragma once
+
+#include <Eigen/Core>
+#include <filesystem>
+#include <limits>
+#include <string>
+#include <vector>
+
+namespace rcal::io {
+
+/// What was measured at one still pose.
+struct PoseSample {
+  enum Set { kUnspecified, kCal, kTest };
+
+  Eigen::VectorXd q;       ///< joint positions [rad | m]
+  Eigen::Vector3d p_WM_W;  ///< measured marker position, world (sensor) frame [m]
+  bool has_orientation = false;
+  Eigen::Vector4d q_EI_wxyz = Eigen::Vector4d(1, 0, 0, 0);  ///< unit, imu → earth [w,x,y,z]
+  int marker = 0;                ///< id of the measured point on the tool
+  double temperature = kAbsent;  ///< [°C], NaN when absent
+  double payload = kAbsent;      ///< [kg], NaN when absent
+  double time = kAbsent;         ///< [s], NaN when absent
+  Eigen::VectorXi dq_sign;       ///< sign of the last motion per joint; empty when absent
+  Set set = kUnspecified;
+
+  static constexpr double kAbsent = std::numeric_limits<double>::quiet_NaN();
+};
+
+struct PoseDataset {
+  std::vector<PoseSample> samples;
+  int num_joints = 0;
+  bool has_orientation = false;              ///< every sample has an orientation
+  std::vector<std::string> joint_names;      ///< FIGAROH layout: joint columns in order; else empty
+  std::vector<std::string> ignored_columns;  ///< columns not understood (warned about)
+  std::vector<std::string> comments;         ///< the `#` lines before the header, without the '#'
+};
+
+/// Reads a pose dataset, rcal or FIGAROH layout (see the file comment). `expected_num_joints`
+/// > 0 makes a different joint count an error; ≤ 0 takes N from the q1..qN columns. For the
+/// FIGAROH layout, `joint_names`, when given, picks the joint columns by name in that order
+/// (other columns are ignored); otherwise every non-marker column is a joint, in file order.
+/// Throws std::runtime_error naming the file, the column and the row (1 = first data row).
+PoseDataset LoadPoseDataset(const std::filesystem::path& path, int expected_num_joints = -1,
+                            const std::vector<std::string>& joint_names = {});
+/// The same from CSV text; `source` names it in errors.
+PoseDataset ParsePoseDataset(const std::string& text, const std::string& source,
+                             int expected_num_joints = -1,
+                             const std::vector<std::string>& joint_names = {});
+
+/// Reads a FIGAROH-layout file (LoadPoseDataset detects it too).
+PoseDataset LoadFigarohDataset(const std::filesystem::path& path,
+                               const std::vector<std::string>& joint_names = {});
+/// The UR10 data of ../shared/data/figaroh_ur10/calibration.csv: the FIGAROH layout with the six
+/// UR joint columns (shoulder_pan_joint … wrist_3_joint) in chain order.
+PoseDataset LoadFigarohUr10(const std::filesystem::path& path);
+
+/// The rcal-layout CSV text of a dataset (full double precision). Optional columns are written
+/// when any sample has them; `comments` become `#` lines.
+std::string PoseDatasetText(const PoseDataset& data);
+/// Writes PoseDatasetText(data) atomically.
+void SavePoseDataset(const std::filesystem::path& path, const PoseDataset& data);
+
+}  // namespace rcal::io

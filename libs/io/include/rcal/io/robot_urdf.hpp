@@ -1,0 +1,72 @@
+// Robots from URDF files (parsed by liburdfdom), and calibrated URDFs written back.
+//
+// The chain runs from a base link to a tip link. Each revolute, continuous or prismatic joint
+// becomes a kinematics::ModelBuilder::UrdfJoint (its origin xyz [m] and rpy [rad] in the parent
+// link's frame, its axis, its limits), with a 6-parameter placement error
+//   T(xyz, rpy) · T(dx, dy, dz) · Rz(drz) · Ry(dry) · Rx(drx) · motion(q)
+// named JOINT_dx … JOINT_drx. Fixed joints become fixed transforms. Continuous joints get limits
+// [−π, π]. Floating, planar and mimic joints are not supported (error).
+//
+// A calibrated URDF is the source URDF with each identified joint's <origin> replaced by the
+// origin composed with its error (rcal::io::ComposeUrdfOrigin), so loading it gives, at zero
+// errors, the calibrated kinematics. Everything else in the file is kept. The world ← base frame
+// and the flange → marker offset are not part of a URDF: they go to the calibrated YAML.
+#pragma once
+
+#include <Eigen/Core>
+#include <filesystem>
+#include <string>
+
+#include "rcal/io/robot_yaml.hpp"
+#include "rcal/kinematics/model.hpp"
+
+namespace rcal::io {
+
+struct UrdfOptions {
+  std::string base_link;  ///< first link of the chain; empty: the URDF's root link
+  std::string tip_link;   ///< last link; empty: the deepest leaf below base_link (error if tied)
+  bool identify_joints = true;  ///< 6-parameter placement error per moving joint
+
+  /// Add a 6-DoF world ← base frame T_WB in front of the chain (ModelBuilder::BaseFrame).
+  bool add_base_frame = false;
+  Eigen::Vector3d base_xyz = Eigen::Vector3d::Zero();  ///< nominal p_WB_W [m]
+  Eigen::Vector3d base_rpy = Eigen::Vector3d::Zero();  ///< nominal roll-pitch-yaw of R_WB [rad]
+  bool identify_base = true;
+
+  /// Add a flange(tip link) → marker offset p_FM after the chain (ModelBuilder::MarkerOffset).
+  bool add_marker = false;
+  Eigen::Vector3d marker_xyz = Eigen::Vector3d::Zero();  ///< nominal p_FM [m], tip-link frame
+  bool identify_marker = true;
+};
+
+/// The robot description (convention urdf) of the chain in URDF text. `source` names the file in
+/// error messages. Throws std::runtime_error naming the file and the link or joint at fault.
+RobotSpec ParseUrdfRobotSpec(const std::string& urdf_xml, const std::string& source,
+                             const UrdfOptions& options = {});
+/// Reads a URDF file: ParseUrdfRobotSpec of its text.
+RobotSpec LoadUrdfRobotSpec(const std::filesystem::path& urdf, const UrdfOptions& options = {});
+/// Reads a URDF file straight into a model: BuildModel(LoadUrdfRobotSpec(urdf, options)).
+kinematics::KinematicModel LoadRobotUrdf(const std::filesystem::path& urdf,
+                                         const UrdfOptions& options = {});
+
+/// The source URDF text with each joint of `model` that has identified errors (parameters
+/// JOINT_dx … JOINT_drx) given its calibrated origin at parameter errors `x` [m, rad]. Throws
+/// std::runtime_error when a joint of the model is not in the URDF or x has the wrong size.
+std::string CalibratedUrdfText(const std::string& urdf_xml, const std::string& source,
+                               const kinematics::KinematicModel& model, const Eigen::VectorXd& x);
+/// Reads `source_urdf`, writes CalibratedUrdfText of it to `out` atomically.
+void SaveCalibratedUrdf(const std::filesystem::path& source_urdf, const std::filesystem::path& out,
+                        const kinematics::KinematicModel& model, const Eigen::VectorXd& x);
+
+/// A robot from any file rcal accepts, with what is needed to save it calibrated.
+struct LoadedRobot {
+  std::filesystem::path source;  ///< the file it came from
+  bool from_urdf = false;        ///< true: source is a URDF (SaveCalibratedUrdf applies)
+  RobotSpec spec;                ///< the description (YAML-able in every case)
+  kinematics::KinematicModel model;
+};
+
+/// Loads `.yaml`/`.yml` (schema rcal.robot/1; `urdf_options` unused) or `.urdf` files.
+LoadedRobot LoadRobot(const std::filesystem::path& path, const UrdfOptions& urdf_options = {});
+
+}  // namespace rcal::io

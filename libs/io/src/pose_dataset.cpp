@@ -1,0 +1,345 @@
+#include "rcal/io/pose_dataset.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <charconv>
+#include <cmath>
+#include <set>
+#include <sstream>
+#include <stdexcept>
+
+#include "rcal/geometry/so3.hpp"
+#include "rcal/io/atomic_file.hpp"
+#include "rcal/io/csv_table.hpp"
+
+namespace rcal::io {
+namespace {
+
+/// Quaternions whose norm is further than this from 1 are rejected, not normalised: a file with
+/// such values is wrong, not imprecise.
+constexpr double kUnitTolerance = 1e-3;
+
+/// prefix + number. (Not `"q" + std::to_string(j)`: GCC 12 warns falsely, -Wrestrict, at -O3.)
+std::string Indexed(const char* prefix, int i) {
+  std::string s(prefix);
+  s += std::to_string(i);
+  return s;
+}
+
+std::string Row(int r) {
+  return "row " + std::to_string(r + 1);
+}
+
+[[noreturn]] void Fail(const CsvTable& t, const std::string& what) {
+  throw std::runtime_error(t.source() + ": " + what);
+}
+
+/// A cell that must hold a number.
+double Required(const CsvTable& t, int r, const std::string& column) {
+  const double v = t.At(r, column);
+  if (!std::isfinite(v))
+    Fail(t, Row(r) + " column '" + column + "' is " +
+                (t.Text(r, column).empty() ? "empty" : "'" + t.Text(r, column) + "'") +
+                ": a number is required");
+  return v;
+}
+
+void WarnIgnored(const CsvTable& t, const std::vector<std::string>& ignored) {
+  if (ignored.empty()) return;
+  std::string list;
+  for (const auto& c : ignored) list += (list.empty() ? "'" : ", '") + c + "'";
+  spdlog::warn("{}: ignoring unknown column(s) {}", t.source(), list);
+}
+
+/// Checks and normalises a measured quaternion [w, x, y, z].
+Eigen::Vector4d UnitQuaternion(const CsvTable& t, int r, const Eigen::Vector4d& q) {
+  const double n = q.norm();
+  if (n < 1e-12) Fail(t, Row(r) + " columns 'qw,qx,qy,qz': zero quaternion");
+  if (std::abs(n - 1.0) > kUnitTolerance)
+    Fail(t,
+         Row(r) + " columns 'qw,qx,qy,qz': not a unit quaternion (norm " + std::to_string(n) + ")");
+  return q / n;
+}
+
+PoseDataset ParseFigaroh(const CsvTable& t, int expected_num_joints,
+                         const std::vector<std::string>& joint_names) {
+  PoseDataset out;
+  out.comments = t.comments();
+  // Marker columns: x1,y1,z1[,phix1,phiy1,phiz1], x2, ...
+  std::set<std::string> used;
+  std::vector<bool> marker_orientation;
+  for (int k = 1; t.Has(Indexed("x", k)); ++k) {
+    const std::string s = std::to_string(k);
+    for (const char* c : {"x", "y", "z"}) {
+      if (!t.Has(c + s)) Fail(t, "missing column '" + std::string(c) + s + "'");
+      used.insert(c + s);
+    }
+    int phi = 0;
+    for (const char* c : {"phix", "phiy", "phiz"}) phi += t.Has(c + s) ? 1 : 0;
+    if (phi != 0 && phi != 3)
+      Fail(t, "columns 'phix" + s + ",phiy" + s + ",phiz" + s + "' come together: some missing");
+    for (const char* c : {"phix", "phiy", "phiz"})
+      if (phi) used.insert(c + s);
+    marker_orientation.push_back(phi == 3);
+  }
+  std::vector<std::string> joints;
+  if (!joint_names.empty()) {
+    for (const auto& n : joint_names) {
+      if (!t.Has(n)) Fail(t, "missing column '" + n + "' (joint)");
+      joints.push_back(n);
+      used.insert(n);
+    }
+    for (const auto& c : t.header())
+      if (!used.count(c)) out.ignored_columns.push_back(c);
+    WarnIgnored(t, out.ignored_columns);
+  } else {
+    for (const auto& c : t.header())
+      if (!used.count(c)) joints.push_back(c);
+  }
+  if (joints.empty()) Fail(t, "no joint columns besides the marker columns");
+  if (expected_num_joints > 0 && static_cast<int>(joints.size()) != expected_num_joints)
+    Fail(t, "has " + std::to_string(joints.size()) + " joint columns, expected " +
+                std::to_string(expected_num_joints));
+  out.num_joints = static_cast<int>(joints.size());
+  out.joint_names = joints;
+  out.has_orientation = true;
+  for (int r = 0; r < t.rows(); ++r) {
+    Eigen::VectorXd q(out.num_joints);
+    for (int j = 0; j < out.num_joints; ++j) q(j) = Required(t, r, joints[j]);
+    for (size_t m = 0; m < marker_orientation.size(); ++m) {
+      const std::string s = std::to_string(m + 1);
+      PoseSample p;
+      p.q = q;
+      p.marker = static_cast<int>(m);
+      for (int i = 0; i < 3; ++i) p.p_WM_W(i) = Required(t, r, std::string(1, "xyz"[i]) + s);
+      if (marker_orientation[m]) {
+        const double roll = Required(t, r, "phix" + s), pitch = Required(t, r, "phiy" + s),
+                     yaw = Required(t, r, "phiz" + s);
+        p.has_orientation = true;
+        p.q_EI_wxyz = geometry::MatrixToQuat(geometry::FromRpy(roll, pitch, yaw));
+      }
+      out.has_orientation = out.has_orientation && p.has_orientation;
+      out.samples.push_back(p);
+    }
+  }
+  if (out.samples.empty()) out.has_orientation = false;
+  return out;
+}
+
+PoseDataset ParseRcal(const CsvTable& t, int expected_num_joints) {
+  PoseDataset out;
+  out.comments = t.comments();
+  std::set<std::string> known{"x", "y", "z", "marker", "temperature", "payload", "time", "set"};
+  int n = 0;
+  while (t.Has(Indexed("q", n + 1))) ++n;
+  if (expected_num_joints > 0 && n < expected_num_joints)
+    Fail(t, "missing column 'q" + std::to_string(n + 1) + "' (expected joints q1..q" +
+                std::to_string(expected_num_joints) + ")");
+  if (expected_num_joints > 0 && n > expected_num_joints)
+    Fail(t, "has joint columns q1..q" + std::to_string(n) + ", expected q1..q" +
+                std::to_string(expected_num_joints));
+  if (n == 0) Fail(t, "missing column 'q1' (joint positions q1..qN)");
+  out.num_joints = n;
+  std::vector<std::string> qcols, dqcols;
+  for (int j = 1; j <= n; ++j) {
+    qcols.push_back(Indexed("q", j));
+    dqcols.push_back(Indexed("dq", j));
+  }
+  known.insert(qcols.begin(), qcols.end());
+  for (const char* c : {"x", "y", "z"})
+    if (!t.Has(c)) Fail(t, "missing column '" + std::string(c) + "' (measured marker position)");
+  const std::vector<std::string> quat{"qw", "qx", "qy", "qz"};
+  std::string quat_missing;
+  int quat_count = 0;
+  for (const auto& c : quat) {
+    if (t.Has(c)) {
+      ++quat_count;
+    } else {
+      quat_missing += (quat_missing.empty() ? "'" : ", '") + c + "'";
+    }
+  }
+  if (quat_count != 0 && quat_count != 4)
+    Fail(t, "columns 'qw,qx,qy,qz' come together: missing column " + quat_missing);
+  const bool quat_cols = quat_count == 4;
+  if (quat_cols) known.insert(quat.begin(), quat.end());
+  int dq_count = 0;
+  for (const auto& c : dqcols) dq_count += t.Has(c) ? 1 : 0;
+  if (dq_count != 0)
+    for (const auto& c : dqcols)
+      if (!t.Has(c)) Fail(t, "missing column '" + c + "' (dq1..dqN come together)");
+  if (dq_count != 0) known.insert(dqcols.begin(), dqcols.end());
+  for (const auto& c : t.header())
+    if (!known.count(c)) out.ignored_columns.push_back(c);
+  WarnIgnored(t, out.ignored_columns);
+
+  out.has_orientation = quat_cols && t.rows() > 0;
+  for (int r = 0; r < t.rows(); ++r) {
+    PoseSample p;
+    p.q.resize(n);
+    for (int j = 0; j < n; ++j) p.q(j) = Required(t, r, qcols[j]);
+    p.p_WM_W = {Required(t, r, "x"), Required(t, r, "y"), Required(t, r, "z")};
+    if (quat_cols) {
+      Eigen::Vector4d q;
+      int present = 0;
+      for (int i = 0; i < 4; ++i) {
+        q(i) = t.At(r, quat[i]);
+        present += std::isfinite(q(i)) ? 1 : 0;
+      }
+      if (present == 4) {
+        p.has_orientation = true;
+        p.q_EI_wxyz = UnitQuaternion(t, r, q);
+      } else if (present != 0) {
+        for (int i = 0; i < 4; ++i)
+          if (!std::isfinite(q(i)))
+            Fail(t, Row(r) + " column '" + quat[i] +
+                        "' is empty or NaN while other quaternion cells are set");
+      }
+    }
+    out.has_orientation = out.has_orientation && p.has_orientation;
+    if (t.Has("marker")) {
+      const double m = t.At(r, "marker");
+      if (!std::isfinite(m) || m != std::round(m) || std::abs(m) > 1e9)
+        Fail(t,
+             Row(r) + " column 'marker' must be an integer id, got '" + t.Text(r, "marker") + "'");
+      p.marker = static_cast<int>(m);
+    }
+    if (t.Has("temperature")) p.temperature = t.At(r, "temperature");
+    if (t.Has("payload")) p.payload = t.At(r, "payload");
+    if (t.Has("time")) p.time = t.At(r, "time");
+    if (dq_count != 0) {
+      int present = 0;
+      for (const auto& c : dqcols) present += std::isfinite(t.At(r, c)) ? 1 : 0;
+      if (present == n) {
+        p.dq_sign.resize(n);
+        for (int j = 0; j < n; ++j) {
+          const double s = t.At(r, dqcols[j]);
+          if (s != -1.0 && s != 0.0 && s != 1.0)
+            Fail(t, Row(r) + " column '" + dqcols[j] + "' must be -1, 0 or 1, got '" +
+                        t.Text(r, dqcols[j]) + "'");
+          p.dq_sign(j) = static_cast<int>(s);
+        }
+      } else if (present != 0) {
+        for (const auto& c : dqcols)
+          if (!std::isfinite(t.At(r, c)))
+            Fail(t, Row(r) + " column '" + c + "' is empty while other dq cells are set");
+      }
+    }
+    if (t.Has("set")) {
+      const std::string& s = t.Text(r, "set");
+      if (s == "cal") {
+        p.set = PoseSample::kCal;
+      } else if (s == "test") {
+        p.set = PoseSample::kTest;
+      } else if (s.empty()) {
+        p.set = PoseSample::kUnspecified;
+      } else {
+        Fail(t, Row(r) + " column 'set' must be cal or test (or empty), got '" + s + "'");
+      }
+    }
+    out.samples.push_back(std::move(p));
+  }
+  return out;
+}
+
+std::string Num(double v) {
+  if (std::isnan(v)) return "";
+  if (v == 0.0) return "0";
+  char buf[64];
+  const auto [ptr, ec] = std::to_chars(buf, buf + sizeof(buf), v);
+  if (ec != std::errc()) throw std::runtime_error("cannot format a number");
+  return std::string(buf, ptr);
+}
+
+}  // namespace
+
+PoseDataset ParsePoseDataset(const std::string& text, const std::string& source,
+                             int expected_num_joints, const std::vector<std::string>& joint_names) {
+  const CsvTable t = CsvTable::Parse(text, source);
+  if (t.Has("x1") && !t.Has("x")) return ParseFigaroh(t, expected_num_joints, joint_names);
+  return ParseRcal(t, expected_num_joints);
+}
+
+PoseDataset LoadPoseDataset(const std::filesystem::path& path, int expected_num_joints,
+                            const std::vector<std::string>& joint_names) {
+  return ParsePoseDataset(ReadFile(path), path.string(), expected_num_joints, joint_names);
+}
+
+PoseDataset LoadFigarohDataset(const std::filesystem::path& path,
+                               const std::vector<std::string>& joint_names) {
+  const CsvTable t = CsvTable::Load(path);
+  if (!t.Has("x1")) Fail(t, "missing column 'x1' (not the FIGAROH layout)");
+  return ParseFigaroh(t, -1, joint_names);
+}
+
+PoseDataset LoadFigarohUr10(const std::filesystem::path& path) {
+  return LoadFigarohDataset(path, {"shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint",
+                                   "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"});
+}
+
+std::string PoseDatasetText(const PoseDataset& data) {
+  const int n = data.num_joints > 0    ? data.num_joints
+                : data.samples.empty() ? 0
+                                       : static_cast<int>(data.samples[0].q.size());
+  if (n <= 0) throw std::invalid_argument("pose dataset: no joints");
+  bool orientation = false, marker = false, temperature = false, payload = false, time = false,
+       dq = false, set = false;
+  for (size_t i = 0; i < data.samples.size(); ++i) {
+    const PoseSample& p = data.samples[i];
+    if (p.q.size() != n)
+      throw std::invalid_argument("pose dataset: sample " + std::to_string(i) + " has " +
+                                  std::to_string(p.q.size()) + " joints, expected " +
+                                  std::to_string(n));
+    if (p.dq_sign.size() != 0 && p.dq_sign.size() != n)
+      throw std::invalid_argument("pose dataset: sample " + std::to_string(i) + " has " +
+                                  std::to_string(p.dq_sign.size()) + " dq signs, expected " +
+                                  std::to_string(n));
+    orientation |= p.has_orientation;
+    marker |= p.marker != 0;
+    temperature |= !std::isnan(p.temperature);
+    payload |= !std::isnan(p.payload);
+    time |= !std::isnan(p.time);
+    dq |= p.dq_sign.size() != 0;
+    set |= p.set != PoseSample::kUnspecified;
+  }
+  std::ostringstream o;
+  for (const auto& c : data.comments) o << '#' << c << '\n';
+  std::vector<std::string> header;
+  for (int j = 1; j <= n; ++j) header.push_back(Indexed("q", j));
+  for (const char* c : {"x", "y", "z"}) header.push_back(c);
+  if (orientation)
+    for (const char* c : {"qw", "qx", "qy", "qz"}) header.push_back(c);
+  if (marker) header.push_back("marker");
+  if (temperature) header.push_back("temperature");
+  if (payload) header.push_back("payload");
+  if (time) header.push_back("time");
+  if (dq)
+    for (int j = 1; j <= n; ++j) header.push_back(Indexed("dq", j));
+  if (set) header.push_back("set");
+  for (size_t i = 0; i < header.size(); ++i) o << (i ? "," : "") << header[i];
+  o << '\n';
+  for (const PoseSample& p : data.samples) {
+    std::vector<std::string> cells;
+    for (int j = 0; j < n; ++j) cells.push_back(Num(p.q(j)));
+    for (int i = 0; i < 3; ++i) cells.push_back(Num(p.p_WM_W(i)));
+    if (orientation)
+      for (int i = 0; i < 4; ++i) cells.push_back(p.has_orientation ? Num(p.q_EI_wxyz(i)) : "");
+    if (marker) cells.push_back(std::to_string(p.marker));
+    if (temperature) cells.push_back(Num(p.temperature));
+    if (payload) cells.push_back(Num(p.payload));
+    if (time) cells.push_back(Num(p.time));
+    if (dq)
+      for (int j = 0; j < n; ++j)
+        cells.push_back(p.dq_sign.size() ? std::to_string(p.dq_sign(j)) : "");
+    if (set)
+      cells.push_back(p.set == PoseSample::kCal ? "cal" : p.set == PoseSample::kTest ? "test" : "");
+    for (size_t i = 0; i < cells.size(); ++i) o << (i ? "," : "") << cells[i];
+    o << '\n';
+  }
+  return o.str();
+}
+
+void SavePoseDataset(const std::filesystem::path& path, const PoseDataset& data) {
+  AtomicWriteFile(path, PoseDatasetText(data));
+}
+
+}  // namespace rcal::io
