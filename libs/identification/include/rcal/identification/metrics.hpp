@@ -1,0 +1,46 @@
+// How good a calibration is: pose errors against measurements or against a known truth, and the
+// error the measurement noise alone allows (the Cramér–Rao prediction).
+//
+// Position error = |p_a − p_b| [m]; orientation error = angle of R_a·R_bᵀ [rad] (the paper's Table
+// 2 reports both as mean and max).
+#pragma once
+
+#include <Eigen/Core>
+#include <random>
+#include <vector>
+
+#include "rcal/kinematics/measurement.hpp"
+#include "rcal/kinematics/model.hpp"
+
+namespace rcal::identification {
+
+struct PoseErrorStats {
+  std::vector<double> position_m;       ///< per pose [m]
+  std::vector<double> orientation_rad;  ///< per pose [rad]; empty when not measured
+  double mean_position_m = 0, max_position_m = 0, rms_position_m = 0;
+  double mean_orientation_rad = 0, max_orientation_rad = 0, rms_orientation_rad = 0;
+};
+
+/// Summary statistics of per-pose errors.
+PoseErrorStats Summarize(std::vector<double> position_m, std::vector<double> orientation_rad);
+
+/// The model at errors x against the measured poses.
+PoseErrorStats ErrorsAgainstMeasurements(const kinematics::KinematicModel& model,
+                                         const Eigen::VectorXd& x,
+                                         const std::vector<kinematics::PoseMeasurement>& ms);
+
+/// The model at errors x against the truth (the same model at x_true) at joints qs.
+PoseErrorStats ErrorsAgainstTruth(const kinematics::KinematicModel& model, const Eigen::VectorXd& x,
+                                  const Eigen::VectorXd& x_true,
+                                  const std::vector<Eigen::VectorXd>& qs);
+
+/// Expected mean position and orientation error at joints qs of an estimate whose error is
+/// N(0, C) on the `identified` parameters around x (C from CramerRaoBound): E|Jₚ δx|, E|J_θ δx|
+/// by `samples` seeded draws per pose. Returns {mean position [m], mean orientation [rad]}.
+std::pair<double, double> PredictedMeanErrors(const kinematics::KinematicModel& model,
+                                              const std::vector<int>& identified,
+                                              const Eigen::MatrixXd& C, const Eigen::VectorXd& x,
+                                              const std::vector<Eigen::VectorXd>& qs,
+                                              unsigned seed = 1, int samples = 200);
+
+}  // namespace rcal::identification

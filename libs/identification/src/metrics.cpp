@@ -1,0 +1,84 @@
+#include "rcal/identification/metrics.hpp"
+
+#include <Eigen/Cholesky>
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include "rcal/geometry/so3.hpp"
+
+namespace rcal::identification {
+namespace {
+
+void Stats(const std::vector<double>& v, double& mean, double& max, double& rms) {
+  if (v.empty()) return;
+  mean = std::accumulate(v.begin(), v.end(), 0.0) / v.size();
+  max = *std::max_element(v.begin(), v.end());
+  double ss = 0;
+  for (double e : v) ss += e * e;
+  rms = std::sqrt(ss / v.size());
+}
+
+}  // namespace
+
+PoseErrorStats Summarize(std::vector<double> position_m, std::vector<double> orientation_rad) {
+  PoseErrorStats s;
+  s.position_m = std::move(position_m);
+  s.orientation_rad = std::move(orientation_rad);
+  Stats(s.position_m, s.mean_position_m, s.max_position_m, s.rms_position_m);
+  Stats(s.orientation_rad, s.mean_orientation_rad, s.max_orientation_rad, s.rms_orientation_rad);
+  return s;
+}
+
+PoseErrorStats ErrorsAgainstMeasurements(const kinematics::KinematicModel& model,
+                                         const Eigen::VectorXd& x,
+                                         const std::vector<kinematics::PoseMeasurement>& ms) {
+  std::vector<double> p, o;
+  for (const auto& m : ms) {
+    const kinematics::ToolPose pose = model.Forward(m.q, x);
+    p.push_back((m.p_WM_W - pose.p_WM_W).norm());
+    if (m.has_orientation) o.push_back(geometry::AngleBetween(m.R_EI, pose.R_EI));
+  }
+  return Summarize(std::move(p), std::move(o));
+}
+
+PoseErrorStats ErrorsAgainstTruth(const kinematics::KinematicModel& model, const Eigen::VectorXd& x,
+                                  const Eigen::VectorXd& x_true,
+                                  const std::vector<Eigen::VectorXd>& qs) {
+  std::vector<double> p, o;
+  for (const auto& q : qs) {
+    const kinematics::ToolPose a = model.Forward(q, x), b = model.Forward(q, x_true);
+    p.push_back((a.p_WM_W - b.p_WM_W).norm());
+    o.push_back(geometry::AngleBetween(a.R_EI, b.R_EI));
+  }
+  return Summarize(std::move(p), std::move(o));
+}
+
+std::pair<double, double> PredictedMeanErrors(const kinematics::KinematicModel& model,
+                                              const std::vector<int>& identified,
+                                              const Eigen::MatrixXd& C, const Eigen::VectorXd& x,
+                                              const std::vector<Eigen::VectorXd>& qs, unsigned seed,
+                                              int samples) {
+  const Eigen::MatrixXd L = C.llt().matrixL();
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> n(0.0, 1.0);
+  Eigen::MatrixXd J(6, model.num_params());
+  Eigen::MatrixXd Jid(6, identified.size());
+  double sum_p = 0, sum_o = 0;
+  Eigen::VectorXd z(L.rows());
+  for (const auto& q : qs) {
+    model.IdentificationJacobian(q, x, J);
+    for (size_t i = 0; i < identified.size(); ++i) Jid.col(i) = J.col(identified[i]);
+    const Eigen::MatrixXd JL = Jid * L;
+    for (int k = 0; k < samples; ++k) {
+      for (int i = 0; i < z.size(); ++i) z(i) = n(rng);
+      const Eigen::VectorXd d = JL * z;
+      sum_p += d.head<3>().norm();
+      sum_o += d.tail<3>().norm();
+    }
+  }
+  const double count = static_cast<double>(qs.size()) * samples;
+  return {sum_p / count, sum_o / count};
+}
+
+}  // namespace rcal::identification

@@ -1,0 +1,51 @@
+#include "rcal/identification/metrics.hpp"
+
+#include <gtest/gtest.h>
+
+#include "identification_fixture.hpp"
+
+namespace rcal::identification {
+namespace {
+
+TEST(Metrics, SummaryOfKnownErrors) {
+  const PoseErrorStats s = Summarize({0.001, 0.003, 0.002}, {0.01, 0.03});
+  EXPECT_DOUBLE_EQ(s.mean_position_m, 0.002);
+  EXPECT_DOUBLE_EQ(s.max_position_m, 0.003);
+  EXPECT_NEAR(s.rms_position_m, std::sqrt((1 + 9 + 4) / 3.0) * 1e-3, 1e-15);
+  EXPECT_DOUBLE_EQ(s.mean_orientation_rad, 0.02);
+}
+
+TEST(Metrics, ErrorsAgainstTruthAndMeasurementsAgreeWithoutNoise) {
+  const auto model = kinematics::testing::Grb3016();
+  sim::Rng rng(5);
+  const Eigen::VectorXd x_true = sim::Table3Errors(model);
+  const auto qs = sim::SampleJoints(model, 20, rng);
+  sim::PoseNoise exact;
+  exact.position_sigma = exact.orientation_sigma = 0;
+  std::vector<kinematics::PoseMeasurement> ms;
+  for (const auto& q : qs) {
+    auto m = sim::MeasurePose(model, x_true, q, exact, rng);
+    m.covariance = Eigen::MatrixXd::Identity(6, 6);
+    ms.push_back(m);
+  }
+  const auto a = ErrorsAgainstTruth(model, model.Nominal(), x_true, qs);
+  const auto b = ErrorsAgainstMeasurements(model, model.Nominal(), ms);
+  EXPECT_NEAR(a.mean_position_m, b.mean_position_m, 1e-15);
+  EXPECT_NEAR(a.max_orientation_rad, b.max_orientation_rad, 1e-12);
+  EXPECT_GT(a.mean_position_m, 0.01);  // Table 3 moves the tool by centimetres
+}
+
+TEST(Metrics, PredictionMatchesAnalyticMeanForIsotropicCase) {
+  // One parameter moving the marker along x with σ = 1 mm: E|δp| = σ·sqrt(2/π).
+  kinematics::ModelBuilder b("slide");
+  b.MarkerOffset({0.1, 0.0, 0.0});
+  const auto model = b.Build();
+  const Eigen::MatrixXd C = Eigen::MatrixXd::Identity(1, 1) * 1e-6;
+  const std::vector<Eigen::VectorXd> qs(10, Eigen::VectorXd(0));
+  const auto [p, o] = PredictedMeanErrors(model, {0}, C, model.Nominal(), qs, 3, 2000);
+  EXPECT_NEAR(p / (1e-3 * std::sqrt(2 / M_PI)), 1.0, 0.02);
+  EXPECT_EQ(o, 0.0);
+}
+
+}  // namespace
+}  // namespace rcal::identification
