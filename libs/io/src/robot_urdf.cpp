@@ -67,26 +67,32 @@ RobotSpec ParseUrdfRobotSpec(const std::string& urdf_xml, const std::string& sou
 
   std::string tip_name = options.tip_link;
   if (tip_name.empty()) {
-    // The deepest leaf below the base; a tie is ambiguous.
-    int best = -1;
+    // The child link of the deepest moving joint below the base (depth counted in moving
+    // joints); fixed frames after it (flange, tool0, cameras) are left to the marker offset and
+    // IMU mounting. Two such links (two arms, gripper fingers) are ambiguous.
+    int best = 0;
     std::vector<std::string> tied;
-    std::function<void(const urdf::Link&, int)> walk = [&](const urdf::Link& l, int depth) {
-      if (l.child_links.empty()) {
-        if (depth > best) {
+    std::function<void(const urdf::Link&, int)> walk = [&](const urdf::Link& l, int moving) {
+      for (const auto& c : l.child_links) {
+        const bool moves = c->parent_joint && c->parent_joint->type != urdf::Joint::FIXED;
+        const int depth = moving + (moves ? 1 : 0);
+        if (moves && depth > best) {
           best = depth;
-          tied = {l.name};
-        } else if (depth == best) {
-          tied.push_back(l.name);
+          tied = {c->name};
+        } else if (moves && depth == best) {
+          tied.push_back(c->name);
         }
+        walk(*c, depth);
       }
-      for (const auto& c : l.child_links) walk(*c, depth + 1);
     };
     walk(*base, 0);
+    if (tied.empty())
+      throw std::runtime_error(source + ": no moving joint below base link '" + base_name + "'");
     if (tied.size() != 1) {
       std::string names;
       for (const auto& n : tied) names += (names.empty() ? "" : ", ") + n;
-      throw std::runtime_error(source + ": the tip link is ambiguous (deepest leaves below '" +
-                               base_name + "': " + names + "); name one");
+      throw std::runtime_error(source + ": the tip link is ambiguous (links after the deepest " +
+                               "moving joints below '" + base_name + "': " + names + "); name one");
     }
     tip_name = tied.front();
   }

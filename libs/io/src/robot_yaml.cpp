@@ -4,6 +4,7 @@
 
 #include <charconv>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <numeric>
 #include <set>
@@ -20,6 +21,21 @@ using kinematics::Joint;
 using kinematics::JointType;
 
 constexpr const char* kSchema = "rcal.robot/1";
+
+/// YAML's spellings of the non-finite numbers (.nan, .inf, -.Inf, ...), or nullopt.
+std::optional<double> YamlSpecial(const std::string& s) {
+  std::string t = s;
+  double sign = 1.0;
+  if (!t.empty() && (t[0] == '-' || t[0] == '+')) {
+    sign = t[0] == '-' ? -1.0 : 1.0;
+    t.erase(0, 1);
+  }
+  for (const char* nan : {".nan", ".NaN", ".NAN"})
+    if (t == nan) return std::numeric_limits<double>::quiet_NaN();
+  for (const char* inf : {".inf", ".Inf", ".INF"})
+    if (t == inf) return sign * std::numeric_limits<double>::infinity();
+  return std::nullopt;
+}
 
 // ---------------------------------------------------------------------------------------------
 // Reading: every accessor knows the file and the key path, so every error names both.
@@ -87,8 +103,10 @@ class Reader {
            std::string("expected ") + (angle ? "an angle [rad]" : "a number") + ", got " + Kind(n),
            &n);
     const std::string& s = n.Scalar();
-    std::optional<double> v;
-    if (angle) {
+    std::optional<double> v = YamlSpecial(s);
+    if (v) {
+      // .nan / .inf: reported as not finite below
+    } else if (angle) {
       v = ParseAngle(s);
     } else {
       double d = 0;
@@ -218,7 +236,7 @@ std::string Num(double v) {
 
 std::string Angle(double v) {
   if (v == 0.0) return "0";
-  const int dens[] = {1, 2, 3, 4, 6, 8, 12};
+  const int dens[] = {1, 2, 3, 4, 5, 6, 8, 9, 10, 12, 18, 36};
   for (int den : dens) {
     for (int num = 1; num <= 4 * den; ++num) {
       if (std::gcd(num, den) != 1) continue;

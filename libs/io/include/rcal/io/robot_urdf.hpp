@@ -24,7 +24,11 @@ namespace rcal::io {
 
 struct UrdfOptions {
   std::string base_link;  ///< first link of the chain; empty: the URDF's root link
-  std::string tip_link;   ///< last link; empty: the deepest leaf below base_link (error if tied)
+  /// Last link of the chain. Empty: the child link of the deepest moving joint below base_link
+  /// (depth in moving joints; for a UR arm wrist_3_link). Fixed frames after it (flange, tool0,
+  /// cameras) stay out: the marker offset and IMU mounting describe what is mounted there. Two
+  /// such links (two arms, gripper fingers) are an error asking for tip_link.
+  std::string tip_link;
   bool identify_joints = true;  ///< 6-parameter placement error per moving joint
 
   /// Add a 6-DoF world ← base frame T_WB in front of the chain (ModelBuilder::BaseFrame).

@@ -1,0 +1,350 @@
+#include "rcal/io/robot_urdf.hpp"
+
+#include <gtest/gtest.h>
+#include <tinyxml.h>
+
+#include <map>
+#include <numbers>
+#include <random>
+#include <sstream>
+
+#include "../kinematics/test_robots.hpp"
+#include "io_test_util.hpp"
+#include "rcal/geometry/so3.hpp"
+#include "rcal/io/atomic_file.hpp"
+
+namespace rcal::io {
+namespace {
+
+using kinematics::KinematicModel;
+using testing::ErrorOf;
+using testing::ScratchDir;
+constexpr double kPi = std::numbers::pi;
+
+std::filesystem::path Ur10Urdf() {
+  return testing::SharedDir() / "data/figaroh_ur10/robot.urdf";
+}
+
+const std::vector<std::string> kUrJoints{"shoulder_pan_joint", "shoulder_lift_joint",
+                                         "elbow_joint",        "wrist_1_joint",
+                                         "wrist_2_joint",      "wrist_3_joint"};
+
+// An independent reading of a URDF: joints by child link, straight from the XML with tinyxml.
+struct XmlJoint {
+  std::string name, type, parent;
+  Eigen::Vector3d xyz = Eigen::Vector3d::Zero(), rpy = Eigen::Vector3d::Zero();
+  Eigen::Vector3d axis = Eigen::Vector3d::UnitX();
+};
+
+Eigen::Vector3d Triple(const char* text) {
+  Eigen::Vector3d v = Eigen::Vector3d::Zero();
+  if (text == nullptr) return v;
+  std::istringstream in(text);
+  in >> v(0) >> v(1) >> v(2);
+  return v;
+}
+
+std::map<std::string, XmlJoint> JointsByChild(const std::string& xml) {
+  TiXmlDocument doc;
+  doc.Parse(xml.c_str());
+  EXPECT_FALSE(doc.Error());
+  std::map<std::string, XmlJoint> out;
+  for (const TiXmlElement* j = doc.RootElement()->FirstChildElement("joint"); j != nullptr;
+       j = j->NextSiblingElement("joint")) {
+    XmlJoint x;
+    x.name = j->Attribute("name");
+    x.type = j->Attribute("type");
+    x.parent = j->FirstChildElement("parent")->Attribute("link");
+    if (const TiXmlElement* o = j->FirstChildElement("origin")) {
+      x.xyz = Triple(o->Attribute("xyz"));
+      x.rpy = Triple(o->Attribute("rpy"));
+    }
+    if (const TiXmlElement* a = j->FirstChildElement("axis")) x.axis = Triple(a->Attribute("xyz"));
+    out[j->FirstChildElement("child")->Attribute("link")] = x;
+  }
+  return out;
+}
+
+/// Hand-chained product of the URDF origins and joint motions, base link → tip link, with the
+/// joint values given by joint name.
+Eigen::Isometry3d ChainByHand(const std::string& xml, const std::string& base,
+                              const std::string& tip, const std::map<std::string, double>& q) {
+  const auto joints = JointsByChild(xml);
+  std::vector<XmlJoint> chain;
+  for (std::string link = tip; link != base;) {
+    const XmlJoint& j = joints.at(link);
+    chain.insert(chain.begin(), j);
+    link = j.parent;
+  }
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  for (const XmlJoint& j : chain) {
+    Eigen::Isometry3d origin = Eigen::Isometry3d::Identity();
+    origin.translation() = j.xyz;
+    origin.linear() = (Eigen::AngleAxisd(j.rpy(2), Eigen::Vector3d::UnitZ()) *
+                       Eigen::AngleAxisd(j.rpy(1), Eigen::Vector3d::UnitY()) *
+                       Eigen::AngleAxisd(j.rpy(0), Eigen::Vector3d::UnitX()))
+                          .toRotationMatrix();
+    T = T * origin;
+    if (j.type == "revolute" || j.type == "continuous") {
+      T = T * Eigen::AngleAxisd(q.at(j.name), j.axis.normalized());
+    } else if (j.type == "prismatic") {
+      T = T * Eigen::Translation3d(q.at(j.name) * j.axis.normalized());
+    }
+  }
+  return T;
+}
+
+std::map<std::string, double> ByName(const KinematicModel& m, const Eigen::VectorXd& q) {
+  std::map<std::string, double> out;
+  for (int j = 0; j < m.num_joints(); ++j) out[m.joints()[j].name] = q(j);
+  return out;
+}
+
+double FrameDifference(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
+  return (a.matrix() - b.matrix()).norm();
+}
+
+TEST(RobotUrdf, Ur10LoadsTheChainFromRootToTheLastMovingJoint) {
+  const KinematicModel m = LoadRobotUrdf(Ur10Urdf());
+  ASSERT_EQ(m.num_joints(), 6);
+  for (int j = 0; j < 6; ++j) EXPECT_EQ(m.joints()[j].name, kUrJoints[j]);
+  EXPECT_EQ(m.num_params(), 36);  // 6 placement errors per joint
+  EXPECT_GE(m.FindParameter("elbow_joint_drx"), 0);
+  EXPECT_DOUBLE_EQ(m.joints()[2].lower, -kPi);
+  EXPECT_DOUBLE_EQ(m.joints()[0].upper, 2 * kPi);
+  const RobotSpec spec = LoadUrdfRobotSpec(Ur10Urdf());
+  EXPECT_EQ(spec.convention, Convention::kUrdf);
+  // The chain ends at wrist_3_link (camera and tool frames hang below it, fixed).
+  ASSERT_TRUE(spec.links.back().joint.has_value());
+  EXPECT_EQ(spec.links.back().joint->name, "wrist_3_joint");
+  EXPECT_EQ(spec.links.size(), 9u);  // support, robot, base_link_inertia fixed + 6 joints
+}
+
+TEST(RobotUrdf, Ur10ForwardKinematicsEqualsHandChainedOrigins) {
+  const std::string xml = ReadFile(Ur10Urdf());
+  const KinematicModel m = LoadRobotUrdf(Ur10Urdf());
+  UrdfOptions o;
+  o.tip_link = "camera_color_optical_frame";
+  const KinematicModel to_camera = LoadRobotUrdf(Ur10Urdf(), o);
+  std::mt19937 rng(11);
+  std::vector<Eigen::VectorXd> qs{Eigen::VectorXd::Zero(6)};
+  for (int k = 0; k < 20; ++k) qs.push_back(kinematics::testing::RandomJoints(m, rng));
+  for (const auto& q : qs) {
+    const Eigen::Isometry3d expected = ChainByHand(xml, "world", "wrist_3_link", ByName(m, q));
+    EXPECT_LT(FrameDifference(m.ToolFrame(q, m.Nominal()), expected), 1e-12);
+    EXPECT_LT((m.Forward(q, m.Nominal()).p_WM_W - expected.translation()).norm(), 1e-12);
+    // Down to the camera: the fixed joints after the arm, with their odd rotations.
+    const Eigen::Isometry3d camera =
+        ChainByHand(xml, "world", "camera_color_optical_frame", ByName(m, q));
+    EXPECT_LT(FrameDifference(to_camera.ToolFrame(q, to_camera.Nominal()), camera), 1e-12);
+  }
+}
+
+TEST(RobotUrdf, BaseAndTipLinksChooseTheChain) {
+  const std::string xml = ReadFile(Ur10Urdf());
+  UrdfOptions o;
+  o.base_link = "base_link";
+  o.tip_link = "wrist_3_link";
+  const KinematicModel m = LoadRobotUrdf(Ur10Urdf(), o);
+  ASSERT_EQ(m.num_joints(), 6);
+  std::mt19937 rng(12);
+  for (int k = 0; k < 10; ++k) {
+    const Eigen::VectorXd q = kinematics::testing::RandomJoints(m, rng);
+    EXPECT_LT(FrameDifference(m.ToolFrame(q, m.Nominal()),
+                              ChainByHand(xml, "base_link", "wrist_3_link", ByName(m, q))),
+              1e-12);
+  }
+  o.tip_link = "no_such_link";
+  EXPECT_NE(ErrorOf([&] { LoadRobotUrdf(Ur10Urdf(), o); }).find("tip link 'no_such_link'"),
+            std::string::npos);
+  o.tip_link = "wall_link";  // not below base_link
+  EXPECT_NE(ErrorOf([&] { LoadRobotUrdf(Ur10Urdf(), o); }).find("is not below base link"),
+            std::string::npos);
+}
+
+TEST(RobotUrdf, BaseFrameAndMarkerOptions) {
+  UrdfOptions o;
+  o.add_base_frame = true;
+  o.base_xyz = {0.1, -0.2, 0.3};
+  o.base_rpy = {0.01, 0.02, 0.03};
+  o.add_marker = true;
+  o.marker_xyz = {0.0, 0.0, 0.05};
+  const KinematicModel m = LoadRobotUrdf(Ur10Urdf(), o);
+  EXPECT_EQ(m.num_params(), 36 + 6 + 3);
+  EXPECT_EQ(m.FindParameter("base_x"), 0);
+  EXPECT_GE(m.FindParameter("marker_z"), 0);
+  const KinematicModel plain = LoadRobotUrdf(Ur10Urdf());
+  const Eigen::VectorXd q = Eigen::VectorXd::LinSpaced(6, -1.0, 1.0);
+  Eigen::Isometry3d T_WB = Eigen::Isometry3d::Identity();
+  T_WB.translation() = o.base_xyz;
+  T_WB.linear() = geometry::FromRpy(o.base_rpy);
+  const Eigen::Vector3d expected = T_WB * (plain.ToolFrame(q, plain.Nominal()) * o.marker_xyz);
+  EXPECT_LT((m.Forward(q, m.Nominal()).p_WM_W - expected).norm(), 1e-12);
+  o.identify_joints = false;
+  o.identify_base = false;
+  EXPECT_EQ(LoadRobotUrdf(Ur10Urdf(), o).num_params(), 3);
+}
+
+TEST(RobotUrdf, CalibratedUrdfRoundTrips) {
+  ScratchDir dir;
+  const KinematicModel m = LoadRobotUrdf(Ur10Urdf());
+  std::mt19937 rng(13);
+  for (int trial = 0; trial < 5; ++trial) {
+    const Eigen::VectorXd x = kinematics::testing::RandomErrors(m, rng, 0.005, 0.02);
+    const auto out = dir / "calibrated.urdf";
+    SaveCalibratedUrdf(Ur10Urdf(), out, m, x);
+    const KinematicModel cal = LoadRobotUrdf(out);
+    ASSERT_EQ(cal.num_params(), m.num_params());
+    for (int k = 0; k < 20; ++k) {
+      const Eigen::VectorXd q = kinematics::testing::RandomJoints(m, rng);
+      EXPECT_LT(FrameDifference(cal.ToolFrame(q, cal.Nominal()), m.ToolFrame(q, x)), 1e-12);
+    }
+    // The rest of the file is kept: visuals, the fixed joints, the comment saying what changed.
+    const std::string text = ReadFile(out);
+    EXPECT_NE(text.find("Calibrated by rcal: 6 joint origins corrected"), std::string::npos);
+    EXPECT_NE(text.find("wall_joint"), std::string::npos);
+    EXPECT_NE(text.find("<mesh"), std::string::npos);
+  }
+  // Zero errors leave the origins as they were.
+  const std::string same =
+      CalibratedUrdfText(ReadFile(Ur10Urdf()), Ur10Urdf().string(), m, m.Nominal());
+  EXPECT_NE(same.find("rpy=\"1.570796326589793 3.141592653589793 3.141592653589793\""),
+            std::string::npos);
+}
+
+TEST(RobotUrdf, CalibratedUrdfRejectsAForeignModel) {
+  const KinematicModel other = kinematics::testing::UrLikeUrdf();
+  const std::string msg = ErrorOf(
+      [&] { CalibratedUrdfText(ReadFile(Ur10Urdf()), "robot.urdf", other, other.Nominal()); });
+  EXPECT_NE(msg.find("joint 'shoulder_pan' of model 'ur_like' is not in the URDF"),
+            std::string::npos)
+      << msg;
+}
+
+TEST(RobotUrdf, ComposeUrdfOriginMatchesTheEtLayout) {
+  std::mt19937 rng(14);
+  std::normal_distribution<double> n(0.0, 1.0);
+  for (double pitch : {0.3, kPi / 2, -kPi / 2, kPi / 2 - 1e-9, kPi}) {
+    const Eigen::Vector3d xyz(0.1, -0.2, 0.3), rpy(0.4, pitch, -0.7);
+    Eigen::Matrix<double, 6, 1> e;
+    for (int i = 0; i < 6; ++i) e(i) = n(rng) * (i < 3 ? 0.01 : 0.05);
+    Eigen::Vector3d xyz2, rpy2;
+    ComposeUrdfOrigin(xyz, rpy, e, &xyz2, &rpy2);
+    Eigen::Isometry3d expected = Eigen::Isometry3d::Identity();
+    expected.translation() = xyz;
+    expected.linear() = geometry::FromRpy(rpy);
+    expected = expected * Eigen::Translation3d(e.head<3>()) *
+               Eigen::AngleAxisd(e(3), Eigen::Vector3d::UnitZ()) *
+               Eigen::AngleAxisd(e(4), Eigen::Vector3d::UnitY()) *
+               Eigen::AngleAxisd(e(5), Eigen::Vector3d::UnitX());
+    Eigen::Isometry3d got = Eigen::Isometry3d::Identity();
+    got.translation() = xyz2;
+    got.linear() = geometry::FromRpy(rpy2);
+    EXPECT_LT(FrameDifference(got, expected), 1e-14) << "pitch " << pitch;
+    // Exactly at gimbal lock too.
+    const Eigen::Matrix3d R = geometry::FromRpy(0.4, pitch, -0.7);
+    EXPECT_LT((geometry::FromRpy(RobustRpy(R)) - R).norm(), 1e-15) << "pitch " << pitch;
+  }
+}
+
+std::string TinyUrdf(const std::string& extra) {
+  return R"(<?xml version="1.0"?>
+<robot name="tiny">
+  <link name="a"/><link name="b"/><link name="c"/>
+  <joint name="ab" type="revolute"><parent link="a"/><child link="b"/>
+    <origin xyz="0 0 0.1" rpy="0 0 0"/><axis xyz="0 0 1"/>
+    <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+  <joint name="bc" type="fixed"><parent link="b"/><child link="c"/>
+    <origin xyz="0.2 0 0" rpy="0 0 0"/></joint>
+)" + extra +
+         "</robot>\n";
+}
+
+TEST(RobotUrdf, BadInputIsNamed) {
+  // The default tip is the link after the last moving joint, not a fixed leaf.
+  EXPECT_EQ(ParseUrdfRobotSpec(TinyUrdf(""), "tiny.urdf").links.size(), 1u);
+  // Two moving branches of the same depth: the tip must be named.
+  const std::string two_arms = TinyUrdf(R"(<link name="d"/>
+  <joint name="ad" type="revolute"><parent link="a"/><child link="d"/><axis xyz="1 0 0"/>
+    <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+)");
+  EXPECT_NE(ErrorOf([&] { ParseUrdfRobotSpec(two_arms, "tiny.urdf"); })
+                .find("tiny.urdf: the tip link is ambiguous (links after the deepest moving "
+                      "joints below 'a': b, d)"),
+            std::string::npos);
+  UrdfOptions o;
+  o.tip_link = "c";
+  EXPECT_EQ(ParseUrdfRobotSpec(two_arms, "tiny.urdf", o).links.size(), 2u);
+  // Malformed XML and invalid URDF.
+  EXPECT_NE(ErrorOf([&] {
+              ParseUrdfRobotSpec("<robot name='x'><link", "bad.urdf");
+            }).find("bad.urdf: malformed XML"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] {
+              ParseUrdfRobotSpec("<robot name='x'></robot>", "bad.urdf");
+            }).find("bad.urdf: not a valid URDF"),
+            std::string::npos);
+  // Unsupported joint types.
+  std::string floating = TinyUrdf("");
+  floating.replace(floating.find("type=\"revolute\""), 15, "type=\"floating\"");
+  EXPECT_NE(ErrorOf([&] {
+              ParseUrdfRobotSpec(floating, "f.urdf");
+            }).find("f.urdf: joint 'ab': only revolute"),
+            std::string::npos);
+  // Only fixed joints.
+  std::string fixed_only = TinyUrdf("");
+  fixed_only.replace(fixed_only.find("type=\"revolute\""), 15, "type=\"fixed\"");
+  EXPECT_NE(ErrorOf([&] {
+              ParseUrdfRobotSpec(fixed_only, "x.urdf");
+            }).find("x.urdf: no moving joint below base link 'a'"),
+            std::string::npos);
+}
+
+TEST(RobotUrdf, ContinuousAndPrismaticJoints) {
+  std::string xml = TinyUrdf("");
+  xml.replace(xml.find("type=\"revolute\""), 15, "type=\"continuous\"");
+  RobotSpec spec = ParseUrdfRobotSpec(xml, "c.urdf");
+  ASSERT_TRUE(spec.links[0].joint.has_value());
+  EXPECT_DOUBLE_EQ(spec.links[0].joint->lower, -kPi);
+  EXPECT_DOUBLE_EQ(spec.links[0].joint->upper, kPi);
+  xml = TinyUrdf("");
+  xml.replace(xml.find("type=\"revolute\""), 15, "type=\"prismatic\"");
+  UrdfOptions o;
+  o.tip_link = "c";
+  const KinematicModel m = BuildModel(ParseUrdfRobotSpec(xml, "p.urdf", o));
+  Eigen::VectorXd q(1);
+  q << 0.25;
+  EXPECT_LT((m.ToolFrame(q, m.Nominal()).translation() - Eigen::Vector3d(0.2, 0, 0.35)).norm(),
+            1e-15);
+}
+
+TEST(RobotUrdf, LoadRobotDispatchesOnTheExtension) {
+  const LoadedRobot urdf = LoadRobot(Ur10Urdf());
+  EXPECT_TRUE(urdf.from_urdf);
+  EXPECT_EQ(urdf.model.num_joints(), 6);
+  const LoadedRobot yaml = LoadRobot(testing::SourceDir() / "config/robots/grb3016.yaml");
+  EXPECT_FALSE(yaml.from_urdf);
+  EXPECT_EQ(yaml.model.num_params(), 28);
+  EXPECT_NE(ErrorOf([&] { LoadRobot("robot.txt"); }).find("unknown robot file type"),
+            std::string::npos);
+}
+
+TEST(RobotUrdf, UrdfRobotSavesAsYamlAndLoadsCalibrated) {
+  ScratchDir dir;
+  UrdfOptions o;
+  o.add_base_frame = true;
+  o.add_marker = true;
+  const LoadedRobot r = LoadRobot(Ur10Urdf(), o);
+  std::mt19937 rng(15);
+  const Eigen::VectorXd x = kinematics::testing::RandomErrors(r.model, rng);
+  SaveCalibratedRobotYaml(dir / "ur10.yaml", r.spec, r.model, x);
+  const KinematicModel cal = LoadRobotYaml(dir / "ur10.yaml");
+  for (int k = 0; k < 20; ++k) {
+    const Eigen::VectorXd q = kinematics::testing::RandomJoints(r.model, rng);
+    EXPECT_LT((cal.Forward(q, cal.Nominal()).p_WM_W - r.model.Forward(q, x).p_WM_W).norm(), 1e-12);
+    EXPECT_LT(FrameDifference(cal.ToolFrame(q, cal.Nominal()), r.model.ToolFrame(q, x)), 1e-12);
+  }
+}
+
+}  // namespace
+}  // namespace rcal::io
