@@ -14,7 +14,9 @@ namespace {
 using namespace testing;
 
 /// Every joint kind the compiler distinguishes: ±x/±y/±z revolute fast paths, a general axis,
-/// prismatic joints (D–H d and URDF axis), and fixed transforms with no joint in between.
+/// prismatic joints (D–H d and URDF axis), fixed transforms with no joint in between, fixed parts
+/// kept as primitive rotations (merged about one axis, or two axes) and parts collapsed into one
+/// general rotation.
 KinematicModel MixedAxes() {
   ModelBuilder b("mixed");
   b.BaseFrame({0.2, 0.0, 0.3}, {0.1, 0.2, 0.3})
@@ -28,6 +30,11 @@ KinematicModel MixedAxes() {
                  {"slide_general", JointType::kPrismatic, -0.2, 0.2})
       .DhLink(0.05, 0.3, 0.1, 0.2, {"slide_dh", JointType::kPrismatic, 0.0, 0.3})
       .DhLink(0.1, -0.4, 0.05, 0.0, Rev("rz"))
+      // Rx(α) of the link above, this Rx(0.3) and the next link's Rx(α₋₁) are consecutive: they
+      // merge into one axis rotation, kept next to a Ry(β) (two primitive rotations).
+      .FixedTransform({0, 0, 0}, {0.3, 0, 0})
+      .ModifiedDhLink(0.05, 0.4, 0.1, 0.2, Rev("mdh_hayati"), true)
+      .DhLink(0.2, 0.0, 0.0, 0.1, Rev("dh_hayati"), true)
       .MarkerOffset({0.0, 0.02, 0.1});
   return b.Build();
 }
