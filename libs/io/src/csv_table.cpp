@@ -32,7 +32,9 @@ std::vector<std::string> SplitCells(const std::string& line) {
 CsvTable CsvTable::Parse(const std::string& text, const std::string& source) {
   CsvTable t;
   t.source_ = source;
-  std::istringstream in(text);
+  // A UTF-8 byte order mark (spreadsheet exports) would otherwise become part of the first
+  // column's name.
+  std::istringstream in(text.compare(0, 3, "\xEF\xBB\xBF") == 0 ? text.substr(3) : text);
   std::string line;
   int line_no = 0;
   bool have_header = false;
@@ -111,7 +113,12 @@ double CsvTable::At(int row, const std::string& column) const {
   const double v = data_.at(row)[c];
   if (std::isnan(v) && !text_[row][c].empty()) {
     const std::string& s = text_[row][c];
-    if (s != "nan" && s != "NaN" && s != "NAN")
+    // Spellings of NaN (from_chars also reads "-nan" and "nan(...)") are values, not errors.
+    double parsed = 0;
+    const char* first = s.data() + (s[0] == '+' ? 1 : 0);
+    const auto [ptr, ec] = std::from_chars(first, s.data() + s.size(), parsed);
+    const bool is_nan = ec == std::errc() && ptr == s.data() + s.size() && std::isnan(parsed);
+    if (!is_nan)
       throw std::runtime_error(source_ + ": row " + std::to_string(row + 1) + " column '" + column +
                                "' is not a number: '" + s + "'");
   }

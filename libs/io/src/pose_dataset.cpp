@@ -58,7 +58,8 @@ Eigen::Vector4d UnitQuaternion(const CsvTable& t, int r, const Eigen::Vector4d& 
   if (std::abs(n - 1.0) > kUnitTolerance)
     Fail(t,
          Row(r) + " columns 'qw,qx,qy,qz': not a unit quaternion (norm " + std::to_string(n) + ")");
-  return q / n;
+  // Within rounding of unit: kept bit for bit, so a dataset survives save and load unchanged.
+  return std::abs(n - 1.0) > 1e-12 ? Eigen::Vector4d(q / n) : q;
 }
 
 PoseDataset ParseFigaroh(const CsvTable& t, int expected_num_joints,
