@@ -151,6 +151,21 @@ TEST(RobotYaml, CalibratedHayatiRoundTripsWithNominalBeta) {
   EXPECT_NE(RobotYamlText(cal).find("beta: 0.003"), std::string::npos);
 }
 
+TEST(RobotYaml, ModifiedDhNominalBetaIsRefusedClearly) {
+  // ModelBuilder::ModifiedDhLink has no nominal β: the loader and the calibrated save say so
+  // instead of silently dropping it.
+  RobotSpec spec = LoadRobotSpec(testing::SourceDir() / "config/robots/seven_dof.yaml");
+  spec.links[2].hayati = true;
+  const KinematicModel model = BuildModel(spec);
+  Eigen::VectorXd x = model.Nominal();
+  EXPECT_NO_THROW(CalibratedSpec(spec, model, x));
+  x(model.FindParameter("beta3")) = 0.001;
+  EXPECT_NE(ErrorOf([&] { CalibratedSpec(spec, model, x); }).find("links[2].beta"),
+            std::string::npos);
+  spec.links[2].beta = 0.001;
+  EXPECT_NE(ErrorOf([&] { BuildModel(spec); }).find("links[2].beta"), std::string::npos);
+}
+
 TEST(RobotYaml, CalibratedSevenDofWithAllFramesRoundTrips) {
   ExpectCalibratedRoundTrip(LoadRobotSpec(testing::SourceDir() / "config/robots/seven_dof.yaml"),
                             7);

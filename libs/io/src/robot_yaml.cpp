@@ -578,6 +578,12 @@ RobotSpec CalibratedSpec(const RobotSpec& spec, const kinematics::KinematicModel
     }
     throw std::runtime_error(who + ": parameter '" + n + "' has no place in the description");
   }
+  if (out.convention == Convention::kModifiedDh)
+    for (size_t li = 0; li < out.links.size(); ++li)
+      if (out.links[li].beta != 0.0)
+        throw std::runtime_error(who + ": links[" + std::to_string(li) +
+                                 "].beta: an identified modified D–H beta cannot be saved as a "
+                                 "nominal value yet (ModelBuilder has no nominal beta)");
   for (size_t li = 0; li < out.links.size(); ++li)
     ComposeUrdfOrigin(spec.links[li].xyz, spec.links[li].rpy, urdf_error[li], &out.links[li].xyz,
                       &out.links[li].rpy);
