@@ -184,5 +184,16 @@ TEST(EkfIdentifier, CheckpointResumesExactlyAndBadOnesAreRefused) {
   EXPECT_THROW(b.SetState(Eigen::VectorXd::Zero(3), a.P()), std::invalid_argument);
 }
 
+TEST(EkfIdentifier, KeepsTheValuesOfParametersItDoesNotEstimate) {
+  const auto model = SevenJointSetup();
+  sim::Rng rng(4);
+  Eigen::VectorXd x_fixed = sim::RandomErrors(model, rng, 0.01, 0.02);
+  EkfIdentifier ekf(model, {0, 1, 2}, {}, x_fixed);
+  const Eigen::VectorXd x = ekf.x();
+  for (int i = 3; i < model.num_params(); ++i) EXPECT_EQ(x(i), x_fixed(i));
+  EXPECT_EQ(x(0), 0.0);
+  EXPECT_THROW(EkfIdentifier(model, {0}, {}, Eigen::VectorXd::Zero(3)), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace rcal::identification

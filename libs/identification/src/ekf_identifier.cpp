@@ -8,8 +8,14 @@
 namespace rcal::identification {
 
 EkfIdentifier::EkfIdentifier(const kinematics::KinematicModel& model, std::vector<int> identified,
-                             EkfSettings settings)
-    : model_(model), identified_(std::move(identified)), settings_(settings) {
+                             EkfSettings settings, Eigen::VectorXd x_fixed)
+    : model_(model),
+      identified_(std::move(identified)),
+      settings_(settings),
+      x_fixed_(x_fixed.size() ? std::move(x_fixed) : model.Nominal()) {
+  if (x_fixed_.size() != model_.num_params() || !x_fixed_.allFinite())
+    throw std::invalid_argument("x_fixed: expected " + std::to_string(model_.num_params()) +
+                                " finite values");
   for (int i : identified_)
     if (i < 0 || i >= model_.num_params())
       throw std::invalid_argument("identified: index " + std::to_string(i) + " out of range");
@@ -91,11 +97,17 @@ void EkfIdentifier::Restore(const EkfCheckpoint& c) {
   relinearizations_ = c.relinearizations;
 }
 
-void EkfIdentifier::Relinearize() {
+int EkfIdentifier::Refine(int max_passes) {
+  if (history_.empty()) return 0;
+  return Relinearize(max_passes);
+}
+
+int EkfIdentifier::Relinearize(int max_passes) {
   const int n = static_cast<int>(identified_.size());
   Eigen::VectorXd r;
   Eigen::MatrixXd H;
-  for (int pass = 0; pass < settings_.max_relinearize_passes; ++pass) {
+  int passes = 0;
+  for (int pass = 0; pass < max_passes; ++pass) {
     const Eigen::VectorXd x_ref = x_;
     Eigen::VectorXd x_full = this->x();
     Eigen::VectorXd x = x0_;
@@ -109,17 +121,19 @@ void EkfIdentifier::Relinearize() {
       const Eigen::MatrixXd IKH = Eigen::MatrixXd::Identity(n, n) - K * H;
       P = IKH * P * IKH.transpose() + K * m.covariance * K.transpose();
     }
-    if (!x.allFinite()) return;  // keep the sequential estimate
+    if (!x.allFinite()) break;  // keep the last finite estimate
     x_ = x;
     P_ = 0.5 * (P + P.transpose());
     ++relinearizations_;
+    ++passes;
     if ((x_ - x_ref).cwiseAbs().maxCoeff() < settings_.relinearize_threshold) break;
   }
   x_lin_ = x_;
+  return passes;
 }
 
 Eigen::VectorXd EkfIdentifier::x() const {
-  Eigen::VectorXd full = Eigen::VectorXd::Zero(model_.num_params());
+  Eigen::VectorXd full = x_fixed_;
   for (size_t i = 0; i < identified_.size(); ++i) full(identified_[i]) = x_(i);
   return full;
 }
@@ -196,7 +210,7 @@ EkfUpdateResult EkfIdentifier::Update(const kinematics::PoseMeasurement& z) {
   history_.push_back(z);
   if (settings_.relinearize_threshold > 0 &&
       (x_ - x_lin_).cwiseAbs().maxCoeff() > settings_.relinearize_threshold)
-    Relinearize();
+    Relinearize(settings_.max_relinearize_passes);
   return result;
 }
 

@@ -67,9 +67,10 @@ struct EkfCheckpoint {
 
 class EkfIdentifier {
  public:
-  /// `identified`: indices into model.parameters() to estimate (others stay at 0 error).
+  /// `identified`: indices into model.parameters() to estimate. The other parameters keep the
+  /// values of `x_fixed` (full length [m | rad]; empty: 0, the nominal model).
   EkfIdentifier(const kinematics::KinematicModel& model, std::vector<int> identified,
-                EkfSettings settings = {});
+                EkfSettings settings = {}, Eigen::VectorXd x_fixed = {});
 
   /// Back to the prior: x = 0, P = diag(prior σ²), counts zeroed.
   void Reset();
@@ -87,7 +88,7 @@ class EkfIdentifier {
   /// One still-pose measurement. Never throws on bad data: a rejection is reported and counted.
   EkfUpdateResult Update(const kinematics::PoseMeasurement& z);
 
-  /// Full-length error vector (zeros where not identified) [m | rad].
+  /// Full-length error vector (x_fixed where not identified) [m | rad].
   Eigen::VectorXd x() const;
   const Eigen::VectorXd& x_identified() const { return x_; }
   /// Covariance of x_identified().
@@ -99,15 +100,20 @@ class EkfIdentifier {
   int accepted() const { return accepted_; }
   int rejected() const { return rejected_; }
   const std::string& last_rejection() const { return last_rejection_; }
+  /// Runs relinearisation passes over the accepted poses until one moves the estimate by less
+  /// than the threshold, at most `max_passes` (the paper's repeated EKF iterations over a batch).
+  /// Returns the passes run.
+  int Refine(int max_passes);
   /// Relinearisation passes run so far.
   int relinearizations() const { return relinearizations_; }
 
  private:
-  void Relinearize();
+  int Relinearize(int max_passes);
 
   kinematics::KinematicModel model_;
   std::vector<int> identified_;
   EkfSettings settings_;
+  Eigen::VectorXd x_fixed_;  // full length: values of the parameters not identified
   Eigen::VectorXd x_;
   Eigen::MatrixXd P_;
   Eigen::VectorXd q_diag_;  // process noise per update

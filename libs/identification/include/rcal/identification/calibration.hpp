@@ -1,0 +1,93 @@
+// Calibration from a measured pose set, as a robotics engineer runs it on real data:
+//
+// 1. start the set-up frames from the data: world ← base from a rigid alignment (Kabsch) of the
+//    nominal flange positions to the measured ones; flange → IMU (or marker) rotation from the
+//    chordal mean of the orientation residuals;
+// 2. "nominal" model = the drawing kinematics with only the set-up frames fitted (base, marker,
+//    imu, earth): the fair before-calibration figure, since no one uses a robot without knowing
+//    where its base is;
+// 3. calibrated model = the identifiable (base) parameter set at the data's own poses, fitted by
+//    batch LM (or the EKF);
+// 4. measurement noise, when not known, from the residuals (variance components: position and
+//    orientation σ scaled until each block's χ² matches its share of the degrees of freedom);
+// 5. judged on data it did not fit: the `set` split, or k-fold cross-validation.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "rcal/identification/batch_lm.hpp"
+#include "rcal/identification/metrics.hpp"
+#include "rcal/kinematics/measurement.hpp"
+#include "rcal/kinematics/model.hpp"
+
+namespace rcal::identification {
+
+/// (R, t) minimising Σ |R·a_i + t − b_i|² (Kabsch with the reflection guard). At least 3
+/// non-collinear points; throws std::invalid_argument otherwise.
+Eigen::Isometry3d FitRigidTransform(const std::vector<Eigen::Vector3d>& a,
+                                    const std::vector<Eigen::Vector3d>& b);
+
+/// Parameters of the set-up frames: groups base, marker, imu, earth.
+std::vector<int> SetupParameters(const kinematics::KinematicModel& model);
+
+/// Starting errors with the set-up frames guessed from the data (see the file comment). Works
+/// when the model's base frame is the ETs Tx Ty Tz Rz Ry Rx at nominal 0 (as ModelBuilder lays
+/// it out); otherwise those parameters stay 0.
+Eigen::VectorXd InitialSetupGuess(const kinematics::KinematicModel& model,
+                                  const std::vector<kinematics::PoseMeasurement>& ms);
+
+/// The columns among `candidates` that the poses can identify together (pivoted QR of the
+/// column-scaled stacked Jacobian at x), ascending.
+std::vector<int> IdentifiableSubset(const kinematics::KinematicModel& model,
+                                    const std::vector<kinematics::PoseMeasurement>& ms,
+                                    const Eigen::VectorXd& x, const std::vector<int>& candidates);
+
+struct CalibrationSettings {
+  enum class Method { kLm, kEkf };
+  Method method = Method::kLm;
+  bool estimate_noise = true;  ///< rescale position/orientation σ from the residuals
+  int noise_iterations = 4;
+  int folds = 5;  ///< k-fold when there is no cal/test split; ≥ number of poses: leave-one-out
+  unsigned seed = 1;  ///< fold assignment
+};
+
+struct CalibrationFit {
+  std::vector<int> setup;                      ///< identified set-up parameters (the nominal fit)
+  std::vector<int> identified;                 ///< identified parameters of the calibrated fit
+  Eigen::VectorXd x_nominal;                   ///< set-up frames only [m | rad]
+  Eigen::VectorXd x;                           ///< calibrated [m | rad]
+  Eigen::VectorXd sigma;                       ///< 1σ of x (0 where not identified)
+  double position_sigma_m = 0;                 ///< noise used (estimated when settings say so)
+  double orientation_sigma_rad = 0;            ///< 0 when positions only
+  PoseErrorStats nominal_fit, calibrated_fit;  ///< on the poses fitted
+  double cost = 0;
+  int iterations = 0;
+};
+
+/// Fits the nominal (set-up only) and the calibrated model to `ms`. The covariances in `ms` are
+/// the starting noise; with estimate_noise they are rescaled.
+CalibrationFit Calibrate(const kinematics::KinematicModel& model,
+                         std::vector<kinematics::PoseMeasurement> ms,
+                         const CalibrationSettings& settings = {});
+
+struct HeldOutErrors {
+  std::string scheme;                  ///< "cal/test split", "5-fold", "leave-one-out"
+  PoseErrorStats nominal, calibrated;  ///< on poses not fitted
+};
+
+/// Errors on poses not fitted: a split when `is_test` marks some poses (fit on the others), else
+/// k-fold. Noise levels from `fit` are used as weights.
+HeldOutErrors HeldOut(const kinematics::KinematicModel& model,
+                      const std::vector<kinematics::PoseMeasurement>& ms,
+                      const std::vector<bool>& is_test, const CalibrationFit& fit,
+                      const CalibrationSettings& settings = {});
+
+/// Sets every measurement's covariance to diag(σ_p², σ_p², σ_p², σ_o², σ_o², σ_o²).
+void SetNoise(std::vector<kinematics::PoseMeasurement>& ms, double position_sigma_m,
+              double orientation_sigma_rad);
+
+}  // namespace rcal::identification

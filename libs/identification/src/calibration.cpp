@@ -1,0 +1,270 @@
+#include "rcal/identification/calibration.hpp"
+
+#include <Eigen/QR>
+#include <Eigen/SVD>
+#include <algorithm>
+#include <numeric>
+#include <random>
+#include <stdexcept>
+
+#include "rcal/geometry/so3.hpp"
+#include "rcal/identification/ekf_identifier.hpp"
+#include "rcal/kinematics/identifiability.hpp"
+
+namespace rcal::identification {
+
+Eigen::Isometry3d FitRigidTransform(const std::vector<Eigen::Vector3d>& a,
+                                    const std::vector<Eigen::Vector3d>& b) {
+  if (a.size() != b.size() || a.size() < 3)
+    throw std::invalid_argument("FitRigidTransform: need the same number (≥ 3) of points");
+  Eigen::Vector3d ca = Eigen::Vector3d::Zero(), cb = Eigen::Vector3d::Zero();
+  for (size_t i = 0; i < a.size(); ++i) {
+    ca += a[i];
+    cb += b[i];
+  }
+  ca /= a.size();
+  cb /= b.size();
+  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+  for (size_t i = 0; i < a.size(); ++i) H += (a[i] - ca) * (b[i] - cb).transpose();
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  if (svd.singularValues()(1) < 1e-12 * std::max(1.0, svd.singularValues()(0)))
+    throw std::invalid_argument("FitRigidTransform: points are collinear");
+  Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
+  D(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1.0 : 1.0;
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = svd.matrixV() * D * svd.matrixU().transpose();
+  T.translation() = cb - T.linear() * ca;
+  return T;
+}
+
+std::vector<int> SetupParameters(const kinematics::KinematicModel& model) {
+  std::vector<int> out;
+  for (int i = 0; i < model.num_params(); ++i) {
+    const std::string& g = model.parameters()[i].group;
+    if (g == "base" || g == "marker" || g == "imu" || g == "earth") out.push_back(i);
+  }
+  return out;
+}
+
+Eigen::VectorXd InitialSetupGuess(const kinematics::KinematicModel& model,
+                                  const std::vector<kinematics::PoseMeasurement>& ms) {
+  Eigen::VectorXd x = model.Nominal();
+  const char* names[6] = {"base_x", "base_y", "base_z", "base_rz", "base_ry", "base_rx"};
+  int idx[6];
+  bool has_base = true;
+  for (int k = 0; k < 6; ++k) has_base &= (idx[k] = model.FindParameter(names[k])) >= 0;
+  if (has_base && ms.size() >= 3) {
+    // Align the model's marker positions with the base frame at its nominal placement.
+    std::vector<Eigen::Vector3d> a, b;
+    const Eigen::Isometry3d T_WB0 = [&] {
+      // Nominal base transform = the chain's first six ETs at their nominal values.
+      Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+      const auto& ets = model.ets(kinematics::Segment::kChain);
+      for (int k = 0; k < 6 && k < static_cast<int>(ets.size()); ++k)
+        T = T * kinematics::EtTransform(ets[k], ets[k].nominal);
+      return T;
+    }();
+    for (const auto& m : ms) {
+      const Eigen::Vector3d p_WM = model.Forward(m.q, x).p_WM_W;
+      a.push_back(T_WB0.inverse() * p_WM);  // in the base frame
+      b.push_back(m.p_WM_W);
+    }
+    const Eigen::Isometry3d T_WB = FitRigidTransform(a, b);
+    const Eigen::Vector3d rpy = geometry::ToRpy(T_WB.linear());
+    const Eigen::Vector3d rpy0 = geometry::ToRpy(T_WB0.linear());
+    for (int k = 0; k < 3; ++k) x(idx[k]) = T_WB.translation()(k) - T_WB0.translation()(k);
+    x(idx[3]) = rpy(2) - rpy0(2);
+    x(idx[4]) = rpy(1) - rpy0(1);
+    x(idx[5]) = rpy(0) - rpy0(0);
+  }
+  // Flange → IMU: chordal mean of R_model⁻¹·R_meas over the poses with orientation.
+  const char* imu_names[3] = {"imu_rz", "imu_ry", "imu_rx"};
+  int imu[3];
+  bool has_imu = true;
+  for (int k = 0; k < 3; ++k) has_imu &= (imu[k] = model.FindParameter(imu_names[k])) >= 0;
+  if (has_imu) {
+    Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+    int count = 0;
+    for (const auto& m : ms) {
+      if (!m.has_orientation) continue;
+      sum += model.Forward(m.q, x).R_EI.transpose() * m.R_EI;
+      ++count;
+    }
+    if (count > 0) {
+      const Eigen::Matrix3d R_I0I = geometry::Orthonormalize(sum / count);
+      // The IMU ETs are Rz Ry Rx at their nominal values; compose the correction on the right.
+      const auto& ets = model.ets(kinematics::Segment::kImu);
+      Eigen::Matrix3d R0 = Eigen::Matrix3d::Identity();
+      for (const auto& et : ets) R0 = R0 * kinematics::EtTransform(et, et.nominal).linear();
+      const Eigen::Vector3d rpy = geometry::ToRpy(R0 * R_I0I), rpy0 = geometry::ToRpy(R0);
+      x(imu[0]) = rpy(2) - rpy0(2);
+      x(imu[1]) = rpy(1) - rpy0(1);
+      x(imu[2]) = rpy(0) - rpy0(0);
+    }
+  }
+  return x;
+}
+
+std::vector<int> IdentifiableSubset(const kinematics::KinematicModel& model,
+                                    const std::vector<kinematics::PoseMeasurement>& ms,
+                                    const Eigen::VectorXd& x, const std::vector<int>& candidates) {
+  int rows = 0;
+  for (const auto& m : ms) rows += m.dimension();
+  Eigen::MatrixXd J(rows, candidates.size());
+  Eigen::VectorXd r;
+  Eigen::MatrixXd H;
+  int row = 0;
+  for (const auto& m : ms) {
+    kinematics::ResidualAndJacobian(model, m, x, candidates, r, H);
+    J.middleRows(row, m.dimension()) = H;
+    row += m.dimension();
+  }
+  for (int c = 0; c < J.cols(); ++c) {
+    const double n = J.col(c).norm();
+    if (n > 0) J.col(c) /= n;
+  }
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(J);
+  qr.setThreshold(1e-9);
+  std::vector<int> out;
+  for (int k = 0; k < qr.rank(); ++k) out.push_back(candidates[qr.colsPermutation().indices()(k)]);
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+void SetNoise(std::vector<kinematics::PoseMeasurement>& ms, double sp, double so) {
+  for (auto& m : ms) {
+    const int d = m.dimension();
+    m.covariance = Eigen::MatrixXd::Zero(d, d);
+    m.covariance.topLeftCorner<3, 3>().diagonal().setConstant(sp * sp);
+    if (m.has_orientation) m.covariance.bottomRightCorner<3, 3>().diagonal().setConstant(so * so);
+  }
+}
+
+namespace {
+
+struct Solved {
+  Eigen::VectorXd x, sigma;
+  double cost = 0;
+  int iterations = 0;
+};
+
+Solved Solve(const kinematics::KinematicModel& model, const std::vector<int>& identified,
+             const std::vector<kinematics::PoseMeasurement>& ms, const Eigen::VectorXd& x0,
+             CalibrationSettings::Method method) {
+  // The EKF estimates errors relative to its starting point: run it on the model with x0 folded
+  // in by starting its state there. Its prior is wide enough that the start barely matters.
+  const LmResult lm = BatchLm(model, identified).Solve(ms, x0);
+  if (method == CalibrationSettings::Method::kLm) return {lm.x, lm.sigma, lm.cost, lm.iterations};
+  // Offline every pose is known good (the dataset was chosen): no gate, and a prior wide enough
+  // (10 cm, 10°) that it does not pull set-up frames found far from the drawing.
+  EkfSettings es;
+  es.gate_probability = 1.0;
+  es.prior_sigma_length = 0.1;
+  es.prior_sigma_angle = 0.17;
+  EkfIdentifier ekf(model, identified, es, x0);
+  Eigen::VectorXd start(identified.size());
+  for (size_t i = 0; i < identified.size(); ++i) start(i) = x0(identified[i]);
+  ekf.SetState(start, ekf.P());
+  for (const auto& m : ms) ekf.Update(m);
+  ekf.Refine(200);
+  Eigen::VectorXd x = x0;
+  for (size_t i = 0; i < identified.size(); ++i) x(identified[i]) = ekf.x_identified()(i);
+  return {x, ekf.sigma(), BatchLm(model, identified).Cost(ms, x), ekf.accepted()};
+}
+
+}  // namespace
+
+CalibrationFit Calibrate(const kinematics::KinematicModel& model,
+                         std::vector<kinematics::PoseMeasurement> ms,
+                         const CalibrationSettings& settings) {
+  if (ms.size() < 3) throw std::invalid_argument("calibration needs at least 3 poses");
+  CalibrationFit fit;
+  const Eigen::VectorXd x0 = InitialSetupGuess(model, ms);
+  fit.setup = IdentifiableSubset(model, ms, x0, SetupParameters(model));
+  // Identifiability at the data's own poses, around the set-up guess.
+  const auto kind = ms.front().has_orientation ? kinematics::MeasurementKind::kFullPose
+                                               : kinematics::MeasurementKind::kPositionOnly;
+  std::vector<Eigen::VectorXd> qs;
+  for (const auto& m : ms) qs.push_back(m.q);
+  fit.identified = kinematics::AnalyzeIdentifiability(model, qs, x0, kind).identifiable;
+
+  fit.position_sigma_m = std::sqrt(ms.front().covariance(0, 0));
+  fit.orientation_sigma_rad =
+      ms.front().has_orientation ? std::sqrt(ms.front().covariance(3, 3)) : 0;
+  const int iterations = settings.estimate_noise ? std::max(1, settings.noise_iterations) : 1;
+  for (int it = 0; it < iterations; ++it) {
+    SetNoise(ms, fit.position_sigma_m, fit.orientation_sigma_rad);
+    const Solved nominal = Solve(model, fit.setup, ms, x0, CalibrationSettings::Method::kLm);
+    const Solved full = Solve(model, fit.identified, ms, nominal.x, settings.method);
+    fit.x_nominal = nominal.x;
+    fit.x = full.x;
+    fit.sigma = full.sigma;
+    fit.cost = full.cost;
+    fit.iterations = full.iterations;
+    if (!settings.estimate_noise) break;
+    // Variance components: each block's mean squared residual, corrected for the parameters.
+    double ss_p = 0, ss_o = 0;
+    int n_p = 0, n_o = 0;
+    for (const auto& m : ms) {
+      const Eigen::VectorXd r = kinematics::Residual(model, m, fit.x);
+      ss_p += r.head<3>().squaredNorm();
+      n_p += 3;
+      if (m.has_orientation) {
+        ss_o += r.tail<3>().squaredNorm();
+        n_o += 3;
+      }
+    }
+    const double redundancy = 1.0 - static_cast<double>(fit.identified.size()) / (n_p + n_o);
+    fit.position_sigma_m = std::sqrt(ss_p / (n_p * redundancy));
+    if (n_o > 0) fit.orientation_sigma_rad = std::sqrt(ss_o / (n_o * redundancy));
+  }
+  fit.nominal_fit = ErrorsAgainstMeasurements(model, fit.x_nominal, ms);
+  fit.calibrated_fit = ErrorsAgainstMeasurements(model, fit.x, ms);
+  return fit;
+}
+
+HeldOutErrors HeldOut(const kinematics::KinematicModel& model,
+                      const std::vector<kinematics::PoseMeasurement>& all,
+                      const std::vector<bool>& is_test, const CalibrationFit& fit,
+                      const CalibrationSettings& settings) {
+  std::vector<kinematics::PoseMeasurement> ms = all;
+  SetNoise(ms, fit.position_sigma_m, fit.orientation_sigma_rad);
+  const int n = static_cast<int>(ms.size());
+  std::vector<int> fold(n);
+  int folds = 0;
+  HeldOutErrors out;
+  const bool split = std::any_of(is_test.begin(), is_test.end(), [](bool b) { return b; });
+  if (split) {
+    for (int i = 0; i < n; ++i) fold[i] = is_test[i] ? 0 : -1;
+    folds = 1;
+    out.scheme = "cal/test split";
+  } else {
+    folds = std::min(settings.folds, n);
+    std::vector<int> order(n);
+    std::iota(order.begin(), order.end(), 0);
+    std::mt19937_64 rng(settings.seed);
+    std::shuffle(order.begin(), order.end(), rng);
+    for (int k = 0; k < n; ++k) fold[order[k]] = k % folds;
+    out.scheme = folds == n ? "leave-one-out" : std::to_string(folds) + "-fold";
+  }
+  std::vector<double> nom_p, nom_o, cal_p, cal_o;
+  for (int f = 0; f < folds; ++f) {
+    std::vector<kinematics::PoseMeasurement> train, held;
+    for (int i = 0; i < n; ++i) (fold[i] == f ? held : train).push_back(ms[i]);
+    if (train.size() < 3 || held.empty()) continue;
+    CalibrationSettings s = settings;
+    s.estimate_noise = false;  // weights from the full fit; each fold refits its parameters
+    const CalibrationFit ff = Calibrate(model, train, s);
+    const auto nom = ErrorsAgainstMeasurements(model, ff.x_nominal, held);
+    const auto cal = ErrorsAgainstMeasurements(model, ff.x, held);
+    nom_p.insert(nom_p.end(), nom.position_m.begin(), nom.position_m.end());
+    nom_o.insert(nom_o.end(), nom.orientation_rad.begin(), nom.orientation_rad.end());
+    cal_p.insert(cal_p.end(), cal.position_m.begin(), cal.position_m.end());
+    cal_o.insert(cal_o.end(), cal.orientation_rad.begin(), cal.orientation_rad.end());
+  }
+  out.nominal = Summarize(nom_p, nom_o);
+  out.calibrated = Summarize(cal_p, cal_o);
+  return out;
+}
+
+}  // namespace rcal::identification

@@ -1,0 +1,244 @@
+// rcal calibrate DATA.csv --robot ROBOT: identify a robot from a pose dataset, write the
+// calibrated robot (YAML, and URDF when it came from URDF), a report and the figures.
+#include <spdlog/spdlog.h>
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "command.hpp"
+#include "rcal/geometry/so3.hpp"
+#include "rcal/identification/calibration.hpp"
+#include "rcal/io/atomic_file.hpp"
+#include "rcal/io/plot.hpp"
+#include "rcal/io/pose_dataset.hpp"
+#include "rcal/io/robot_urdf.hpp"
+#include "rcal/io/robot_yaml.hpp"
+#include "report.hpp"
+
+namespace rcal::tool {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+struct Options {
+  std::string data;
+  std::string robot;
+  std::string tip_link, base_link;
+  std::string out = "out/calibrate";
+  std::string json_path;
+  std::string method = "lm";
+  std::string frames = "auto";
+  int folds = 5;
+  unsigned seed = 1;
+  double position_sigma_mm = 0.1;
+  double orientation_sigma_deg = 0.1;
+  bool fixed_noise = false;
+};
+
+json StatsJson(const identification::PoseErrorStats& s, const std::string& prefix) {
+  json j;
+  j[prefix + "mean_position_error_m"] = s.mean_position_m;
+  j[prefix + "max_position_error_m"] = s.max_position_m;
+  j[prefix + "rms_position_error_m"] = s.rms_position_m;
+  if (!s.orientation_rad.empty()) {
+    j[prefix + "mean_orientation_error_rad"] = s.mean_orientation_rad;
+    j[prefix + "max_orientation_error_rad"] = s.max_orientation_rad;
+  }
+  return j;
+}
+
+std::vector<std::string> Row(const std::string& name, const identification::PoseErrorStats& s) {
+  const bool o = !s.orientation_rad.empty();
+  return {name, Fmt(s.mean_position_m * kMm), Fmt(s.max_position_m * kMm),
+          o ? Fmt(s.mean_orientation_rad * kDeg) : "–",
+          o ? Fmt(s.max_orientation_rad * kDeg) : "–"};
+}
+
+int Run(const Options& o) {
+  // Robot: URDF chains get the set-up frames a real cell has; YAML files get what they lack.
+  const bool frames = o.frames == "auto";
+  if (!frames && o.frames != "none") throw std::runtime_error("--frames: auto or none");
+  io::UrdfOptions uo;
+  uo.tip_link = o.tip_link;
+  uo.base_link = o.base_link;
+  uo.add_base_frame = frames;
+  uo.add_marker = frames;
+  io::LoadedRobot robot = io::LoadRobot(ResolvePath(o.robot), uo);
+
+  std::vector<std::string> joint_names;
+  for (const auto& j : robot.model.joints()) joint_names.push_back(j.name);
+  const io::PoseDataset data =
+      io::LoadPoseDataset(ResolvePath(o.data), robot.model.num_joints(), joint_names);
+  if (data.samples.empty()) throw std::runtime_error(o.data + ": no poses");
+  for (const auto& s : data.samples)
+    if (s.marker != 0)
+      throw std::runtime_error(o.data +
+                               ": column 'marker': several markers per tool are not "
+                               "supported by rcal calibrate yet (found id " +
+                               std::to_string(s.marker) + ")");
+  if (frames) {
+    if (!robot.from_urdf) {
+      if (!robot.spec.base) robot.spec.base = io::FrameSpec{};
+      if (!robot.spec.marker && !robot.spec.tool) robot.spec.marker = io::FrameSpec{};
+    }
+    if (data.has_orientation && !robot.spec.imu) robot.spec.imu = io::FrameSpec{};
+    robot.model = io::BuildModel(robot.spec);
+  }
+  const auto& model = robot.model;
+
+  std::vector<kinematics::PoseMeasurement> ms;
+  std::vector<bool> is_test;
+  for (const auto& s : data.samples) {
+    kinematics::PoseMeasurement m;
+    m.q = s.q;
+    m.p_WM_W = s.p_WM_W;
+    m.has_orientation = data.has_orientation;
+    if (m.has_orientation) m.R_EI = geometry::QuatToMatrix(s.q_EI_wxyz);
+    ms.push_back(m);
+    is_test.push_back(s.set == io::PoseSample::kTest);
+  }
+  identification::SetNoise(ms, o.position_sigma_mm / kMm, o.orientation_sigma_deg / kDeg);
+  identification::CalibrationSettings settings;
+  settings.method = o.method == "ekf" ? identification::CalibrationSettings::Method::kEkf
+                                      : identification::CalibrationSettings::Method::kLm;
+  if (o.method != "ekf" && o.method != "lm") throw std::runtime_error("--method: lm or ekf");
+  settings.estimate_noise = !o.fixed_noise;
+  settings.folds = o.folds;
+  settings.seed = o.seed;
+
+  // Fit on the calibration poses only when there is a split; judge on the rest.
+  std::vector<kinematics::PoseMeasurement> fit_set;
+  for (size_t i = 0; i < ms.size(); ++i)
+    if (!is_test[i]) fit_set.push_back(ms[i]);
+  spdlog::info("{}: {} poses ({} for fitting), {}, robot {} with {} parameters", o.data, ms.size(),
+               fit_set.size(), data.has_orientation ? "position and orientation" : "positions only",
+               model.name(), model.num_params());
+  const identification::CalibrationFit fit = identification::Calibrate(model, fit_set, settings);
+  spdlog::info("fitted {} parameters ({} set-up); noise σ {:.3f} mm, {:.3f}°",
+               fit.identified.size(), fit.setup.size(), fit.position_sigma_m * kMm,
+               fit.orientation_sigma_rad * kDeg);
+  spdlog::info("judging on poses not fitted...");
+  const identification::HeldOutErrors held =
+      identification::HeldOut(model, ms, is_test, fit, settings);
+
+  const fs::path out(o.out);
+  fs::create_directories(out);
+  const std::vector<std::string> header = {" calibrated by rcal calibrate from " + o.data,
+                                           " held-out (" + held.scheme + ") mean position error " +
+                                               Fmt(held.calibrated.mean_position_m * kMm, 4) +
+                                               " mm (nominal " +
+                                               Fmt(held.nominal.mean_position_m * kMm, 4) + " mm)"};
+  io::SaveCalibratedRobotYaml(out / "robot_calibrated.yaml", robot.spec, model, fit.x, header);
+  if (robot.from_urdf)
+    io::SaveCalibratedUrdf(robot.source, out / "robot_calibrated.urdf", model, fit.x);
+
+  std::vector<double> idx, before, after;
+  for (size_t i = 0; i < fit.nominal_fit.position_m.size(); ++i) {
+    idx.push_back(i + 1);
+    before.push_back(fit.nominal_fit.position_m[i] * kMm);
+    after.push_back(fit.calibrated_fit.position_m[i] * kMm);
+  }
+  io::PlotPng({"Position error per fitted pose",
+               "pose",
+               "position error [mm]",
+               {{"nominal (set-up frames fitted)", idx, before, "impulses"},
+                {"calibrated", idx, after, "points"}}},
+              out / "errors.png");
+
+  std::vector<std::vector<std::string>> prows;
+  json jparams = json::array();
+  for (int i : fit.identified) {
+    const auto& P = model.parameters()[i];
+    const double u = P.is_angle ? kDeg : kMm;
+    prows.push_back({P.name, P.group, P.is_angle ? "deg" : "mm", Fmt(fit.x(i) * u, 4),
+                     Fmt(fit.sigma(i) * u, 4)});
+    jparams.push_back({{"name", P.name},
+                       {"unit", P.is_angle ? "rad" : "m"},
+                       {"value", fit.x(i)},
+                       {"sigma", fit.sigma(i)}});
+  }
+  std::ostringstream md;
+  md << "# rcal calibrate\n\n- Data: `" << o.data << "`, " << ms.size() << " poses, "
+     << (data.has_orientation ? "position and orientation" : "positions only") << "\n- Robot: `"
+     << o.robot << "` (" << model.name() << "), " << model.num_params() << " parameters, "
+     << fit.identified.size() << " identifiable at these poses, " << fit.setup.size()
+     << " of them set-up frames\n- Method: " << o.method << "; noise "
+     << (o.fixed_noise ? "given" : "estimated from the residuals") << ": "
+     << Fmt(fit.position_sigma_m * kMm, 4) << " mm, " << Fmt(fit.orientation_sigma_rad * kDeg, 4)
+     << "°\n\n'Nominal' is the drawing kinematics with only the set-up frames (world ← base, "
+        "marker, IMU) fitted: the honest before-calibration figure.\n\n## Errors\n\n"
+     << MdTable({"", "position mean [mm]", "position max [mm]", "orientation mean [deg]",
+                 "orientation max [deg]"},
+                {Row("fitted poses, nominal", fit.nominal_fit),
+                 Row("fitted poses, calibrated", fit.calibrated_fit),
+                 Row("held-out (" + held.scheme + "), nominal", held.nominal),
+                 Row("held-out (" + held.scheme + "), calibrated", held.calibrated)})
+     << "\n![errors](errors.png)\n\n## Identified parameters\n\n"
+     << MdTable({"parameter", "group", "unit", "error", "σ"}, prows)
+     << "\nCalibrated robot: `robot_calibrated.yaml`"
+     << (robot.from_urdf ? " and `robot_calibrated.urdf`" : "") << ".\n";
+  io::AtomicWriteFile(out / "report.md", md.str());
+
+  json j = {{"data", o.data},
+            {"robot", model.name()},
+            {"num_poses", ms.size()},
+            {"num_identified", fit.identified.size()},
+            {"method", o.method},
+            {"validation", held.scheme},
+            {"position_noise_m", fit.position_sigma_m},
+            {"orientation_noise_rad", fit.orientation_sigma_rad},
+            {"parameters", jparams}};
+  j.update(StatsJson(fit.nominal_fit, "fit_nominal_"));
+  j.update(StatsJson(fit.calibrated_fit, "fit_"));
+  j.update(StatsJson(held.nominal, "test_nominal_"));
+  j.update(StatsJson(held.calibrated, "test_"));
+  io::AtomicWriteFile(out / "results.json", j.dump(2));
+  if (!o.json_path.empty()) io::AtomicWriteFile(o.json_path, j.dump(2));
+
+  std::printf("\nrcal calibrate — %s, %zu poses, %zu parameters identified\n", o.data.c_str(),
+              ms.size(), fit.identified.size());
+  std::printf("                         position mean/max [mm]   orientation mean/max [deg]\n");
+  const auto line = [](const char* name, const identification::PoseErrorStats& s) {
+    std::printf("  %-22s %8.3f / %-8.3f       %8.3f / %-8.3f\n", name, s.mean_position_m * kMm,
+                s.max_position_m * kMm, s.mean_orientation_rad * kDeg,
+                s.max_orientation_rad * kDeg);
+  };
+  line("fit, nominal", fit.nominal_fit);
+  line("fit, calibrated", fit.calibrated_fit);
+  std::printf("  held-out: %s\n", held.scheme.c_str());
+  line("held-out, nominal", held.nominal);
+  line("held-out, calibrated", held.calibrated);
+  std::printf("  wrote %s\n", (out / "report.md").c_str());
+  return 0;
+}
+
+const RegisterCommand kCalibrate(
+    "calibrate", "Identify a robot from a pose dataset (CSV)",
+    [](CLI::App& sub) -> std::function<int()> {
+      auto o = std::make_shared<Options>();
+      sub.add_option("data", o->data, "pose dataset CSV (rcal or FIGAROH layout)")->required();
+      sub.add_option("--robot", o->robot, "robot file (YAML or URDF)")->required();
+      sub.add_option("--tip", o->tip_link, "URDF: last link of the chain (the flange)");
+      sub.add_option("--base-link", o->base_link, "URDF: first link of the chain");
+      sub.add_option("--out", o->out, "output folder")->capture_default_str();
+      sub.add_option("--json", o->json_path, "also write the figures here (SI units)");
+      sub.add_option("--method", o->method, "lm or ekf")->capture_default_str();
+      sub.add_option("--frames", o->frames,
+                     "auto: add world←base, marker and IMU frames the robot file lacks; none")
+          ->capture_default_str();
+      sub.add_option("--folds", o->folds, "k of k-fold when the data has no set column")
+          ->capture_default_str();
+      sub.add_option("--seed", o->seed, "fold assignment seed")->capture_default_str();
+      sub.add_option("--position-sigma-mm", o->position_sigma_mm, "starting position noise [mm]")
+          ->capture_default_str();
+      sub.add_option("--orientation-sigma-deg", o->orientation_sigma_deg,
+                     "starting orientation noise [deg]")
+          ->capture_default_str();
+      sub.add_flag("--fixed-noise", o->fixed_noise, "use the given noise, do not estimate it");
+      return [o]() { return Run(*o); };
+    });
+
+}  // namespace
+}  // namespace rcal::tool
