@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "rcal/identification/batch_lm.hpp"
+#include "rcal/identification/ekf_identifier.hpp"
 #include "rcal/kinematics/identifiability.hpp"
 #include "rcal/kinematics/measurement.hpp"
 #include "rcal/kinematics/model.hpp"
@@ -228,6 +229,27 @@ void BatchCeres(benchmark::State& state) {
   state.counters["iterations"] = s.ceres_iterations;
 }
 
+// One EKF update on a filter that has seen 49 poses (the steady state of an online run: the
+// relinearisation passes have stopped firing), and the same update with the plain EKF settings
+// (one linearisation, no passes) for scale.
+void EkfUpdate(benchmark::State& state, int iterations) {
+  const Setup& s = S();
+  rcal::identification::EkfSettings settings;
+  settings.max_iterations = iterations;
+  rcal::identification::EkfIdentifier warm(s.model, s.identified, settings);
+  for (int k = 0; k + 1 < kPoses; ++k) warm.Update(s.measurements[k]);
+  const auto checkpoint = warm.Checkpoint();
+  rcal::identification::EkfIdentifier ekf(s.model, s.identified, settings);
+  for (auto _ : state) {
+    state.PauseTiming();
+    ekf.Restore(checkpoint);
+    state.ResumeTiming();
+    const auto r = ekf.Update(s.measurements[kPoses - 1]);
+    benchmark::DoNotOptimize(r.nis);
+  }
+  state.counters["relinearization_passes"] = ekf.relinearizations() - checkpoint.relinearizations;
+}
+
 class TableReporter : public benchmark::ConsoleReporter {
  public:
   void ReportRuns(const std::vector<Run>& reports) override {
@@ -273,6 +295,8 @@ int main(int argc, char** argv) {
   S();
   benchmark::RegisterBenchmark("batch50/rcal", BatchRcal)->Unit(benchmark::kMillisecond);
   benchmark::RegisterBenchmark("batch50/ceres", BatchCeres)->Unit(benchmark::kMillisecond);
+  benchmark::RegisterBenchmark("ekf_update/iterated", EkfUpdate, 10)->Unit(benchmark::kMicrosecond);
+  benchmark::RegisterBenchmark("ekf_update/plain", EkfUpdate, 1)->Unit(benchmark::kMicrosecond);
   TableReporter reporter;
   benchmark::RunSpecifiedBenchmarks(&reporter);
   benchmark::Shutdown();
@@ -287,5 +311,11 @@ int main(int argc, char** argv) {
         "%.3f | %.2fx |\n",
         S().rcal_cost, S().ceres_cost, S().rcal_iterations, S().ceres_iterations, r * 1e-6,
         c * 1e-6, c / r);
+  const double e = reporter.Ns("ekf_update/iterated"), p = reporter.Ns("ekf_update/plain");
+  if (e > 0 && p > 0)
+    std::printf(
+        "| one EKF update, 25 parameters, pose 50 of 50: iterated (default) / plain | %.3f "
+        "/ %.3f | – | – |\n",
+        e * 1e-6, p * 1e-6);
   return 0;
 }
