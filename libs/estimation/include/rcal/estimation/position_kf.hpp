@@ -1,0 +1,118 @@
+// Position Kalman filter (the paper's Section 3.4, Eqs. 24–31, errata from
+// ../shared/paper/NOTES.md applied): position, velocity and acceleration per axis, observed by a
+// position sensor and by the accelerometer rotated into the earth frame.
+//
+// Frame convention (one, used everywhere in this filter): all states and the position sensor
+// are in the earth frame E of the orientation estimate (NED or ENU, z vertical, as
+// OrientationKf), point W = E. The accelerometer's specific force f_B is rotated with the
+// orientation estimate and gravity is removed:
+//   a_E = R_EB f_B + g_E,   g_E = −g · up_E   (g_E = [0,0,+g] in NED, [0,0,−g] in ENU).
+// This settles the NOTES.md erratum on Eqs. 25/29 (NED stated, gravity removed as if z were up).
+//
+// State (Eq. 27 order): x = [p_x, V_x, A_x, p_y, V_y, A_y, p_z, V_z, A_z], with p_WM_W [m] the
+// marker position, V [m/s], A [m/s²] its acceleration, all in E. The paper's A is the
+// body-frame acceleration with M_H2S in Φ (Eq. 28) and gravity as an input (Eq. 29); taking A in
+// E instead moves the rotation and gravity into the accelerometer measurement, and Φ becomes
+// the same constant-acceleration block per axis (PaperPhiPos() gives the paper's form, with
+// the row-7 erratum: p_z does not depend on V_y):
+//   Φ_axis = [1 Δt Δt²/2; 0 1 Δt; 0 0 1],   x⁻ = Φ x,   P⁻ = Φ P Φᵀ + Q,
+//   Q_axis = q_j [Δt⁵/20 Δt⁴/8 Δt³/6; Δt⁴/8 Δt³/3 Δt²/2; Δt³/6 Δt²/2 Δt]  (white jerk, Eq. 30)
+// Measurements (H′ of Eq. 31, missing in the text): the position sensor observes p
+// (H = rows of p), the accelerometer observes A (H = rows of A). Update as NOTES.md Eqs. 15–17,
+// Joseph form. The position sensor is χ²-gated: NIS = yᵀS⁻¹y > position_gate_chi2 rejects it
+// (counted). Bad input and out-of-order time are refused with a Status; the state is unchanged.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+
+#include "rcal/estimation/fqa.hpp"
+#include "rcal/estimation/result.hpp"
+
+namespace rcal::estimation {
+
+/// The paper's Φ_pos (Eq. 28) for the state of Eq. 27 with body-frame acceleration A, the
+/// rotation M_H2S = R_EB (tool → local frame) and sampling time t [s], with the NOTES.md
+/// erratum (row 7: no t in the V_y column). The matching input is PaperGammaPos().
+Eigen::Matrix<double, 9, 9> PaperPhiPos(const Eigen::Matrix3d& M, double t);
+/// Γ_pos u (Eq. 29): gravity g [m/s²] removed along z as the paper writes it (z up).
+Eigen::Matrix<double, 9, 1> PaperGammaPos(double g, double t);
+
+struct PositionKfSettings {
+  EarthFrame earth = EarthFrame::kNed;
+  double gravity = 9.81;  ///< [m/s²]
+  /// White-jerk PSD driving A (paper's w′, Eq. 30) [m/s³/√Hz].
+  double jerk_noise = 50.0;
+  /// Standard deviation of one earth-frame acceleration measurement [m/s²] (accelerometer
+  /// noise plus g times the orientation error).
+  double accel_sigma = 0.3;
+  /// Standard deviation of one position-sensor sample, per axis [m].
+  double position_sigma = 1e-3;
+  /// χ² gate on the 3-dof position innovation (0 = off). 16.27: 0.999 quantile.
+  double position_gate_chi2 = 16.27;
+  /// After this many consecutive gated position samples the filter re-initialises its position
+  /// on the next one (a real jump, not a glitch) [-]. 0 = never.
+  int max_consecutive_rejections = 20;
+  double initial_velocity_sigma = 0.5;  ///< [m/s]
+  double initial_accel_sigma = 5.0;     ///< [m/s²]
+};
+
+class PositionKf {
+ public:
+  struct Counters {
+    std::int64_t accel_samples = 0;      ///< accelerometer updates applied
+    std::int64_t position_samples = 0;   ///< position samples accepted
+    std::int64_t position_rejected = 0;  ///< position samples rejected by the χ² gate
+    std::int64_t input_rejected = 0;     ///< refused calls (bad input, time order)
+    std::int64_t reinitialised = 0;      ///< re-initialisations after a run of rejections
+  };
+
+  explicit PositionKf(const PositionKfSettings& settings = {});
+  void Reset();
+
+  /// Accelerometer sample at t [s] (not before the last update): specific force f_B [m/s²] in
+  /// the body frame and the orientation estimate R_EB (body → earth) at t. Before the first
+  /// position sample the filter is not initialised and the sample is ignored (Ok).
+  Status UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen::Matrix3d& R_EB);
+
+  /// Position-sensor sample p_WM_W [m] at t [s] (not before the last update). The first one
+  /// initialises the filter. Returns Ok also when gated (see last_position_accepted()).
+  Status UpdatePosition(double t, const Eigen::Vector3d& p_WM_W);
+
+  bool initialized() const { return initialized_; }
+  double t() const { return t_; }
+  /// Position p_WM_W [m], velocity [m/s] and acceleration [m/s²], all in the earth frame.
+  Eigen::Vector3d p_WM_W() const;
+  Eigen::Vector3d v_W() const;
+  Eigen::Vector3d a_W() const;
+  /// State x in Eq. 27 order and its covariance.
+  const Eigen::Matrix<double, 9, 1>& x() const { return x_; }
+  const Eigen::Matrix<double, 9, 9>& P() const { return P_; }
+  /// Covariance of p_WM_W [m²].
+  Eigen::Matrix3d position_covariance() const;
+  double last_position_nis() const { return last_position_nis_; }
+  bool last_position_accepted() const { return last_position_accepted_; }
+  const Counters& counters() const { return counters_; }
+
+  /// Earth-frame acceleration a_E = R_EB f_B − g·up_E [m/s²] (what the accelerometer update uses).
+  Eigen::Vector3d EarthAcceleration(const Eigen::Vector3d& f_B, const Eigen::Matrix3d& R_EB) const;
+
+ private:
+  using Mat9 = Eigen::Matrix<double, 9, 9>;
+  using Vec9 = Eigen::Matrix<double, 9, 1>;
+  void PredictTo(double t);
+  Status Check(double t, const Eigen::Vector3d& v, const char* name);
+  void Initialise(double t, const Eigen::Vector3d& p);
+
+  PositionKfSettings settings_;
+  bool initialized_ = false;
+  double t_ = 0.0;
+  Vec9 x_ = Vec9::Zero();
+  Mat9 P_ = Mat9::Identity();
+  Counters counters_;
+  double last_position_nis_ = 0.0;
+  bool last_position_accepted_ = false;
+  int consecutive_rejections_ = 0;
+};
+
+}  // namespace rcal::estimation

@@ -1,0 +1,345 @@
+#include "rcal/estimation/orientation_kf.hpp"
+
+#include <Eigen/Cholesky>
+#include <Eigen/LU>
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <string>
+
+#include "rcal/geometry/so3.hpp"
+
+namespace rcal::estimation {
+namespace {
+
+using geometry::QuatMultiply;
+using geometry::QuatToMatrix;
+
+// Unit quaternion [w,x,y,z] of the rotation vector v [rad].
+Eigen::Vector4d QuatExp(const Eigen::Vector3d& v) {
+  const double a = v.norm();
+  if (a < 1e-12) {
+    Eigen::Vector4d q(1.0, 0.5 * v.x(), 0.5 * v.y(), 0.5 * v.z());
+    return q.normalized();
+  }
+  const double s = std::sin(0.5 * a) / a;
+  return {std::cos(0.5 * a), s * v.x(), s * v.y(), s * v.z()};
+}
+
+std::string Vec(const Eigen::Vector3d& v) {
+  std::ostringstream o;
+  o << "[" << v.x() << ", " << v.y() << ", " << v.z() << "]";
+  return o.str();
+}
+
+std::string Num(double v) {
+  std::ostringstream o;
+  o.precision(17);
+  o << v;
+  return o.str();
+}
+
+}  // namespace
+
+Eigen::Matrix<double, 7, 7> PaperPhiOri(const Eigen::Vector4d& q, double dt) {
+  // q̇ = ½ Ξ(q) ω with Ξ(q) the last three columns of the matrix in Eq. 18.
+  const double h = 0.5 * dt;
+  Eigen::Matrix<double, 7, 7> Phi = Eigen::Matrix<double, 7, 7>::Identity();
+  Phi.block<4, 3>(0, 4) << -q(1), -q(2), -q(3),  //
+      q(0), -q(3), q(2),                         // row 2: −q3 (erratum, NOTES.md)
+      q(3), q(0), -q(1),                         //
+      -q(2), q(1), q(0);
+  Phi.block<4, 3>(0, 4) *= h;
+  return Phi;
+}
+
+OrientationKf::OrientationKf(const OrientationKfSettings& settings) : settings_(settings) {
+  Reset();
+}
+
+void OrientationKf::Reset() {
+  initialized_ = false;
+  t_ = 0.0;
+  q_EB_ = Eigen::Vector4d(1, 0, 0, 0);
+  omega_B_.setZero();
+  bias_B_.setZero();
+  q_IB_ = Eigen::Vector4d(1, 0, 0, 0);
+  f_I_lp_.setZero();
+  m_I_lp_.setZero();
+  P_.setIdentity();
+  counters_ = {};
+  last_tilt_nis_ = std::numeric_limits<double>::quiet_NaN();
+  last_heading_nis_ = std::numeric_limits<double>::quiet_NaN();
+  last_accel_used_ = false;
+  last_mag_used_ = false;
+  still_count_ = 0;
+  mag_ref_norm_ = settings_.mag_ref_norm > 0.0 ? settings_.mag_ref_norm : 0.0;
+  mag_ref_dip_ = settings_.mag_ref_norm > 0.0 ? settings_.mag_ref_dip : 0.0;
+  mag_ref_count_ = 0;
+  mag_rejected_time_ = 0.0;
+  mag_cand_norm_ = mag_cand_dip_ = 0.0;
+  mag_norm_sum_ = 0.0;
+  mag_dip_sum_ = 0.0;
+}
+
+Eigen::Matrix3d OrientationKf::R_EB() const {
+  return QuatToMatrix(q_EB_);
+}
+
+void OrientationKf::PredictRate(double dt) {
+  // ω_k = ω_{k−1} + ∫w over (t_{k−1}, t_k];  b_k = b_{k−1} + ∫w_b.
+  const double sa2 = settings_.angular_accel_noise * settings_.angular_accel_noise;
+  P_.block<3, 3>(3, 3) += sa2 * dt * Eigen::Matrix3d::Identity();
+  if (settings_.estimate_gyro_bias) {
+    const double sb2 = settings_.gyro_bias_random_walk * settings_.gyro_bias_random_walk;
+    P_.block<3, 3>(6, 6) += sb2 * dt * Eigen::Matrix3d::Identity();
+  }
+}
+
+void OrientationKf::PropagateAttitude(double dt) {
+  // q_k = q_{k−1} ⊗ Exp(ω_k Δt), ω_k the rate over (t_{k−1}, t_k] (already updated with the
+  // gyro sample at t_k); δθ_k = δθ_{k−1} + R̂_EB,k J_r(ω̂Δt) Δt δω_k.
+  const Eigen::Vector3d phi = omega_B_ * dt;
+  q_EB_ = QuatMultiply(q_EB_, QuatExp(phi)).normalized();
+  Mat9 Phi = Mat9::Identity();
+  Phi.block<3, 3>(0, 3) = QuatToMatrix(q_EB_) * geometry::RightJacobian(phi) * dt;
+  P_ = Phi * P_ * Phi.transpose();
+  P_.block<3, 3>(0, 0) += settings_.attitude_process_noise * settings_.attitude_process_noise * dt *
+                          Eigen::Matrix3d::Identity();
+  // Heading (earth z) random walk that grows with the rate: heading is observed only by the
+  // magnetometer, so fast motion should hand it back to the magnetometer sooner.
+  const double k_w = settings_.rate_proportional_noise * omega_B_.norm();
+  P_(2, 2) += k_w * k_w * dt;
+  P_ = 0.5 * (P_ + P_.transpose());
+}
+
+void OrientationKf::ApplyCorrection(const Eigen::Matrix<double, 9, 1>& dx) {
+  q_EB_ = QuatMultiply(QuatExp(dx.head<3>()), q_EB_).normalized();
+  omega_B_ += dx.segment<3>(3);
+  if (settings_.estimate_gyro_bias) bias_B_ += dx.segment<3>(6);
+}
+
+double OrientationKf::Correct(const Eigen::MatrixXd& H, const Eigen::VectorXd& y,
+                              const Eigen::MatrixXd& R) {
+  // NOTES.md errata for Eqs. 15–17: K = P⁻Hᵀ(HP⁻Hᵀ + R)⁻¹, x⁺ = x⁻ + K(z − Hx⁻),
+  // P⁺ = (I − KH)P⁻(I − KH)ᵀ + KRKᵀ (Joseph form).
+  const Eigen::MatrixXd S = H * P_ * H.transpose() + R;
+  const Eigen::LDLT<Eigen::MatrixXd> S_ldlt(S);
+  const Eigen::MatrixXd K = S_ldlt.solve(H * P_).transpose();  // P Hᵀ S⁻¹ (S, P symmetric)
+  const Eigen::Matrix<double, 9, 1> dx = K * y;
+  const Mat9 IKH = Mat9::Identity() - K * H;
+  P_ = IKH * P_ * IKH.transpose() + K * R * K.transpose();
+  P_ = 0.5 * (P_ + P_.transpose());
+  ApplyCorrection(dx);
+  return y.dot(S_ldlt.solve(y));
+}
+
+Status OrientationKf::Update(double t, const Eigen::Vector3d& gyro_B, const Eigen::Vector3d& f_B,
+                             const Eigen::Vector3d& m_B) {
+  auto refuse = [this](std::string why) {
+    ++counters_.input_rejected;
+    return Status::Error("orientation_kf: " + why);
+  };
+  if (!std::isfinite(t)) return refuse("time t is not finite");
+  if (!gyro_B.allFinite()) return refuse("gyro is not finite: " + Vec(gyro_B));
+  if (!f_B.allFinite()) return refuse("accelerometer is not finite: " + Vec(f_B));
+  if (!m_B.allFinite()) return refuse("magnetometer is not finite: " + Vec(m_B));
+  if (initialized_ && !(t > t_))
+    return refuse("time t = " + Num(t) + " s is not after the previous sample (" + Num(t_) + " s)");
+
+  const Eigen::Vector3d up_E = UpVector(settings_.earth);
+  const Eigen::Vector3d north_E = MagneticNorth(settings_.earth);
+  FqaSettings fqa;
+  fqa.earth = settings_.earth;
+  fqa.m_ref_E = north_E;
+  const double f_norm = f_B.norm();
+  const double m_norm = m_B.norm();
+
+  if (!initialized_) {
+    const auto q0 = Fqa(f_B, m_B, fqa);
+    if (!q0.ok()) return refuse("cannot initialise: " + q0.error());
+    q_EB_ = *q0;
+    q_IB_ = *q0;
+    f_I_lp_ = QuatToMatrix(q_IB_) * f_B;
+    m_I_lp_ = QuatToMatrix(q_IB_) * m_B;
+    omega_B_ = gyro_B;
+    bias_B_.setZero();
+    P_.setZero();
+    P_.block<3, 3>(0, 0).diagonal().setConstant(std::pow(settings_.initial_attitude_sigma, 2));
+    P_.block<3, 3>(3, 3).diagonal().setConstant(std::pow(settings_.initial_rate_sigma, 2));
+    P_.block<3, 3>(6, 6).diagonal().setConstant(
+        settings_.estimate_gyro_bias ? std::pow(settings_.initial_bias_sigma, 2) : 0.0);
+    initialized_ = true;
+    t_ = t;
+    ++counters_.samples;
+    if (mag_ref_norm_ <= 0.0 && m_norm > 0.0 && f_norm > 0.0) {
+      mag_norm_sum_ += m_norm;
+      mag_dip_sum_ += std::asin(std::clamp(-m_B.dot(f_B) / (m_norm * f_norm), -1.0, 1.0));
+      ++mag_ref_count_;
+    }
+    last_accel_used_ = last_mag_used_ = true;
+    return Status::Ok();
+  }
+
+  const double dt = t - t_;
+  t_ = t;
+  ++counters_.samples;
+  PredictRate(dt);
+
+  // Gyro: z = ω_meas, h = ω̂ + b̂ (Eq. 22 with the bias).
+  {
+    Eigen::MatrixXd H = Eigen::MatrixXd::Zero(3, 9);
+    H.block<3, 3>(0, 3).setIdentity();
+    if (settings_.estimate_gyro_bias) H.block<3, 3>(0, 6).setIdentity();
+    const double sg2 = settings_.gyro_noise_density * settings_.gyro_noise_density / dt;
+    Correct(H, gyro_B - omega_B_ - bias_B_, sg2 * Eigen::MatrixXd::Identity(3, 3));
+  }
+  PropagateAttitude(dt);
+
+  // Rest: zero-rate pseudo-measurement makes the bias directly observable.
+  const bool still_now = (gyro_B - bias_B_).norm() < settings_.still_gyro &&
+                         std::abs(f_norm - settings_.gravity) < settings_.still_accel;
+  still_count_ = still_now ? still_count_ + 1 : 0;
+  if (settings_.zero_rate_update && still()) {
+    Eigen::MatrixXd H = Eigen::MatrixXd::Zero(3, 9);
+    H.block<3, 3>(0, 3).setIdentity();
+    Correct(H, -omega_B_, std::pow(settings_.zero_rate_sigma, 2) * Eigen::MatrixXd::Identity(3, 3));
+    ++counters_.zero_rate_updates;
+  }
+
+  // Strapdown frame I (gyro only, never corrected) and the sensors low-passed in it: in I,
+  // gravity and the earth field are nearly constant while linear accelerations average out.
+  q_IB_ = QuatMultiply(q_IB_, QuatExp(omega_B_ * dt)).normalized();
+  const Eigen::Matrix3d R_IB = QuatToMatrix(q_IB_);
+  auto alpha = [dt](double tau) { return tau > 0.0 ? 1.0 - std::exp(-dt / tau) : 1.0; };
+  f_I_lp_ += alpha(settings_.accel_lowpass_tau) * (R_IB * f_B - f_I_lp_);
+  const Eigen::Vector3d f_meas_B = R_IB.transpose() * f_I_lp_;
+
+  // Accelerometer and magnetometer acceptance.
+  Eigen::Matrix3d R_hat = R_EB();
+  const Eigen::Vector3d down_B = -R_hat.transpose() * up_E;
+  bool use_acc = f_meas_B.norm() > 0.0;
+  if (settings_.reject_accel &&
+      std::abs(f_meas_B.norm() - settings_.gravity) > settings_.accel_norm_tolerance)
+    use_acc = false;
+  bool use_mag = m_norm > 0.0;
+  const bool learning = mag_ref_norm_ <= 0.0;
+  if (use_mag && learning) {
+    const Eigen::Vector3d d_B = f_norm > 0.0 ? Eigen::Vector3d(-f_B / f_norm) : down_B;
+    mag_norm_sum_ += m_norm;
+    mag_dip_sum_ += std::asin(std::clamp(m_B.dot(d_B) / m_norm, -1.0, 1.0));
+    if (++mag_ref_count_ >= std::max(1, settings_.mag_reference_samples)) {
+      mag_ref_norm_ = mag_norm_sum_ / mag_ref_count_;
+      mag_ref_dip_ = mag_dip_sum_ / mag_ref_count_;
+    }
+  } else if (use_mag && settings_.reject_mag) {
+    const double dip = std::asin(std::clamp(m_B.dot(down_B) / m_norm, -1.0, 1.0));
+    if (std::abs(m_norm - mag_ref_norm_) > settings_.mag_norm_tolerance * mag_ref_norm_ ||
+        std::abs(dip - mag_ref_dip_) > settings_.mag_dip_tolerance)
+      use_mag = false;
+    if (use_mag) {
+      const double a = alpha(settings_.mag_reference_tau);
+      if (settings_.mag_reference_tau > 0.0) {
+        mag_ref_norm_ += a * (m_norm - mag_ref_norm_);
+        mag_ref_dip_ += a * (dip - mag_ref_dip_);
+      }
+      mag_rejected_time_ = 0.0;
+    } else {
+      // Candidate new reference: adopted after a long, steady rejection.
+      const double a = alpha(2.0);
+      if (mag_rejected_time_ == 0.0) {
+        mag_cand_norm_ = m_norm;
+        mag_cand_dip_ = dip;
+      } else {
+        mag_cand_norm_ += a * (m_norm - mag_cand_norm_);
+        mag_cand_dip_ += a * (dip - mag_cand_dip_);
+      }
+      const bool steady =
+          std::abs(m_norm - mag_cand_norm_) < settings_.mag_norm_tolerance * mag_cand_norm_ &&
+          std::abs(dip - mag_cand_dip_) < settings_.mag_dip_tolerance;
+      mag_rejected_time_ = steady ? mag_rejected_time_ + dt : dt;
+      if (settings_.mag_new_reference_time > 0.0 &&
+          mag_rejected_time_ >= settings_.mag_new_reference_time) {
+        mag_ref_norm_ = mag_cand_norm_;
+        mag_ref_dip_ = mag_cand_dip_;
+        mag_rejected_time_ = 0.0;
+        ++counters_.mag_reference_changes;
+      }
+    }
+  }
+  if (use_mag) m_I_lp_ += alpha(settings_.mag_lowpass_tau) * (R_IB * m_B - m_I_lp_);
+  const Eigen::Vector3d m_meas_B = R_IB.transpose() * m_I_lp_;
+
+  // FQA measurement rows.
+  last_tilt_nis_ = last_heading_nis_ = std::numeric_limits<double>::quiet_NaN();
+  const Eigen::Vector3d m_pred_B = R_hat.transpose() * north_E;
+  const Eigen::Vector3d f_pred_B = settings_.gravity * R_hat.transpose() * up_E;
+  auto gated_update = [&](int row0, int rows, const Eigen::Vector3d& y_full, double sigma,
+                          double gate) -> bool {
+    Eigen::MatrixXd H = Eigen::MatrixXd::Zero(rows, 9);
+    H.block(0, row0, rows, rows).setIdentity();
+    const Eigen::VectorXd y = y_full.segment(row0, rows);
+    const Eigen::MatrixXd R = sigma * sigma * Eigen::MatrixXd::Identity(rows, rows);
+    const Eigen::MatrixXd S = H * P_ * H.transpose() + R;
+    const double nis = y.dot(S.ldlt().solve(y));
+    (rows == 2 ? last_tilt_nis_ : last_heading_nis_) = nis;
+    if (gate > 0.0 && nis > gate) return false;
+    Correct(H, y, R);
+    return true;
+  };
+  if (settings_.decoupled_fqa) {
+    if (use_acc) {
+      const auto q_tilt = Fqa(f_meas_B, m_pred_B, fqa);
+      if (q_tilt.ok()) {
+        const Eigen::Vector3d y = geometry::Log(QuatToMatrix(*q_tilt) * R_hat.transpose());
+        if (!gated_update(0, 2, y, settings_.tilt_sigma, settings_.tilt_gate_chi2)) {
+          use_acc = false;
+          ++counters_.accel_gated;
+        }
+      } else {
+        use_acc = false;
+      }
+      R_hat = R_EB();
+    }
+    if (use_mag) {
+      const Eigen::Vector3d f_level_B = settings_.gravity * R_hat.transpose() * up_E;
+      const auto q_head = Fqa(f_level_B, m_meas_B, fqa);
+      if (q_head.ok()) {
+        const Eigen::Vector3d y = geometry::Log(QuatToMatrix(*q_head) * R_hat.transpose());
+        if (!gated_update(2, 1, y, settings_.heading_sigma, settings_.heading_gate_chi2)) {
+          use_mag = false;
+          ++counters_.mag_gated;
+        }
+      } else {
+        use_mag = false;
+      }
+    }
+  } else if (use_acc || use_mag) {
+    // The paper's measurement: one FQA quaternion; a rejected sensor is replaced by its
+    // prediction so that its rows carry no information and are dropped.
+    const auto q_meas = Fqa(use_acc ? f_meas_B : f_pred_B, use_mag ? m_meas_B : m_pred_B, fqa);
+    if (q_meas.ok()) {
+      const Eigen::Vector3d y = geometry::Log(QuatToMatrix(*q_meas) * R_hat.transpose());
+      if (use_acc && !gated_update(0, 2, y, settings_.tilt_sigma, settings_.tilt_gate_chi2)) {
+        use_acc = false;
+        ++counters_.accel_gated;
+      }
+      // Sequential rows: the heading innovation is taken against the tilt-corrected state.
+      const Eigen::Vector3d y2 = geometry::Log(QuatToMatrix(*q_meas) * R_EB().transpose());
+      if (use_mag &&
+          !gated_update(2, 1, y2, settings_.heading_sigma, settings_.heading_gate_chi2)) {
+        use_mag = false;
+        ++counters_.mag_gated;
+      }
+    } else {
+      use_acc = use_mag = false;
+    }
+  }
+  if (!use_acc) ++counters_.accel_rejected;
+  if (!use_mag) ++counters_.mag_rejected;
+  last_accel_used_ = use_acc;
+  last_mag_used_ = use_mag;
+  return Status::Ok();
+}
+
+}  // namespace rcal::estimation

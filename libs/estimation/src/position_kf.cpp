@@ -1,0 +1,197 @@
+#include "rcal/estimation/position_kf.hpp"
+
+#include <Eigen/Cholesky>
+#include <Eigen/LU>
+#include <cmath>
+#include <sstream>
+#include <string>
+
+namespace rcal::estimation {
+namespace {
+
+// Index of p, V, A of axis i in the Eq. 27 state order.
+constexpr int IP(int i) {
+  return 3 * i;
+}
+constexpr int IV(int i) {
+  return 3 * i + 1;
+}
+constexpr int IA(int i) {
+  return 3 * i + 2;
+}
+
+}  // namespace
+
+Eigen::Matrix<double, 9, 9> PaperPhiPos(const Eigen::Matrix3d& M, double t) {
+  Eigen::Matrix<double, 9, 9> Phi = Eigen::Matrix<double, 9, 9>::Identity();
+  for (int i = 0; i < 3; ++i) {
+    Phi(IP(i), IV(i)) = t;  // Eq. 26: ṗ = V (row 7 has no V_y term: NOTES.md erratum)
+    for (int j = 0; j < 3; ++j) {
+      // Eq. 25: V̇_i = Σ_j M(i, j) A_j.
+      Phi(IP(i), IA(j)) = M(i, j) * t * t / 2.0;
+      Phi(IV(i), IA(j)) = M(i, j) * t;
+    }
+  }
+  return Phi;
+}
+
+Eigen::Matrix<double, 9, 1> PaperGammaPos(double g, double t) {
+  Eigen::Matrix<double, 9, 1> u = Eigen::Matrix<double, 9, 1>::Zero();
+  u(IP(2)) = -g * t * t / 2.0;
+  u(IV(2)) = -g * t;
+  return u;
+}
+
+PositionKf::PositionKf(const PositionKfSettings& settings) : settings_(settings) {
+  Reset();
+}
+
+void PositionKf::Reset() {
+  initialized_ = false;
+  t_ = 0.0;
+  x_.setZero();
+  P_.setIdentity();
+  counters_ = {};
+  last_position_nis_ = 0.0;
+  last_position_accepted_ = false;
+  consecutive_rejections_ = 0;
+}
+
+Eigen::Vector3d PositionKf::p_WM_W() const {
+  return {x_(IP(0)), x_(IP(1)), x_(IP(2))};
+}
+Eigen::Vector3d PositionKf::v_W() const {
+  return {x_(IV(0)), x_(IV(1)), x_(IV(2))};
+}
+Eigen::Vector3d PositionKf::a_W() const {
+  return {x_(IA(0)), x_(IA(1)), x_(IA(2))};
+}
+
+Eigen::Matrix3d PositionKf::position_covariance() const {
+  Eigen::Matrix3d C;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) C(i, j) = P_(IP(i), IP(j));
+  return C;
+}
+
+Eigen::Vector3d PositionKf::EarthAcceleration(const Eigen::Vector3d& f_B,
+                                              const Eigen::Matrix3d& R_EB) const {
+  return R_EB * f_B - settings_.gravity * UpVector(settings_.earth);
+}
+
+Status PositionKf::Check(double t, const Eigen::Vector3d& v, const char* name) {
+  std::string why;
+  if (!std::isfinite(t))
+    why = "time t is not finite";
+  else if (!v.allFinite())
+    why = std::string(name) + " is not finite";
+  else if (initialized_ && t < t_) {
+    std::ostringstream o;
+    o.precision(17);
+    o << "time t = " << t << " s is before the last update (" << t_ << " s)";
+    why = o.str();
+  }
+  if (why.empty()) return Status::Ok();
+  ++counters_.input_rejected;
+  return Status::Error("position_kf: " + why);
+}
+
+void PositionKf::PredictTo(double t) {
+  const double dt = t - t_;
+  t_ = t;
+  if (dt <= 0.0) return;
+  Eigen::Matrix3d Phi_axis;
+  Phi_axis << 1, dt, dt * dt / 2, 0, 1, dt, 0, 0, 1;
+  const double qj = settings_.jerk_noise * settings_.jerk_noise;
+  const double dt2 = dt * dt, dt3 = dt2 * dt, dt4 = dt3 * dt, dt5 = dt4 * dt;
+  Eigen::Matrix3d Q_axis;
+  Q_axis << dt5 / 20, dt4 / 8, dt3 / 6, dt4 / 8, dt3 / 3, dt2 / 2, dt3 / 6, dt2 / 2, dt;
+  Q_axis *= qj;
+  Mat9 Phi = Mat9::Zero(), Q = Mat9::Zero();
+  for (int i = 0; i < 3; ++i) {
+    Phi.block<3, 3>(3 * i, 3 * i) = Phi_axis;
+    Q.block<3, 3>(3 * i, 3 * i) = Q_axis;
+  }
+  x_ = Phi * x_;
+  P_ = Phi * P_ * Phi.transpose() + Q;
+  P_ = 0.5 * (P_ + P_.transpose());
+}
+
+void PositionKf::Initialise(double t, const Eigen::Vector3d& p) {
+  x_.setZero();
+  P_.setZero();
+  for (int i = 0; i < 3; ++i) {
+    x_(IP(i)) = p(i);
+    P_(IP(i), IP(i)) = settings_.position_sigma * settings_.position_sigma;
+    P_(IV(i), IV(i)) = settings_.initial_velocity_sigma * settings_.initial_velocity_sigma;
+    P_(IA(i), IA(i)) = settings_.initial_accel_sigma * settings_.initial_accel_sigma;
+  }
+  t_ = t;
+  initialized_ = true;
+  consecutive_rejections_ = 0;
+}
+
+Status PositionKf::UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen::Matrix3d& R_EB) {
+  if (auto s = Check(t, f_B, "accelerometer f_B"); !s) return s;
+  if (!R_EB.allFinite()) {
+    ++counters_.input_rejected;
+    return Status::Error("position_kf: orientation R_EB is not finite");
+  }
+  if (!initialized_) return Status::Ok();
+  PredictTo(t);
+  const Eigen::Vector3d z = EarthAcceleration(f_B, R_EB);
+  Eigen::Matrix<double, 3, 9> H = Eigen::Matrix<double, 3, 9>::Zero();
+  for (int i = 0; i < 3; ++i) H(i, IA(i)) = 1.0;
+  const Eigen::Matrix3d R =
+      settings_.accel_sigma * settings_.accel_sigma * Eigen::Matrix3d::Identity();
+  const Eigen::Vector3d y = z - H * x_;
+  const Eigen::Matrix3d S = H * P_ * H.transpose() + R;
+  const Eigen::Matrix<double, 9, 3> K = P_ * H.transpose() * S.inverse();
+  x_ += K * y;
+  const Mat9 IKH = Mat9::Identity() - K * H;
+  P_ = IKH * P_ * IKH.transpose() + K * R * K.transpose();
+  ++counters_.accel_samples;
+  return Status::Ok();
+}
+
+Status PositionKf::UpdatePosition(double t, const Eigen::Vector3d& p_WM_W) {
+  if (auto s = Check(t, p_WM_W, "position p_WM_W"); !s) return s;
+  if (!initialized_) {
+    Initialise(t, p_WM_W);
+    ++counters_.position_samples;
+    last_position_accepted_ = true;
+    last_position_nis_ = 0.0;
+    return Status::Ok();
+  }
+  PredictTo(t);
+  Eigen::Matrix<double, 3, 9> H = Eigen::Matrix<double, 3, 9>::Zero();
+  for (int i = 0; i < 3; ++i) H(i, IP(i)) = 1.0;
+  const Eigen::Matrix3d R =
+      settings_.position_sigma * settings_.position_sigma * Eigen::Matrix3d::Identity();
+  const Eigen::Vector3d y = p_WM_W - H * x_;
+  const Eigen::Matrix3d S = H * P_ * H.transpose() + R;
+  const Eigen::Matrix3d S_inv = S.inverse();
+  last_position_nis_ = y.dot(S_inv * y);
+  if (settings_.position_gate_chi2 > 0.0 && last_position_nis_ > settings_.position_gate_chi2) {
+    ++counters_.position_rejected;
+    last_position_accepted_ = false;
+    if (settings_.max_consecutive_rejections > 0 &&
+        ++consecutive_rejections_ >= settings_.max_consecutive_rejections) {
+      // The sensor keeps disagreeing: trust it again from the next sample on.
+      initialized_ = false;
+      ++counters_.reinitialised;
+    }
+    return Status::Ok();
+  }
+  consecutive_rejections_ = 0;
+  const Eigen::Matrix<double, 9, 3> K = P_ * H.transpose() * S_inv;
+  x_ += K * y;
+  const Mat9 IKH = Mat9::Identity() - K * H;
+  P_ = IKH * P_ * IKH.transpose() + K * R * K.transpose();
+  P_ = 0.5 * (P_ + P_.transpose());
+  ++counters_.position_samples;
+  last_position_accepted_ = true;
+  return Status::Ok();
+}
+
+}  // namespace rcal::estimation
