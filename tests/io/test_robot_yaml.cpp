@@ -151,19 +151,22 @@ TEST(RobotYaml, CalibratedHayatiRoundTripsWithNominalBeta) {
   EXPECT_NE(RobotYamlText(cal).find("beta: 0.003"), std::string::npos);
 }
 
-TEST(RobotYaml, ModifiedDhNominalBetaIsRefusedClearly) {
-  // ModelBuilder::ModifiedDhLink has no nominal β: the loader and the calibrated save say so
-  // instead of silently dropping it.
+TEST(RobotYaml, CalibratedModifiedDhBetaRoundTrips) {
+  // An identified modified D–H β becomes the nominal β of the calibrated file, and that file
+  // reproduces the calibrated kinematics.
   RobotSpec spec = LoadRobotSpec(testing::SourceDir() / "config/robots/seven_dof.yaml");
   spec.links[2].hayati = true;
   const KinematicModel model = BuildModel(spec);
   Eigen::VectorXd x = model.Nominal();
-  EXPECT_NO_THROW(CalibratedSpec(spec, model, x));
   x(model.FindParameter("beta3")) = 0.001;
-  EXPECT_NE(ErrorOf([&] { CalibratedSpec(spec, model, x); }).find("links[2].beta"),
-            std::string::npos);
-  spec.links[2].beta = 0.001;
-  EXPECT_NE(ErrorOf([&] { BuildModel(spec); }).find("links[2].beta"), std::string::npos);
+  const RobotSpec cal = CalibratedSpec(spec, model, x);
+  EXPECT_DOUBLE_EQ(cal.links[2].beta, 0.001);
+  const KinematicModel reloaded = BuildModel(ParseRobotYaml(RobotYamlText(cal)));
+  const Eigen::VectorXd q = Eigen::VectorXd::Constant(7, 0.4);
+  EXPECT_LT(
+      (reloaded.ToolFrame(q, reloaded.Nominal()).matrix() - model.ToolFrame(q, x).matrix()).norm(),
+      1e-12);
+  ExpectCalibratedRoundTrip(spec, 8);
 }
 
 TEST(RobotYaml, CalibratedSevenDofWithAllFramesRoundTrips) {

@@ -51,8 +51,18 @@ KinematicModel ModelFor(int which) {
       return Grb3016();
     case 1:
       return SevenJointSetup();
-    default:
+    case 2:
       return UrLikeUrdf();
+    default: {
+      // Hayati β (with nominal values) in both D–H forms, a prismatic joint and an IMU.
+      ModelBuilder b("hayati");
+      b.DhLink(0.150, -kPi / 2, 0.250, 0.0, Rev("j1"))
+          .DhLink(0.570, -kPi, 0.0, -kPi / 2, Rev("j2"), /*hayati=*/true, /*beta=*/0.01)
+          .ModifiedDhLink(0.150, kPi / 2, 0.0, 0.0, Rev("j3"), /*hayati=*/true, /*beta=*/-0.02)
+          .DhLink(0.0, kPi / 2, 0.3, 0.0, {"slide", JointType::kPrismatic, 0.0, 0.5})
+          .ImuMounting({0.1, 0.2, 0.3});
+      return b.Build();
+    }
   }
 }
 
@@ -83,7 +93,7 @@ TEST_P(JacobianTest, JointJacobianMatchesFiniteDifferences) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Robots, JacobianTest, ::testing::Values(0, 1, 2));
+INSTANTIATE_TEST_SUITE_P(Robots, JacobianTest, ::testing::Values(0, 1, 2, 3));
 
 TEST(Model, DhLinkMatchesClosedFormMatrix) {
   // One standard D–H link against the textbook matrix.

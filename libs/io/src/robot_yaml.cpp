@@ -435,16 +435,9 @@ kinematics::KinematicModel BuildModel(const RobotSpec& spec) {
       }
       if (!l.joint) throw std::runtime_error(where + ": a D–H link needs a joint");
       if (spec.convention == Convention::kDh) {
-        b.DhLink(l.a, l.alpha, l.d, l.theta, *l.joint, l.hayati);
-        // Rz·Tz·Tx·Rx·Ry(β error) · Ry(β nominal): two rotations about one axis add, so this is
-        // exactly the Hayati link with nominal β.
-        if (l.hayati && l.beta != 0.0) b.FixedTransform(Eigen::Vector3d::Zero(), {0, l.beta, 0});
+        b.DhLink(l.a, l.alpha, l.d, l.theta, *l.joint, l.hayati, l.beta);
       } else {
-        if (l.hayati && l.beta != 0.0)
-          throw std::runtime_error(where +
-                                   ".beta: a nonzero nominal beta in modified D–H needs "
-                                   "ModelBuilder support (not available yet)");
-        b.ModifiedDhLink(l.a, l.alpha, l.d, l.theta, *l.joint, l.hayati);
+        b.ModifiedDhLink(l.a, l.alpha, l.d, l.theta, *l.joint, l.hayati, l.beta);
       }
     }
     if (spec.tool)
@@ -578,12 +571,6 @@ RobotSpec CalibratedSpec(const RobotSpec& spec, const kinematics::KinematicModel
     }
     throw std::runtime_error(who + ": parameter '" + n + "' has no place in the description");
   }
-  if (out.convention == Convention::kModifiedDh)
-    for (size_t li = 0; li < out.links.size(); ++li)
-      if (out.links[li].beta != 0.0)
-        throw std::runtime_error(who + ": links[" + std::to_string(li) +
-                                 "].beta: an identified modified D–H beta cannot be saved as a "
-                                 "nominal value yet (ModelBuilder has no nominal beta)");
   for (size_t li = 0; li < out.links.size(); ++li)
     ComposeUrdfOrigin(spec.links[li].xyz, spec.links[li].rpy, urdf_error[li], &out.links[li].xyz,
                       &out.links[li].rpy);

@@ -215,7 +215,7 @@ ModelBuilder& ModelBuilder::BaseFrame(const Eigen::Vector3d& p_WB_W, const Eigen
 }
 
 ModelBuilder& ModelBuilder::DhLink(double a, double alpha, double d, double theta,
-                                   const Joint& joint, bool hayati) {
+                                   const Joint& joint, bool hayati, double beta) {
   const int i = ++link_;
   const std::string n = std::to_string(i), group = "link " + n;
   model_.joints_.push_back(joint);
@@ -234,13 +234,13 @@ ModelBuilder& ModelBuilder::DhLink(double a, double alpha, double d, double thet
   Push(Segment::kChain, Kind::kRotation, Eigen::Vector3d::UnitX(), alpha,
        AddParam("alpha" + n, true, alpha, group));
   if (hayati && revolute)
-    Push(Segment::kChain, Kind::kRotation, Eigen::Vector3d::UnitY(), 0.0,
-         AddParam("beta" + n, true, 0.0, group));
+    Push(Segment::kChain, Kind::kRotation, Eigen::Vector3d::UnitY(), beta,
+         AddParam("beta" + n, true, beta, group));
   return *this;
 }
 
 ModelBuilder& ModelBuilder::ModifiedDhLink(double a_prev, double alpha_prev, double d, double theta,
-                                           const Joint& joint, bool hayati) {
+                                           const Joint& joint, bool hayati, double beta) {
   const int i = ++link_;
   const std::string n = std::to_string(i), group = "link " + n;
   model_.joints_.push_back(joint);
@@ -251,8 +251,8 @@ ModelBuilder& ModelBuilder::ModifiedDhLink(double a_prev, double alpha_prev, dou
   Push(Segment::kChain, Kind::kTranslation, Eigen::Vector3d::UnitX(), a_prev,
        AddParam("a" + n, false, a_prev, group));
   if (hayati && revolute)
-    Push(Segment::kChain, Kind::kRotation, Eigen::Vector3d::UnitY(), 0.0,
-         AddParam("beta" + n, true, 0.0, group));
+    Push(Segment::kChain, Kind::kRotation, Eigen::Vector3d::UnitY(), beta,
+         AddParam("beta" + n, true, beta, group));
   Push(Segment::kChain, Kind::kRotation, Eigen::Vector3d::UnitZ(), theta,
        AddParam("theta" + n, true, theta, group), revolute ? j : -1);
   if (hayati && revolute) {

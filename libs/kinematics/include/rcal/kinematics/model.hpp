@@ -126,12 +126,14 @@ class ModelBuilder {
   ModelBuilder& BaseFrame(const Eigen::Vector3d& p_WB_W, const Eigen::Vector3d& rpy_WB,
                           bool identify = true);
   /// Standard D–H link; `hayati` replaces d by β (for a link whose next axis is parallel):
-  /// d stays at its nominal value and is not a parameter. Lengths [m], angles [rad].
+  /// d stays at its nominal value and is not a parameter; `beta` is β's nominal value (a
+  /// calibrated robot carries its identified β there). Lengths [m], angles [rad].
   ModelBuilder& DhLink(double a, double alpha, double d, double theta, const Joint& joint,
-                       bool hayati = false);
-  /// Modified (Craig) D–H link; `hayati` replaces dᵢ by βᵢ (axis i parallel to axis i−1).
+                       bool hayati = false, double beta = 0.0);
+  /// Modified (Craig) D–H link; `hayati` replaces dᵢ by βᵢ (axis i parallel to axis i−1), with
+  /// nominal value `beta` [rad].
   ModelBuilder& ModifiedDhLink(double a_prev, double alpha_prev, double d, double theta,
-                               const Joint& joint, bool hayati = false);
+                               const Joint& joint, bool hayati = false, double beta = 0.0);
   /// URDF-style joint: fixed origin (xyz [m], rpy [rad]) then a 6-parameter placement error
   /// (name_dx … name_drx) then the motion about/along the unit `axis`.
   ModelBuilder& UrdfJoint(const Eigen::Vector3d& xyz, const Eigen::Vector3d& rpy,
