@@ -1,0 +1,161 @@
+#include "rcal/sim/effects.hpp"
+
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+#include "rcal/geometry/so3.hpp"
+
+namespace rcal::sim {
+namespace {
+
+std::vector<std::string> Split(const std::string& s, char sep) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, sep)) out.push_back(item);
+  return out;
+}
+
+int JointIndex(const std::string& name, const kinematics::KinematicModel& model,
+               const std::string& text) {
+  for (int j = 0; j < model.num_joints(); ++j)
+    if (model.joints()[j].name == name) return j;
+  if (name.size() >= 2 && name[0] == 'j') {
+    try {
+      size_t used = 0;
+      const int k = std::stoi(name.substr(1), &used);
+      if (used == name.size() - 1 && k >= 1 && k <= model.num_joints()) return k - 1;
+    } catch (const std::exception&) {
+    }
+  }
+  throw std::invalid_argument("effect '" + text + "': no joint '" + name + "' (use j1..j" +
+                              std::to_string(model.num_joints()) + " or a joint name)");
+}
+
+}  // namespace
+
+TruthEffect ParseEffectSpec(const std::string& text, const kinematics::KinematicModel& model) {
+  const size_t eq = text.find('=');
+  if (eq == std::string::npos)
+    throw std::invalid_argument("effect '" + text + "': expected CAUSE[:JOINT]=VALUE");
+  const std::vector<std::string> head = Split(text.substr(0, eq), ':');
+  if (head.empty()) throw std::invalid_argument("effect '" + text + "': no cause");
+  if (head[0] == "time_offset")
+    throw std::invalid_argument("effect '" + text +
+                                "': time_offset applies to streamed data only, not to poses");
+  const auto cause = kinematics::ParseEffectCause(head[0]);
+  if (!cause)
+    throw std::invalid_argument("effect '" + text + "': unknown cause '" + head[0] +
+                                "' (joint_compliance, joint_periodic, joint_scale, thermal, "
+                                "backlash)");
+  TruthEffect t;
+  t.effect.cause = *cause;
+  if (*cause == kinematics::EffectCause::kThermal) {
+    if (head.size() > 2 || (head.size() == 2 && head[1] != "time" && head[1] != "temperature"))
+      throw std::invalid_argument("effect '" + text + "': thermal[:time|:temperature]=VALUE");
+    if (head.size() == 2 && head[1] == "time") {
+      t.effect.thermal_source = kinematics::Effect::ThermalSource::kTime;
+      t.effect.reference = 0.0;
+    }
+  } else {
+    if (head.size() < 2) throw std::invalid_argument("effect '" + text + "': which joint?");
+    t.effect.joint = JointIndex(head[1], model, text);
+    if (head.size() == 3 && *cause == kinematics::EffectCause::kJointPeriodic &&
+        (head[2] == "h1" || head[2] == "h2"))
+      t.effect.harmonic = head[2] == "h2" ? 2 : 1;
+    else if (head.size() > 2)
+      throw std::invalid_argument("effect '" + text + "': unexpected '" + head[2] + "'");
+  }
+  const std::vector<std::string> vals = Split(text.substr(eq + 1), ',');
+  const int n = t.effect.num_params();
+  if (vals.empty() || static_cast<int>(vals.size()) > n)
+    throw std::invalid_argument("effect '" + text + "': expected " +
+                                (n == 1 ? std::string("one value") : "one or two values"));
+  t.values = Eigen::VectorXd::Zero(n);
+  for (size_t i = 0; i < vals.size(); ++i) {
+    try {
+      size_t used = 0;
+      t.values(i) = std::stod(vals[i], &used);
+      if (used != vals[i].size() || !std::isfinite(t.values(i))) throw std::invalid_argument("");
+    } catch (const std::exception&) {
+      throw std::invalid_argument("effect '" + text + "': '" + vals[i] + "' is not a number");
+    }
+  }
+  return t;
+}
+
+EffectTruth MakeEffectTruth(const kinematics::KinematicModel& model,
+                            const std::vector<TruthEffect>& effects,
+                            const kinematics::GravityModel& gravity) {
+  std::vector<kinematics::Effect> fx;
+  for (const auto& t : effects) fx.push_back(t.effect);
+  EffectTruth out{kinematics::ExtendedModel(model, fx, gravity), {}};
+  out.e = out.model.NoEffects();
+  for (size_t k = 0; k < effects.size(); ++k) {
+    if (effects[k].values.size() != effects[k].effect.num_params())
+      throw std::invalid_argument("MakeEffectTruth: wrong number of values");
+    out.e.segment(out.model.effect_offset(k), effects[k].values.size()) = effects[k].values;
+  }
+  return out;
+}
+
+std::vector<kinematics::EffectContext> SampleSession(int num_joints, int count,
+                                                     const SessionSettings& s, Rng& rng) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  std::uniform_int_distribution<int> coin(0, 1);
+  std::uniform_int_distribution<size_t> pick(0,
+                                             s.payloads_kg.empty() ? 0 : s.payloads_kg.size() - 1);
+  std::vector<kinematics::EffectContext> out(count);
+  for (int i = 0; i < count; ++i) {
+    auto& c = out[i];
+    c.time_s = count > 1 ? s.session_s * i / (count - 1) : 0.0;
+    c.temperature_c =
+        s.temperature_start_c +
+        s.temperature_rise_c * (1.0 - std::exp(-c.time_s / s.warmup_time_constant_s)) +
+        s.temperature_noise_c * n(rng);
+    c.payload_kg = s.payloads_kg.empty() ? 0.0 : s.payloads_kg[pick(rng)];
+    c.dq_sign = Eigen::VectorXi::Ones(num_joints);
+    if (s.random_approach)
+      for (int j = 0; j < num_joints; ++j) c.dq_sign(j) = coin(rng) ? 1 : -1;
+  }
+  return out;
+}
+
+kinematics::PoseMeasurement MeasurePoseWithEffects(const EffectTruth& truth,
+                                                   const Eigen::VectorXd& x_true,
+                                                   const Eigen::VectorXd& q,
+                                                   const kinematics::EffectContext& ctx,
+                                                   const PoseNoise& noise, Rng& rng) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  const kinematics::ToolPose pose = truth.model.Forward(q, ctx, x_true, truth.e);
+  kinematics::PoseMeasurement m;
+  m.q = q;
+  m.p_WM_W = pose.p_WM_W + noise.position_sigma * Eigen::Vector3d(n(rng), n(rng), n(rng));
+  m.has_orientation = noise.orientation;
+  const int dim = noise.orientation ? 6 : 3;
+  m.covariance = Eigen::MatrixXd::Zero(dim, dim);
+  m.covariance.topLeftCorner<3, 3>().diagonal().setConstant(noise.position_sigma *
+                                                            noise.position_sigma);
+  if (noise.orientation) {
+    const Eigen::Vector3d dtheta =
+        noise.orientation_sigma * Eigen::Vector3d(n(rng), n(rng), n(rng));
+    m.R_EI = geometry::Exp(dtheta) * pose.R_EI;  // left error, earth frame (measurement.hpp)
+    m.covariance.bottomRightCorner<3, 3>().diagonal().setConstant(noise.orientation_sigma *
+                                                                  noise.orientation_sigma);
+  }
+  return m;
+}
+
+std::vector<kinematics::PoseMeasurement> MeasurePosesWithEffects(
+    const EffectTruth& truth, const Eigen::VectorXd& x_true, const std::vector<Eigen::VectorXd>& qs,
+    const std::vector<kinematics::EffectContext>& contexts, const PoseNoise& noise, Rng& rng) {
+  if (qs.size() != contexts.size())
+    throw std::invalid_argument("MeasurePosesWithEffects: one context per pose");
+  std::vector<kinematics::PoseMeasurement> out;
+  for (size_t i = 0; i < qs.size(); ++i)
+    out.push_back(MeasurePoseWithEffects(truth, x_true, qs[i], contexts[i], noise, rng));
+  return out;
+}
+
+}  // namespace rcal::sim

@@ -1,0 +1,114 @@
+// Truth effects: parsing, and the effected robot against the geometric model evaluated at joints
+// (or lengths) changed by hand.
+#include "rcal/sim/effects.hpp"
+
+#include <gtest/gtest.h>
+
+#include "../kinematics/test_robots.hpp"
+
+namespace rcal::sim {
+namespace {
+
+using kinematics::EffectCause;
+
+PoseNoise Exact() {
+  PoseNoise n;
+  n.position_sigma = 0.0;
+  n.orientation_sigma = 0.0;
+  return n;
+}
+
+TEST(SimEffects, ParsesTheCommandLineSyntax) {
+  const auto m = kinematics::testing::UrLikeUrdf();
+  auto t = ParseEffectSpec("joint_compliance:j2=2e-6", m);
+  EXPECT_EQ(t.effect.cause, EffectCause::kJointCompliance);
+  EXPECT_EQ(t.effect.joint, 1);
+  EXPECT_DOUBLE_EQ(t.values(0), 2e-6);
+  t = ParseEffectSpec("joint_periodic:elbow:h2=1e-4,-5e-5", m);
+  EXPECT_EQ(t.effect.joint, 2);
+  EXPECT_EQ(t.effect.harmonic, 2);
+  EXPECT_DOUBLE_EQ(t.values(1), -5e-5);
+  t = ParseEffectSpec("joint_periodic:j1=1e-4", m);
+  EXPECT_EQ(t.effect.harmonic, 1);
+  EXPECT_DOUBLE_EQ(t.values(1), 0.0);
+  t = ParseEffectSpec("thermal:time=3e-9", m);
+  EXPECT_EQ(t.effect.thermal_source, kinematics::Effect::ThermalSource::kTime);
+  for (const char* bad :
+       {"joint_scale=1e-4", "joint_scale:j7=1e-4", "joint_scale:j2=abc", "time_offset=0.01",
+        "compliance:j2=1", "joint_scale:j2=1,2", "backlash:j2"})
+    EXPECT_THROW(ParseEffectSpec(bad, m), std::invalid_argument) << bad;
+}
+
+TEST(SimEffects, JointEffectsMoveTheJointsByHand) {
+  const auto m = kinematics::testing::UrLikeUrdf();
+  Rng rng(11);
+  const Eigen::VectorXd x = RandomErrors(m, rng, 1e-3, 1e-3);
+  const auto qs = SampleJoints(m, 10, rng);
+  const auto ctxs = SampleSession(m.num_joints(), 10, {}, rng);
+  const EffectTruth truth = MakeEffectTruth(
+      m, {ParseEffectSpec("joint_scale:j3=2e-3", m), ParseEffectSpec("backlash:j2=1e-3", m),
+          ParseEffectSpec("joint_periodic:j4=1e-3,2e-3", m)});
+  for (size_t i = 0; i < qs.size(); ++i) {
+    Eigen::VectorXd q = qs[i];
+    q(2) *= 1 + 2e-3;
+    q(1) += 1e-3 * ctxs[i].dq_sign(1);
+    q(3) += 1e-3 * std::sin(qs[i](3)) + 2e-3 * std::cos(qs[i](3));
+    const auto meas = MeasurePoseWithEffects(truth, x, qs[i], ctxs[i], Exact(), rng);
+    const auto ref = m.Forward(q, x);
+    EXPECT_LT((meas.p_WM_W - ref.p_WM_W).norm(), 1e-12);
+    EXPECT_LT((meas.R_EI - ref.R_EI).norm(), 1e-12);
+  }
+}
+
+TEST(SimEffects, ThermalGrowsTheArm) {
+  const auto m = kinematics::testing::Grb3016();  // no set-up frames: the whole chain grows
+  Rng rng(12);
+  const EffectTruth truth = MakeEffectTruth(m, {ParseEffectSpec("thermal=1e-5", m)});
+  kinematics::EffectContext ctx;
+  ctx.temperature_c = 35.0;
+  const Eigen::VectorXd q = SampleJoints(m, 1, rng)[0];
+  const auto meas = MeasurePoseWithEffects(truth, m.Nominal(), q, ctx, Exact(), rng);
+  EXPECT_LT((meas.p_WM_W - (1 + 15e-5) * m.Forward(q, m.Nominal()).p_WM_W).norm(), 1e-12);
+}
+
+TEST(SimEffects, ComplianceDeflectsWithGravityTorqueAndPayload) {
+  const auto m = kinematics::testing::UrLikeUrdf();
+  Rng rng(13);
+  const EffectTruth truth = MakeEffectTruth(m, {ParseEffectSpec("joint_compliance:j2=5e-6", m)});
+  Eigen::VectorXd q = Eigen::VectorXd::Zero(6);
+  q(1) = -1.2;  // shoulder lift: arm out, large torque
+  kinematics::EffectContext light, heavy;
+  heavy.payload_kg = 10.0;
+  const double t0 = truth.model.GravityTorque(q, 0)(1), t1 = truth.model.GravityTorque(q, 10)(1);
+  EXPECT_GT(std::abs(t1), std::abs(t0));
+  // Hand-made: a 10 kg load at the end of the chain adds m g × lever arm about joint 2's axis.
+  EXPECT_GT(std::abs(t1 - t0), 10.0 * 9.81 * 0.5);
+  for (const auto& [ctx, tau] : {std::pair{light, t0}, std::pair{heavy, t1}}) {
+    Eigen::VectorXd qd = q;
+    qd(1) += 5e-6 * tau;
+    const auto meas = MeasurePoseWithEffects(truth, m.Nominal(), q, ctx, Exact(), rng);
+    EXPECT_LT((meas.p_WM_W - m.Forward(qd, m.Nominal()).p_WM_W).norm(), 1e-12);
+  }
+}
+
+TEST(SimEffects, SessionContexts) {
+  Rng rng(14);
+  SessionSettings s;
+  const auto c = SampleSession(6, 50, s, rng);
+  ASSERT_EQ(c.size(), 50u);
+  EXPECT_DOUBLE_EQ(c.front().time_s, 0.0);
+  EXPECT_DOUBLE_EQ(c.back().time_s, s.session_s);
+  int neg = 0;
+  for (const auto& k : c) {
+    EXPECT_GT(k.temperature_c, 18.0);
+    EXPECT_LT(k.temperature_c, 34.0);
+    neg += (k.dq_sign.array() < 0).count();
+    EXPECT_TRUE(k.payload_kg == 0.0 || k.payload_kg == 5.0 || k.payload_kg == 10.0);
+  }
+  EXPECT_GT(neg, 100);
+  EXPECT_LT(neg, 200);
+  EXPECT_GT(c.back().temperature_c - c.front().temperature_c, 8.0);
+}
+
+}  // namespace
+}  // namespace rcal::sim
