@@ -102,6 +102,7 @@ est::PositionKfSettings BroadPositionSettings(double pos_noise_m) {
   est::PositionKfSettings s;
   s.earth = est::EarthFrame::kEnu;
   s.position_sigma = pos_noise_m;
+  s.accel_sigma = 1.0;  // the IMU is not at the marker: lever-arm accelerations
   return s;
 }
 
