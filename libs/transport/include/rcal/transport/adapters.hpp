@@ -1,0 +1,108 @@
+// Pure conversions between LCM messages and the libraries' domain types. No I/O, no state.
+//
+// Every conversion from a message checks it first (sizes, finite values, unit quaternions,
+// covariance shape) and returns std::nullopt with `*error` naming the field when it does not fit,
+// so a process rejects and counts it instead of corrupting its state.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "rcal/calibration_status_t.hpp"
+#include "rcal/identification/ekf_identifier.hpp"
+#include "rcal/ik/levenberg_marquardt_ik.hpp"
+#include "rcal/ik_command_t.hpp"
+#include "rcal/ik_request_t.hpp"
+#include "rcal/joint_state_t.hpp"
+#include "rcal/kinematic_params_t.hpp"
+#include "rcal/kinematics/measurement.hpp"
+#include "rcal/kinematics/model.hpp"
+#include "rcal/pose_measurement_t.hpp"
+
+namespace rcal::transport {
+
+/// Identifies a parameterisation: "<model name>:<16 hex digits of a hash of the parameter names
+/// in order>". Two models with the same id accept each other's KINEMATIC_PARAMS.
+std::string ModelId(const kinematics::KinematicModel& model);
+
+// ---- pose measurements ------------------------------------------------------------------------
+
+/// Pose measurement → message. `utime` [µs]: sensor time of the still window's end.
+pose_measurement_t ToMessage(const kinematics::PoseMeasurement& m, int64_t utime,
+                             int32_t pose_index);
+
+/// Message → pose measurement. Checks: num_joints ≥ 1 and == q size, dimension ∈ {3, 6} and
+/// consistent with has_orientation, num_covariance == dimension², finite values, quaternion norm
+/// within 1e-6 of 1 (renormalised), symmetric covariance. Does not check against a model (see
+/// kinematics::Validate).
+std::optional<kinematics::PoseMeasurement> FromMessage(const pose_measurement_t& msg,
+                                                       std::string* error);
+
+// ---- joints -----------------------------------------------------------------------------------
+
+/// Joint vector → message with the model's joint names; dq zero when not given.
+joint_state_t ToJointState(const kinematics::KinematicModel& model, const Eigen::VectorXd& q,
+                           int64_t utime, const Eigen::VectorXd& dq = {});
+
+// ---- kinematic parameters ---------------------------------------------------------------------
+
+/// Full-length errors x and σ [m | rad] → message. `identified`: indices estimated.
+kinematic_params_t ToKinematicParams(const kinematics::KinematicModel& model,
+                                     const Eigen::VectorXd& x, const Eigen::VectorXd& sigma,
+                                     const std::vector<int>& identified,
+                                     const std::string& robot_id, int64_t utime,
+                                     int32_t poses_used);
+
+/// The identifier's current estimate → message.
+kinematic_params_t ToKinematicParams(const identification::EkfIdentifier& ekf,
+                                     const std::string& robot_id, int64_t utime);
+
+/// Message → full-length error vector for `model`. Checks sizes, finiteness, the model id and
+/// that every name is the model's parameter at that index.
+std::optional<Eigen::VectorXd> ParamsFromMessage(const kinematic_params_t& msg,
+                                                 const kinematics::KinematicModel& model,
+                                                 std::string* error);
+
+// ---- calibration status -----------------------------------------------------------------------
+
+/// Figures the identifier reports alongside its estimate.
+struct StatusFigures {
+  double condition_number = 0;
+  double rms_position_residual = 0;     ///< [m]
+  double rms_orientation_residual = 0;  ///< [rad]
+  double last_nis = 0;
+  bool converged = false;
+};
+
+/// The identifier's counts plus `figures` → message.
+calibration_status_t ToCalibrationStatus(const identification::EkfIdentifier& ekf,
+                                         const StatusFigures& figures, int64_t utime);
+
+// ---- inverse kinematics -----------------------------------------------------------------------
+
+struct IkQuery {
+  int64_t request_id = 0;
+  Eigen::Isometry3d T_WT = Eigen::Isometry3d::Identity();  ///< target tool frame, world
+  bool position_only = false;
+  Eigen::VectorXd q_seed;  ///< [rad | m]
+};
+
+/// Message → query. Checks sizes (num_joints == `expected_joints` when ≥ 0), finite values and a
+/// unit quaternion (when not position only).
+std::optional<IkQuery> FromMessage(const ik_request_t& msg, int expected_joints,
+                                   std::string* error);
+
+/// Request → message for tests and clients.
+ik_request_t ToMessage(const IkQuery& query, int64_t utime);
+
+/// Solutions on the calibrated and nominal model → message. `nominal_tool_error` [m]: how far
+/// the nominal solution lands from the target on the calibrated model.
+ik_command_t ToIkCommand(const ik_request_t& request, const ik::IkResult& calibrated,
+                         const ik::IkResult& nominal, double nominal_tool_error,
+                         int64_t params_utime);
+
+}  // namespace rcal::transport

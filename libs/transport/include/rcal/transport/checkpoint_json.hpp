@@ -1,0 +1,32 @@
+// The identifier's checkpoint as a JSON document (schema `rcal.ekf_checkpoint/1`), written
+// atomically by the process so that a restart resumes where it stopped. Doubles are written in
+// their shortest exact form: Restore(Parse(Text(c))) reproduces the state bit for bit.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+
+#include "rcal/identification/ekf_identifier.hpp"
+
+namespace rcal::transport {
+
+/// A checkpoint and what it belongs to.
+struct CheckpointFile {
+  std::string model_id;          ///< ModelId() of the model it was taken on
+  int64_t utime = 0;             ///< sensor time of the last measurement it includes [µs]
+  int64_t last_pose_index = -1;  ///< pose_index of that measurement (−1: none)
+  identification::EkfCheckpoint checkpoint;
+};
+
+/// JSON text of a checkpoint.
+std::string CheckpointText(const CheckpointFile& c);
+/// Parses CheckpointText output. Throws std::runtime_error naming the key on a malformed file.
+CheckpointFile ParseCheckpoint(const std::string& text);
+
+/// Writes atomically (temporary file + rename). Throws std::runtime_error naming the path.
+void SaveCheckpoint(const std::filesystem::path& path, const CheckpointFile& c);
+/// Reads and parses. Throws std::runtime_error naming the path and the key.
+CheckpointFile LoadCheckpoint(const std::filesystem::path& path);
+
+}  // namespace rcal::transport

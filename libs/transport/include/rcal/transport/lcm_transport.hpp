@@ -1,0 +1,49 @@
+// The Transport over LCM (udpm:// multicast on the machine, memq:// inside one process).
+#pragma once
+
+#include <lcm/lcm-cpp.hpp>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "rcal/transport/transport.hpp"
+
+namespace rcal::transport {
+
+/// The pipeline's default: multicast that never leaves the machine (ttl=0).
+inline constexpr const char* kDefaultLcmUrl = "udpm://239.255.76.67:7667?ttl=0";
+
+/// The LCM URL to use: `url` if not empty, else the environment variable RCAL_LCM_URL if set and
+/// not empty, else kDefaultLcmUrl.
+std::string ResolveLcmUrl(const std::string& url = "");
+
+class LcmTransport final : public Transport {
+ public:
+  /// Opens LCM on ResolveLcmUrl(url). Throws std::runtime_error naming the URL if LCM cannot
+  /// start (e.g. no multicast route).
+  explicit LcmTransport(const std::string& url = "");
+  ~LcmTransport() override;
+  LcmTransport(const LcmTransport&) = delete;
+  LcmTransport& operator=(const LcmTransport&) = delete;
+
+  bool PublishRaw(const std::string& channel, const void* data, int size) override;
+  void SubscribeRaw(const std::string& channel, RawHandler handler) override;
+  int HandleTimeout(int timeout_ms) override;
+
+  const std::string& url() const { return url_; }
+  /// The underlying LCM instance (for lcm::LogFile-free helpers such as getFileno()).
+  lcm::LCM& lcm() { return lcm_; }
+
+ private:
+  struct Slot {
+    RawHandler handler;
+    void Handle(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
+      handler(channel, rbuf->data, static_cast<int>(rbuf->data_size));
+    }
+  };
+  std::string url_;
+  lcm::LCM lcm_;
+  std::vector<std::unique_ptr<Slot>> slots_;
+};
+
+}  // namespace rcal::transport

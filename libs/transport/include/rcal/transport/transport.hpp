@@ -1,0 +1,69 @@
+// Typed publish/subscribe behind an abstract interface (after Drake's DrakeLcmInterface), so a
+// process's adapter code is written once and runs over UDP multicast, memq:// in tests, or a log.
+//
+// Messages are LCM-generated types (anything with encode/decode/getEncodedSize). A message that
+// fails to decode (truncated, wrong type: the LCM fingerprint differs) never reaches the typed
+// handler: the error handler gets a reason naming the channel, and the process goes on.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace rcal::transport {
+
+/// Raw handler: channel, encoded bytes.
+using RawHandler = std::function<void(const std::string& channel, const void* data, int size)>;
+/// Called when a message on a subscribed channel cannot be decoded; `reason` names the channel.
+using ErrorHandler = std::function<void(const std::string& reason)>;
+
+class Transport {
+ public:
+  virtual ~Transport() = default;
+
+  /// Publishes encoded bytes on `channel`. Returns false when the transport refused them.
+  virtual bool PublishRaw(const std::string& channel, const void* data, int size) = 0;
+  /// Calls `handler` for every message whose channel matches the regular expression `channel`
+  /// (LCM semantics: the whole name must match; ".*" is every channel).
+  virtual void SubscribeRaw(const std::string& channel, RawHandler handler) = 0;
+  /// Waits up to `timeout_ms` for one message and dispatches it. Returns 1 when one was handled,
+  /// 0 on timeout, negative on a transport error.
+  virtual int HandleTimeout(int timeout_ms) = 0;
+
+  /// Encodes and publishes a typed message. Returns false on an encoding or transport failure.
+  template <typename Msg>
+  bool Publish(const std::string& channel, const Msg& msg) {
+    const int size = msg.getEncodedSize();
+    if (size < 0) return false;
+    std::vector<uint8_t> buffer(static_cast<size_t>(size));
+    if (msg.encode(buffer.data(), 0, size) != size) return false;
+    return PublishRaw(channel, buffer.data(), size);
+  }
+
+  /// Subscribes a typed handler. Bytes that do not decode as `Msg` go to `on_error` (if given)
+  /// with a reason naming the channel and the type; `on_message` is not called.
+  template <typename Msg>
+  void Subscribe(const std::string& channel, std::function<void(const Msg&)> on_message,
+                 ErrorHandler on_error = {}) {
+    SubscribeRaw(channel, [on_message = std::move(on_message), on_error = std::move(on_error)](
+                              const std::string& ch, const void* data, int size) {
+      Msg msg;
+      int decoded = -1;
+      try {
+        decoded = msg.decode(data, 0, size);
+      } catch (...) {  // generated code does not throw, but allocation can
+        decoded = -1;
+      }
+      if (decoded < 0) {
+        if (on_error)
+          on_error("channel " + ch + ": " + std::to_string(size) + " bytes do not decode as " +
+                   Msg::getTypeName());
+        return;
+      }
+      on_message(msg);
+    });
+  }
+};
+
+}  // namespace rcal::transport

@@ -1,0 +1,242 @@
+#include "rcal/transport/adapters.hpp"
+
+#include <cmath>
+#include <cstdio>
+
+namespace rcal::transport {
+namespace {
+
+bool AllFinite(const double* v, size_t n) {
+  for (size_t i = 0; i < n; ++i)
+    if (!std::isfinite(v[i])) return false;
+  return true;
+}
+
+template <typename T>
+std::optional<T> Fail(std::string* error, const std::string& what) {
+  if (error) *error = what;
+  return std::nullopt;
+}
+
+}  // namespace
+
+std::string ModelId(const kinematics::KinematicModel& model) {
+  uint64_t h = 1469598103934665603ull;  // FNV-1a 64
+  for (const auto& p : model.parameters()) {
+    for (unsigned char c : p.name) h = (h ^ c) * 1099511628211ull;
+    h = (h ^ 0xffu) * 1099511628211ull;  // separator
+  }
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(h));
+  return model.name() + ":" + hex;
+}
+
+pose_measurement_t ToMessage(const kinematics::PoseMeasurement& m, int64_t utime,
+                             int32_t pose_index) {
+  pose_measurement_t msg;
+  msg.utime = utime;
+  msg.pose_index = pose_index;
+  msg.num_joints = static_cast<int32_t>(m.q.size());
+  msg.q.assign(m.q.data(), m.q.data() + m.q.size());
+  for (int i = 0; i < 3; ++i) msg.p[i] = m.p_WM_W(i);
+  msg.has_orientation = m.has_orientation;
+  const Eigen::Quaterniond q_EI(m.R_EI);
+  msg.q_EI[0] = q_EI.w();
+  msg.q_EI[1] = q_EI.x();
+  msg.q_EI[2] = q_EI.y();
+  msg.q_EI[3] = q_EI.z();
+  msg.dimension = static_cast<int8_t>(m.dimension());
+  msg.num_covariance = static_cast<int32_t>(m.covariance.size());
+  msg.covariance.resize(m.covariance.size());
+  for (int r = 0; r < m.covariance.rows(); ++r)
+    for (int c = 0; c < m.covariance.cols(); ++c)
+      msg.covariance[r * m.covariance.cols() + c] = m.covariance(r, c);
+  return msg;
+}
+
+std::optional<kinematics::PoseMeasurement> FromMessage(const pose_measurement_t& msg,
+                                                       std::string* error) {
+  using R = kinematics::PoseMeasurement;
+  if (msg.num_joints < 1 || static_cast<size_t>(msg.num_joints) != msg.q.size())
+    return Fail<R>(error, "pose_measurement.num_joints: " + std::to_string(msg.num_joints) +
+                              " does not match q (" + std::to_string(msg.q.size()) + ")");
+  if (!AllFinite(msg.q.data(), msg.q.size()))
+    return Fail<R>(error, "pose_measurement.q: not finite");
+  if (!AllFinite(msg.p, 3)) return Fail<R>(error, "pose_measurement.p: not finite");
+  const int dim = msg.has_orientation ? 6 : 3;
+  if (msg.dimension != dim)
+    return Fail<R>(error, "pose_measurement.dimension: " + std::to_string(msg.dimension) +
+                              ", expected " + std::to_string(dim) + " with has_orientation " +
+                              (msg.has_orientation ? "true" : "false"));
+  if (msg.num_covariance != dim * dim || msg.covariance.size() != static_cast<size_t>(dim * dim))
+    return Fail<R>(error, "pose_measurement.covariance: " + std::to_string(msg.covariance.size()) +
+                              " values, expected " + std::to_string(dim * dim));
+  if (!AllFinite(msg.covariance.data(), msg.covariance.size()))
+    return Fail<R>(error, "pose_measurement.covariance: not finite");
+  R m;
+  m.q = Eigen::Map<const Eigen::VectorXd>(msg.q.data(), msg.num_joints);
+  m.p_WM_W = Eigen::Vector3d(msg.p[0], msg.p[1], msg.p[2]);
+  m.has_orientation = msg.has_orientation;
+  if (msg.has_orientation) {
+    if (!AllFinite(msg.q_EI, 4)) return Fail<R>(error, "pose_measurement.q_EI: not finite");
+    Eigen::Quaterniond q(msg.q_EI[0], msg.q_EI[1], msg.q_EI[2], msg.q_EI[3]);
+    if (std::abs(q.norm() - 1.0) > 1e-6)
+      return Fail<R>(error, "pose_measurement.q_EI: not a unit quaternion (norm " +
+                                std::to_string(q.norm()) + ")");
+    m.R_EI = q.normalized().toRotationMatrix();
+  }
+  m.covariance =
+      Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
+          msg.covariance.data(), dim, dim);
+  const double scale = m.covariance.cwiseAbs().maxCoeff();
+  if ((m.covariance - m.covariance.transpose()).cwiseAbs().maxCoeff() > 1e-12 * scale)
+    return Fail<R>(error, "pose_measurement.covariance: not symmetric");
+  return m;
+}
+
+joint_state_t ToJointState(const kinematics::KinematicModel& model, const Eigen::VectorXd& q,
+                           int64_t utime, const Eigen::VectorXd& dq) {
+  joint_state_t msg;
+  msg.utime = utime;
+  msg.num_joints = static_cast<int32_t>(q.size());
+  for (int i = 0; i < q.size(); ++i) {
+    std::string name = std::to_string(i + 1);
+    if (i < model.num_joints()) name = model.joints()[i].name;
+    msg.names.push_back(name);
+  }
+  msg.q.assign(q.data(), q.data() + q.size());
+  msg.dq.assign(q.size(), 0.0);
+  if (dq.size() == q.size()) msg.dq.assign(dq.data(), dq.data() + dq.size());
+  return msg;
+}
+
+kinematic_params_t ToKinematicParams(const kinematics::KinematicModel& model,
+                                     const Eigen::VectorXd& x, const Eigen::VectorXd& sigma,
+                                     const std::vector<int>& identified,
+                                     const std::string& robot_id, int64_t utime,
+                                     int32_t poses_used) {
+  kinematic_params_t msg;
+  msg.utime = utime;
+  msg.robot_id = robot_id;
+  msg.model_id = ModelId(model);
+  msg.num_params = model.num_params();
+  msg.identified.assign(model.num_params(), false);
+  for (int i : identified)
+    if (i >= 0 && i < model.num_params()) msg.identified[i] = true;
+  for (int i = 0; i < model.num_params(); ++i) {
+    msg.names.push_back(model.parameters()[i].name);
+    msg.values.push_back(i < x.size() ? x(i) : 0.0);
+    msg.sigmas.push_back(i < sigma.size() ? sigma(i) : 0.0);
+  }
+  msg.poses_used = poses_used;
+  return msg;
+}
+
+kinematic_params_t ToKinematicParams(const identification::EkfIdentifier& ekf,
+                                     const std::string& robot_id, int64_t utime) {
+  return ToKinematicParams(ekf.model(), ekf.x(), ekf.sigma(), ekf.identified(), robot_id, utime,
+                           ekf.accepted());
+}
+
+std::optional<Eigen::VectorXd> ParamsFromMessage(const kinematic_params_t& msg,
+                                                 const kinematics::KinematicModel& model,
+                                                 std::string* error) {
+  using R = Eigen::VectorXd;
+  if (msg.model_id != ModelId(model))
+    return Fail<R>(
+        error, "kinematic_params.model_id: " + msg.model_id + ", this model is " + ModelId(model));
+  const size_t n = static_cast<size_t>(model.num_params());
+  if (msg.num_params != model.num_params() || msg.names.size() != n || msg.values.size() != n)
+    return Fail<R>(error, "kinematic_params.num_params: " + std::to_string(msg.num_params) +
+                              ", model has " + std::to_string(n));
+  for (size_t i = 0; i < n; ++i)
+    if (msg.names[i] != model.parameters()[i].name)
+      return Fail<R>(error, "kinematic_params.names[" + std::to_string(i) + "]: " + msg.names[i] +
+                                ", expected " + model.parameters()[i].name);
+  if (!AllFinite(msg.values.data(), n))
+    return Fail<R>(error, "kinematic_params.values: not finite");
+  return Eigen::Map<const Eigen::VectorXd>(msg.values.data(), static_cast<Eigen::Index>(n));
+}
+
+calibration_status_t ToCalibrationStatus(const identification::EkfIdentifier& ekf,
+                                         const StatusFigures& figures, int64_t utime) {
+  calibration_status_t msg;
+  msg.utime = utime;
+  msg.poses_accepted = ekf.accepted();
+  msg.poses_rejected = ekf.rejected();
+  msg.last_rejection = ekf.last_rejection();
+  msg.condition_number = figures.condition_number;
+  msg.rms_position_residual = figures.rms_position_residual;
+  msg.rms_orientation_residual = figures.rms_orientation_residual;
+  msg.last_nis = figures.last_nis;
+  msg.relinearizations = ekf.relinearizations();
+  msg.converged = figures.converged;
+  return msg;
+}
+
+std::optional<IkQuery> FromMessage(const ik_request_t& msg, int expected_joints,
+                                   std::string* error) {
+  using R = IkQuery;
+  if (msg.num_joints < 1 || static_cast<size_t>(msg.num_joints) != msg.q_seed.size())
+    return Fail<R>(error, "ik_request.num_joints: " + std::to_string(msg.num_joints) +
+                              " does not match q_seed (" + std::to_string(msg.q_seed.size()) + ")");
+  if (expected_joints >= 0 && msg.num_joints != expected_joints)
+    return Fail<R>(error, "ik_request.num_joints: " + std::to_string(msg.num_joints) +
+                              ", the robot has " + std::to_string(expected_joints));
+  if (!AllFinite(msg.q_seed.data(), msg.q_seed.size()))
+    return Fail<R>(error, "ik_request.q_seed: not finite");
+  if (!AllFinite(msg.p, 3)) return Fail<R>(error, "ik_request.p: not finite");
+  IkQuery query;
+  query.request_id = msg.request_id;
+  query.position_only = msg.position_only;
+  query.q_seed = Eigen::Map<const Eigen::VectorXd>(msg.q_seed.data(), msg.num_joints);
+  query.T_WT.translation() = Eigen::Vector3d(msg.p[0], msg.p[1], msg.p[2]);
+  if (!msg.position_only) {
+    if (!AllFinite(msg.q_WT, 4)) return Fail<R>(error, "ik_request.q_WT: not finite");
+    Eigen::Quaterniond q(msg.q_WT[0], msg.q_WT[1], msg.q_WT[2], msg.q_WT[3]);
+    if (std::abs(q.norm() - 1.0) > 1e-6)
+      return Fail<R>(
+          error, "ik_request.q_WT: not a unit quaternion (norm " + std::to_string(q.norm()) + ")");
+    query.T_WT.linear() = q.normalized().toRotationMatrix();
+  }
+  return query;
+}
+
+ik_request_t ToMessage(const IkQuery& query, int64_t utime) {
+  ik_request_t msg;
+  msg.utime = utime;
+  msg.request_id = query.request_id;
+  for (int i = 0; i < 3; ++i) msg.p[i] = query.T_WT.translation()(i);
+  const Eigen::Quaterniond q(query.T_WT.rotation());
+  msg.q_WT[0] = q.w();
+  msg.q_WT[1] = q.x();
+  msg.q_WT[2] = q.y();
+  msg.q_WT[3] = q.z();
+  msg.position_only = query.position_only;
+  msg.num_joints = static_cast<int32_t>(query.q_seed.size());
+  msg.q_seed.assign(query.q_seed.data(), query.q_seed.data() + query.q_seed.size());
+  return msg;
+}
+
+ik_command_t ToIkCommand(const ik_request_t& request, const ik::IkResult& calibrated,
+                         const ik::IkResult& nominal, double nominal_tool_error,
+                         int64_t params_utime) {
+  ik_command_t msg;
+  msg.utime = request.utime;
+  msg.request_id = request.request_id;
+  msg.converged = calibrated.converged;
+  msg.status = ik::ToString(calibrated.status);
+  msg.reason = calibrated.reason;
+  msg.num_joints = static_cast<int32_t>(calibrated.q.size());
+  msg.q.assign(calibrated.q.data(), calibrated.q.data() + calibrated.q.size());
+  msg.q_nominal.assign(msg.num_joints, 0.0);
+  for (int i = 0; i < std::min<int>(msg.num_joints, nominal.q.size()); ++i)
+    msg.q_nominal[i] = nominal.q(i);
+  msg.position_error = calibrated.position_error;
+  msg.orientation_error = calibrated.orientation_error;
+  msg.nominal_tool_error = nominal_tool_error;
+  msg.params_utime = params_utime;
+  return msg;
+}
+
+}  // namespace rcal::transport

@@ -1,0 +1,136 @@
+#include "rcal/transport/checkpoint_json.hpp"
+
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+
+#include "rcal/io/atomic_file.hpp"
+
+namespace rcal::transport {
+namespace {
+
+using nlohmann::json;
+constexpr const char* kSchema = "rcal.ekf_checkpoint/1";
+
+json Vec(const Eigen::VectorXd& v) {
+  return std::vector<double>(v.data(), v.data() + v.size());
+}
+
+json Mat(const Eigen::MatrixXd& m) {
+  json rows = json::array();
+  for (int r = 0; r < m.rows(); ++r) {
+    std::vector<double> row(m.cols());
+    for (int c = 0; c < m.cols(); ++c) row[c] = m(r, c);
+    rows.push_back(row);
+  }
+  return rows;
+}
+
+const json& At(const json& j, const std::string& key, const std::string& path) {
+  if (!j.is_object() || !j.contains(key))
+    throw std::runtime_error("checkpoint: " + path + key + ": missing");
+  return j.at(key);
+}
+
+Eigen::VectorXd ToVec(const json& j, const std::string& key) {
+  if (!j.is_array()) throw std::runtime_error("checkpoint: " + key + ": not an array");
+  Eigen::VectorXd v(j.size());
+  for (size_t i = 0; i < j.size(); ++i) {
+    if (!j[i].is_number()) throw std::runtime_error("checkpoint: " + key + ": not a number");
+    v(i) = j[i].get<double>();
+  }
+  return v;
+}
+
+Eigen::MatrixXd ToMat(const json& j, const std::string& key) {
+  if (!j.is_array()) throw std::runtime_error("checkpoint: " + key + ": not an array");
+  if (j.empty()) return {};
+  Eigen::MatrixXd m(j.size(), j[0].size());
+  for (size_t r = 0; r < j.size(); ++r) {
+    const Eigen::VectorXd row = ToVec(j[r], key);
+    if (row.size() != m.cols()) throw std::runtime_error("checkpoint: " + key + ": ragged rows");
+    m.row(r) = row.transpose();
+  }
+  return m;
+}
+
+}  // namespace
+
+std::string CheckpointText(const CheckpointFile& f) {
+  const auto& c = f.checkpoint;
+  json history = json::array();
+  for (const auto& m : c.history) {
+    history.push_back({{"q", Vec(m.q)},
+                       {"p_WM_W", Vec(m.p_WM_W)},
+                       {"has_orientation", m.has_orientation},
+                       {"R_EI", Mat(m.R_EI)},
+                       {"covariance", Mat(m.covariance)}});
+  }
+  json j = {{"schema", kSchema},      {"model_id", f.model_id},
+            {"utime", f.utime},       {"last_pose_index", f.last_pose_index},
+            {"x0", Vec(c.x0)},        {"x", Vec(c.x)},
+            {"x_lin", Vec(c.x_lin)},  {"P0", Mat(c.P0)},
+            {"P", Mat(c.P)},          {"accepted", c.accepted},
+            {"rejected", c.rejected}, {"relinearizations", c.relinearizations},
+            {"history", history}};
+  return j.dump() + "\n";
+}
+
+CheckpointFile ParseCheckpoint(const std::string& text) {
+  json j;
+  try {
+    j = json::parse(text);
+  } catch (const std::exception& e) {
+    throw std::runtime_error(std::string("checkpoint: not JSON: ") + e.what());
+  }
+  if (!j.is_object() || j.value("schema", "") != kSchema)
+    throw std::runtime_error(std::string("checkpoint: schema: expected ") + kSchema);
+  try {
+    CheckpointFile f;
+    f.model_id = At(j, "model_id", "").get<std::string>();
+    f.utime = At(j, "utime", "").get<int64_t>();
+    f.last_pose_index = At(j, "last_pose_index", "").get<int64_t>();
+    auto& c = f.checkpoint;
+    c.x0 = ToVec(At(j, "x0", ""), "x0");
+    c.x = ToVec(At(j, "x", ""), "x");
+    c.x_lin = ToVec(At(j, "x_lin", ""), "x_lin");
+    c.P0 = ToMat(At(j, "P0", ""), "P0");
+    c.P = ToMat(At(j, "P", ""), "P");
+    c.accepted = At(j, "accepted", "").get<int>();
+    c.rejected = At(j, "rejected", "").get<int>();
+    c.relinearizations = At(j, "relinearizations", "").get<int>();
+    const json& history = At(j, "history", "");
+    for (size_t i = 0; i < history.size(); ++i) {
+      const std::string path = "history[" + std::to_string(i) + "].";
+      const json& h = history[i];
+      kinematics::PoseMeasurement m;
+      m.q = ToVec(At(h, "q", path), path + "q");
+      const Eigen::VectorXd p = ToVec(At(h, "p_WM_W", path), path + "p_WM_W");
+      if (p.size() != 3) throw std::runtime_error("checkpoint: " + path + "p_WM_W: not 3 values");
+      m.p_WM_W = p;
+      m.has_orientation = At(h, "has_orientation", path).get<bool>();
+      const Eigen::MatrixXd R = ToMat(At(h, "R_EI", path), path + "R_EI");
+      if (R.rows() != 3 || R.cols() != 3)
+        throw std::runtime_error("checkpoint: " + path + "R_EI: not 3×3");
+      m.R_EI = R;
+      m.covariance = ToMat(At(h, "covariance", path), path + "covariance");
+      c.history.push_back(std::move(m));
+    }
+    return f;
+  } catch (const nlohmann::json::exception& e) {
+    throw std::runtime_error(std::string("checkpoint: wrong type: ") + e.what());
+  }
+}
+
+void SaveCheckpoint(const std::filesystem::path& path, const CheckpointFile& c) {
+  io::AtomicWriteFile(path, CheckpointText(c));
+}
+
+CheckpointFile LoadCheckpoint(const std::filesystem::path& path) {
+  try {
+    return ParseCheckpoint(io::ReadFile(path));
+  } catch (const std::runtime_error& e) {
+    throw std::runtime_error(path.string() + ": " + e.what());
+  }
+}
+
+}  // namespace rcal::transport

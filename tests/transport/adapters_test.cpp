@@ -1,0 +1,220 @@
+// Message <-> domain conversions: exact round trips through encoded bytes on memq://, and every
+// malformed field rejected with its name.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+
+#include "fixture.hpp"
+#include "rcal/transport/adapters.hpp"
+#include "rcal/transport/lcm_transport.hpp"
+
+namespace rcal::transport {
+namespace {
+
+using testing::Grb3016;
+
+// Publishes on memq:// and returns what a subscriber decodes: the bytes really go through LCM.
+template <typename Msg>
+Msg ThroughLcm(const Msg& m) {
+  LcmTransport t("memq://");
+  std::optional<Msg> got;
+  t.Subscribe<Msg>("C", [&](const Msg& r) { got = r; });
+  EXPECT_TRUE(t.Publish("C", m));
+  while (t.HandleTimeout(0) > 0) {
+  }
+  EXPECT_TRUE(got.has_value());
+  return got.value_or(Msg{});
+}
+
+TEST(PoseMeasurementAdapter, FullPoseRoundTripsExactly) {
+  const Grb3016 g(5);
+  for (const auto& z : g.poses) {
+    ASSERT_TRUE(z.has_orientation);
+    const auto msg = ThroughLcm(ToMessage(z, 1000, 3));
+    EXPECT_EQ(msg.utime, 1000);
+    EXPECT_EQ(msg.pose_index, 3);
+    std::string error;
+    const auto back = FromMessage(msg, &error);
+    ASSERT_TRUE(back) << error;
+    EXPECT_EQ(back->q, z.q);
+    EXPECT_EQ(back->p_WM_W, z.p_WM_W);
+    EXPECT_EQ(back->covariance, z.covariance);
+    EXPECT_TRUE(back->has_orientation);
+    // Through a quaternion: equal to rounding.
+    EXPECT_LT((back->R_EI - z.R_EI).cwiseAbs().maxCoeff(), 1e-15);
+    // Same residual against the model at the truth as the original (independent of the codec).
+    EXPECT_LT((kinematics::Residual(g.model, *back, g.x_true) -
+               kinematics::Residual(g.model, z, g.x_true))
+                  .cwiseAbs()
+                  .maxCoeff(),
+              1e-14);
+  }
+}
+
+TEST(PoseMeasurementAdapter, PositionOnlyRoundTrips) {
+  kinematics::PoseMeasurement z;
+  z.q = Eigen::VectorXd::LinSpaced(6, -1, 1);
+  z.p_WM_W = {0.5, -0.25, 1.0};
+  z.covariance = Eigen::Matrix3d::Identity() * 2.5e-9;
+  const auto msg = ToMessage(z, 5, 0);
+  EXPECT_EQ(msg.dimension, 3);
+  EXPECT_EQ(msg.num_covariance, 9);
+  std::string error;
+  const auto back = FromMessage(ThroughLcm(msg), &error);
+  ASSERT_TRUE(back) << error;
+  EXPECT_FALSE(back->has_orientation);
+  EXPECT_EQ(back->covariance, z.covariance);
+  EXPECT_EQ(back->p_WM_W, z.p_WM_W);
+}
+
+TEST(PoseMeasurementAdapter, MalformedFieldsAreRejectedByName) {
+  const Grb3016 g(1);
+  const auto good = ToMessage(g.poses[0], 1, 0);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  struct Case {
+    const char* field;
+    std::function<void(pose_measurement_t&)> spoil;
+  };
+  const std::vector<Case> cases = {
+      {"num_joints", [](auto& m) { m.num_joints = 5; }},
+      {"num_joints", [](auto& m) { m.num_joints = 0, m.q.clear(); }},
+      {"q", [&](auto& m) { m.q[2] = nan; }},
+      {"p", [&](auto& m) { m.p[1] = nan; }},
+      {"dimension", [](auto& m) { m.dimension = 3; }},
+      {"dimension", [](auto& m) { m.has_orientation = false; }},
+      {"covariance", [](auto& m) { m.num_covariance = 9, m.covariance.resize(9); }},
+      {"covariance", [&](auto& m) { m.covariance[7] = nan; }},
+      {"covariance", [](auto& m) { m.covariance[1] = 1e-3; }},  // not symmetric
+      {"q_EI", [](auto& m) { m.q_EI[0] = 2; }},
+      {"q_EI", [&](auto& m) { m.q_EI[3] = nan; }},
+  };
+  std::string error;
+  ASSERT_TRUE(FromMessage(good, &error)) << error;
+  for (const auto& c : cases) {
+    auto bad = good;
+    c.spoil(bad);
+    error.clear();
+    EXPECT_FALSE(FromMessage(bad, &error)) << c.field;
+    EXPECT_NE(error.find(std::string("pose_measurement.") + c.field), std::string::npos)
+        << c.field << ": " << error;
+  }
+}
+
+TEST(KinematicParamsAdapter, RoundTripAndModelChecks) {
+  const Grb3016 g(1);
+  Eigen::VectorXd sigma = Eigen::VectorXd::Zero(g.model.num_params());
+  for (int i : g.base) sigma(i) = 1e-4 * (i + 1);
+  const auto msg =
+      ThroughLcm(ToKinematicParams(g.model, g.x_true, sigma, g.base, "grb3016", 777, 12));
+  EXPECT_EQ(msg.num_params, g.model.num_params());
+  EXPECT_EQ(msg.poses_used, 12);
+  EXPECT_EQ(msg.robot_id, "grb3016");
+  EXPECT_EQ(msg.model_id, ModelId(g.model));
+  int n_identified = 0;
+  for (int i = 0; i < msg.num_params; ++i) {
+    EXPECT_EQ(msg.names[i], g.model.parameters()[i].name);
+    EXPECT_EQ(msg.sigmas[i], sigma(i));
+    n_identified += msg.identified[i];
+  }
+  EXPECT_EQ(n_identified, static_cast<int>(g.base.size()));
+  std::string error;
+  const auto x = ParamsFromMessage(msg, g.model, &error);
+  ASSERT_TRUE(x) << error;
+  EXPECT_EQ(*x, g.x_true);
+
+  auto renamed = msg;
+  std::swap(renamed.names[0], renamed.names[1]);
+  EXPECT_FALSE(ParamsFromMessage(renamed, g.model, &error));
+  EXPECT_NE(error.find("kinematic_params.names[0]"), std::string::npos) << error;
+  auto other = msg;
+  other.model_id = "other:0";
+  EXPECT_FALSE(ParamsFromMessage(other, g.model, &error));
+  EXPECT_NE(error.find("kinematic_params.model_id"), std::string::npos) << error;
+  auto nan = msg;
+  nan.values[3] = std::nan("");
+  EXPECT_FALSE(ParamsFromMessage(nan, g.model, &error));
+  EXPECT_NE(error.find("kinematic_params.values"), std::string::npos) << error;
+}
+
+TEST(KinematicParamsAdapter, FromTheIdentifier) {
+  const Grb3016 g(10);
+  identification::EkfIdentifier ekf(g.model, g.base);
+  for (const auto& z : g.poses) ekf.Update(z);
+  const auto msg = ToKinematicParams(ekf, "grb3016", 99);
+  EXPECT_EQ(msg.poses_used, ekf.accepted());
+  for (int i = 0; i < g.model.num_params(); ++i) {
+    EXPECT_EQ(msg.values[i], ekf.x()(i));
+    EXPECT_EQ(msg.sigmas[i], ekf.sigma()(i));
+  }
+  const auto status = ToCalibrationStatus(ekf, {3.5, 1e-4, 2e-3, 1.0, true}, 99);
+  EXPECT_EQ(status.poses_accepted, ekf.accepted());
+  EXPECT_EQ(status.poses_rejected, ekf.rejected());
+  EXPECT_EQ(status.condition_number, 3.5);
+  EXPECT_TRUE(status.converged);
+}
+
+TEST(ModelId, DependsOnTheParameterNames) {
+  const Grb3016 g(1);
+  const auto seven = io::LoadRobot(RCAL_SOURCE_DIR "/config/robots/seven_dof.yaml").model;
+  EXPECT_EQ(ModelId(g.model), ModelId(g.model));
+  EXPECT_NE(ModelId(g.model), ModelId(seven));
+  EXPECT_EQ(ModelId(g.model).rfind(g.model.name() + ":", 0), 0u);
+}
+
+TEST(IkAdapter, RequestRoundTripAndRejections) {
+  IkQuery q;
+  q.request_id = 42;
+  q.T_WT.translation() = Eigen::Vector3d(0.4, 0.1, 0.6);
+  q.T_WT.linear() = Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized()).matrix();
+  q.q_seed = Eigen::VectorXd::Constant(6, 0.1);
+  std::string error;
+  const auto back = FromMessage(ThroughLcm(ToMessage(q, 17)), 6, &error);
+  ASSERT_TRUE(back) << error;
+  EXPECT_EQ(back->request_id, 42);
+  EXPECT_EQ(back->q_seed, q.q_seed);
+  EXPECT_LT((back->T_WT.matrix() - q.T_WT.matrix()).cwiseAbs().maxCoeff(), 1e-15);
+
+  auto wrong_count = ToMessage(q, 17);
+  EXPECT_FALSE(FromMessage(wrong_count, 7, &error));
+  EXPECT_NE(error.find("ik_request.num_joints"), std::string::npos) << error;
+  auto bad_quat = ToMessage(q, 17);
+  bad_quat.q_WT[0] = 0.2;
+  EXPECT_FALSE(FromMessage(bad_quat, 6, &error));
+  EXPECT_NE(error.find("ik_request.q_WT"), std::string::npos) << error;
+  bad_quat.position_only = true;  // orientation ignored
+  EXPECT_TRUE(FromMessage(bad_quat, 6, &error)) << error;
+}
+
+TEST(IkAdapter, CommandCarriesBothSolutions) {
+  ik_request_t req;
+  req.utime = 5;
+  req.request_id = 9;
+  ik::IkResult cal, nom;
+  cal.q = Eigen::VectorXd::Constant(6, 0.2);
+  cal.converged = true;
+  cal.status = ik::IkStatus::kConverged;
+  cal.position_error = 1e-12;
+  nom.q = Eigen::VectorXd::Constant(6, 0.21);
+  const auto cmd = ThroughLcm(ToIkCommand(req, cal, nom, 3e-3, 77));
+  EXPECT_EQ(cmd.request_id, 9);
+  EXPECT_EQ(cmd.utime, 5);
+  EXPECT_TRUE(cmd.converged);
+  EXPECT_EQ(cmd.status, "converged");
+  EXPECT_EQ(cmd.q, std::vector<double>(6, 0.2));
+  EXPECT_EQ(cmd.q_nominal, std::vector<double>(6, 0.21));
+  EXPECT_EQ(cmd.nominal_tool_error, 3e-3);
+  EXPECT_EQ(cmd.params_utime, 77);
+}
+
+TEST(JointStateAdapter, NamesFromTheModel) {
+  const Grb3016 g(1);
+  const auto msg = ThroughLcm(ToJointState(g.model, g.poses[0].q, 11));
+  ASSERT_EQ(msg.num_joints, 6);
+  EXPECT_EQ(msg.names[0], g.model.joints()[0].name);
+  EXPECT_EQ(msg.q[5], g.poses[0].q(5));
+  EXPECT_EQ(msg.dq, std::vector<double>(6, 0.0));
+}
+
+}  // namespace
+}  // namespace rcal::transport

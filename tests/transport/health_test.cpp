@@ -1,0 +1,65 @@
+// The heartbeat schedule follows message time, not the wall clock.
+#include <gtest/gtest.h>
+
+#include "rcal/transport/health.hpp"
+#include "rcal/transport/lcm_transport.hpp"
+
+namespace rcal::transport {
+namespace {
+
+TEST(Health, BeatsOncePerSecondOfSensorTime) {
+  Health h("proc");
+  std::vector<int64_t> beats;
+  // 10 Hz of sensor time over 3.05 s, with a 2 s gap in the middle.
+  std::vector<int64_t> times;
+  for (int64_t t = 0; t <= 1'000'000; t += 100'000) times.push_back(t);
+  for (int64_t t = 3'050'000; t <= 4'000'000; t += 100'000) times.push_back(t);
+  for (int64_t t : times)
+    if (auto b = h.Tick(t)) beats.push_back(b->utime);
+  // Independent truth: first sample, then the first sample at or after each whole second of the
+  // schedule; the gap gives one beat, not a burst.
+  EXPECT_EQ(beats, (std::vector<int64_t>{0, 1'000'000, 3'050'000}));
+}
+
+TEST(Health, ScheduleIsAnchoredToTheFirstBeat) {
+  Health h("proc");
+  std::vector<int64_t> beats;
+  for (int64_t t : {500'000, 900'000, 1'499'999, 1'500'000, 2'600'000, 3'400'000, 3'500'000})
+    if (auto b = h.Tick(t)) beats.push_back(b->utime);
+  EXPECT_EQ(beats, (std::vector<int64_t>{500'000, 1'500'000, 2'600'000, 3'500'000}));
+}
+
+TEST(Health, ReplayStartingOverRestartsTheSchedule) {
+  Health h("proc");
+  int n = 0;
+  for (int64_t t : {10'000'000, 11'000'000, 0, 500'000, 1'000'000})
+    if (h.Tick(t)) ++n;
+  EXPECT_EQ(n, 4);  // 10 s, 11 s, 0 (restart), 1 s
+}
+
+TEST(Health, CountsAndLastErrorArePublished) {
+  LcmTransport t("memq://");
+  std::vector<health_t> got;
+  t.Subscribe<health_t>("HEALTH", [&](const health_t& m) { got.push_back(m); });
+  Health h("ekf_identifier");
+  h.Received();
+  h.Received();
+  h.Received();
+  h.Rejected("pose_measurement.q: not finite");
+  h.Published();
+  EXPECT_TRUE(h.Tick(42, t));
+  EXPECT_FALSE(h.Tick(43, t));
+  while (t.HandleTimeout(0) > 0) {
+  }
+  ASSERT_EQ(got.size(), 1u);
+  EXPECT_EQ(got[0].utime, 42);
+  EXPECT_EQ(got[0].process, "ekf_identifier");
+  EXPECT_EQ(got[0].received, 3);
+  EXPECT_EQ(got[0].rejected, 1);
+  EXPECT_EQ(got[0].published, 2);  // one message plus this heartbeat
+  EXPECT_EQ(got[0].last_error, "pose_measurement.q: not finite");
+  EXPECT_GT(got[0].pid, 0);
+}
+
+}  // namespace
+}  // namespace rcal::transport

@@ -1,0 +1,103 @@
+// LcmTransport over memq://: typed round trips, and bytes that are not the subscribed type are
+// rejected through the error handler, never delivered.
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+
+#include "rcal/health_t.hpp"
+#include "rcal/pose_measurement_t.hpp"
+#include "rcal/transport/lcm_transport.hpp"
+
+namespace rcal::transport {
+namespace {
+
+pose_measurement_t Sample() {
+  pose_measurement_t m;
+  m.utime = 123456789;
+  m.pose_index = 7;
+  m.num_joints = 2;
+  m.q = {0.1, -0.2};
+  m.p[0] = 1;
+  m.p[1] = 2;
+  m.p[2] = 3;
+  m.has_orientation = false;
+  m.q_EI[0] = 1;
+  m.dimension = 3;
+  m.num_covariance = 9;
+  m.covariance = {1e-8, 0, 0, 0, 1e-8, 0, 0, 0, 1e-8};
+  return m;
+}
+
+TEST(LcmTransport, TypedRoundTripOverMemq) {
+  LcmTransport t("memq://");
+  std::vector<pose_measurement_t> got;
+  int errors = 0;
+  t.Subscribe<pose_measurement_t>(
+      "POSE_MEASUREMENT", [&](const pose_measurement_t& m) { got.push_back(m); },
+      [&](const std::string&) { ++errors; });
+  ASSERT_TRUE(t.Publish("POSE_MEASUREMENT", Sample()));
+  ASSERT_TRUE(t.Publish("OTHER", Sample()));  // not subscribed
+  while (t.HandleTimeout(0) > 0) {
+  }
+  ASSERT_EQ(got.size(), 1u);
+  EXPECT_EQ(errors, 0);
+  EXPECT_EQ(got[0].utime, 123456789);
+  EXPECT_EQ(got[0].pose_index, 7);
+  EXPECT_EQ(got[0].q, (std::vector<double>{0.1, -0.2}));
+  EXPECT_EQ(got[0].p[2], 3.0);
+  EXPECT_EQ(got[0].covariance[4], 1e-8);
+}
+
+TEST(LcmTransport, WrongTypeAndTruncatedBytesAreRejectedNotDelivered) {
+  LcmTransport t("memq://");
+  int delivered = 0;
+  std::vector<std::string> errors;
+  t.Subscribe<pose_measurement_t>(
+      "POSE_MEASUREMENT", [&](const pose_measurement_t&) { ++delivered; },
+      [&](const std::string& e) { errors.push_back(e); });
+  health_t h;
+  h.utime = 1;
+  h.process = "x";
+  ASSERT_TRUE(t.Publish("POSE_MEASUREMENT", h));  // another type: fingerprint differs
+  const pose_measurement_t m = Sample();
+  std::vector<uint8_t> bytes(m.getEncodedSize());
+  m.encode(bytes.data(), 0, bytes.size());
+  ASSERT_TRUE(t.PublishRaw("POSE_MEASUREMENT", bytes.data(), bytes.size() / 2));  // truncated
+  ASSERT_TRUE(t.PublishRaw("POSE_MEASUREMENT", bytes.data(), 0));                 // empty
+  while (t.HandleTimeout(0) > 0) {
+  }
+  EXPECT_EQ(delivered, 0);
+  ASSERT_EQ(errors.size(), 3u);
+  EXPECT_NE(errors[0].find("POSE_MEASUREMENT"), std::string::npos) << errors[0];
+  EXPECT_NE(errors[0].find("pose_measurement_t"), std::string::npos) << errors[0];
+  // The transport still works afterwards.
+  ASSERT_TRUE(t.Publish("POSE_MEASUREMENT", m));
+  while (t.HandleTimeout(0) > 0) {
+  }
+  EXPECT_EQ(delivered, 1);
+}
+
+TEST(LcmTransport, RegexSubscriptionSeesEveryChannel) {
+  LcmTransport t("memq://");
+  std::vector<std::string> channels;
+  t.SubscribeRaw(".*", [&](const std::string& ch, const void*, int) { channels.push_back(ch); });
+  t.Publish("A", Sample());
+  t.Publish("B_LONGER", Sample());
+  while (t.HandleTimeout(0) > 0) {
+  }
+  EXPECT_EQ(channels, (std::vector<std::string>{"A", "B_LONGER"}));
+}
+
+TEST(ResolveLcmUrl, ArgumentThenEnvironmentThenDefault) {
+  ::unsetenv("RCAL_LCM_URL");
+  EXPECT_EQ(ResolveLcmUrl(), "udpm://239.255.76.67:7667?ttl=0");
+  ::setenv("RCAL_LCM_URL", "udpm://239.255.76.67:7799?ttl=0", 1);
+  EXPECT_EQ(ResolveLcmUrl(), "udpm://239.255.76.67:7799?ttl=0");
+  EXPECT_EQ(ResolveLcmUrl("memq://"), "memq://");
+  ::setenv("RCAL_LCM_URL", "", 1);
+  EXPECT_EQ(ResolveLcmUrl(), kDefaultLcmUrl);
+  ::unsetenv("RCAL_LCM_URL");
+}
+
+}  // namespace
+}  // namespace rcal::transport
