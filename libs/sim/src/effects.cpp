@@ -159,3 +159,33 @@ std::vector<kinematics::PoseMeasurement> MeasurePosesWithEffects(
 }
 
 }  // namespace rcal::sim
+
+namespace rcal::sim {
+
+TruthEffect EffectOfSize(const kinematics::KinematicModel& model, const kinematics::Effect& effect,
+                         const std::vector<Eigen::VectorXd>& qs,
+                         const std::vector<kinematics::EffectContext>& contexts,
+                         const Eigen::VectorXd& x, double rms_m, Rng& rng,
+                         const kinematics::GravityModel& gravity) {
+  TruthEffect t{effect, Eigen::VectorXd::Zero(effect.num_params())};
+  std::uniform_real_distribution<double> u(0.0, 2.0 * 3.14159265358979323846);
+  std::uniform_int_distribution<int> coin(0, 1);
+  if (effect.num_params() == 2) {
+    const double phase = u(rng);
+    t.values << std::cos(phase), std::sin(phase);
+  } else {
+    t.values(0) = coin(rng) ? 1.0 : -1.0;
+  }
+  const kinematics::ExtendedModel ext(model, {effect}, gravity);
+  double ss = 0;
+  for (size_t i = 0; i < qs.size(); ++i) {
+    Eigen::MatrixXd Je;
+    ext.Jacobians(qs[i], contexts[i], x, ext.NoEffects(), nullptr, &Je);
+    ss += (Je.topRows<3>() * t.values).squaredNorm();
+  }
+  const double rms = qs.empty() ? 0.0 : std::sqrt(ss / qs.size());
+  if (rms > 0) t.values *= rms_m / rms;
+  return t;
+}
+
+}  // namespace rcal::sim

@@ -72,3 +72,17 @@ std::vector<kinematics::PoseMeasurement> MeasurePosesWithEffects(
     const std::vector<kinematics::EffectContext>& contexts, const PoseNoise& noise, Rng& rng);
 
 }  // namespace rcal::sim
+
+namespace rcal::sim {
+
+/// The values of `effect` that displace the marker by `rms_m` [m] RMS over the poses (joints qs,
+/// contexts, geometric errors x), in a seeded random direction for two-parameter effects (the
+/// phase of a periodic error) and a seeded random sign. For detection tests "near the noise
+/// floor": rms_m a small multiple of the position noise.
+TruthEffect EffectOfSize(const kinematics::KinematicModel& model, const kinematics::Effect& effect,
+                         const std::vector<Eigen::VectorXd>& qs,
+                         const std::vector<kinematics::EffectContext>& contexts,
+                         const Eigen::VectorXd& x, double rms_m, Rng& rng,
+                         const kinematics::GravityModel& gravity = {});
+
+}  // namespace rcal::sim

@@ -1,0 +1,142 @@
+// Where the geometric model of an arm disagrees with measured poses, why, and what an extended
+// model gains on data it did not fit (issue 6, pose data).
+//
+// 1. Base fit: identification::Calibrate on the calibration poses (set-up frames from the data,
+//    identifiable geometric parameter set, noise σ estimated from the residuals).
+// 2. Residual tests: χ² of the fit residuals against the stated noise and against the noise of
+//    repeated poses (same joints, measured again), and the correlation of the residual along each
+//    candidate's direction with its regressor (joint angle, sin/cos harmonics, gravity torque,
+//    temperature, time, approach direction, payload through the torque).
+// 3. Candidate extensions (kinematics::ExtendedModel effects) fitted on the calibration part and
+//    judged on held-out poses by k-fold cross-validation. Around the base fit the problem is
+//    linear to second order in the (sub-millimetre) corrections, so each fold solves the whitened
+//    linearised least-squares problem [J_x J_e]·δ = r for the identified geometric parameters
+//    and the candidate's effect parameters; held-out residuals are r − J·δ.
+// 4. Greedy forward selection: each round adds the candidate with the lowest mean held-out
+//    whitened squared residual, if its paired improvement over the current model on the held-out
+//    poses is significant: one-sided z = mean(d)/(sd(d)/√n) > Φ⁻¹(1 − α/m), d the per-pose drop of
+//    the whitened squared residual, m the candidates tried that round (Bonferroni), so an effect
+//    that is not there is reported with probability ≲ α.
+// 5. The selected model is refitted (nonlinear, batch) on all calibration poses: values with σ.
+//    Gain: held-out position RMS of geometry alone and of the selected model, on the `set` test
+//    poses when there are any (selection then never saw them), else by the same k-fold.
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "rcal/identification/calibration.hpp"
+#include "rcal/kinematics/joint_effects.hpp"
+#include "rcal/kinematics/measurement.hpp"
+#include "rcal/kinematics/model.hpp"
+
+namespace rcal::discrepancy {
+
+/// The measured poses with what each was taken under.
+struct PoseData {
+  std::vector<kinematics::PoseMeasurement> measurements;  ///< covariances: the starting noise
+  std::vector<kinematics::EffectContext> contexts;        ///< one per measurement
+  std::vector<bool> is_test;  ///< `set` = test; empty or all false: k-fold on everything
+};
+
+struct AnalysisSettings {
+  /// Noise the data claims (for the χ² test) [m], [rad]; 0: not stated.
+  double stated_position_sigma_m = 0.0;
+  double stated_orientation_sigma_rad = 0.0;
+  bool estimate_noise = true;  ///< weights from the base fit's residuals (else the covariances)
+  int folds = 5;               ///< k of the k-fold cross-validation (≥ poses: leave-one-out)
+  int repeats = 2;             ///< k-fold repeated with different fold assignments, averaged
+  unsigned seed = 1;           ///< fold assignment
+  double alpha = 0.01;         ///< false-positive rate per selection round
+  int max_effects = 4;
+  bool second_harmonic = true;  ///< try joint_periodic h = 2 as well as h = 1
+  kinematics::GravityModel gravity;
+  double min_temperature_spread_c = 0.5;  ///< thermal by temperature needs at least this range
+  double min_relative_novelty = 1e-3;     ///< candidate columns this close to geometry: skipped
+};
+
+/// χ² of the base fit's residuals against a noise level.
+struct NoiseTest {
+  std::string against;  ///< "stated noise" or "repeated poses"
+  double position_sigma_m = 0;
+  double orientation_sigma_rad = 0;
+  double chi2 = 0;
+  double dof = 0;
+  double p_value = 1;  ///< P(χ² ≥ observed) if the model were right
+};
+
+/// Correlation of a regressor with the residual along the direction its effect moves the pose.
+struct RegressorCorrelation {
+  std::string regressor;       ///< e.g. "gravity torque shoulder_lift", "sin(2 q3)", "temperature"
+  std::string unit;            ///< of the regressor values: "N*m", "rad", "1", "degC", "s"
+  kinematics::Effect effect;   ///< the candidate the regressor belongs to
+  int column = 0;              ///< which of the effect's parameters (periodic: 0 sin, 1 cos)
+  double correlation = 0;      ///< Pearson r, all calibration poses
+  double p_value = 1;          ///< two-sided, Fisher z
+  std::vector<double> values;  ///< regressor per calibration pose [unit]
+  std::vector<double> residual_before_m;  ///< projected residual per pose, geometric fit [m]
+  std::vector<double> residual_after_m;   ///< the same after the selected model [m]
+};
+
+/// One selection round.
+struct SelectionRound {
+  std::vector<kinematics::Effect> tried;
+  std::vector<double> z;  ///< paired z of each tried candidate against the current model
+  int best = -1;          ///< index into tried
+  double z_critical = 0;  ///< Φ⁻¹(1 − α/m)
+  bool accepted = false;
+  double heldout_rms_current_m = 0;  ///< position RMS, current model, k-fold
+  double heldout_rms_best_m = 0;     ///< with the best candidate added
+};
+
+/// An effect the data supports.
+struct FoundEffect {
+  kinematics::Effect effect;
+  std::string cause;                ///< vocabulary name
+  std::vector<std::string> joints;  ///< joint names (empty for thermal)
+  std::vector<kinematics::EffectParameter> parameters;
+  Eigen::VectorXd values;  ///< [SI, parameters' units]
+  Eigen::VectorXd sigma;   ///< 1σ
+  double z = 0;            ///< selection statistic when it was added
+};
+
+struct Gain {
+  std::string scheme;               ///< "cal/test split" or "5-fold ×2"
+  double heldout_rms_before_m = 0;  ///< geometric model, held-out position RMS
+  double heldout_rms_after_m = 0;   ///< selected model
+  double relative_gain = 0;         ///< (before − after) / before
+  double z = 0;                     ///< paired z of the improvement (whitened squared residual)
+  std::vector<double> position_before_m, position_after_m;  ///< per held-out pose [m]
+};
+
+struct Analysis {
+  identification::CalibrationFit base_fit;
+  std::vector<NoiseTest> noise_tests;
+  std::vector<RegressorCorrelation> correlations;  ///< strongest first
+  std::vector<kinematics::Effect> candidates;      ///< tried (eligible and identifiable)
+  std::vector<std::string> skipped;                ///< candidates not tried, with the reason
+  std::vector<SelectionRound> rounds;
+  std::vector<FoundEffect> effects;   ///< empty: geometry suffices
+  Eigen::VectorXd x;                  ///< geometric errors of the final fit [m|rad]
+  Eigen::VectorXd e;                  ///< effect parameters of the final fit [SI]
+  double position_sigma_after_m = 0;  ///< noise re-estimated with the effects
+  Gain gain;
+  int num_fit_poses = 0, num_test_poses = 0;
+};
+
+/// Runs steps 1–5 of the file comment. Throws std::invalid_argument on inconsistent input.
+Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
+                 const AnalysisSettings& settings = {});
+
+/// Held-out position RMS [m] of the geometric model extended by `effects` (fitted, not given),
+/// evaluated as Analyze evaluates its gain (split or repeated k-fold, linearised around the base
+/// fit). For tests: the gain the true model structure would get.
+double HeldOutRms(const kinematics::KinematicModel& model, const PoseData& data,
+                  const std::vector<kinematics::Effect>& effects,
+                  const AnalysisSettings& settings = {});
+
+/// Human-readable name of an effect: "joint_compliance shoulder_lift", "thermal (temperature)".
+std::string Describe(const kinematics::KinematicModel& model, const kinematics::Effect& effect);
+
+}  // namespace rcal::discrepancy

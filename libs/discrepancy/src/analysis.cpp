@@ -1,0 +1,703 @@
+#include "rcal/discrepancy/analysis.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <Eigen/Cholesky>
+#include <Eigen/QR>
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <numeric>
+#include <random>
+#include <stdexcept>
+
+#include "rcal/identification/chi_square.hpp"
+
+namespace rcal::discrepancy {
+namespace {
+
+using kinematics::Effect;
+using kinematics::EffectCause;
+
+// Φ⁻¹(p) by bisection on erfc (accurate enough for critical values).
+double NormalQuantile(double p) {
+  double lo = -40, hi = 40;
+  for (int i = 0; i < 200; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (0.5 * std::erfc(-mid / std::sqrt(2.0)) < p ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
+double Mean(const std::vector<double>& v) {
+  return v.empty() ? 0.0 : std::accumulate(v.begin(), v.end(), 0.0) / v.size();
+}
+
+double Rms(const std::vector<double>& v) {
+  double s = 0;
+  for (double x : v) s += x * x;
+  return v.empty() ? 0.0 : std::sqrt(s / v.size());
+}
+
+// One-sided paired z of the improvement a − b (positive: b better).
+double PairedZ(const std::vector<double>& a, const std::vector<double>& b) {
+  const size_t n = a.size();
+  if (n < 2) return 0;
+  std::vector<double> d(n);
+  for (size_t i = 0; i < n; ++i) d[i] = a[i] - b[i];
+  const double m = Mean(d);
+  double ss = 0;
+  for (double x : d) ss += (x - m) * (x - m);
+  const double sd = std::sqrt(ss / (n - 1));
+  if (sd <= 0) return m > 0 ? 1e9 : 0.0;
+  return m / (sd / std::sqrt(static_cast<double>(n)));
+}
+
+std::string JointName(const kinematics::KinematicModel& model, int j) {
+  return model.joints()[j].name;
+}
+
+// Every effect that could be tried on this model and data (eligibility by the data's contents).
+std::vector<Effect> EligibleEffects(const kinematics::KinematicModel& model, const PoseData& data,
+                                    const std::vector<int>& fit, const AnalysisSettings& s,
+                                    std::vector<std::string>& skipped) {
+  std::vector<Effect> out;
+  const int n = model.num_joints();
+  const kinematics::ExtendedModel probe(model, {}, s.gravity);
+  Eigen::MatrixXd tau(fit.size(), n), q(fit.size(), n);
+  std::vector<int> pos(n, 0), neg(n, 0);
+  std::vector<double> temp, time;
+  for (size_t k = 0; k < fit.size(); ++k) {
+    const auto& m = data.measurements[fit[k]];
+    const auto& c = data.contexts[fit[k]];
+    q.row(k) = m.q.transpose();
+    tau.row(k) = probe.GravityTorque(m.q, c.payload_kg).transpose();
+    for (int j = 0; j < n && j < c.dq_sign.size(); ++j) {
+      pos[j] += c.dq_sign(j) > 0;
+      neg[j] += c.dq_sign(j) < 0;
+    }
+    temp.push_back(c.temperature_c);
+    time.push_back(c.time_s);
+  }
+  const auto spread = [](const Eigen::VectorXd& v) { return v.maxCoeff() - v.minCoeff(); };
+  for (int j = 0; j < n; ++j) {
+    const std::string name = JointName(model, j);
+    const bool rev = model.joints()[j].type == kinematics::JointType::kRevolute;
+    if (spread(tau.col(j)) > 1.0)
+      out.push_back({EffectCause::kJointCompliance, j});
+    else
+      skipped.push_back("joint_compliance " + name + ": gravity torque does not vary");
+    if (rev) {
+      out.push_back({EffectCause::kJointPeriodic, j, 1});
+      if (s.second_harmonic) out.push_back({EffectCause::kJointPeriodic, j, 2});
+    }
+    if (spread(q.col(j)) > 0.05)
+      out.push_back({EffectCause::kJointScale, j});
+    else
+      skipped.push_back("joint_scale " + name + ": joint hardly moves");
+    if (pos[j] >= 3 && neg[j] >= 3)
+      out.push_back({EffectCause::kBacklash, j});
+    else
+      skipped.push_back("backlash " + name +
+                        ": approach direction (dq) not given or not both ways ≥ 3 times");
+  }
+  const auto all_finite = [](const std::vector<double>& v) {
+    return !v.empty() && std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
+  };
+  if (all_finite(temp) &&
+      *std::max_element(temp.begin(), temp.end()) - *std::min_element(temp.begin(), temp.end()) >=
+          s.min_temperature_spread_c) {
+    Effect t{EffectCause::kThermal};
+    t.reference = Mean(temp);
+    out.push_back(t);
+  } else {
+    skipped.push_back("thermal (temperature): no temperature column, or it hardly varies");
+  }
+  if (all_finite(time) &&
+      *std::max_element(time.begin(), time.end()) > *std::min_element(time.begin(), time.end())) {
+    Effect t{EffectCause::kThermal};
+    t.thermal_source = Effect::ThermalSource::kTime;
+    t.reference = Mean(time);
+    out.push_back(t);
+  } else {
+    skipped.push_back("thermal (time): no time column");
+  }
+  return out;
+}
+
+// The whitened linearised problem around the base fit, over all poses.
+struct Linearized {
+  kinematics::ExtendedModel ext;  // model + every candidate effect
+  std::vector<int> identified;
+  int num_geo = 0;
+  std::vector<Eigen::VectorXd> r;   // whitened residual per pose
+  std::vector<Eigen::MatrixXd> J;   // whitened [J_x(identified) J_e(all)] per pose
+  std::vector<Eigen::Vector3d> rp;  // position residual [m]
+  std::vector<Eigen::MatrixXd> Jp;  // position rows, unwhitened
+  std::vector<int> fit, test;
+  std::vector<std::vector<int>> fold_sets;  // per repeat: fold id per fit pose (index in fit)
+  int folds = 0;
+
+  std::vector<int> Columns(const std::vector<int>& effects) const {
+    std::vector<int> c(num_geo);
+    std::iota(c.begin(), c.end(), 0);
+    for (int k : effects)
+      for (int i = 0; i < ext.effects()[k].num_params(); ++i)
+        c.push_back(num_geo + ext.effect_offset(k) + i);
+    return c;
+  }
+
+  // Least squares on `train` poses over `cols`; returns δ (cols order).
+  Eigen::VectorXd Solve(const std::vector<int>& train, const std::vector<int>& cols) const {
+    int rows = 0;
+    for (int i : train) rows += r[i].size();
+    Eigen::MatrixXd A(rows, cols.size());
+    Eigen::VectorXd b(rows);
+    int row = 0;
+    for (int i : train) {
+      const int d = r[i].size();
+      for (size_t c = 0; c < cols.size(); ++c) A.block(row, c, d, 1) = J[i].col(cols[c]);
+      b.segment(row, d) = r[i];
+      row += d;
+    }
+    Eigen::VectorXd scale(cols.size());
+    for (size_t c = 0; c < cols.size(); ++c) {
+      const double nrm = A.col(c).norm();
+      scale(c) = nrm > 0 ? 1.0 / nrm : 1.0;
+      A.col(c) *= scale(c);
+    }
+    Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(A);
+    qr.setThreshold(1e-10);
+    return (qr.solve(b).array() * scale.array()).matrix();
+  }
+
+  // Held-out whitened squared residual and squared position error of pose i after δ.
+  std::pair<double, double> Score(int i, const std::vector<int>& cols,
+                                  const Eigen::VectorXd& delta) const {
+    Eigen::VectorXd ri = r[i];
+    Eigen::Vector3d pi = rp[i];
+    for (size_t c = 0; c < cols.size(); ++c) {
+      ri -= J[i].col(cols[c]) * delta(c);
+      pi -= Jp[i].col(cols[c]) * delta(c);
+    }
+    return {ri.squaredNorm(), pi.squaredNorm()};
+  }
+
+  struct Eval {
+    std::vector<double> score;     // whitened squared residual per held-out pose
+    std::vector<double> position;  // position error per held-out pose [m]
+  };
+
+  // k-fold (repeated) over the fit poses.
+  Eval CrossValidate(const std::vector<int>& effects) const {
+    const std::vector<int> cols = Columns(effects);
+    const size_t n = fit.size();
+    Eval out{std::vector<double>(n, 0.0), std::vector<double>(n, 0.0)};
+    for (const auto& fold : fold_sets) {
+      for (int f = 0; f < folds; ++f) {
+        std::vector<int> train, held;
+        for (size_t k = 0; k < n; ++k) (fold[k] == f ? held : train).push_back(k);
+        if (held.empty()) continue;
+        std::vector<int> tr;
+        for (int k : train) tr.push_back(fit[k]);
+        const Eigen::VectorXd delta = Solve(tr, cols);
+        for (int k : held) {
+          const auto [s, p] = Score(fit[k], cols, delta);
+          out.score[k] += s / fold_sets.size();
+          out.position[k] += p / fold_sets.size();
+        }
+      }
+    }
+    for (double& p : out.position) p = std::sqrt(p);
+    return out;
+  }
+
+  // Fit on all fit poses, judge on the test poses.
+  Eval Split(const std::vector<int>& effects) const {
+    const std::vector<int> cols = Columns(effects);
+    const Eigen::VectorXd delta = Solve(fit, cols);
+    Eval out;
+    for (int i : test) {
+      const auto [s, p] = Score(i, cols, delta);
+      out.score.push_back(s);
+      out.position.push_back(std::sqrt(p));
+    }
+    return out;
+  }
+};
+
+struct Prepared {
+  identification::CalibrationFit base_fit;
+  std::vector<kinematics::PoseMeasurement> ms;  // weighted with the noise used
+  Linearized lin;
+  std::vector<std::string> skipped;
+};
+
+Prepared Prepare(const kinematics::KinematicModel& model, const PoseData& data,
+                 const AnalysisSettings& s, const std::vector<Effect>* only) {
+  const size_t n = data.measurements.size();
+  if (data.contexts.size() != n)
+    throw std::invalid_argument("discrepancy: one context per measurement");
+  if (!data.is_test.empty() && data.is_test.size() != n)
+    throw std::invalid_argument("discrepancy: is_test must be empty or one flag per measurement");
+  for (size_t i = 0; i < n; ++i) {
+    const std::string why = kinematics::Validate(model, data.measurements[i]);
+    if (!why.empty())
+      throw std::invalid_argument("discrepancy: measurement " + std::to_string(i) + ": " + why);
+  }
+  Prepared p;
+  for (size_t i = 0; i < n; ++i)
+    (!data.is_test.empty() && data.is_test[i] ? p.lin.test : p.lin.fit).push_back(i);
+  if (p.lin.fit.size() < 6) throw std::invalid_argument("discrepancy: fewer than 6 fit poses");
+  std::vector<kinematics::PoseMeasurement> fit_ms;
+  for (int i : p.lin.fit) fit_ms.push_back(data.measurements[i]);
+  identification::CalibrationSettings cs;
+  cs.estimate_noise = s.estimate_noise;
+  p.base_fit = identification::Calibrate(model, fit_ms, cs);
+  p.ms = data.measurements;
+  if (s.estimate_noise)
+    identification::SetNoise(p.ms, p.base_fit.position_sigma_m, p.base_fit.orientation_sigma_rad);
+
+  const std::vector<Effect> effects =
+      only ? *only : EligibleEffects(model, data, p.lin.fit, s, p.skipped);
+  Linearized& L = p.lin;
+  L.ext = kinematics::ExtendedModel(model, effects, s.gravity);
+  L.identified = p.base_fit.identified;
+  L.num_geo = static_cast<int>(L.identified.size());
+  const Eigen::VectorXd e0 = L.ext.NoEffects();
+  const int cols = L.num_geo + L.ext.num_effect_params();
+  for (size_t i = 0; i < n; ++i) {
+    const auto& m = p.ms[i];
+    Eigen::MatrixXd Jx, Je;
+    L.ext.Jacobians(m.q, data.contexts[i], p.base_fit.x, e0, &Jx, &Je);
+    const int d = m.dimension();
+    Eigen::MatrixXd Jfull(d, cols);
+    for (int c = 0; c < L.num_geo; ++c) Jfull.col(c) = Jx.col(L.identified[c]).head(d);
+    if (Je.cols() > 0) Jfull.rightCols(Je.cols()) = Je.topRows(d);
+    const Eigen::VectorXd r = kinematics::Residual(model, m, p.base_fit.x);
+    const Eigen::LLT<Eigen::MatrixXd> llt(m.covariance);
+    L.r.push_back(llt.matrixL().solve(r));
+    L.J.push_back(llt.matrixL().solve(Jfull));
+    L.rp.push_back(r.head<3>());
+    L.Jp.push_back(Jfull.topRows(3));
+  }
+  // Fold assignments over the fit poses, seeded.
+  const int nf = static_cast<int>(L.fit.size());
+  L.folds = std::min(std::max(2, s.folds), nf);
+  std::mt19937_64 rng(s.seed);
+  for (int rep = 0; rep < std::max(1, s.repeats); ++rep) {
+    std::vector<int> order(nf), fold(nf);
+    std::iota(order.begin(), order.end(), 0);
+    std::shuffle(order.begin(), order.end(), rng);
+    for (int k = 0; k < nf; ++k) fold[order[k]] = k % L.folds;
+    L.fold_sets.push_back(fold);
+    if (L.folds == nf) break;  // leave-one-out: one assignment is all there is
+  }
+  return p;
+}
+
+// Effects (indices into lin.ext.effects()) whose columns the geometry nearly explains.
+std::vector<bool> Identifiable(const Linearized& L, double min_novelty,
+                               std::vector<std::string>& skipped,
+                               const kinematics::KinematicModel& model) {
+  int rows = 0;
+  for (int i : L.fit) rows += L.r[i].size();
+  const int cols = L.num_geo + L.ext.num_effect_params();
+  Eigen::MatrixXd A(rows, cols);
+  int row = 0;
+  for (int i : L.fit) {
+    A.middleRows(row, L.r[i].size()) = L.J[i];
+    row += L.r[i].size();
+  }
+  Eigen::MatrixXd G = A.leftCols(L.num_geo);
+  for (int c = 0; c < G.cols(); ++c)
+    if (G.col(c).norm() > 0) G.col(c).normalize();
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(G);
+  qr.setThreshold(1e-10);
+  const int rank = qr.rank();
+  const Eigen::MatrixXd Q = Eigen::MatrixXd(qr.householderQ()).leftCols(rank);
+  std::vector<bool> ok(L.ext.effects().size(), true);
+  for (size_t k = 0; k < L.ext.effects().size(); ++k) {
+    for (int i = 0; i < L.ext.effects()[k].num_params(); ++i) {
+      const Eigen::VectorXd c = A.col(L.num_geo + L.ext.effect_offset(k) + i);
+      const double nc = c.norm();
+      const double novelty = nc > 0 ? (c - Q * (Q.transpose() * c)).norm() / nc : 0.0;
+      if (novelty < min_novelty) ok[k] = false;
+    }
+    if (!ok[k])
+      skipped.push_back(Describe(model, L.ext.effects()[k]) +
+                        ": not separable from the geometric parameters at these poses");
+  }
+  return ok;
+}
+
+// Nonlinear batch fit of the identified geometry and the effects on the fit poses.
+struct FinalFit {
+  Eigen::VectorXd x, e, sigma_e;
+  double position_sigma_m = 0;
+};
+
+FinalFit FitExtended(const kinematics::ExtendedModel& ext, const std::vector<int>& identified,
+                     const std::vector<kinematics::PoseMeasurement>& ms,
+                     const std::vector<kinematics::EffectContext>& ctx, const Eigen::VectorXd& x0,
+                     const Eigen::VectorXd& e0, bool estimate_noise) {
+  const int ng = identified.size(), ne = ext.num_effect_params(), np = ng + ne;
+  FinalFit f{x0, e0, Eigen::VectorXd::Zero(ne), 0};
+  int rows = 0;
+  for (const auto& m : ms) rows += m.dimension();
+  const auto build = [&](const Eigen::VectorXd& x, const Eigen::VectorXd& e, Eigen::MatrixXd* A,
+                         Eigen::VectorXd& b) {
+    b.resize(rows);
+    if (A) A->resize(rows, np);
+    int row = 0;
+    for (size_t i = 0; i < ms.size(); ++i) {
+      const auto& m = ms[i];
+      const int d = m.dimension();
+      Eigen::MatrixXd Jx, Je;
+      kinematics::ToolPose pose;
+      ext.Jacobians(m.q, ctx[i], x, e, A ? &Jx : nullptr, A ? &Je : nullptr, &pose);
+      Eigen::VectorXd r(d);
+      r.head<3>() = m.p_WM_W - pose.p_WM_W;
+      if (d == 6) {
+        const Eigen::AngleAxisd aa(m.R_EI * pose.R_EI.transpose());
+        r.tail<3>() = aa.angle() * aa.axis();
+      }
+      const Eigen::LLT<Eigen::MatrixXd> llt(m.covariance);
+      b.segment(row, d) = llt.matrixL().solve(r);
+      if (A) {
+        Eigen::MatrixXd Jf(d, np);
+        for (int c = 0; c < ng; ++c) Jf.col(c) = Jx.col(identified[c]).head(d);
+        if (ne > 0) Jf.rightCols(ne) = Je.topRows(d);
+        A->middleRows(row, d) = llt.matrixL().solve(Jf);
+      }
+      row += d;
+    }
+  };
+  const auto apply = [&](const Eigen::VectorXd& delta, Eigen::VectorXd& x, Eigen::VectorXd& e) {
+    for (int c = 0; c < ng; ++c) x(identified[c]) += delta(c);
+    e += delta.tail(ne);
+  };
+  Eigen::MatrixXd A;
+  Eigen::VectorXd b;
+  double lambda = 1e-6;
+  build(f.x, f.e, &A, b);
+  double cost = b.squaredNorm();
+  for (int it = 0; it < 30; ++it) {
+    Eigen::VectorXd scale(np);
+    for (int c = 0; c < np; ++c) scale(c) = A.col(c).norm() > 0 ? 1.0 / A.col(c).norm() : 1.0;
+    const Eigen::MatrixXd As = A * scale.asDiagonal();
+    Eigen::MatrixXd H = As.transpose() * As;
+    H.diagonal().array() += lambda;
+    const Eigen::VectorXd delta = (H.ldlt().solve(As.transpose() * b).array() * scale.array());
+    Eigen::VectorXd x = f.x, e = f.e, bn;
+    apply(delta, x, e);
+    build(x, e, nullptr, bn);
+    const double nc = bn.squaredNorm();
+    if (nc <= cost) {
+      const bool done = cost - nc < 1e-12 * std::max(1.0, cost);
+      f.x = x;
+      f.e = e;
+      cost = nc;
+      lambda = std::max(1e-12, lambda * 0.1);
+      build(f.x, f.e, &A, b);
+      if (done) break;
+    } else {
+      lambda *= 10;
+      if (lambda > 1e6) break;
+    }
+  }
+  // Covariance (AᵀA)⁻¹ scaled by the a-posteriori variance factor when the noise is estimated.
+  const double dof = std::max(1, rows - np);
+  const double s2 = estimate_noise ? cost / dof : 1.0;
+  Eigen::VectorXd scale(np);
+  for (int c = 0; c < np; ++c) scale(c) = A.col(c).norm() > 0 ? 1.0 / A.col(c).norm() : 1.0;
+  const Eigen::MatrixXd As = A * scale.asDiagonal();
+  const Eigen::MatrixXd C = (As.transpose() * As).completeOrthogonalDecomposition().pseudoInverse();
+  for (int k = 0; k < ne; ++k)
+    f.sigma_e(k) = std::sqrt(std::max(0.0, C(ng + k, ng + k) * s2)) * scale(ng + k);
+  double ssp = 0;
+  int pose_count = 0;
+  for (size_t i = 0; i < ms.size(); ++i) {
+    const Eigen::Vector3d r = ms[i].p_WM_W - ext.Forward(ms[i].q, ctx[i], f.x, f.e).p_WM_W;
+    ssp += r.squaredNorm();
+    ++pose_count;
+  }
+  const double redundancy = 1.0 - static_cast<double>(np) / std::max(1, rows);
+  f.position_sigma_m = std::sqrt(ssp / (3.0 * pose_count * std::max(0.05, redundancy)));
+  return f;
+}
+
+double FisherP(double r, int n) {
+  if (n < 4) return 1.0;
+  const double z = std::atanh(std::clamp(r, -0.999999, 0.999999)) * std::sqrt(n - 3.0);
+  return std::erfc(std::abs(z) / std::sqrt(2.0));
+}
+
+double Correlation(const std::vector<double>& a, const std::vector<double>& b) {
+  const double ma = Mean(a), mb = Mean(b);
+  double sab = 0, saa = 0, sbb = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    sab += (a[i] - ma) * (b[i] - mb);
+    saa += (a[i] - ma) * (a[i] - ma);
+    sbb += (b[i] - mb) * (b[i] - mb);
+  }
+  return saa > 0 && sbb > 0 ? sab / std::sqrt(saa * sbb) : 0.0;
+}
+
+}  // namespace
+
+std::string Describe(const kinematics::KinematicModel& model, const Effect& f) {
+  std::string s = kinematics::ToString(f.cause);
+  if (f.cause == EffectCause::kThermal)
+    return s + (f.thermal_source == Effect::ThermalSource::kTime ? " (time)" : " (temperature)");
+  s += " " + model.joints()[f.joint].name;
+  if (f.cause == EffectCause::kJointPeriodic) s += " h" + std::to_string(f.harmonic);
+  return s;
+}
+
+double HeldOutRms(const kinematics::KinematicModel& model, const PoseData& data,
+                  const std::vector<Effect>& effects, const AnalysisSettings& settings) {
+  std::vector<Effect> fx = effects;
+  for (Effect& f : fx)  // thermal references at the data's mean, as Analyze chooses them
+    if (f.cause == EffectCause::kThermal) {
+      std::vector<double> v;
+      for (const auto& c : data.contexts) v.push_back(kinematics::ThermalRegressor(f, c));
+      f.reference = Mean(v);
+    }
+  const Prepared p = Prepare(model, data, settings, &fx);
+  std::vector<int> all(fx.size());
+  std::iota(all.begin(), all.end(), 0);
+  const auto ev = p.lin.test.empty() ? p.lin.CrossValidate(all) : p.lin.Split(all);
+  return Rms(ev.position);
+}
+
+Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
+                 const AnalysisSettings& s) {
+  Prepared p = Prepare(model, data, s, nullptr);
+  const Linearized& L = p.lin;
+  Analysis a;
+  a.base_fit = p.base_fit;
+  a.skipped = p.skipped;
+  a.num_fit_poses = L.fit.size();
+  a.num_test_poses = L.test.size();
+  const auto& effects = L.ext.effects();
+
+  // --- Noise tests: the base fit's residuals against the stated noise and repeated poses.
+  {
+    double ssp = 0, sso = 0;
+    int np = 0, no = 0;
+    for (int i : L.fit) {
+      const Eigen::VectorXd r = kinematics::Residual(model, p.ms[i], p.base_fit.x);
+      ssp += r.head<3>().squaredNorm();
+      np += 3;
+      if (r.size() == 6) {
+        sso += r.tail<3>().squaredNorm();
+        no += 3;
+      }
+    }
+    const double dof = np + no - static_cast<double>(p.base_fit.identified.size());
+    const auto test = [&](const std::string& against, double sp, double so) {
+      NoiseTest t;
+      t.against = against;
+      t.position_sigma_m = sp;
+      t.orientation_sigma_rad = so;
+      t.chi2 = ssp / (sp * sp) + (no > 0 && so > 0 ? sso / (so * so) : 0.0);
+      t.dof = no > 0 && so > 0 ? dof : dof - no;
+      t.p_value = 1.0 - identification::ChiSquareCdf(t.chi2, t.dof);
+      a.noise_tests.push_back(t);
+    };
+    if (s.stated_position_sigma_m > 0)
+      test("stated noise", s.stated_position_sigma_m, s.stated_orientation_sigma_rad);
+    // Repeated poses: the same joints measured again (pooled within-group variance).
+    std::vector<std::vector<int>> groups;
+    for (int i : L.fit) {
+      bool placed = false;
+      for (auto& g : groups)
+        if ((data.measurements[g[0]].q - data.measurements[i].q).lpNorm<Eigen::Infinity>() < 1e-6) {
+          g.push_back(i);
+          placed = true;
+          break;
+        }
+      if (!placed) groups.push_back({i});
+    }
+    double ssr = 0, sso_r = 0;
+    int dofr = 0;
+    for (const auto& g : groups) {
+      if (g.size() < 2) continue;
+      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+      for (int i : g) mean += data.measurements[i].p_WM_W;
+      mean /= g.size();
+      for (int i : g) ssr += (data.measurements[i].p_WM_W - mean).squaredNorm();
+      dofr += 3 * (g.size() - 1);
+      (void)sso_r;
+    }
+    if (dofr >= 3) test("repeated poses", std::sqrt(ssr / dofr), 0.0);
+  }
+
+  // --- Which candidates the geometry cannot absorb.
+  std::vector<bool> ok = Identifiable(L, s.min_relative_novelty, a.skipped, model);
+  std::vector<int> pool;
+  for (size_t k = 0; k < effects.size(); ++k)
+    if (ok[k]) {
+      pool.push_back(k);
+      a.candidates.push_back(effects[k]);
+    }
+
+  // --- Greedy forward selection on k-fold held-out residuals.
+  std::vector<int> selected;
+  std::vector<double> selected_z;
+  Linearized::Eval current = L.CrossValidate({});
+  while (static_cast<int>(selected.size()) < s.max_effects) {
+    SelectionRound round;
+    round.heldout_rms_current_m = Rms(current.position);
+    std::vector<Linearized::Eval> evals;
+    std::vector<int> ids;
+    for (int k : pool) {
+      if (std::find(selected.begin(), selected.end(), k) != selected.end()) continue;
+      std::vector<int> trial = selected;
+      trial.push_back(k);
+      evals.push_back(L.CrossValidate(trial));
+      ids.push_back(k);
+      round.tried.push_back(effects[k]);
+      round.z.push_back(PairedZ(current.score, evals.back().score));
+    }
+    if (ids.empty()) break;
+    int best = 0;
+    for (size_t c = 1; c < ids.size(); ++c)
+      if (Mean(evals[c].score) < Mean(evals[best].score)) best = c;
+    round.best = best;
+    round.z_critical = NormalQuantile(1.0 - s.alpha / ids.size());
+    round.heldout_rms_best_m = Rms(evals[best].position);
+    round.accepted = round.z[best] > round.z_critical;
+    spdlog::debug("selection round {}: best {} z {:.2f} (critical {:.2f})", a.rounds.size() + 1,
+                  Describe(model, effects[ids[best]]), round.z[best], round.z_critical);
+    a.rounds.push_back(round);
+    if (!round.accepted) break;
+    selected.push_back(ids[best]);
+    selected_z.push_back(round.z[best]);
+    current = evals[best];
+  }
+
+  // --- Final nonlinear fit of the selected model on the fit poses.
+  std::vector<Effect> chosen;
+  for (int k : selected) chosen.push_back(effects[k]);
+  const kinematics::ExtendedModel final_model(model, chosen, s.gravity);
+  std::vector<kinematics::PoseMeasurement> fit_ms;
+  std::vector<kinematics::EffectContext> fit_ctx;
+  for (int i : L.fit) {
+    fit_ms.push_back(p.ms[i]);
+    fit_ctx.push_back(data.contexts[i]);
+  }
+  Eigen::VectorXd e0 = final_model.NoEffects();
+  {
+    const std::vector<int> cols = L.Columns(selected);
+    const Eigen::VectorXd delta = L.Solve(L.fit, cols);
+    e0 = delta.tail(e0.size());
+  }
+  const FinalFit ff =
+      FitExtended(final_model, L.identified, fit_ms, fit_ctx, p.base_fit.x, e0, s.estimate_noise);
+  a.x = ff.x;
+  a.e = ff.e;
+  a.position_sigma_after_m = ff.position_sigma_m;
+  const auto params = final_model.EffectParameters();
+  for (size_t k = 0; k < chosen.size(); ++k) {
+    FoundEffect fe;
+    fe.effect = chosen[k];
+    fe.cause = kinematics::ToString(chosen[k].cause);
+    if (chosen[k].joint >= 0) fe.joints.push_back(JointName(model, chosen[k].joint));
+    const int o = final_model.effect_offset(k), np = chosen[k].num_params();
+    fe.parameters.assign(params.begin() + o, params.begin() + o + np);
+    fe.values = ff.e.segment(o, np);
+    fe.sigma = ff.sigma_e.segment(o, np);
+    fe.z = selected_z[k];
+    a.effects.push_back(fe);
+  }
+
+  // --- Gain on data the selection never fitted (the split) or by the same k-fold.
+  const Linearized::Eval before = L.test.empty() ? L.CrossValidate({}) : L.Split({});
+  const Linearized::Eval after = L.test.empty() ? current : L.Split(selected);
+  a.gain.scheme = L.test.empty()
+                      ? std::to_string(L.folds) + "-fold ×" + std::to_string(L.fold_sets.size())
+                      : "cal/test split";
+  a.gain.heldout_rms_before_m = Rms(before.position);
+  a.gain.heldout_rms_after_m = Rms(after.position);
+  a.gain.relative_gain = a.gain.heldout_rms_before_m > 0
+                             ? 1.0 - a.gain.heldout_rms_after_m / a.gain.heldout_rms_before_m
+                             : 0.0;
+  a.gain.z = selected.empty() ? 0.0 : PairedZ(before.score, after.score);
+  a.gain.position_before_m = before.position;
+  a.gain.position_after_m = after.position;
+
+  // --- Correlations: each candidate's regressor against the residual along its direction.
+  for (size_t k = 0; k < effects.size(); ++k) {
+    const Effect& f = effects[k];
+    for (int c = 0; c < f.num_params(); ++c) {
+      RegressorCorrelation rc;
+      rc.effect = f;
+      rc.column = c;
+      const int j = f.joint;
+      switch (f.cause) {
+        case EffectCause::kJointCompliance:
+          rc.regressor = "gravity torque " + JointName(model, j);
+          rc.unit = model.joints()[j].type == kinematics::JointType::kRevolute ? "N*m" : "N";
+          break;
+        case EffectCause::kJointPeriodic:
+          rc.regressor = std::string(c == 0 ? "sin(" : "cos(") + (f.harmonic == 2 ? "2 " : "") +
+                         "q " + JointName(model, j) + ")";
+          rc.unit = "1";
+          break;
+        case EffectCause::kJointScale:
+          rc.regressor = "q " + JointName(model, j);
+          rc.unit = "rad";
+          break;
+        case EffectCause::kBacklash:
+          rc.regressor = "approach direction " + JointName(model, j);
+          rc.unit = "1";
+          break;
+        case EffectCause::kThermal:
+          rc.regressor = f.thermal_source == Effect::ThermalSource::kTime ? "time" : "temperature";
+          rc.unit = f.thermal_source == Effect::ThermalSource::kTime ? "s" : "degC";
+          break;
+      }
+      const int col = L.num_geo + L.ext.effect_offset(k) + c;
+      for (int i : L.fit) {
+        // Regressor = the effect column per unit parameter along its own direction; direction
+        // of the joint's motion (joint effects) or of the arm's growth (thermal).
+        const auto& m = data.measurements[i];
+        const auto& ctx = data.contexts[i];
+        Eigen::Vector3d dir;
+        double g = 0;
+        if (f.cause == EffectCause::kThermal) {
+          kinematics::EffectContext unit_ctx = ctx;
+          if (f.thermal_source == Effect::ThermalSource::kTime)
+            unit_ctx.time_s = f.reference + 1.0;
+          else
+            unit_ctx.temperature_c = f.reference + 1.0;
+          const kinematics::ExtendedModel one(model, {f}, s.gravity);
+          Eigen::MatrixXd Je;
+          one.Jacobians(m.q, unit_ctx, p.base_fit.x, one.NoEffects(), nullptr, &Je);
+          dir = Je.col(0).head<3>();
+          g = kinematics::ThermalRegressor(f, ctx);
+        } else {
+          dir = model.JointJacobian(m.q, p.base_fit.x).col(j).head<3>();
+          const Eigen::Vector3d jc = L.Jp[i].col(col);
+          g = dir.squaredNorm() > 0 ? jc.dot(dir) / dir.squaredNorm() : 0.0;
+        }
+        const double nd = dir.norm();
+        const Eigen::Vector3d u = nd > 0 ? Eigen::Vector3d(dir / nd) : Eigen::Vector3d::Zero();
+        rc.values.push_back(g);
+        rc.residual_before_m.push_back(u.dot(L.rp[i]));
+        rc.residual_after_m.push_back(
+            u.dot(m.p_WM_W - final_model.Forward(m.q, ctx, a.x, a.e).p_WM_W));
+      }
+      rc.correlation = Correlation(rc.values, rc.residual_before_m);
+      rc.p_value = FisherP(rc.correlation, rc.values.size());
+      a.correlations.push_back(std::move(rc));
+    }
+  }
+  std::stable_sort(a.correlations.begin(), a.correlations.end(),
+                   [](const auto& x, const auto& y) { return x.p_value < y.p_value; });
+  return a;
+}
+
+}  // namespace rcal::discrepancy
