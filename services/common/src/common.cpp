@@ -1,0 +1,39 @@
+#include "rcal/services/common.hpp"
+
+#include <chrono>
+#include <filesystem>
+
+namespace rcal::services {
+namespace {
+volatile std::sig_atomic_t g_stop = 0;
+extern "C" void OnStopSignal(int) {
+  g_stop = 1;
+}
+}  // namespace
+
+void InstallStopHandlers() {
+  struct sigaction sa {};
+  sa.sa_handler = OnStopSignal;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+}
+
+bool StopRequested() {
+  return g_stop != 0;
+}
+
+std::string RepoPath(const std::string& path) {
+  if (path.empty() || std::filesystem::path(path).is_absolute() || std::filesystem::exists(path))
+    return path;
+  const auto in_repo = std::filesystem::path(RCAL_SOURCE_DIR) / path;
+  return std::filesystem::exists(in_repo) ? in_repo.string() : path;
+}
+
+long long MonotonicMicros() {
+  return std::chrono::duration_cast<std::chrono::microseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+}  // namespace rcal::services
