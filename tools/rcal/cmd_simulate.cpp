@@ -34,7 +34,7 @@ struct Options {
   std::string tip_link, base_link;
   double base_sigma_m = 0.05;
   double base_sigma_rad = 0.05;
-  std::vector<double> marker_xyz{0.0, 0.0, 0.1};
+  std::vector<double> marker_xyz{0.05, 0.0, 0.1};
   double geometry_sigma_mm = 0.5;
   double geometry_sigma_deg = 0.05;
   double position_sigma_mm = 0.05;
