@@ -7,6 +7,8 @@
 
 #include <optional>
 
+#include "rcal/identification/calibration.hpp"
+
 #include "../kinematics/test_robots.hpp"
 #include "rcal/sim/effects.hpp"
 
@@ -110,6 +112,75 @@ TEST(Discrepancy, NamesTheHiddenCauseAndJoint) {
     const double rms_true = HeldOutRms(c.model, c.data, c.truth);
     EXPECT_NEAR(a.gain.heldout_rms_after_m, rms_true, 0.1 * rms_true) << what;
   }
+}
+
+TEST(Discrepancy, SplitAndOrientation) {
+  // Position and orientation measured; a `set` column: selection sees only the cal poses, the
+  // gain is judged on the test poses.
+  const Effect hidden{EffectCause::kJointPeriodic, 4, 1};
+  Case c = MakeCase(21, hidden, 3.0, 100, true);
+  for (size_t i = 0; i < c.data.measurements.size(); ++i) c.data.is_test.push_back(i % 3 == 0);
+  const Analysis a = Analyze(c.model, c.data);
+  EXPECT_EQ(a.num_test_poses, 34);
+  EXPECT_EQ(a.gain.scheme, "cal/test split");
+  ASSERT_EQ(a.effects.size(), 1u) << Found(c, a);
+  EXPECT_TRUE(a.effects.front().effect.SameAs(hidden)) << Found(c, a);
+  EXPECT_GT(a.gain.relative_gain, 0.1);
+  EXPECT_EQ(a.gain.position_before_m.size(), 34u);
+  // Clean data with the same layout: nothing.
+  Case clean = MakeCase(22, std::nullopt, 0, 100, true);
+  clean.data.is_test = c.data.is_test;
+  EXPECT_TRUE(Analyze(clean.model, clean.data).effects.empty());
+}
+
+TEST(Discrepancy, LinearisedCrossValidationMatchesFullRecalibration) {
+  // The k-fold held-out RMS of the geometric model, linearised around the base fit, against
+  // identification::HeldOut, which recalibrates every fold from scratch (same fold assignment).
+  const Case c = MakeCase(23, std::nullopt, 0, 60);
+  AnalysisSettings s;
+  s.repeats = 1;
+  const double lin = HeldOutRms(c.model, c.data, {}, s);
+  std::vector<kinematics::PoseMeasurement> ms = c.data.measurements;
+  identification::CalibrationSettings cs;
+  cs.folds = s.folds;
+  cs.seed = s.seed;
+  const auto fit = identification::Calibrate(c.model, ms, cs);
+  const auto held = identification::HeldOut(c.model, ms, {}, fit, cs);
+  EXPECT_NEAR(lin, held.calibrated.rms_position_m, 0.005 * held.calibrated.rms_position_m);
+}
+
+TEST(Discrepancy, NoiseTests) {
+  // Stated noise right: χ² consistent; stated noise too small: rejected. Repeated poses give
+  // the noise without the model.
+  Case c = MakeCase(24, std::nullopt, 0, 40);
+  sim::Rng rng(7);
+  std::normal_distribution<double> n(0.0, 5e-5);
+  for (int i = 0; i < 20; ++i) {  // re-measure 20 poses
+    kinematics::PoseMeasurement m = c.data.measurements[i];
+    const Eigen::VectorXd r0 =
+        Eigen::Vector3d(n(rng), n(rng), n(rng));  // fresh noise around the same pose
+    m.p_WM_W += r0;
+    c.data.measurements.push_back(m);
+    c.data.contexts.push_back(c.data.contexts[i]);
+  }
+  AnalysisSettings s;
+  s.stated_position_sigma_m = 5e-5;
+  Analysis a = Analyze(c.model, c.data, s);
+  ASSERT_EQ(a.noise_tests.size(), 2u);
+  EXPECT_EQ(a.noise_tests[0].against, "stated noise");
+  EXPECT_GT(a.noise_tests[0].p_value, 0.001);
+  EXPECT_EQ(a.noise_tests[1].against, "repeated poses");
+  // Re-measured poses differ by two noise draws (σ√2 per axis) and the pair mean removes half.
+  EXPECT_NEAR(a.noise_tests[1].position_sigma_m, 5e-5, 2e-5);
+  s.stated_position_sigma_m = 2e-5;
+  a = Analyze(c.model, c.data, s);
+  EXPECT_LT(a.noise_tests[0].p_value, 1e-6);
+}
+
+TEST(Discrepancy, RejectsInconsistentInput) {
+  Case c = MakeCase(25, std::nullopt, 0, 20);
+  c.data.contexts.pop_back();
+  EXPECT_THROW(Analyze(c.model, c.data), std::invalid_argument);
 }
 
 }  // namespace
