@@ -21,11 +21,16 @@
 //   (2) gyro update of ω̂_k, b̂_k; (3) attitude propagation with the rate over (t_{k−1}, t_k]:
 //       q̂_k = q̂_{k−1} ⊗ Exp(ω̂_k Δt),
 //       δθ_k = δθ_{k−1} + R̂_EB,k J_r(ω̂_k Δt) Δt δω_k     (the paper's Φ_ori columns 5–7),
-//       P ← Φ P Φᵀ + σ_q² Δt I_θθ  (σ_q: unmodelled attitude noise);
-//       noise growing with the rate); (4) FQA update. Ordering (2) before (3) makes ω_k the rate
-//       over the interval ending at t_k,
-//   as a sampled gyro measures it; propagating with ω̂_{k−1} (Eq. 20 read literally) lags the
-//   gyro by one sample, which costs several degrees on fast motion.
+//       P ← Φ P Φᵀ + σ_q² Δt I_θθ + k_ω² |ω̂|² Δt e_z e_zᵀ  (unmodelled attitude noise;
+//       optional heading noise growing with the rate, off by default); (4) FQA update.
+//   Ordering (2) before (3) makes ω_k the rate over the interval ending at t_k, as a sampled
+//   gyro measures it; propagating with ω̂_{k−1} (Eq. 20 read literally) lags the gyro by one
+//   sample, which costs several degrees on fast motion.
+// FQA inputs (beyond the paper): f_B and the accepted m_B are first low-passed (time constants
+// accel_lowpass_tau, mag_lowpass_tau) in a strapdown frame I integrated from the gyro alone,
+// f̄_I ← f̄_I + α (R_IB f_B − f̄_I), and rotated back, f̄_B = R_IBᵀ f̄_I. In I gravity and the
+// earth field are nearly constant while linear accelerations average out; with τ = 0 the FQA
+// sees the raw samples, as in the paper.
 // Measurements (standard KF update, NOTES.md errata for Eqs. 15–17, Joseph form):
 //   gyro:   z = ω_meas,  h = ω̂ + b̂,  H = [0 I I],  R = σ_g² / Δt I
 //   rest:   z = 0,       h = ω̂,      H = [0 I 0]  (zero-rate update while still, optional)
