@@ -6,10 +6,23 @@
 
 #include "../kinematics/test_robots.hpp"
 #include "rcal/identification/batch_lm.hpp"
+#include "rcal/io/robot_urdf.hpp"
 #include "rcal/kinematics/identifiability.hpp"
 #include "rcal/sim/pose_sim.hpp"
 
 namespace rcal::identification::testing {
+
+/// The real UR10 of ../shared/data/figaroh_ur10, loaded from its URDF, with the set-up a cell has
+/// (world ← base frame and a marker offset, both identified).
+inline kinematics::KinematicModel Ur10FromUrdf() {
+  io::UrdfOptions o;
+  o.tip_link = "wrist_3_link";
+  o.add_base_frame = true;
+  o.base_xyz = Eigen::Vector3d(0.3, -0.2, 0.1);
+  o.add_marker = true;
+  o.marker_xyz = Eigen::Vector3d(0.02, 0.05, 0.1);
+  return io::LoadRobotUrdf(std::string(RCAL_SHARED_DIR) + "/data/figaroh_ur10/robot.urdf", o);
+}
 
 struct Scenario {
   kinematics::KinematicModel model;

@@ -42,7 +42,7 @@ TEST(BatchLm, BaseSetReproducesTheTruthExactly) {
 
 TEST(BatchLm, RecoversRandomErrorsOnThreeRobots) {
   unsigned seed = 100;
-  for (const auto& model : {Grb3016(), SevenJointSetup(), UrLikeUrdf()}) {
+  for (const auto& model : {Grb3016(), SevenJointSetup(), UrLikeUrdf(), Ur10FromUrdf()}) {
     const Scenario s = MakeScenario(model, sim::PoseNoise{}, seed++);
     ExpectRecovers(s, BatchLm(model, s.identified).Solve(s.cal, model.Nominal()),
                    model.name().c_str());
@@ -53,7 +53,7 @@ TEST(BatchLm, RecoversFromPositionsOnly) {
   sim::PoseNoise noise;
   noise.orientation = false;
   unsigned seed = 200;
-  for (const auto& model : {Grb3016(), SevenJointSetup(), UrLikeUrdf()}) {
+  for (const auto& model : {Grb3016(), SevenJointSetup(), UrLikeUrdf(), Ur10FromUrdf()}) {
     const Scenario s = MakeScenario(model, noise, seed++, 60);
     ExpectRecovers(s, BatchLm(model, s.identified).Solve(s.cal, model.Nominal()),
                    model.name().c_str());

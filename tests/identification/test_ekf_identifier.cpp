@@ -41,7 +41,7 @@ void ExpectEkfMatchesTruthAndLm(const Scenario& s, const EkfIdentifier& ekf, con
 
 TEST(EkfIdentifier, RecoversRandomErrorsOnThreeRobots) {
   unsigned seed = 300;
-  for (const auto& model : {Grb3016(), SevenJointSetup(), UrLikeUrdf()}) {
+  for (const auto& model : {Grb3016(), SevenJointSetup(), UrLikeUrdf(), Ur10FromUrdf()}) {
     const Scenario s = MakeScenario(model, sim::PoseNoise{}, seed++);
     ExpectEkfMatchesTruthAndLm(s, RunEkf(s), model.name().c_str());
   }
@@ -51,7 +51,7 @@ TEST(EkfIdentifier, RecoversFromPositionsOnly) {
   sim::PoseNoise noise;
   noise.orientation = false;
   unsigned seed = 400;
-  for (const auto& model : {Grb3016(), SevenJointSetup(), UrLikeUrdf()}) {
+  for (const auto& model : {Grb3016(), SevenJointSetup(), UrLikeUrdf(), Ur10FromUrdf()}) {
     const Scenario s = MakeScenario(model, noise, seed++, 60);
     ExpectEkfMatchesTruthAndLm(s, RunEkf(s), model.name().c_str());
   }
