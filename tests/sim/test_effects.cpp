@@ -110,5 +110,29 @@ TEST(SimEffects, SessionContexts) {
   EXPECT_GT(c.back().temperature_c - c.front().temperature_c, 8.0);
 }
 
+TEST(SimEffects, EffectOfSize) {
+  const auto m = kinematics::testing::UrLikeUrdf();
+  Rng rng(15);
+  const Eigen::VectorXd x = RandomErrors(m, rng, 1e-3, 1e-3);
+  const auto qs = SampleJoints(m, 40, rng);
+  auto ctx = SampleSession(m.num_joints(), 40, {}, rng);
+  const kinematics::Effect f{EffectCause::kJointPeriodic, 2, 1};
+  const TruthEffect total = EffectOfSize(m, f, qs, ctx, x, 1e-4, rng);
+  const TruthEffect visible = EffectOfSize(m, f, qs, ctx, x, 1e-4, rng, {}, true);
+  // Total size: the RMS displacement of the marker, measured by the truth robot itself.
+  const EffectTruth truth = MakeEffectTruth(m, {total});
+  double ss = 0;
+  for (size_t i = 0; i < qs.size(); ++i)
+    ss += (truth.model.Forward(qs[i], ctx[i], x, truth.e).p_WM_W - m.Forward(qs[i], x).p_WM_W)
+              .squaredNorm();
+  EXPECT_NEAR(std::sqrt(ss / qs.size()), 1e-4, 1e-7);
+  // Geometry absorbs part of it: the visible-size values are larger.
+  EXPECT_GT(visible.values.norm(), total.values.norm());
+  // Backlash with every approach from the same side is a constant joint offset: invisible.
+  for (auto& c : ctx) c.dq_sign.setOnes();
+  EXPECT_THROW(EffectOfSize(m, {EffectCause::kBacklash, 1}, qs, ctx, x, 1e-4, rng, {}, true),
+               std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace rcal::sim

@@ -150,10 +150,12 @@ int Run(const Options& o) {
     io::Series before{"geometric model", {}, {}, "points"},
         after{"extended model", {}, {}, "points"};
     const double hs = HumanScale(c.unit);
+    // A two-valued regressor (approach direction) draws before and after side by side.
+    const double shift = c.effect.cause == kinematics::EffectCause::kBacklash ? 0.08 : 0.0;
     for (size_t i = 0; i < c.values.size(); ++i) {
-      before.x.push_back(c.values[i] * hs);
+      before.x.push_back(c.values[i] * hs - shift);
       before.y.push_back(c.residual_before_m[i] * kMm);
-      after.x.push_back(c.values[i] * hs);
+      after.x.push_back(c.values[i] * hs + shift);
       after.y.push_back(c.residual_after_m[i] * kMm);
     }
     const std::string file = "residual_" + std::to_string(k + 1) + ".png";

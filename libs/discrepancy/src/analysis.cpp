@@ -331,18 +331,33 @@ std::vector<bool> Identifiable(const Linearized& L, double min_novelty,
   return ok;
 }
 
-// Nonlinear batch fit of the identified geometry and the effects on the fit poses.
-struct FinalFit {
-  Eigen::VectorXd x, e, sigma_e;
-  double position_sigma_m = 0;
-};
+double FisherP(double r, int n) {
+  if (n < 4) return 1.0;
+  const double z = std::atanh(std::clamp(r, -0.999999, 0.999999)) * std::sqrt(n - 3.0);
+  return std::erfc(std::abs(z) / std::sqrt(2.0));
+}
 
-FinalFit FitExtended(const kinematics::ExtendedModel& ext, const std::vector<int>& identified,
-                     const std::vector<kinematics::PoseMeasurement>& ms,
-                     const std::vector<kinematics::EffectContext>& ctx, const Eigen::VectorXd& x0,
-                     const Eigen::VectorXd& e0, bool estimate_noise) {
+double Correlation(const std::vector<double>& a, const std::vector<double>& b) {
+  const double ma = Mean(a), mb = Mean(b);
+  double sab = 0, saa = 0, sbb = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    sab += (a[i] - ma) * (b[i] - mb);
+    saa += (a[i] - ma) * (a[i] - ma);
+    sbb += (b[i] - mb) * (b[i] - mb);
+  }
+  return saa > 0 && sbb > 0 ? sab / std::sqrt(saa * sbb) : 0.0;
+}
+
+}  // namespace
+
+ExtendedFit FitExtended(const kinematics::ExtendedModel& ext, const std::vector<int>& identified,
+                        const std::vector<kinematics::PoseMeasurement>& ms,
+                        const std::vector<kinematics::EffectContext>& ctx,
+                        const Eigen::VectorXd& x0, const Eigen::VectorXd& e0, bool estimate_noise) {
+  if (ctx.size() != ms.size())
+    throw std::invalid_argument("FitExtended: one context per measurement");
   const int ng = identified.size(), ne = ext.num_effect_params(), np = ng + ne;
-  FinalFit f{x0, e0, Eigen::VectorXd::Zero(ne), 0};
+  ExtendedFit f{x0, e0, Eigen::VectorXd::Zero(ne), 0};
   int rows = 0;
   for (const auto& m : ms) rows += m.dimension();
   const auto build = [&](const Eigen::VectorXd& x, const Eigen::VectorXd& e, Eigen::MatrixXd* A,
@@ -426,25 +441,6 @@ FinalFit FitExtended(const kinematics::ExtendedModel& ext, const std::vector<int
   f.position_sigma_m = std::sqrt(ssp / (3.0 * pose_count * std::max(0.05, redundancy)));
   return f;
 }
-
-double FisherP(double r, int n) {
-  if (n < 4) return 1.0;
-  const double z = std::atanh(std::clamp(r, -0.999999, 0.999999)) * std::sqrt(n - 3.0);
-  return std::erfc(std::abs(z) / std::sqrt(2.0));
-}
-
-double Correlation(const std::vector<double>& a, const std::vector<double>& b) {
-  const double ma = Mean(a), mb = Mean(b);
-  double sab = 0, saa = 0, sbb = 0;
-  for (size_t i = 0; i < a.size(); ++i) {
-    sab += (a[i] - ma) * (b[i] - mb);
-    saa += (a[i] - ma) * (a[i] - ma);
-    sbb += (b[i] - mb) * (b[i] - mb);
-  }
-  return saa > 0 && sbb > 0 ? sab / std::sqrt(saa * sbb) : 0.0;
-}
-
-}  // namespace
 
 std::string Describe(const kinematics::KinematicModel& model, const Effect& f) {
   std::string s = kinematics::ToString(f.cause);
@@ -594,7 +590,7 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
     const Eigen::VectorXd delta = L.Solve(L.fit, cols);
     e0 = delta.tail(e0.size());
   }
-  const FinalFit ff =
+  const ExtendedFit ff =
       FitExtended(final_model, L.identified, fit_ms, fit_ctx, p.base_fit.x, e0, s.estimate_noise);
   a.x = ff.x;
   a.e = ff.e;

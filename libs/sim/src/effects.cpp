@@ -1,5 +1,6 @@
 #include "rcal/sim/effects.hpp"
 
+#include <Eigen/QR>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
@@ -166,7 +167,7 @@ TruthEffect EffectOfSize(const kinematics::KinematicModel& model, const kinemati
                          const std::vector<Eigen::VectorXd>& qs,
                          const std::vector<kinematics::EffectContext>& contexts,
                          const Eigen::VectorXd& x, double rms_m, Rng& rng,
-                         const kinematics::GravityModel& gravity) {
+                         const kinematics::GravityModel& gravity, bool beyond_geometry) {
   TruthEffect t{effect, Eigen::VectorXd::Zero(effect.num_params())};
   std::uniform_real_distribution<double> u(0.0, 2.0 * 3.14159265358979323846);
   std::uniform_int_distribution<int> coin(0, 1);
@@ -177,14 +178,29 @@ TruthEffect EffectOfSize(const kinematics::KinematicModel& model, const kinemati
     t.values(0) = coin(rng) ? 1.0 : -1.0;
   }
   const kinematics::ExtendedModel ext(model, {effect}, gravity);
-  double ss = 0;
-  for (size_t i = 0; i < qs.size(); ++i) {
-    Eigen::MatrixXd Je;
-    ext.Jacobians(qs[i], contexts[i], x, ext.NoEffects(), nullptr, &Je);
-    ss += (Je.topRows<3>() * t.values).squaredNorm();
+  const int n = static_cast<int>(qs.size());
+  Eigen::VectorXd d(3 * n);
+  Eigen::MatrixXd G(3 * n, model.num_params());
+  for (int i = 0; i < n; ++i) {
+    Eigen::MatrixXd Jx, Je;
+    ext.Jacobians(qs[i], contexts[i], x, ext.NoEffects(), &Jx, &Je);
+    d.segment<3>(3 * i) = Je.topRows<3>() * t.values;
+    G.middleRows<3>(3 * i) = Jx.topRows<3>();
   }
-  const double rms = qs.empty() ? 0.0 : std::sqrt(ss / qs.size());
-  if (rms > 0) t.values *= rms_m / rms;
+  const double total = n == 0 ? 0.0 : std::sqrt(d.squaredNorm() / n);
+  if (beyond_geometry && n > 0) {
+    for (int c = 0; c < G.cols(); ++c)
+      if (G.col(c).norm() > 0) G.col(c).normalize();
+    Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(G);
+    qr.setThreshold(1e-10);
+    const Eigen::MatrixXd Q = Eigen::MatrixXd(qr.householderQ()).leftCols(qr.rank());
+    d -= Q * (Q.transpose() * d);
+  }
+  const double rms = n == 0 ? 0.0 : std::sqrt(d.squaredNorm() / n);
+  if (!(rms > 1e-9 * total))
+    throw std::invalid_argument(
+        "EffectOfSize: the effect does not move the marker beyond what geometry absorbs");
+  t.values *= rms_m / rms;
   return t;
 }
 

@@ -136,6 +136,22 @@ double HeldOutRms(const kinematics::KinematicModel& model, const PoseData& data,
                   const std::vector<kinematics::Effect>& effects,
                   const AnalysisSettings& settings = {});
 
+/// Batch fit of an extended model: the geometric errors `identified` and every effect parameter,
+/// by Levenberg–Marquardt on the whitened residuals (measurement covariances as weights), from
+/// (x0, e0). For the identifier and the IK corrector to use a model that Analyze selected.
+struct ExtendedFit {
+  Eigen::VectorXd x;            ///< geometric errors [m | rad], full length
+  Eigen::VectorXd e;            ///< effect parameters [SI]
+  Eigen::VectorXd sigma_e;      ///< 1σ of e (scaled by the a-posteriori variance factor when
+                                ///< estimate_noise)
+  double position_sigma_m = 0;  ///< position noise re-estimated from the residuals [m]
+};
+ExtendedFit FitExtended(const kinematics::ExtendedModel& model, const std::vector<int>& identified,
+                        const std::vector<kinematics::PoseMeasurement>& ms,
+                        const std::vector<kinematics::EffectContext>& contexts,
+                        const Eigen::VectorXd& x0, const Eigen::VectorXd& e0,
+                        bool estimate_noise = true);
+
 /// Human-readable name of an effect: "joint_compliance shoulder_lift", "thermal (temperature)".
 std::string Describe(const kinematics::KinematicModel& model, const kinematics::Effect& effect);
 

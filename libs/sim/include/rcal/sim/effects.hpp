@@ -78,11 +78,15 @@ namespace rcal::sim {
 /// The values of `effect` that displace the marker by `rms_m` [m] RMS over the poses (joints qs,
 /// contexts, geometric errors x), in a seeded random direction for two-parameter effects (the
 /// phase of a periodic error) and a seeded random sign. For detection tests "near the noise
-/// floor": rms_m a small multiple of the position noise.
+/// floor": rms_m a small multiple of the position noise. With `beyond_geometry`, the size is
+/// that of the part of the displacement no change of the geometric parameters can reproduce at
+/// these poses (least-squares residual of the displacements against the identification
+/// Jacobian's position rows): the part a calibration could ever see.
 TruthEffect EffectOfSize(const kinematics::KinematicModel& model, const kinematics::Effect& effect,
                          const std::vector<Eigen::VectorXd>& qs,
                          const std::vector<kinematics::EffectContext>& contexts,
                          const Eigen::VectorXd& x, double rms_m, Rng& rng,
-                         const kinematics::GravityModel& gravity = {});
+                         const kinematics::GravityModel& gravity = {},
+                         bool beyond_geometry = false);
 
 }  // namespace rcal::sim
