@@ -156,6 +156,9 @@ TEST(JointEffects, GravityTorqueOfPlanarArmByHand) {
   EffectContext ctx;
   ctx.payload_kg = payload;
   EXPECT_NEAR(ext.EffectiveJoints(Eigen::Vector2d(0, 0), ctx, e)(1), 1e-5 * tau(1), 1e-15);
+  // The IK corrector's inverse, with a torque that depends on the joints themselves.
+  const Eigen::Vector2d q_eff(0.3, -0.7);
+  EXPECT_LT((ext.EffectiveJoints(ext.ReadJointsFor(q_eff, ctx, e), ctx, e) - q_eff).norm(), 1e-12);
 }
 
 TEST(JointEffects, ThermalScalesTheArm) {
