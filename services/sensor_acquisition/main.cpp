@@ -8,10 +8,16 @@
 // unlimited) from mt19937_64(S·1000 + 3), each block then measured in order from the same
 // generator. Sensor time starts at --start-utime and advances 1/rate per pose; --speed paces
 // it against the wall clock (1: real time, 0: as fast as possible).
-// Sensor-level IMU/POSITION streams come with the sensor-level simulator.
+// Sensor-level IMU/POSITION streams from the simulator come with the sensor-level simulator.
+//
+// Source `replay FILE`: a raw-stream CSV in the BROAD layout (sources.hpp) published as IMU (every
+// row) and POSITION (decimated to --position-rate), utime from the file, paced by --speed (1: real
+// time, 0: as fast as possible). A real sensor driver implements rcal::sensors::SensorSource.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
+#include <cstdio>
+#include <optional>
 #include <thread>
 
 #include "rcal/io/robot_urdf.hpp"
@@ -21,6 +27,56 @@
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/health.hpp"
 #include "rcal/transport/lcm_transport.hpp"
+#include "sources.hpp"
+
+namespace {
+
+// Publishes a source's samples, pacing recorded ones by utime against the wall clock.
+int RunSource(rcal::sensors::SensorSource& source, rcal::transport::Transport& t, double speed) {
+  using namespace rcal;
+  namespace ch = transport::channels;
+  transport::Health health("sensor_acquisition");
+  spdlog::info("sensor_acquisition: {}, speed {}", source.Describe(), speed);
+  std::optional<int64_t> utime0;
+  long long wall0 = 0;
+  int64_t published = 0;
+  while (!services::StopRequested() && !source.Finished()) {
+    const auto e = source.Next(100);
+    if (!e) continue;
+    const int64_t utime = sensors::Utime(*e);
+    if (!utime0) {
+      utime0 = utime;
+      wall0 = services::MonotonicMicros();
+    }
+    if (source.Recorded() && speed > 0) {
+      const long long due = wall0 + static_cast<long long>((utime - *utime0) / speed);
+      while (!services::StopRequested()) {
+        const long long now = services::MonotonicMicros();
+        if (now >= due) break;
+        std::this_thread::sleep_for(std::chrono::microseconds(std::min(due - now, 50'000LL)));
+      }
+    }
+    bool ok = false;
+    if (const auto* imu = std::get_if<transport::ImuSample>(&*e))
+      ok = t.Publish(ch::kImu, transport::ToMessage(*imu));
+    else if (const auto* pos = std::get_if<transport::PositionSample>(&*e))
+      ok = t.Publish(ch::kPosition, transport::ToMessage(*pos));
+    else
+      ok = t.Publish(ch::kJoints, std::get<joint_state_t>(*e));
+    if (ok) {
+      health.Published();
+      ++published;
+    } else {
+      health.Error("publish failed at utime " + std::to_string(utime));
+    }
+    health.Tick(utime, t);
+    t.HandleTimeout(0);  // keeps LCM's receive queue empty
+  }
+  spdlog::info("done: {} samples published", published);
+  return 0;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   using namespace rcal;
@@ -36,8 +92,10 @@ int main(int argc, char** argv) {
       "Source sim: the simulated GRB3016 (Table 3 errors) publishes JOINTS and POSE_MEASUREMENT "
       "per still pose, HEALTH at 1 Hz of sensor time.\n"
       "LCM URL: --lcm-url, else $RCAL_LCM_URL, else udpm://239.255.76.67:7667?ttl=0."};
-  app.add_option("--source", source, "sim (replay and drivers come later)")
-      ->check(CLI::IsMember({"sim"}))
+  std::string replay_file;
+  rcal::sensors::RawCsvReplaySettings replay;
+  app.add_option("--source", source, "sim | replay (FILE: a raw-stream CSV, BROAD layout)")
+      ->check(CLI::IsMember({"sim", "replay"}))
       ->capture_default_str();
   app.add_option("--robot", robot_path, "robot YAML or URDF")->capture_default_str();
   app.add_option("--seed", seed, "random seed (the offline experiment's)")->capture_default_str();
@@ -56,11 +114,33 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_flag("--position-only", position_only, "position-only measurements");
   app.add_option("--lcm-url", lcm_url, "LCM URL");
+  app.add_option("file", replay_file,
+                 "replay: the raw-stream CSV (t_s, gyr_*, acc_*, mag_*, pos_*)");
+  app.add_option("--position-rate", replay.position_rate,
+                 "replay: POSITION rate [Hz] (0: every row)")
+      ->capture_default_str();
+  app.add_option("--mag-scale", replay.mag_scale, "replay: magnetometer file unit → T")
+      ->capture_default_str();
+  app.add_option("--position-sigma", replay.position_sigma,
+                 "replay: σ per axis in the POSITION covariance [m]")
+      ->capture_default_str();
+  app.add_option("--max-rows", replay.max_rows, "replay: rows to publish (0: all)")
+      ->capture_default_str();
+  app.add_option("--utime-offset", replay.utime_offset, "replay: added to every utime [µs]")
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
+  if (source == "replay" && replay_file.empty()) {
+    std::fprintf(stderr, "sensor_acquisition: --source replay needs FILE\n");
+    return 2;
+  }
 
   try {
     services::InstallStopHandlers();
     transport::LcmTransport t(lcm_url);
+    if (source == "replay") {
+      sensors::RawCsvReplaySource src(services::RepoPath(replay_file), replay);
+      return RunSource(src, t, speed);
+    }
     const auto robot = io::LoadRobot(services::RepoPath(robot_path));
     const auto& model = robot.model;
     const Eigen::VectorXd x_true = sim::Table3Errors(model);

@@ -1,0 +1,165 @@
+// The sensor-fusion filters as pipeline nodes: message checks and conversions for the raw sensor
+// streams (IMU, POSITION) and the estimates (ORIENTATION, TOOL_POSITION), and the two nodes the
+// orientation_kf and position_kf processes run. A node owns a library filter and a Health, is
+// driven only by messages on a Transport (so the same code runs over UDP multicast, memq:// in
+// tests and benchmarks, or a log), and runs the filter on sensor time t = utime · 1e-6 s.
+//
+// Bad input is rejected, counted in HEALTH with a reason naming the field, and leaves the filter
+// untouched: a message that does not decode (wrong type, truncated), non-finite values, a
+// non-unit quaternion, a utime not after the last one of the same stream (duplicate or out of
+// order), an IMU sample without magnetometer (the orientation KF needs it).
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <string>
+
+#include "rcal/estimation/orientation_kf.hpp"
+#include "rcal/estimation/position_kf.hpp"
+#include "rcal/imu_sample_t.hpp"
+#include "rcal/orientation_estimate_t.hpp"
+#include "rcal/position_sample_t.hpp"
+#include "rcal/tool_position_estimate_t.hpp"
+#include "rcal/transport/health.hpp"
+#include "rcal/transport/transport.hpp"
+
+namespace rcal::transport {
+
+// ---- raw sensor samples -----------------------------------------------------------------------
+
+struct ImuSample {
+  int64_t utime = 0;  ///< [µs]
+  int32_t sensor_id = 0;
+  Eigen::Vector3d gyro_B = Eigen::Vector3d::Zero();  ///< [rad/s], imu axes
+  Eigen::Vector3d f_B = Eigen::Vector3d::Zero();     ///< specific force [m/s²], imu axes
+  bool has_mag = false;                              ///< m_B valid
+  Eigen::Vector3d m_B = Eigen::Vector3d::Zero();     ///< magnetic field [T], imu axes
+};
+
+struct PositionSample {
+  int64_t utime = 0;  ///< [µs]
+  int32_t marker_id = 0;
+  Eigen::Vector3d p = Eigen::Vector3d::Zero();           ///< [m]
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  ///< [m²]
+};
+
+imu_sample_t ToMessage(const ImuSample& s);
+/// Checks finite gyro and accel, finite mag when has_mag.
+std::optional<ImuSample> ImuFromMessage(const imu_sample_t& msg, std::string* error);
+
+position_sample_t ToMessage(const PositionSample& s);
+/// Checks finite p and a finite, symmetric covariance with a non-negative diagonal.
+std::optional<PositionSample> PositionFromMessage(const position_sample_t& msg, std::string* error);
+
+// ---- estimates --------------------------------------------------------------------------------
+
+/// The orientation KF's current estimate (q_EB = q_EI, attitude covariance, gyro bias).
+orientation_estimate_t ToOrientationEstimate(const estimation::OrientationKf& kf, int64_t utime);
+/// Message → R_EI. Checks finite values and |q| within 1e-6 of 1 (renormalised).
+std::optional<Eigen::Matrix3d> RotationFromMessage(const orientation_estimate_t& msg,
+                                                   std::string* error);
+
+/// The position KF's current estimate: p, v and the 6×6 covariance of [p; v].
+tool_position_estimate_t ToToolPositionEstimate(const estimation::PositionKf& kf, int64_t utime);
+
+/// Sensor time [s] of a utime [µs]: the one conversion every filter node and offline reference
+/// uses, so that both feed the filter bit-identical times.
+inline double SensorSeconds(int64_t utime) {
+  return static_cast<double>(utime) * 1e-6;
+}
+
+// ---- nodes ------------------------------------------------------------------------------------
+
+/// IMU → OrientationKf → ORIENTATION (one estimate per accepted IMU sample, once initialised),
+/// HEALTH at 1 Hz of sensor time.
+class OrientationKfNode {
+ public:
+  struct Options {
+    std::string name = "orientation_kf";  ///< process name in HEALTH
+    int32_t sensor_id = 0;                ///< other IMUs' samples are ignored (not rejected)
+    std::string imu_channel = "IMU";
+    std::string orientation_channel = "ORIENTATION";
+    std::string health_channel = "HEALTH";
+  };
+  OrientationKfNode(Transport& t, const estimation::OrientationKfSettings& settings,
+                    Options options);
+  OrientationKfNode(Transport& t, const estimation::OrientationKfSettings& settings)
+      : OrientationKfNode(t, settings, Options{}) {}
+
+  /// Handles one IMU message (what the subscription calls; public for tests).
+  void OnImu(const imu_sample_t& msg);
+  /// Handles bytes on the IMU channel that did not decode.
+  void OnUndecodable(const std::string& reason);
+
+  const estimation::OrientationKf& filter() const { return kf_; }
+  const Health& health() const { return health_; }
+
+ private:
+  void Reject(const std::string& reason, int64_t utime);
+  Transport& t_;
+  Options o_;
+  estimation::OrientationKf kf_;
+  Health health_;
+  std::optional<int64_t> last_utime_;
+};
+
+/// IMU + ORIENTATION + POSITION → PositionKf → TOOL_POSITION, HEALTH at 1 Hz of sensor time.
+///
+/// The accelerometer of IMU sample k needs the orientation estimate at the same utime, which
+/// arrives later from orientation_kf: accelerometer samples wait until their ORIENTATION comes
+/// (matched by utime; an accelerometer sample whose orientation never comes is dropped when a
+/// later orientation arrives). Position samples wait until the orientation stream has reached
+/// their utime (or, without orientations, until the IMU stream is `orientation_wait_us` past
+/// them), so updates are applied in sensor-time order, accelerometer before position at equal
+/// utime, whatever order the messages arrive in. A position sample that comes after a later
+/// update was applied is rejected as out of order. The position sensor frame is taken as the
+/// orientation's earth frame (the filter's convention). One TOOL_POSITION per applied update,
+/// once initialised.
+class PositionKfNode {
+ public:
+  struct Options {
+    std::string name = "position_kf";
+    int32_t sensor_id = 0;
+    int32_t marker_id = 0;  ///< other markers' samples are ignored (not rejected)
+    int64_t orientation_wait_us = 1'000'000;
+    size_t max_pending = 10'000;  ///< pending accelerometer samples kept at most
+    std::string imu_channel = "IMU";
+    std::string orientation_channel = "ORIENTATION";
+    std::string position_channel = "POSITION";
+    std::string tool_position_channel = "TOOL_POSITION";
+    std::string health_channel = "HEALTH";
+  };
+  PositionKfNode(Transport& t, const estimation::PositionKfSettings& settings, Options options);
+  PositionKfNode(Transport& t, const estimation::PositionKfSettings& settings)
+      : PositionKfNode(t, settings, Options{}) {}
+
+  void OnImu(const imu_sample_t& msg);
+  void OnOrientation(const orientation_estimate_t& msg);
+  void OnPosition(const position_sample_t& msg);
+  void OnUndecodable(const std::string& reason);
+
+  const estimation::PositionKf& filter() const { return kf_; }
+  const Health& health() const { return health_; }
+  /// Accelerometer samples dropped because their orientation never came.
+  int64_t unpaired_accel() const { return unpaired_accel_; }
+
+ private:
+  void Reject(const std::string& reason);
+  void Flush(int64_t watermark);
+  void Applied(int64_t utime);
+  Transport& t_;
+  Options o_;
+  estimation::PositionKf kf_;
+  Health health_;
+  std::optional<int64_t> last_imu_, last_orientation_, last_position_, last_applied_;
+  int64_t latest_ = 0;
+  std::map<int64_t, Eigen::Vector3d> pending_accel_;  // utime → f_B
+  // Ready accelerometer updates (with their orientation) and waiting position samples.
+  std::multimap<int64_t, std::pair<Eigen::Vector3d, Eigen::Matrix3d>> ready_accel_;
+  std::multimap<int64_t, Eigen::Vector3d> pending_position_;
+  int64_t unpaired_accel_ = 0;
+};
+
+}  // namespace rcal::transport

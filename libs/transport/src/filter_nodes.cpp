@@ -1,0 +1,304 @@
+#include "rcal/transport/filter_nodes.hpp"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+
+namespace rcal::transport {
+namespace {
+
+template <typename T>
+std::optional<T> Fail(std::string* error, const std::string& what) {
+  if (error) *error = what;
+  return std::nullopt;
+}
+
+bool Finite3(const double* v) {
+  return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]);
+}
+
+Eigen::Vector3d V3(const double* v) {
+  return Eigen::Vector3d(v[0], v[1], v[2]);
+}
+
+void Put3(const Eigen::Vector3d& v, double* out) {
+  for (int i = 0; i < 3; ++i) out[i] = v(i);
+}
+
+std::string NotAfter(const char* field, int64_t utime, int64_t last) {
+  return std::string(field) + ": " + std::to_string(utime) + " is not after the last sample (" +
+         std::to_string(last) + ")";
+}
+
+}  // namespace
+
+// ---- raw sensor samples -----------------------------------------------------------------------
+
+imu_sample_t ToMessage(const ImuSample& s) {
+  imu_sample_t m;
+  m.utime = s.utime;
+  m.sensor_id = s.sensor_id;
+  Put3(s.gyro_B, m.gyro);
+  Put3(s.f_B, m.accel);
+  m.has_mag = s.has_mag;
+  Put3(s.has_mag ? s.m_B : Eigen::Vector3d::Zero(), m.mag);
+  return m;
+}
+
+std::optional<ImuSample> ImuFromMessage(const imu_sample_t& msg, std::string* error) {
+  if (!Finite3(msg.gyro)) return Fail<ImuSample>(error, "imu_sample.gyro: not finite");
+  if (!Finite3(msg.accel)) return Fail<ImuSample>(error, "imu_sample.accel: not finite");
+  if (msg.has_mag && !Finite3(msg.mag)) return Fail<ImuSample>(error, "imu_sample.mag: not finite");
+  ImuSample s;
+  s.utime = msg.utime;
+  s.sensor_id = msg.sensor_id;
+  s.gyro_B = V3(msg.gyro);
+  s.f_B = V3(msg.accel);
+  s.has_mag = msg.has_mag;
+  if (msg.has_mag) s.m_B = V3(msg.mag);
+  return s;
+}
+
+position_sample_t ToMessage(const PositionSample& s) {
+  position_sample_t m;
+  m.utime = s.utime;
+  m.marker_id = s.marker_id;
+  Put3(s.p, m.p);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) m.covariance[3 * r + c] = s.covariance(r, c);
+  return m;
+}
+
+std::optional<PositionSample> PositionFromMessage(const position_sample_t& msg,
+                                                  std::string* error) {
+  if (!Finite3(msg.p)) return Fail<PositionSample>(error, "position_sample.p: not finite");
+  PositionSample s;
+  s.utime = msg.utime;
+  s.marker_id = msg.marker_id;
+  s.p = V3(msg.p);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) {
+      const double v = msg.covariance[3 * r + c];
+      if (!std::isfinite(v))
+        return Fail<PositionSample>(error, "position_sample.covariance: not finite");
+      s.covariance(r, c) = v;
+    }
+  for (int i = 0; i < 3; ++i)
+    if (s.covariance(i, i) < 0)
+      return Fail<PositionSample>(error, "position_sample.covariance: negative variance");
+  if ((s.covariance - s.covariance.transpose()).cwiseAbs().maxCoeff() >
+      1e-9 * std::max(1e-30, s.covariance.cwiseAbs().maxCoeff()))
+    return Fail<PositionSample>(error, "position_sample.covariance: not symmetric");
+  return s;
+}
+
+// ---- estimates --------------------------------------------------------------------------------
+
+orientation_estimate_t ToOrientationEstimate(const estimation::OrientationKf& kf, int64_t utime) {
+  orientation_estimate_t m;
+  m.utime = utime;
+  for (int i = 0; i < 4; ++i) m.q_EI[i] = kf.q_EB()(i);
+  const Eigen::Matrix3d P = kf.attitude_covariance();
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) m.covariance[3 * r + c] = P(r, c);
+  Put3(kf.bias_B(), m.gyro_bias);
+  return m;
+}
+
+std::optional<Eigen::Matrix3d> RotationFromMessage(const orientation_estimate_t& msg,
+                                                   std::string* error) {
+  Eigen::Vector4d q(msg.q_EI[0], msg.q_EI[1], msg.q_EI[2], msg.q_EI[3]);
+  if (!q.allFinite()) return Fail<Eigen::Matrix3d>(error, "orientation_estimate.q_EI: not finite");
+  if (std::abs(q.norm() - 1.0) > 1e-6)
+    return Fail<Eigen::Matrix3d>(
+        error, "orientation_estimate.q_EI: norm " + std::to_string(q.norm()) + " is not 1");
+  q.normalize();
+  return Eigen::Quaterniond(q(0), q(1), q(2), q(3)).toRotationMatrix();
+}
+
+tool_position_estimate_t ToToolPositionEstimate(const estimation::PositionKf& kf, int64_t utime) {
+  tool_position_estimate_t m;
+  m.utime = utime;
+  Put3(kf.p_WM_W(), m.p);
+  Put3(kf.v_W(), m.v);
+  // State order per axis [p, V, A] (x = [p_x V_x A_x p_y ...]); [p; v] indices:
+  const int idx[6] = {0, 3, 6, 1, 4, 7};
+  for (int r = 0; r < 6; ++r)
+    for (int c = 0; c < 6; ++c) m.covariance[6 * r + c] = kf.P()(idx[r], idx[c]);
+  return m;
+}
+
+// ---- orientation node -------------------------------------------------------------------------
+
+OrientationKfNode::OrientationKfNode(Transport& t,
+                                     const estimation::OrientationKfSettings& settings,
+                                     Options options)
+    : t_(t), o_(std::move(options)), kf_(settings), health_(o_.name) {
+  t_.Subscribe<imu_sample_t>(
+      o_.imu_channel, [this](const imu_sample_t& m) { OnImu(m); },
+      [this](const std::string& e) { OnUndecodable(e); });
+}
+
+void OrientationKfNode::Reject(const std::string& reason, int64_t utime) {
+  health_.Rejected(reason);
+  health_.Tick(last_utime_.value_or(utime), t_, o_.health_channel);
+}
+
+void OrientationKfNode::OnUndecodable(const std::string& reason) {
+  health_.Received();
+  health_.Rejected(reason);
+  if (last_utime_) health_.Tick(*last_utime_, t_, o_.health_channel);
+}
+
+void OrientationKfNode::OnImu(const imu_sample_t& msg) {
+  health_.Received();
+  if (msg.sensor_id != o_.sensor_id) return;
+  std::string error;
+  const auto s = ImuFromMessage(msg, &error);
+  if (!s) return Reject(error, msg.utime);
+  if (!s->has_mag)
+    return Reject("imu_sample.has_mag: false (the orientation KF needs the magnetometer)",
+                  msg.utime);
+  if (last_utime_ && msg.utime <= *last_utime_)
+    return Reject(NotAfter("imu_sample.utime", msg.utime, *last_utime_), msg.utime);
+  const auto status = kf_.Update(SensorSeconds(msg.utime), s->gyro_B, s->f_B, s->m_B);
+  if (!status) return Reject("imu_sample: " + status.error(), msg.utime);
+  last_utime_ = msg.utime;
+  if (kf_.initialized() &&
+      t_.Publish(o_.orientation_channel, ToOrientationEstimate(kf_, msg.utime)))
+    health_.Published();
+  health_.Tick(msg.utime, t_, o_.health_channel);
+}
+
+// ---- position node ----------------------------------------------------------------------------
+
+PositionKfNode::PositionKfNode(Transport& t, const estimation::PositionKfSettings& settings,
+                               Options options)
+    : t_(t), o_(std::move(options)), kf_(settings), health_(o_.name) {
+  auto undecodable = [this](const std::string& e) { OnUndecodable(e); };
+  t_.Subscribe<imu_sample_t>(
+      o_.imu_channel, [this](const imu_sample_t& m) { OnImu(m); }, undecodable);
+  t_.Subscribe<orientation_estimate_t>(
+      o_.orientation_channel, [this](const orientation_estimate_t& m) { OnOrientation(m); },
+      undecodable);
+  t_.Subscribe<position_sample_t>(
+      o_.position_channel, [this](const position_sample_t& m) { OnPosition(m); }, undecodable);
+}
+
+void PositionKfNode::Reject(const std::string& reason) {
+  health_.Rejected(reason);
+  health_.Tick(latest_, t_, o_.health_channel);
+}
+
+void PositionKfNode::OnUndecodable(const std::string& reason) {
+  health_.Received();
+  Reject(reason);
+}
+
+void PositionKfNode::OnImu(const imu_sample_t& msg) {
+  health_.Received();
+  if (msg.sensor_id != o_.sensor_id) return;
+  std::string error;
+  const auto s = ImuFromMessage(msg, &error);
+  if (!s) return Reject(error);
+  if (last_imu_ && msg.utime <= *last_imu_)
+    return Reject(NotAfter("imu_sample.utime", msg.utime, *last_imu_));
+  last_imu_ = msg.utime;
+  latest_ = std::max(latest_, msg.utime);
+  pending_accel_[msg.utime] = s->f_B;
+  while (pending_accel_.size() > o_.max_pending) {
+    pending_accel_.erase(pending_accel_.begin());
+    ++unpaired_accel_;
+  }
+  // Without orientations, positions still go in after orientation_wait_us of IMU time.
+  Flush(std::max(last_orientation_.value_or(INT64_MIN), msg.utime - o_.orientation_wait_us));
+}
+
+void PositionKfNode::OnOrientation(const orientation_estimate_t& msg) {
+  health_.Received();
+  std::string error;
+  const auto R = RotationFromMessage(msg, &error);
+  if (!R) return Reject(error);
+  if (last_orientation_ && msg.utime <= *last_orientation_)
+    return Reject(NotAfter("orientation_estimate.utime", msg.utime, *last_orientation_));
+  last_orientation_ = msg.utime;
+  latest_ = std::max(latest_, msg.utime);
+  // Accelerometer samples before this orientation never got theirs: drop them.
+  auto it = pending_accel_.begin();
+  while (it != pending_accel_.end() && it->first < msg.utime) {
+    it = pending_accel_.erase(it);
+    ++unpaired_accel_;
+  }
+  if (it != pending_accel_.end() && it->first == msg.utime) {
+    ready_accel_.emplace(msg.utime, std::make_pair(it->second, *R));
+    pending_accel_.erase(it);
+  }
+  Flush(std::max(msg.utime, last_imu_ ? *last_imu_ - o_.orientation_wait_us
+                                      : static_cast<int64_t>(INT64_MIN)));
+}
+
+void PositionKfNode::OnPosition(const position_sample_t& msg) {
+  health_.Received();
+  if (msg.marker_id != o_.marker_id) return;
+  std::string error;
+  const auto s = PositionFromMessage(msg, &error);
+  if (!s) return Reject(error);
+  if (last_position_ && msg.utime <= *last_position_)
+    return Reject(NotAfter("position_sample.utime", msg.utime, *last_position_));
+  if (last_applied_ && msg.utime < *last_applied_)
+    return Reject("position_sample.utime: " + std::to_string(msg.utime) +
+                  " came after the filter reached " + std::to_string(*last_applied_));
+  last_position_ = msg.utime;
+  latest_ = std::max(latest_, msg.utime);
+  pending_position_.emplace(msg.utime, s->p);
+  Flush(std::max(last_orientation_.value_or(INT64_MIN), last_imu_
+                                                            ? *last_imu_ - o_.orientation_wait_us
+                                                            : static_cast<int64_t>(INT64_MIN)));
+}
+
+void PositionKfNode::Applied(int64_t utime) {
+  last_applied_ = utime;
+  if (kf_.initialized() && t_.Publish(o_.tool_position_channel, ToToolPositionEstimate(kf_, utime)))
+    health_.Published();
+  health_.Tick(utime, t_, o_.health_channel);
+}
+
+void PositionKfNode::Flush(int64_t watermark) {
+  // Merge the two queues in utime order, accelerometer first at equal utime.
+  for (;;) {
+    const bool has_a = !ready_accel_.empty() && ready_accel_.begin()->first <= watermark;
+    const bool has_p = !pending_position_.empty() && pending_position_.begin()->first <= watermark;
+    if (!has_a && !has_p) break;
+    if (has_a && (!has_p || ready_accel_.begin()->first <= pending_position_.begin()->first)) {
+      const auto [utime, fr] = *ready_accel_.begin();
+      ready_accel_.erase(ready_accel_.begin());
+      if (last_applied_ && utime < *last_applied_) {
+        Reject("imu_sample.utime: " + std::to_string(utime) + " came after the filter reached " +
+               std::to_string(*last_applied_));
+        continue;
+      }
+      const auto status = kf_.UpdateAccel(SensorSeconds(utime), fr.first, fr.second);
+      if (!status) {
+        Reject("imu_sample: " + status.error());
+        continue;
+      }
+      Applied(utime);
+    } else {
+      const auto [utime, p] = *pending_position_.begin();
+      pending_position_.erase(pending_position_.begin());
+      if (last_applied_ && utime < *last_applied_) {
+        Reject("position_sample.utime: " + std::to_string(utime) +
+               " came after the filter reached " + std::to_string(*last_applied_));
+        continue;
+      }
+      const auto status = kf_.UpdatePosition(SensorSeconds(utime), p);
+      if (!status) {
+        Reject("position_sample: " + status.error());
+        continue;
+      }
+      Applied(utime);
+    }
+  }
+}
+
+}  // namespace rcal::transport

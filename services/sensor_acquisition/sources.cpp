@@ -1,0 +1,72 @@
+#include "sources.hpp"
+
+#include <cmath>
+#include <limits>
+
+#include "rcal/io/csv_table.hpp"
+
+namespace rcal::sensors {
+
+int64_t Utime(const SensorEvent& e) {
+  return std::visit([](const auto& s) -> int64_t { return s.utime; }, e);
+}
+
+RawCsvReplaySource::RawCsvReplaySource(const std::string& path,
+                                       const RawCsvReplaySettings& settings)
+    : path_(path) {
+  const io::CsvTable table = io::CsvTable::Load(path);
+  const Eigen::VectorXd t = table.Column("t_s");
+  const char* imu_columns[9] = {"gyr_x", "gyr_y", "gyr_z", "acc_x", "acc_y",
+                                "acc_z", "mag_x", "mag_y", "mag_z"};
+  std::vector<Eigen::VectorXd> imu;
+  for (const char* c : imu_columns) imu.push_back(table.Column(c));
+  const bool has_pos = table.Has("pos_x") && table.Has("pos_y") && table.Has("pos_z");
+  Eigen::VectorXd px, py, pz;
+  if (has_pos) {
+    px = table.Column("pos_x");
+    py = table.Column("pos_y");
+    pz = table.Column("pos_z");
+  }
+  const int rows = settings.max_rows > 0
+                       ? static_cast<int>(std::min<int64_t>(settings.max_rows, table.rows()))
+                       : table.rows();
+  const double period = settings.position_rate > 0 ? 1.0 / settings.position_rate : 0.0;
+  double next_pos_t = -std::numeric_limits<double>::infinity();
+  const Eigen::Matrix3d cov =
+      settings.position_sigma * settings.position_sigma * Eigen::Matrix3d::Identity();
+  for (int k = 0; k < rows; ++k) {
+    const int64_t utime = std::llround(t(k) * 1e6) + settings.utime_offset;
+    transport::ImuSample s;
+    s.utime = utime;
+    s.sensor_id = settings.sensor_id;
+    s.gyro_B = Eigen::Vector3d(imu[0](k), imu[1](k), imu[2](k));
+    s.f_B = Eigen::Vector3d(imu[3](k), imu[4](k), imu[5](k));
+    s.has_mag = true;
+    s.m_B = settings.mag_scale * Eigen::Vector3d(imu[6](k), imu[7](k), imu[8](k));
+    events_.push_back(s);
+    ++imu_count_;
+    if (!has_pos) continue;
+    const Eigen::Vector3d p(px(k), py(k), pz(k));
+    if (!p.allFinite() || t(k) < next_pos_t - 1e-9) continue;
+    next_pos_t = (std::isfinite(next_pos_t) ? next_pos_t : t(k)) + period;
+    transport::PositionSample ps;
+    ps.utime = utime;
+    ps.marker_id = settings.marker_id;
+    ps.p = p;
+    ps.covariance = cov;
+    events_.push_back(ps);
+    ++position_count_;
+  }
+}
+
+std::string RawCsvReplaySource::Describe() const {
+  return "raw-stream CSV " + path_ + " (" + std::to_string(imu_count_) + " IMU, " +
+         std::to_string(position_count_) + " POSITION samples)";
+}
+
+std::optional<SensorEvent> RawCsvReplaySource::Next(int /*timeout_ms*/) {
+  if (Finished()) return std::nullopt;
+  return events_[next_++];
+}
+
+}  // namespace rcal::sensors

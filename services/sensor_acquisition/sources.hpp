@@ -1,0 +1,73 @@
+// Where sensor_acquisition's raw streams come from. A source yields IMU, POSITION and JOINTS
+// samples in sensor-time order with utime from the source; the process publishes them.
+//
+// A real sensor driver implements SensorSource: Next() blocks (up to the timeout) for the next
+// sample from the device, stamps it with the device's own clock (utime [µs], SI units, sensor
+// axes), and Recorded() returns false so the process publishes it at once instead of pacing it.
+// Recorded sources (files) return true and the process paces them by utime (--speed).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "rcal/joint_state_t.hpp"
+#include "rcal/transport/filter_nodes.hpp"
+
+namespace rcal::sensors {
+
+using SensorEvent = std::variant<transport::ImuSample, transport::PositionSample, joint_state_t>;
+
+/// Sensor time of an event [µs].
+int64_t Utime(const SensorEvent& e);
+
+class SensorSource {
+ public:
+  virtual ~SensorSource() = default;
+  /// One line for the log: what the source reads.
+  virtual std::string Describe() const = 0;
+  /// The next sample, or nullopt when none came within `timeout_ms` (live) or the stream ended
+  /// (then Finished() is true).
+  virtual std::optional<SensorEvent> Next(int timeout_ms) = 0;
+  virtual bool Finished() const = 0;
+  /// True for files: the caller paces samples by utime. False for live drivers.
+  virtual bool Recorded() const = 0;
+};
+
+/// A raw-stream CSV in the BROAD layout (../shared/data/broad/README.md): `t_s` [s],
+/// `gyr_x..z` [rad/s], `acc_x..z` [m/s²], `mag_x..z` [file unit, µT in BROAD], optional
+/// `pos_x..z` [m] (NaN where the marker was hidden); other columns are ignored. Each row is one
+/// IMU sample with utime = round(t_s · 1e6) + utime_offset; the position, where finite, is
+/// decimated to `position_rate` (the first finite row, then every 1/position_rate s of file
+/// time) and published after the IMU sample of its row.
+struct RawCsvReplaySettings {
+  double position_rate = 20.0;   ///< [Hz]; 0: every row with a finite position
+  double mag_scale = 1e-6;       ///< file unit → T (BROAD's µT)
+  double position_sigma = 1e-3;  ///< σ per axis in the published covariance [m]
+  int64_t max_rows = 0;          ///< rows to replay (0: all)
+  int64_t utime_offset = 0;      ///< added to every utime [µs]
+  int32_t sensor_id = 0;
+  int32_t marker_id = 0;
+};
+
+class RawCsvReplaySource final : public SensorSource {
+ public:
+  /// Reads the whole file. Throws std::runtime_error naming the file and a missing column.
+  RawCsvReplaySource(const std::string& path, const RawCsvReplaySettings& settings);
+  std::string Describe() const override;
+  std::optional<SensorEvent> Next(int timeout_ms) override;
+  bool Finished() const override { return next_ >= events_.size(); }
+  bool Recorded() const override { return true; }
+  size_t size() const { return events_.size(); }
+
+ private:
+  std::string path_;
+  std::vector<SensorEvent> events_;
+  size_t next_ = 0;
+  int64_t imu_count_ = 0, position_count_ = 0;
+};
+
+}  // namespace rcal::sensors
