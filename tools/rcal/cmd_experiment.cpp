@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "command.hpp"
+#include "experiment_sensors.hpp"
 #include "rcal/identification/batch_lm.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
 #include "rcal/identification/metrics.hpp"
@@ -40,6 +41,9 @@ struct PaperOptions {
   double position_noise_mm = 0.05;
   double orientation_noise_deg = 0.1;
   bool position_only = false;
+  bool sensors = false;   // from raw sensor streams (experiment_sensors.hpp)
+  bool no_sweep = false;  // sensors: skip the robustness sweep
+  bool no_peg = false;    // sensors: skip peg-in-hole
 };
 
 json StatsJson(const PoseErrorStats& s) {
@@ -387,7 +391,24 @@ const RegisterCommand kExperiment(
       paper->add_option("--orientation-noise-deg", o->orientation_noise_deg, "σ per axis [deg]")
           ->capture_default_str();
       paper->add_flag("--position-only", o->position_only, "measure positions only");
-      return [o]() { return RunPaper(*o); };
+      paper->add_flag("--sensors", o->sensors,
+                      "from raw sensor streams: IMU + position sensor at 100 Hz, FQA + KFs, "
+                      "still windows, online EKF, set-up frames, peg-in-hole, robustness sweep");
+      paper->add_flag("--no-sweep", o->no_sweep, "with --sensors: skip the robustness sweep");
+      paper->add_flag("--no-peg", o->no_peg, "with --sensors: skip peg-in-hole");
+      return [o, paper]() {
+        if (!o->sensors) return RunPaper(*o);
+        exp::ReportOptions r;
+        r.robot = o->robot;
+        r.out = paper->count("--out") ? o->out : "out/experiment_sensors";
+        r.json_path = o->json_path;
+        r.seed = o->seed;
+        r.num_cal = o->num_cal;
+        r.num_test = o->num_test;
+        r.sweep = !o->no_sweep;
+        r.peg = !o->no_peg;
+        return exp::RunSensorsExperiment(r);
+      };
     });
 
 }  // namespace

@@ -1,0 +1,153 @@
+// The pose pipeline: raw sensor streams in, one still-pose measurement per still window out —
+// the measurement the EKF identifier consumes (the paper's Sections 3.3–3.4 feeding Section 4).
+//
+// Inputs, in sensor-time order (non-decreasing t across all three streams; ties allowed):
+//   joints   q [rad | m]                          → still detection (StillDetector, joints)
+//   IMU      gyro ω_B [rad/s], specific force f_B [m/s²], field m_B [any fixed unit], body B = I
+//            → OrientationKf (FQA inside) → q_EI; the accelerometer also drives the position KF
+//   position p_WM_W [m], marker in the world (position sensor) frame W → PositionKf
+// Frames. The orientation KF works in the earth frame E (NED by default). The position KF works
+// in W: the accelerometer is brought into W with the current estimate R_WE (SetWorldFromEarth,
+// identity until told) as a_W = R_WE (R_EI f_B + g_E); the position KF is given that
+// acceleration through its own interface (R = I, f' = a_W − g_E), so any R_WE is exact. While the
+// arm stands still a_W ≈ 0 whatever R_WE is, so R_WE only matters while moving.
+//
+// Window. It opens when the joints have been still for StillDetectorSettings::min_duration, then
+// `settle_time` more seconds are skipped (the filters forget the move), and it closes at the
+// first moving joint sample (or Flush()). Over the window, at each IMU sample:
+//   pose       p̄_WM_W, q̄_EI: mean of the filters' outputs (StillWindow: arithmetic mean of
+//              positions, Markley mean of quaternions); q̄ = mean of the joint readings.
+//   covariance of the window mean, from the scatter of the raw measurements the filters accepted:
+//              Σ_p = S_p / N_p, S_p the sample covariance of the position-sensor samples;
+//              Σ_θ = S_θ / N_θ, S_θ that of δθ_i = Log(R_FQA,i R̄_EIᵀ) (earth frame), R_FQA,i the
+//              FQA of sample i (accelerometer and magnetometer both accepted);
+//              each inflated by `covariance_scale` and floored by the `*_floor_sigma`s. With
+//              fewer than `min_raw_samples` raw samples the filters' mean covariance is used
+//              (StillWindow, conservative). The 6×6 covariance is block diagonal [m², rad²].
+// A window is dropped (counted, with the reason) when it has fewer than min_window_samples IMU
+// samples, no accepted position sample, or an IMU gap longer than max_gap.
+// Bad input (non-finite values, wrong joint count, time going backwards) is refused with a
+// Status naming the field and counted; the state is unchanged.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "rcal/estimation/orientation_kf.hpp"
+#include "rcal/estimation/position_kf.hpp"
+#include "rcal/estimation/result.hpp"
+#include "rcal/estimation/still_window.hpp"
+
+namespace rcal::estimation {
+
+struct PosePipelineSettings {
+  /// Orientation KF; defaults suited to a still-and-move program with an Xsens MTi-100 class
+  /// IMU (raw FQA, no low-pass, so the estimate settles within a still stop).
+  OrientationKfSettings orientation = [] {
+    OrientationKfSettings s;
+    s.accel_lowpass_tau = 0.0;
+    s.mag_lowpass_tau = 0.0;
+    // The FQA's own noise at rest (accelerometer 60 µg/√Hz, magnetometer 0.02 µT/√Hz against
+    // a 20 µT horizontal field, 100 Hz), and an attitude process noise that lets the estimate
+    // forget a move within ~0.1 s: the window mean is then the mean of the still samples.
+    s.tilt_sigma = 0.002;             // [rad]
+    s.heading_sigma = 0.01;           // [rad]
+    s.attitude_process_noise = 0.01;  // [rad/√s]
+    return s;
+  }();
+  /// Position KF; position_sigma should be the position sensor's σ per axis [m].
+  PositionKfSettings position = [] {
+    PositionKfSettings s;
+    s.position_sigma = 5e-4;
+    return s;
+  }();
+  StillDetectorSettings still;
+  double settle_time = 0.2;              ///< [s] skipped after the detector declares still
+  int min_window_samples = 20;           ///< IMU samples a window needs [-]
+  int min_raw_samples = 10;              ///< raw samples needed for the scatter covariance [-]
+  double max_gap = 0.2;                  ///< [s] largest IMU gap tolerated inside a window
+  bool use_orientation = true;           ///< false: position-only measurements
+  double covariance_scale = 1.0;         ///< multiplies the window covariance [-]
+  double position_floor_sigma = 0.0;     ///< [m] per axis, added in quadrature
+  double orientation_floor_sigma = 0.0;  ///< [rad] per axis, added in quadrature
+};
+
+/// One still-window pose measurement (the fields of kinematics::PoseMeasurement, plus where it
+/// came from).
+struct StillPose {
+  Eigen::VectorXd q;                                 ///< mean joint reading [rad | m]
+  Eigen::Vector3d p_WM_W = Eigen::Vector3d::Zero();  ///< marker position, world [m]
+  bool has_orientation = true;
+  Eigen::Matrix3d R_EI = Eigen::Matrix3d::Identity();  ///< IMU → earth
+  /// Covariance of [δp_W; δθ_E] (6×6) [m², rad²], or 3×3 [m²] when position only.
+  Eigen::MatrixXd covariance;
+  double t_begin = 0.0, t_end = 0.0;  ///< [s]
+  int imu_samples = 0;                ///< filter outputs averaged
+  int position_samples = 0;           ///< raw position samples accepted in the window
+  int orientation_samples = 0;        ///< raw FQA samples in the orientation scatter
+};
+
+class PosePipeline {
+ public:
+  struct Counters {
+    std::int64_t joint_samples = 0, imu_samples = 0, position_samples = 0;
+    std::int64_t input_rejected = 0;   ///< refused calls (bad input, time order)
+    std::int64_t windows_emitted = 0;  ///< poses produced
+    std::int64_t windows_dropped = 0;  ///< windows without a usable pose
+    std::string last_error;            ///< last refusal or drop reason
+  };
+
+  explicit PosePipeline(const PosePipelineSettings& settings = {});
+  /// Forgets filters, window, pending poses and counters (R_WE is kept).
+  void Reset();
+  /// World ← earth rotation used to bring accelerations into the position frame.
+  void SetWorldFromEarth(const Eigen::Matrix3d& R_WE) { R_WE_ = R_WE; }
+
+  /// Joint reading q [rad | m] at t [s].
+  Status AddJoints(double t, const Eigen::VectorXd& q);
+  /// IMU sample at t [s]: gyro [rad/s], specific force [m/s²], magnetic field (body frame).
+  Status AddImu(double t, const Eigen::Vector3d& gyro_B, const Eigen::Vector3d& f_B,
+                const Eigen::Vector3d& m_B);
+  /// Position-sensor sample p_WM_W [m] at t [s] (the time the position refers to).
+  Status AddPosition(double t, const Eigen::Vector3d& p_WM_W);
+  /// Closes an open window (end of a recording).
+  void Flush();
+  /// Poses completed since the last call (oldest first).
+  std::vector<StillPose> TakePoses();
+
+  const Counters& counters() const { return counters_; }
+  const OrientationKf& orientation_kf() const { return ori_; }
+  const PositionKf& position_kf() const { return pos_; }
+  bool in_window() const { return open_; }
+  const PosePipelineSettings& settings() const { return settings_; }
+
+ private:
+  Status CheckTime(double t, const char* stream);
+  Status Refuse(const std::string& reason);
+  void CloseWindow();
+  void Drop(const std::string& reason);
+
+  PosePipelineSettings settings_;
+  OrientationKf ori_;
+  PositionKf pos_;
+  StillDetector detector_;
+  StillWindow window_;
+  Eigen::Matrix3d R_WE_ = Eigen::Matrix3d::Identity();
+  Counters counters_;
+  std::vector<StillPose> ready_;
+  bool has_t_ = false;
+  double t_last_ = 0.0;
+  int num_joints_ = -1;
+  bool still_ = false;  // detector state after the last joint sample
+  bool open_ = false;   // accumulating a window
+  double t_open_ = 0.0, t_first_ = 0.0, t_last_imu_ = 0.0;
+  bool gap_ = false;
+  Eigen::VectorXd q_sum_;
+  int q_count_ = 0;
+  std::vector<Eigen::Vector3d> raw_p_;
+  std::vector<Eigen::Matrix3d> raw_R_;
+};
+
+}  // namespace rcal::estimation

@@ -1,0 +1,208 @@
+#include "rcal/estimation/pose_pipeline.hpp"
+
+#include <cmath>
+#include <string>
+
+#include "rcal/estimation/fqa.hpp"
+#include "rcal/geometry/so3.hpp"
+
+namespace rcal::estimation {
+
+namespace {
+bool Finite(const Eigen::VectorXd& v) {
+  return v.allFinite();
+}
+}  // namespace
+
+PosePipeline::PosePipeline(const PosePipelineSettings& settings)
+    : settings_(settings),
+      ori_(settings.orientation),
+      pos_(settings.position),
+      detector_(settings.still) {}
+
+void PosePipeline::Reset() {
+  ori_.Reset();
+  pos_.Reset();
+  detector_.Reset();
+  window_.Reset();
+  counters_ = {};
+  ready_.clear();
+  has_t_ = false;
+  t_last_ = 0.0;
+  num_joints_ = -1;
+  still_ = open_ = gap_ = false;
+  q_count_ = 0;
+  raw_p_.clear();
+  raw_R_.clear();
+}
+
+Status PosePipeline::Refuse(const std::string& reason) {
+  ++counters_.input_rejected;
+  counters_.last_error = reason;
+  return Status::Error(reason);
+}
+
+Status PosePipeline::CheckTime(double t, const char* stream) {
+  if (!std::isfinite(t)) return Refuse(std::string(stream) + ".t: not finite");
+  if (has_t_ && t < t_last_)
+    return Refuse(std::string(stream) + ".t: " + std::to_string(t) +
+                  " s is before the last sample (" + std::to_string(t_last_) +
+                  " s): streams must come in sensor-time order");
+  return Status::Ok();
+}
+
+Status PosePipeline::AddJoints(double t, const Eigen::VectorXd& q) {
+  if (Status s = CheckTime(t, "joints"); !s) return s;
+  if (q.size() == 0 || !Finite(q)) return Refuse("joints.q: empty or not finite");
+  if (num_joints_ >= 0 && q.size() != num_joints_)
+    return Refuse("joints.q: " + std::to_string(q.size()) + " joints, expected " +
+                  std::to_string(num_joints_));
+  const Result<bool> still = detector_.Update(t, q, Eigen::Vector3d::Zero(),
+                                              Eigen::Vector3d(0, 0, -settings_.still.gravity));
+  if (!still) return Refuse("joints: " + still.error());
+  num_joints_ = static_cast<int>(q.size());
+  has_t_ = true;
+  t_last_ = t;
+  ++counters_.joint_samples;
+  still_ = *still;
+  if (open_ && !still_) CloseWindow();
+  if (!open_ && still_ &&
+      t >= detector_.still_since() + settings_.still.min_duration + settings_.settle_time) {
+    open_ = true;
+    gap_ = false;
+    t_open_ = t;
+    t_first_ = t_last_imu_ = t;
+    window_.Reset();
+    q_sum_ = Eigen::VectorXd::Zero(q.size());
+    q_count_ = 0;
+    raw_p_.clear();
+    raw_R_.clear();
+  }
+  if (open_) {
+    q_sum_ += q;
+    ++q_count_;
+  }
+  return Status::Ok();
+}
+
+Status PosePipeline::AddImu(double t, const Eigen::Vector3d& gyro_B, const Eigen::Vector3d& f_B,
+                            const Eigen::Vector3d& m_B) {
+  if (Status s = CheckTime(t, "imu"); !s) return s;
+  if (!gyro_B.allFinite()) return Refuse("imu.gyro: not finite");
+  if (!f_B.allFinite()) return Refuse("imu.accel: not finite");
+  if (!m_B.allFinite()) return Refuse("imu.mag: not finite");
+  if (Status s = ori_.Update(t, gyro_B, f_B, m_B); !s) return Refuse("imu: " + s.error());
+  has_t_ = true;
+  t_last_ = t;
+  ++counters_.imu_samples;
+  if (!ori_.initialized()) return Status::Ok();
+  // Acceleration into the position frame W (see the header): a_W = R_WE (R_EI f + g_E).
+  const Eigen::Matrix3d R_EI = ori_.R_EB();
+  const Eigen::Vector3d g_E_ori =
+      -settings_.orientation.gravity * UpVector(settings_.orientation.earth);
+  const Eigen::Vector3d g_E_pos = -settings_.position.gravity * UpVector(settings_.position.earth);
+  const Eigen::Vector3d a_W = R_WE_ * (R_EI * f_B + g_E_ori);
+  pos_.UpdateAccel(t, a_W - g_E_pos, Eigen::Matrix3d::Identity());
+  if (!open_ || !pos_.initialized()) return Status::Ok();
+  if (t - t_last_imu_ > settings_.max_gap) gap_ = true;
+  t_last_imu_ = t;
+  window_.Add(t, pos_.p_WM_W(), pos_.position_covariance(), ori_.q_EB(),
+              ori_.attitude_covariance());
+  if (ori_.last_accel_used() && ori_.last_mag_used()) {
+    FqaSettings fs;
+    fs.earth = settings_.orientation.earth;
+    fs.m_ref_E = MagneticNorth(fs.earth);
+    const Result<Eigen::Vector4d> q = Fqa(f_B, m_B, fs);
+    if (q) raw_R_.push_back(geometry::QuatToMatrix(*q));
+  }
+  return Status::Ok();
+}
+
+Status PosePipeline::AddPosition(double t, const Eigen::Vector3d& p_WM_W) {
+  if (Status s = CheckTime(t, "position"); !s) return s;
+  if (!p_WM_W.allFinite()) return Refuse("position.p_WM_W: not finite");
+  if (Status s = pos_.UpdatePosition(t, p_WM_W); !s) return Refuse("position: " + s.error());
+  has_t_ = true;
+  t_last_ = t;
+  ++counters_.position_samples;
+  if (open_ && pos_.last_position_accepted()) raw_p_.push_back(p_WM_W);
+  return Status::Ok();
+}
+
+void PosePipeline::Flush() {
+  if (open_) CloseWindow();
+}
+
+std::vector<StillPose> PosePipeline::TakePoses() {
+  std::vector<StillPose> out;
+  out.swap(ready_);
+  return out;
+}
+
+void PosePipeline::Drop(const std::string& reason) {
+  ++counters_.windows_dropped;
+  counters_.last_error = reason;
+}
+
+void PosePipeline::CloseWindow() {
+  open_ = false;
+  const std::string when = "window at " + std::to_string(t_open_) + " s: ";
+  if (window_.size() < settings_.min_window_samples)
+    return Drop(when + std::to_string(window_.size()) + " IMU samples, need " +
+                std::to_string(settings_.min_window_samples));
+  if (gap_) return Drop(when + "IMU gap longer than max_gap");
+  if (raw_p_.empty()) return Drop(when + "no accepted position sample");
+  const Result<WindowPose> wp = window_.Estimate();
+  if (!wp) return Drop(when + wp.error());
+
+  StillPose pose;
+  pose.q = q_sum_ / std::max(1, q_count_);
+  pose.p_WM_W = wp->p_WM_W;
+  pose.R_EI = geometry::QuatToMatrix(wp->q_EB);
+  pose.has_orientation = settings_.use_orientation;
+  pose.t_begin = wp->t_begin;
+  pose.t_end = wp->t_end;
+  pose.imu_samples = wp->samples;
+  pose.position_samples = static_cast<int>(raw_p_.size());
+  pose.orientation_samples = static_cast<int>(raw_R_.size());
+
+  // Covariance of the window mean from the raw scatter (header).
+  Eigen::Matrix3d C_p = wp->P_p;
+  const int n_p = static_cast<int>(raw_p_.size());
+  if (n_p >= std::max(2, settings_.min_raw_samples)) {
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (const auto& p : raw_p_) mean += p;
+    mean /= n_p;
+    Eigen::Matrix3d S = Eigen::Matrix3d::Zero();
+    for (const auto& p : raw_p_) S += (p - mean) * (p - mean).transpose();
+    C_p = S / (n_p - 1) / n_p;
+  }
+  Eigen::Matrix3d C_th = wp->P_theta;
+  const int n_r = static_cast<int>(raw_R_.size());
+  if (n_r >= std::max(2, settings_.min_raw_samples)) {
+    std::vector<Eigen::Vector3d> d;
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (const auto& R : raw_R_) {
+      d.push_back(geometry::Log(R * pose.R_EI.transpose()));
+      mean += d.back();
+    }
+    mean /= n_r;
+    Eigen::Matrix3d S = Eigen::Matrix3d::Zero();
+    for (const auto& v : d) S += (v - mean) * (v - mean).transpose();
+    C_th = S / (n_r - 1) / n_r;
+  }
+  const double s = settings_.covariance_scale;
+  C_p = s * C_p + std::pow(settings_.position_floor_sigma, 2) * Eigen::Matrix3d::Identity();
+  C_th = s * C_th + std::pow(settings_.orientation_floor_sigma, 2) * Eigen::Matrix3d::Identity();
+  if (pose.has_orientation) {
+    pose.covariance = Eigen::MatrixXd::Zero(6, 6);
+    pose.covariance.topLeftCorner<3, 3>() = C_p;
+    pose.covariance.bottomRightCorner<3, 3>() = C_th;
+  } else {
+    pose.covariance = C_p;
+  }
+  ++counters_.windows_emitted;
+  ready_.push_back(std::move(pose));
+}
+
+}  // namespace rcal::estimation

@@ -1,0 +1,120 @@
+// Sensor-level simulation: the truth motion of the tool along a JointTrajectory, and the sensor
+// streams a cell records while the arm moves (joints, IMU, position sensor), sampled on one clock.
+//
+// Truth (model at errors x_true, set-up frames included in x_true):
+//   p_WM_W(t) = model.Forward(q(t), x_true).p_WM_W        marker position, world [m]
+//   R_EI(t)   = model.Forward(q(t), x_true).R_EI          IMU orientation, imu → earth
+//   v_WM_W, a_WM_W: central differences of p_WM_W along the analytic q(t) (step h):
+//     v ≈ (p(t+h) − p(t−h)) / 2h,   a ≈ (p(t+h) − 2p(t) + p(t−h)) / h²       [m/s, m/s²]
+//   ω_I ≈ Log(R_EI(t−h)ᵀ R_EI(t+h)) / 2h    angular rate in the IMU frame [rad/s]
+// Both are O(h²) accurate; q(t) is a quintic, so h = 1 ms gives errors far below sensor noise.
+// The IMU sits at the marker point, so its acceleration in the earth frame is a_E = R_EW a_WM_W
+// (gravity not included; ImuModel adds it). ImuModel's W is this earth frame E (NED).
+//
+// Streams, all at the clock rate (default 100 Hz), sample k at t_k = k / rate:
+//   joints  q(t_k) as read (optionally quantised to the encoder resolution)
+//   IMU     ImuModel(ImuTruth{t_k, R_EI, ω_I, a_E, p_E}) (+ optional magnetic disturbance)
+//   position PositionSensorModel(t_k, p_WM_W) (its frame M = world W by default)
+// Magnetic disturbance (optional): at a seeded random fraction of the still stops, a constant
+// field d_E [µT] (random direction, fixed magnitude) is added in the earth frame for the whole
+// stop, as a ferrous object near that pose would: m_S += R_SI R_EIᵀ d_E.
+// Every draw is seeded: the same settings and seed give the same streams.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <optional>
+#include <random>
+#include <vector>
+
+#include "rcal/kinematics/model.hpp"
+#include "rcal/sim/imu_model.hpp"
+#include "rcal/sim/position_sensor_model.hpp"
+#include "rcal/sim/trajectory.hpp"
+
+namespace rcal::sim {
+
+/// The truth state of the tool at one time.
+struct ToolState {
+  double t = 0.0;                                      ///< [s]
+  Eigen::VectorXd q;                                   ///< joints [rad | m]
+  Eigen::Vector3d p_WM_W = Eigen::Vector3d::Zero();    ///< marker position, world [m]
+  Eigen::Vector3d v_WM_W = Eigen::Vector3d::Zero();    ///< marker velocity, world [m/s]
+  Eigen::Vector3d a_WM_W = Eigen::Vector3d::Zero();    ///< marker acceleration, world [m/s²]
+  Eigen::Matrix3d R_EI = Eigen::Matrix3d::Identity();  ///< IMU → earth
+  Eigen::Vector3d omega_I = Eigen::Vector3d::Zero();   ///< IMU angular rate, IMU frame [rad/s]
+};
+
+/// Truth motion of the marker/IMU for a truth model (model, x_true) along a trajectory.
+class ToolMotionTruth {
+ public:
+  /// `fd_step` h [s] of the central differences. Keeps copies of model, x_true and trajectory.
+  ToolMotionTruth(const kinematics::KinematicModel& model, const Eigen::VectorXd& x_true,
+                  JointTrajectory trajectory, double fd_step = 1e-3);
+  /// The truth state at t [s] (clamped to the trajectory's span, where the arm stands still).
+  ToolState At(double t) const;
+  /// The IMU truth (ImuModel's W = earth E): R_WI = R_EI, a_W = R_EW a_WM_W, p_W = R_EW p_WM_W.
+  ImuTruth Imu(const ToolState& s) const;
+  /// Earth ← world rotation of the truth set-up (the model's earth segment at x_true).
+  const Eigen::Matrix3d& R_EW() const { return R_EW_; }
+  const JointTrajectory& trajectory() const { return trajectory_; }
+  const kinematics::KinematicModel& model() const { return model_; }
+  const Eigen::VectorXd& x_true() const { return x_true_; }
+
+ private:
+  kinematics::KinematicModel model_;
+  Eigen::VectorXd x_true_;
+  JointTrajectory trajectory_;
+  double h_;
+  Eigen::Matrix3d R_EW_;
+};
+
+struct SensorSimSettings {
+  double rate_hz = 100.0;  ///< common clock of the joint, IMU and position streams [Hz]
+  ImuModelSettings imu;    ///< rate_hz is overwritten with the clock rate
+  /// Position sensor; rate_hz should be ≤ the clock rate. Default: 100 Hz, 0.5 mm per axis.
+  PositionSensorSettings position = [] {
+    PositionSensorSettings p;
+    p.rate_hz = 100.0;
+    p.sigma = 5e-4;
+    return p;
+  }();
+  double joint_resolution = 0.0;  ///< encoder quantum [rad]; 0: exact readings
+  bool mag_disturbance = false;
+  double mag_disturbance_uT = 15.0;       ///< |d_E| [µT]
+  double mag_disturbance_fraction = 0.2;  ///< fraction of the still stops disturbed [-]
+};
+
+/// Everything the sensors deliver at one clock tick.
+struct SensorFrame {
+  double t = 0.0;                          ///< [s]
+  Eigen::VectorXd q;                       ///< joints as read [rad | m]
+  ImuSample imu;                           ///< gyro [rad/s], specific force [m/s²], field [µT]
+  std::optional<PositionSample> position;  ///< when the position sensor fired (not dropped)
+  ToolState truth;                         ///< the truth at t (for tests and reports)
+};
+
+/// Steps the clock along the trajectory and samples every sensor.
+class SensorSim {
+ public:
+  SensorSim(const ToolMotionTruth& truth, const SensorSimSettings& settings, std::uint64_t seed);
+  /// The next tick, or nullopt after the end of the trajectory.
+  std::optional<SensorFrame> Next();
+  /// Number of ticks in the whole trajectory.
+  std::int64_t num_ticks() const { return num_ticks_; }
+  /// Still stops given a magnetic disturbance (indices of waypoints).
+  const std::vector<int>& disturbed_stops() const { return disturbed_; }
+  const ImuModel& imu() const { return imu_; }
+  const PositionSensorModel& position() const { return position_; }
+
+ private:
+  const ToolMotionTruth& truth_;
+  SensorSimSettings settings_;
+  ImuModel imu_;
+  PositionSensorModel position_;
+  std::int64_t k_ = 0, num_ticks_ = 0;
+  std::vector<int> disturbed_;
+  std::vector<Eigen::Vector3d> disturbance_E_;  // per waypoint [µT]
+};
+
+}  // namespace rcal::sim

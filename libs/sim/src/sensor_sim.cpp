@@ -1,0 +1,105 @@
+#include "rcal/sim/sensor_sim.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+#include "rcal/geometry/so3.hpp"
+
+namespace rcal::sim {
+
+ToolMotionTruth::ToolMotionTruth(const kinematics::KinematicModel& model,
+                                 const Eigen::VectorXd& x_true, JointTrajectory trajectory,
+                                 double fd_step)
+    : model_(model), x_true_(x_true), trajectory_(std::move(trajectory)), h_(fd_step) {
+  if (x_true_.size() != model_.num_params())
+    throw std::invalid_argument("ToolMotionTruth: x_true has the wrong size");
+  if (!(h_ > 0)) throw std::invalid_argument("ToolMotionTruth: fd_step must be > 0");
+  R_EW_.setIdentity();
+  for (const auto& et : model_.ets(kinematics::Segment::kEarth)) {
+    const double v = et.nominal + (et.param >= 0 ? x_true_(et.param) : 0.0);
+    R_EW_ = R_EW_ * kinematics::EtTransform(et, v).linear();
+  }
+}
+
+ToolState ToolMotionTruth::At(double t) const {
+  ToolState s;
+  s.t = t;
+  Eigen::VectorXd q_m, q_p;
+  trajectory_.Sample(t, s.q);
+  trajectory_.Sample(t - h_, q_m);
+  trajectory_.Sample(t + h_, q_p);
+  const kinematics::ToolPose pose = model_.Forward(s.q, x_true_);
+  const kinematics::ToolPose pm = model_.Forward(q_m, x_true_);
+  const kinematics::ToolPose pp = model_.Forward(q_p, x_true_);
+  s.p_WM_W = pose.p_WM_W;
+  s.R_EI = pose.R_EI;
+  s.v_WM_W = (pp.p_WM_W - pm.p_WM_W) / (2 * h_);
+  s.a_WM_W = (pp.p_WM_W - 2 * pose.p_WM_W + pm.p_WM_W) / (h_ * h_);
+  s.omega_I = geometry::Log(pm.R_EI.transpose() * pp.R_EI) / (2 * h_);
+  return s;
+}
+
+ImuTruth ToolMotionTruth::Imu(const ToolState& s) const {
+  ImuTruth u;
+  u.t = s.t;
+  u.R_WI = s.R_EI;
+  u.omega_I = s.omega_I;
+  u.a_W = R_EW_ * s.a_WM_W;
+  u.p_W = R_EW_ * s.p_WM_W;
+  return u;
+}
+
+namespace {
+ImuModelSettings WithRate(ImuModelSettings s, double rate) {
+  s.rate_hz = rate;
+  return s;
+}
+}  // namespace
+
+SensorSim::SensorSim(const ToolMotionTruth& truth, const SensorSimSettings& settings,
+                     std::uint64_t seed)
+    : truth_(truth),
+      settings_(settings),
+      imu_(WithRate(settings.imu, settings.rate_hz), seed * 7919 + 11),
+      position_(settings.position, seed * 7919 + 13) {
+  if (!(settings_.rate_hz > 0)) throw std::invalid_argument("SensorSim: rate_hz must be > 0");
+  num_ticks_ =
+      static_cast<std::int64_t>(std::floor(truth_.trajectory().duration() * settings_.rate_hz)) + 1;
+  const int n = truth_.trajectory().num_waypoints();
+  disturbance_E_.assign(n, Eigen::Vector3d::Zero());
+  if (settings_.mag_disturbance) {
+    std::mt19937_64 rng(seed * 7919 + 17);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    std::normal_distribution<double> normal(0.0, 1.0);
+    for (int k = 0; k < n; ++k) {
+      const bool on = u(rng) < settings_.mag_disturbance_fraction;
+      Eigen::Vector3d d(normal(rng), normal(rng), normal(rng));
+      if (!on) continue;
+      disturbed_.push_back(k);
+      disturbance_E_[k] = settings_.mag_disturbance_uT * d.normalized();
+    }
+  }
+}
+
+std::optional<SensorFrame> SensorSim::Next() {
+  if (k_ >= num_ticks_) return std::nullopt;
+  SensorFrame f;
+  f.t = static_cast<double>(k_) / settings_.rate_hz;
+  ++k_;
+  f.truth = truth_.At(f.t);
+  f.q = f.truth.q;
+  if (settings_.joint_resolution > 0)
+    for (int i = 0; i < f.q.size(); ++i)
+      f.q(i) = settings_.joint_resolution * std::round(f.q(i) / settings_.joint_resolution);
+  f.imu = imu_.Sample(truth_.Imu(f.truth));
+  const int stop = truth_.trajectory().StillAt(f.t);
+  if (stop >= 0 && settings_.mag_disturbance) {
+    const Eigen::Matrix3d R_SI =
+        settings_.imu.mounting ? settings_.imu.R_SI : Eigen::Matrix3d::Identity();
+    f.imu.mag_S += R_SI * f.truth.R_EI.transpose() * disturbance_E_[stop];
+  }
+  f.position = position_.Sample(f.t, f.truth.p_WM_W);
+  return f;
+}
+
+}  // namespace rcal::sim
