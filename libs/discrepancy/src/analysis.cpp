@@ -612,9 +612,12 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
   // --- Gain on data the selection never fitted (the split) or by the same k-fold.
   const Linearized::Eval before = L.test.empty() ? L.CrossValidate({}) : L.Split({});
   const Linearized::Eval after = L.test.empty() ? current : L.Split(selected);
-  a.gain.scheme = L.test.empty()
-                      ? std::to_string(L.folds) + "-fold ×" + std::to_string(L.fold_sets.size())
-                      : "cal/test split";
+  if (!L.test.empty())
+    a.gain.scheme = "cal/test split";
+  else if (L.folds == static_cast<int>(L.fit.size()))
+    a.gain.scheme = "leave-one-out";
+  else
+    a.gain.scheme = std::to_string(L.folds) + "-fold ×" + std::to_string(L.fold_sets.size());
   a.gain.heldout_rms_before_m = Rms(before.position);
   a.gain.heldout_rms_after_m = Rms(after.position);
   a.gain.relative_gain = a.gain.heldout_rms_before_m > 0
