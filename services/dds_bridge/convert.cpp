@@ -1,0 +1,280 @@
+// LCM <-> DDS conversion (see include/rcal/dds/convert.hpp).
+#include "rcal/dds/convert.hpp"
+
+#include <cmath>
+#include <limits>
+#include <string_view>
+
+namespace rcal::dds {
+namespace {
+
+constexpr int64_t kMicrosPerSecond = 1'000'000;
+
+bool Fail(std::string* error, std::string message) {
+  if (error) *error = std::move(message);
+  return false;
+}
+
+// A finite value, or (allow_inf) +inf/-inf; never NaN.
+bool CheckValue(double v, const std::string& field, std::string* error, bool allow_inf = false) {
+  if (std::isnan(v)) return Fail(error, field + ": NaN");
+  if (!allow_inf && std::isinf(v)) return Fail(error, field + ": infinite");
+  return true;
+}
+
+template <size_t N>
+bool CheckArray(const double (&a)[N], const std::string& field, std::string* error) {
+  for (size_t i = 0; i < N; ++i)
+    if (!CheckValue(a[i], field + "[" + std::to_string(i) + "]", error)) return false;
+  return true;
+}
+
+char* Dup(const std::string& s) {
+  return dds_string_dup(s.c_str());
+}
+
+std::string Str(const char* s) {
+  return s ? std::string(s) : std::string();
+}
+
+template <typename Seq, typename Elem>
+void AllocSeq(Seq& seq, size_t n) {
+  seq._maximum = seq._length = static_cast<uint32_t>(n);
+  seq._buffer = n ? static_cast<Elem*>(dds_alloc(n * sizeof(Elem))) : nullptr;
+  seq._release = true;
+}
+
+bool FillHeader(std_msgs_msg_dds__Header_& h, int64_t utime, const char* frame,
+                const std::string& field, std::string* error) {
+  auto stamp = StampFromUtime(utime, field, error);
+  if (!stamp) return false;
+  h.stamp = *stamp;
+  h.frame_id = dds_string_dup(frame);
+  return true;
+}
+
+template <size_t N>
+void Copy(double (&to)[N], const double (&from)[N]) {
+  std::memcpy(to, from, sizeof to);
+}
+
+}  // namespace
+
+std::optional<Time> StampFromUtime(int64_t utime, const std::string& field, std::string* error) {
+  int64_t sec = utime / kMicrosPerSecond, rest = utime % kMicrosPerSecond;
+  if (rest < 0) {  // floor division: nanosec is never negative
+    --sec;
+    rest += kMicrosPerSecond;
+  }
+  if (sec < std::numeric_limits<int32_t>::min() || sec > std::numeric_limits<int32_t>::max()) {
+    Fail(error, field + ": " + std::to_string(utime) + " µs does not fit a stamp (int32 seconds)");
+    return std::nullopt;
+  }
+  return Time{static_cast<int32_t>(sec), static_cast<uint32_t>(rest * 1000)};
+}
+
+std::optional<int64_t> UtimeFromStamp(const Time& stamp, const std::string& field,
+                                      std::string* error) {
+  if (stamp.nanosec >= 1'000'000'000u) {
+    Fail(error, field + ".nanosec: " + std::to_string(stamp.nanosec) + " is not below 1e9");
+    return std::nullopt;
+  }
+  return static_cast<int64_t>(stamp.sec) * kMicrosPerSecond + stamp.nanosec / 1000;
+}
+
+// ---- kinematic parameters ---------------------------------------------------------------------
+
+namespace {
+std::string ParamField(const char* array, size_t i, const std::string& name) {
+  return std::string("kinematic_params.") + array + "[" + std::to_string(i) + "] (" + name + ")";
+}
+}  // namespace
+
+std::optional<Sample<KinematicParams>> ToDds(const kinematic_params_t& msg, std::string* error) {
+  if (msg.robot_id.empty()) return Fail(error, "kinematic_params.robot_id: empty"), std::nullopt;
+  if (msg.num_params < 0) return Fail(error, "kinematic_params.num_params: negative"), std::nullopt;
+  const auto n = static_cast<size_t>(msg.num_params);
+  for (auto [name, size] : {std::pair{"names", msg.names.size()},
+                            {"values", msg.values.size()},
+                            {"sigmas", msg.sigmas.size()},
+                            {"identified", msg.identified.size()}})
+    if (size != n)
+      return Fail(error, std::string("kinematic_params.") + name + ": " + std::to_string(size) +
+                             " entries, num_params is " + std::to_string(n)),
+             std::nullopt;
+  for (size_t i = 0; i < n; ++i)
+    if (!CheckValue(msg.values[i], ParamField("values", i, msg.names[i]), error) ||
+        !CheckValue(msg.sigmas[i], ParamField("sigmas", i, msg.names[i]), error))
+      return std::nullopt;
+
+  Sample<KinematicParams> s;
+  auto& d = s.get();
+  if (!FillHeader(d.header, msg.utime, kKinematicParamsFrame, "kinematic_params.utime", error))
+    return std::nullopt;
+  d.robot_id = Dup(msg.robot_id);
+  d.model_id = Dup(msg.model_id);
+  AllocSeq<dds_sequence_string, char*>(d.names, n);
+  AllocSeq<dds_sequence_double, double>(d.values, n);
+  AllocSeq<dds_sequence_double, double>(d.sigmas, n);
+  AllocSeq<dds_sequence_bool, bool>(d.identified, n);
+  for (size_t i = 0; i < n; ++i) {
+    d.names._buffer[i] = Dup(msg.names[i]);
+    d.values._buffer[i] = msg.values[i];
+    d.sigmas._buffer[i] = msg.sigmas[i];
+    d.identified._buffer[i] = msg.identified[i] != 0;
+  }
+  d.poses_used = msg.poses_used;
+  return s;
+}
+
+std::optional<kinematic_params_t> FromDds(const KinematicParams& d, std::string* error) {
+  const std::string robot_id = Str(d.robot_id);
+  if (robot_id.empty()) return Fail(error, "kinematic_params.robot_id: empty"), std::nullopt;
+  const uint32_t n = d.names._length;
+  for (auto [name, size] : {std::pair{"values", d.values._length},
+                            {"sigmas", d.sigmas._length},
+                            {"identified", d.identified._length}})
+    if (size != n)
+      return Fail(error, std::string("kinematic_params.") + name + ": " + std::to_string(size) +
+                             " entries, names has " + std::to_string(n)),
+             std::nullopt;
+  if (n > static_cast<uint32_t>(std::numeric_limits<int32_t>::max()))
+    return Fail(error, "kinematic_params.names: too many entries"), std::nullopt;
+  const auto utime = UtimeFromStamp(d.header.stamp, "kinematic_params.header.stamp", error);
+  if (!utime) return std::nullopt;
+
+  kinematic_params_t m;
+  m.utime = *utime;
+  m.robot_id = robot_id;
+  m.model_id = Str(d.model_id);
+  m.num_params = static_cast<int32_t>(n);
+  for (uint32_t i = 0; i < n; ++i) {
+    m.names.push_back(Str(d.names._buffer[i]));
+    if (!CheckValue(d.values._buffer[i], ParamField("values", i, m.names.back()), error) ||
+        !CheckValue(d.sigmas._buffer[i], ParamField("sigmas", i, m.names.back()), error))
+      return std::nullopt;
+    m.values.push_back(d.values._buffer[i]);
+    m.sigmas.push_back(d.sigmas._buffer[i]);
+    m.identified.push_back(d.identified._buffer[i] ? 1 : 0);
+  }
+  m.poses_used = d.poses_used;
+  return m;
+}
+
+// ---- calibration status -----------------------------------------------------------------------
+
+namespace {
+template <typename Status>
+bool CheckStatus(const Status& s, std::string* error) {
+  return CheckValue(s.condition_number, "calibration_status.condition_number", error, true) &&
+         CheckValue(s.rms_position_residual, "calibration_status.rms_position_residual", error) &&
+         CheckValue(s.rms_orientation_residual, "calibration_status.rms_orientation_residual",
+                    error) &&
+         CheckValue(s.last_nis, "calibration_status.last_nis", error);
+}
+}  // namespace
+
+std::optional<Sample<CalibrationStatus>> ToDds(const calibration_status_t& msg,
+                                               const std::string& robot_id, std::string* error) {
+  if (robot_id.empty()) return Fail(error, "calibration_status: empty robot id"), std::nullopt;
+  if (!CheckStatus(msg, error)) return std::nullopt;
+  Sample<CalibrationStatus> s;
+  auto& d = s.get();
+  if (!FillHeader(d.header, msg.utime, kCalibrationStatusFrame, "calibration_status.utime", error))
+    return std::nullopt;
+  d.robot_id = Dup(robot_id);
+  d.poses_accepted = msg.poses_accepted;
+  d.poses_rejected = msg.poses_rejected;
+  d.last_rejection = Dup(msg.last_rejection);
+  d.condition_number = msg.condition_number;
+  d.rms_position_residual = msg.rms_position_residual;
+  d.rms_orientation_residual = msg.rms_orientation_residual;
+  d.last_nis = msg.last_nis;
+  d.relinearizations = msg.relinearizations;
+  d.converged = msg.converged != 0;
+  return s;
+}
+
+std::optional<calibration_status_t> FromDds(const CalibrationStatus& d, std::string* error) {
+  if (Str(d.robot_id).empty())
+    return Fail(error, "calibration_status.robot_id: empty"), std::nullopt;
+  if (!CheckStatus(d, error)) return std::nullopt;
+  const auto utime = UtimeFromStamp(d.header.stamp, "calibration_status.header.stamp", error);
+  if (!utime) return std::nullopt;
+  calibration_status_t m;
+  m.utime = *utime;
+  m.poses_accepted = d.poses_accepted;
+  m.poses_rejected = d.poses_rejected;
+  m.last_rejection = Str(d.last_rejection);
+  m.condition_number = d.condition_number;
+  m.rms_position_residual = d.rms_position_residual;
+  m.rms_orientation_residual = d.rms_orientation_residual;
+  m.last_nis = d.last_nis;
+  m.relinearizations = d.relinearizations;
+  m.converged = d.converged ? 1 : 0;
+  return m;
+}
+
+// ---- tool pose --------------------------------------------------------------------------------
+
+std::optional<Sample<ToolPose>> ToDds(const tool_position_estimate_t& position,
+                                      const orientation_estimate_t* orientation,
+                                      const std::string& robot_id, std::string* error) {
+  if (robot_id.empty()) return Fail(error, "tool_pose: empty robot id"), std::nullopt;
+  if (!CheckArray(position.p, "tool_position_estimate.p", error) ||
+      !CheckArray(position.v, "tool_position_estimate.v", error) ||
+      !CheckArray(position.covariance, "tool_position_estimate.covariance", error))
+    return std::nullopt;
+  if (orientation &&
+      (!CheckArray(orientation->q_EI, "orientation_estimate.q_EI", error) ||
+       !CheckArray(orientation->covariance, "orientation_estimate.covariance", error)))
+    return std::nullopt;
+  Sample<ToolPose> s;
+  auto& d = s.get();
+  if (!FillHeader(d.header, position.utime, kToolPoseFrame, "tool_position_estimate.utime", error))
+    return std::nullopt;
+  d.robot_id = Dup(robot_id);
+  Copy(d.position, position.p);
+  Copy(d.velocity, position.v);
+  Copy(d.covariance, position.covariance);
+  d.has_orientation = orientation != nullptr;
+  if (orientation) {
+    auto stamp = StampFromUtime(orientation->utime, "orientation_estimate.utime", error);
+    if (!stamp) return std::nullopt;
+    d.orientation_stamp = *stamp;
+    Copy(d.orientation, orientation->q_EI);
+    Copy(d.orientation_covariance, orientation->covariance);
+  }
+  return s;
+}
+
+std::optional<ToolPoseMessages> FromDds(const ToolPose& d, std::string* error) {
+  if (Str(d.robot_id).empty()) return Fail(error, "tool_pose.robot_id: empty"), std::nullopt;
+  if (!CheckArray(d.position, "tool_pose.position", error) ||
+      !CheckArray(d.velocity, "tool_pose.velocity", error) ||
+      !CheckArray(d.covariance, "tool_pose.covariance", error))
+    return std::nullopt;
+  const auto utime = UtimeFromStamp(d.header.stamp, "tool_pose.header.stamp", error);
+  if (!utime) return std::nullopt;
+  ToolPoseMessages out;
+  out.position.utime = *utime;
+  Copy(out.position.p, d.position);
+  Copy(out.position.v, d.velocity);
+  Copy(out.position.covariance, d.covariance);
+  if (d.has_orientation) {
+    if (!CheckArray(d.orientation, "tool_pose.orientation", error) ||
+        !CheckArray(d.orientation_covariance, "tool_pose.orientation_covariance", error))
+      return std::nullopt;
+    const auto t = UtimeFromStamp(d.orientation_stamp, "tool_pose.orientation_stamp", error);
+    if (!t) return std::nullopt;
+    orientation_estimate_t o{};
+    o.utime = *t;
+    Copy(o.q_EI, d.orientation);
+    Copy(o.covariance, d.orientation_covariance);
+    for (double& b : o.gyro_bias) b = 0;
+    out.orientation = o;
+  }
+  return out;
+}
+
+}  // namespace rcal::dds

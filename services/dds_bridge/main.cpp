@@ -1,0 +1,203 @@
+// dds_bridge: rcal's calibration results on DDS, for ROS 2 and for other machines.
+//
+// Subscribes on LCM: KINEMATIC_PARAMS, CALIBRATION_STATUS, TOOL_POSITION and ORIENTATION.
+// Publishes on DDS (Cyclone DDS, ROS 2 conventions, types from idl/rcal_msgs.idl):
+//   rt/rcal/kinematic_params    rcal_msgs::msg::dds_::KinematicParams_    reliable,
+//   transient-local, rt/rcal/calibration_status  rcal_msgs::msg::dds_::CalibrationStatus_ keep-last
+//   1 rt/rcal/tool_pose           rcal_msgs::msg::dds_::ToolPose_           best-effort
+// every message naming the robot (--robot-id). A ToolPose_ is published for every TOOL_POSITION,
+// with the latest ORIENTATION received before it. HEALTH at 1 Hz of sensor time (and once at
+// start, with utime 0, when the LCM subscriptions are in place).
+//
+// Cyclone binds to loopback only (config/cyclonedds-loopback.xml) unless CYCLONEDDS_URI is set,
+// e.g. to config/cyclonedds-network.xml. Bad input (fails to decode, NaN, sizes that disagree,
+// KINEMATIC_PARAMS of another robot) is rejected naming the field, counted in HEALTH, and not
+// published; a failed DDS write is reported in HEALTH. The bridge keeps no state but the latest
+// orientation, so a restart of any LCM publisher needs nothing from it.
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+#include <cerrno>
+#include <cstring>
+#include <optional>
+
+#include "rcal/dds/convert.hpp"
+#include "rcal/dds/dds_common.hpp"
+#include "rcal/services/common.hpp"
+#include "rcal/transport/channels.hpp"
+#include "rcal/transport/health.hpp"
+#include "rcal/transport/lcm_transport.hpp"
+
+namespace {
+
+using namespace rcal;
+namespace ch = transport::channels;
+
+struct Options {
+  std::string robot_id;
+  std::string lcm_url;
+  int dds_domain = -1;  // -1: Cyclone's default (DDS_DOMAIN_DEFAULT)
+  std::string name = "dds_bridge";
+};
+
+class Bridge {
+ public:
+  Bridge(const Options& o, transport::Transport& t, dds_entity_t participant)
+      : o_(o), t_(t), health_(o.name) {
+    dds_qos_t* latched = dds::LatchedQos();
+    dds_qos_t* stream = dds::StreamQos();
+    params_w_ = Writer(participant, dds::Descriptor<dds::KinematicParams>(),
+                       dds::kKinematicParamsTopic, latched);
+    status_w_ = Writer(participant, dds::Descriptor<dds::CalibrationStatus>(),
+                       dds::kCalibrationStatusTopic, latched);
+    pose_w_ = Writer(participant, dds::Descriptor<dds::ToolPose>(), dds::kToolPoseTopic, stream);
+    dds_delete_qos(latched);
+    dds_delete_qos(stream);
+
+    auto undecodable = [this](const std::string& e) {
+      health_.Received();
+      Reject(e);
+    };
+    t_.Subscribe<kinematic_params_t>(
+        ch::kKinematicParams, [this](const kinematic_params_t& m) { OnParams(m); }, undecodable);
+    t_.Subscribe<calibration_status_t>(
+        ch::kCalibrationStatus, [this](const calibration_status_t& m) { OnStatus(m); },
+        undecodable);
+    t_.Subscribe<orientation_estimate_t>(
+        ch::kOrientation, [this](const orientation_estimate_t& m) { OnOrientation(m); },
+        undecodable);
+    t_.Subscribe<tool_position_estimate_t>(
+        ch::kToolPosition, [this](const tool_position_estimate_t& m) { OnToolPosition(m); },
+        undecodable);
+    health_.Tick(0, t_);  // "up": the subscriptions are in place
+  }
+
+ private:
+  static dds_entity_t Writer(dds_entity_t participant, const dds_topic_descriptor_t* desc,
+                             const char* name, const dds_qos_t* qos) {
+    const dds_entity_t topic = dds_create_topic(participant, desc, name, qos, nullptr);
+    if (topic < 0)
+      throw std::runtime_error(std::string("dds_create_topic ") + name + ": " +
+                               dds_strretcode(topic));
+    const dds_entity_t w = dds_create_writer(participant, topic, qos, nullptr);
+    if (w < 0)
+      throw std::runtime_error(std::string("dds_create_writer ") + name + ": " + dds_strretcode(w));
+    return w;
+  }
+
+  void Reject(const std::string& reason) {
+    health_.Rejected(reason);
+    spdlog::warn("rejected: {}", reason);
+  }
+
+  template <typename T>
+  void Write(dds_entity_t writer, const std::optional<dds::Sample<T>>& s, const std::string& error,
+             const char* what) {
+    if (!s) return Reject(error);
+    const dds_return_t rc = dds_write(writer, &s->get());
+    if (rc < 0) {
+      health_.Error(std::string("dds_write ") + what + ": " + dds_strretcode(rc));
+      spdlog::error("dds_write {}: {}", what, dds_strretcode(rc));
+      return;
+    }
+    health_.Published();
+  }
+
+  void OnParams(const kinematic_params_t& m) {
+    health_.Received();
+    std::string error;
+    if (m.robot_id != o_.robot_id) {
+      Reject("kinematic_params.robot_id: '" + m.robot_id + "' is not this bridge's robot '" +
+             o_.robot_id + "'");
+    } else {
+      Write(params_w_, dds::ToDds(m, &error), error, "kinematic_params");
+      spdlog::info("kinematic_params utime {} ({} parameters, {} poses)", m.utime, m.num_params,
+                   m.poses_used);
+    }
+    health_.Tick(m.utime, t_);
+  }
+
+  void OnStatus(const calibration_status_t& m) {
+    health_.Received();
+    std::string error;
+    Write(status_w_, dds::ToDds(m, o_.robot_id, &error), error, "calibration_status");
+    health_.Tick(m.utime, t_);
+  }
+
+  void OnOrientation(const orientation_estimate_t& m) {
+    health_.Received();
+    // Checked here so that a bad orientation is rejected once, not with every pose after it.
+    std::string error;
+    tool_position_estimate_t probe{};
+    probe.utime = m.utime;
+    if (dds::ToDds(probe, &m, o_.robot_id, &error))
+      orientation_ = m;
+    else
+      Reject(error);
+    health_.Tick(m.utime, t_);
+  }
+
+  void OnToolPosition(const tool_position_estimate_t& m) {
+    health_.Received();
+    std::string error;
+    Write(pose_w_, dds::ToDds(m, orientation_ ? &*orientation_ : nullptr, o_.robot_id, &error),
+          error, "tool_pose");
+    health_.Tick(m.utime, t_);
+  }
+
+  Options o_;
+  transport::Transport& t_;
+  transport::Health health_;
+  dds_entity_t params_w_ = 0, status_w_ = 0, pose_w_ = 0;
+  std::optional<orientation_estimate_t> orientation_;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  CLI::App app{
+      "dds_bridge: KINEMATIC_PARAMS, CALIBRATION_STATUS and the tool pose from LCM to DDS\n"
+      "(topics rt/rcal/kinematic_params, rt/rcal/calibration_status, rt/rcal/tool_pose; ROS 2\n"
+      "types rcal_msgs/msg/*). Cyclone DDS: $CYCLONEDDS_URI, else config/cyclonedds-loopback.xml.\n"
+      "LCM URL: --lcm-url, else $RCAL_LCM_URL, else udpm://239.255.76.67:7667?ttl=0."};
+  app.add_option("--robot-id", o.robot_id,
+                 "robot id on every DDS message; KINEMATIC_PARAMS of other robots are rejected")
+      ->required();
+  app.add_option("--lcm-url", o.lcm_url, "LCM URL");
+  app.add_option("--dds-domain", o.dds_domain, "DDS domain id (-1: Cyclone's default, 0)")
+      ->capture_default_str();
+  app.add_option("--name", o.name, "process name in HEALTH")->capture_default_str();
+  CLI11_PARSE(app, argc, argv);
+  if (o.robot_id.empty()) {
+    spdlog::error("--robot-id: empty");
+    return 2;
+  }
+
+  try {
+    rcal::services::InstallStopHandlers();
+    const std::string uri = rcal::dds::EnsureCycloneConfig();
+    const dds_domainid_t domain =
+        o.dds_domain < 0 ? DDS_DOMAIN_DEFAULT : static_cast<dds_domainid_t>(o.dds_domain);
+    rcal::dds::EntityGuard participant(dds_create_participant(domain, nullptr, nullptr));
+    if (participant.get() < 0)
+      throw std::runtime_error(std::string("dds_create_participant (CYCLONEDDS_URI ") + uri +
+                               "): " + dds_strretcode(participant.get()));
+    rcal::transport::LcmTransport t(o.lcm_url);
+    Bridge bridge(o, t, participant.get());
+    spdlog::info("dds_bridge for robot '{}': LCM {} -> DDS domain {} (CYCLONEDDS_URI {})",
+                 o.robot_id, t.url(), o.dds_domain < 0 ? "default" : std::to_string(o.dds_domain),
+                 uri);
+    while (!rcal::services::StopRequested()) {
+      if (t.HandleTimeout(100) < 0 && errno != EINTR) {
+        spdlog::error("LCM error: {}", std::strerror(errno));
+        return 1;
+      }
+    }
+    spdlog::info("stopped");
+    return 0;
+  } catch (const std::exception& e) {
+    spdlog::error("{}", e.what());
+    return 1;
+  }
+}
