@@ -26,6 +26,7 @@ using nlohmann::json;
 
 struct Options {
   int seeds = 20;
+  unsigned first_seed = 1000;
   std::string json_path;
   std::string robot = "../shared/data/figaroh_ur10/robot.urdf";
   int poses = 60;
@@ -102,7 +103,7 @@ int Run(const Options& o) {
   Tally clean;
   sim::Rng pick(12345);
   for (int s = 0; s < o.seeds; ++s) {
-    const unsigned seed = 1000 + s;
+    const unsigned seed = o.first_seed + s;
     {
       const auto d = simulate(seed, std::nullopt, 0);
       const auto a = discrepancy::Analyze(model, d, settings);
@@ -171,6 +172,7 @@ int Run(const Options& o) {
                   {"alpha", o.alpha},
                   {"size", o.size},
                   {"seeds", o.seeds},
+                  {"first_seed", o.first_seed},
                   {"rows", rows},
                   {"clean_runs", clean.runs},
                   {"false_positive_rate", double(clean.wrong) / clean.runs}};
@@ -183,6 +185,8 @@ const RegisterCommand kSweep(
     [](CLI::App& sub) -> std::function<int()> {
       auto o = std::make_shared<Options>();
       sub.add_option("--seeds", o->seeds, "datasets per cell")->capture_default_str();
+      sub.add_option("--first-seed", o->first_seed, "seed of the first dataset")
+          ->capture_default_str();
       sub.add_option("--json", o->json_path, "write the rates here");
       sub.add_option("--robot", o->robot, "robot file (YAML or URDF)")->capture_default_str();
       sub.add_option("--poses", o->poses, "poses per dataset")->capture_default_str();
