@@ -315,7 +315,8 @@ std::vector<bool> Identifiable(const Linearized& L, double min_novelty,
   Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(G);
   qr.setThreshold(1e-10);
   const int rank = qr.rank();
-  const Eigen::MatrixXd Q = Eigen::MatrixXd(qr.householderQ()).leftCols(rank);
+  // Thin Q: the first `rank` columns only (rows × rank, not rows × rows).
+  const Eigen::MatrixXd Q = qr.householderQ() * Eigen::MatrixXd::Identity(G.rows(), rank);
   std::vector<bool> ok(L.ext.effects().size(), true);
   for (size_t k = 0; k < L.ext.effects().size(); ++k) {
     for (int i = 0; i < L.ext.effects()[k].num_params(); ++i) {

@@ -193,7 +193,7 @@ TruthEffect EffectOfSize(const kinematics::KinematicModel& model, const kinemati
       if (G.col(c).norm() > 0) G.col(c).normalize();
     Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(G);
     qr.setThreshold(1e-10);
-    const Eigen::MatrixXd Q = Eigen::MatrixXd(qr.householderQ()).leftCols(qr.rank());
+    const Eigen::MatrixXd Q = qr.householderQ() * Eigen::MatrixXd::Identity(G.rows(), qr.rank());
     d -= Q * (Q.transpose() * d);
   }
   const double rms = n == 0 ? 0.0 : std::sqrt(d.squaredNorm() / n);
