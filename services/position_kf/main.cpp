@@ -46,6 +46,7 @@ int main(int argc, char** argv) {
     services::InstallStopHandlers();
     transport::LcmTransport t(lcm_url);
     transport::PositionKfNode node(t, settings, options);
+    node.Announce();
     spdlog::info("position_kf on {} (earth {})", t.url(), earth);
     while (!services::StopRequested()) {
       if (t.HandleTimeout(100) < 0 && errno != EINTR) {

@@ -139,6 +139,11 @@ OrientationKfNode::OrientationKfNode(Transport& t,
       [this](const std::string& e) { OnUndecodable(e); });
 }
 
+void OrientationKfNode::Announce() {
+  health_.Published();
+  t_.Publish(o_.health_channel, health_.Message(0));
+}
+
 void OrientationKfNode::Reject(const std::string& reason, int64_t utime) {
   health_.Rejected(reason);
   health_.Tick(last_utime_.value_or(utime), t_, o_.health_channel);
@@ -183,6 +188,11 @@ PositionKfNode::PositionKfNode(Transport& t, const estimation::PositionKfSetting
       undecodable);
   t_.Subscribe<position_sample_t>(
       o_.position_channel, [this](const position_sample_t& m) { OnPosition(m); }, undecodable);
+}
+
+void PositionKfNode::Announce() {
+  health_.Published();
+  t_.Publish(o_.health_channel, health_.Message(0));
 }
 
 void PositionKfNode::Reject(const std::string& reason) {

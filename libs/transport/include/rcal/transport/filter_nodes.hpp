@@ -88,6 +88,9 @@ class OrientationKfNode {
   OrientationKfNode(Transport& t, const estimation::OrientationKfSettings& settings)
       : OrientationKfNode(t, settings, Options{}) {}
 
+  /// Publishes one HEALTH with utime 0 (outside the 1 Hz schedule) so listeners know the process
+  /// is up before any sample came.
+  void Announce();
   /// Handles one IMU message (what the subscription calls; public for tests).
   void OnImu(const imu_sample_t& msg);
   /// Handles bytes on the IMU channel that did not decode.
@@ -135,6 +138,8 @@ class PositionKfNode {
   PositionKfNode(Transport& t, const estimation::PositionKfSettings& settings)
       : PositionKfNode(t, settings, Options{}) {}
 
+  /// As OrientationKfNode::Announce().
+  void Announce();
   void OnImu(const imu_sample_t& msg);
   void OnOrientation(const orientation_estimate_t& msg);
   void OnPosition(const position_sample_t& msg);

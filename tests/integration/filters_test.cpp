@@ -1,0 +1,216 @@
+// sensor_acquisition --source replay (a BROAD trial) → orientation_kf → position_kf as real
+// processes over UDP multicast in a private namespace (non-default port), against the library
+// filters run offline on the same file read independently: sample for sample, at two replay
+// speeds (the filters run on sensor time, so speed must not matter). And: malformed and
+// wrong-type messages on live channels are rejected, counted in HEALTH, and the processes keep
+// running.
+#include <cmath>
+#include <map>
+#include <optional>
+
+#include "netns.hpp"
+#include "rcal/estimation/orientation_kf.hpp"
+#include "rcal/estimation/position_kf.hpp"
+#include "rcal/health_t.hpp"
+#include "rcal/io/csv_table.hpp"
+#include "rcal/transport/channels.hpp"
+#include "rcal/transport/filter_nodes.hpp"
+#include "rcal/transport/lcm_transport.hpp"
+
+namespace rcal {
+namespace {
+
+using namespace integration;
+namespace ch = transport::channels;
+constexpr const char* kUrl = "udpm://239.255.76.67:7713?ttl=0";  // not the default port
+constexpr const char* kTrial = RCAL_SHARED_DIR "/data/broad/broad_02_100hz.csv";
+constexpr int kRows = 3000;  // 30 s of the trial: rest, then the first rotations
+
+// The offline reference: the trial read with io::CsvTable, utime = round(t_s·1e6), mag µT → T,
+// position at 20 Hz from the first finite row, accelerometer before position at equal time.
+struct Offline {
+  std::map<int64_t, orientation_estimate_t> orientation;
+  std::vector<std::pair<int64_t, tool_position_estimate_t>> tool;  // in update order
+  Offline() {
+    const auto table = io::CsvTable::Load(kTrial);
+    estimation::OrientationKfSettings os;
+    os.earth = estimation::EarthFrame::kEnu;
+    estimation::PositionKfSettings ps;
+    ps.earth = estimation::EarthFrame::kEnu;
+    estimation::OrientationKf okf(os);
+    estimation::PositionKf pkf(ps);
+    double next_pos_t = -INFINITY;
+    for (int k = 0; k < kRows; ++k) {
+      auto c = [&](const char* name) { return table.At(k, name); };
+      const double t_s = c("t_s");
+      const int64_t utime = std::llround(t_s * 1e6);
+      const double t = transport::SensorSeconds(utime);
+      const Eigen::Vector3d f(c("acc_x"), c("acc_y"), c("acc_z"));
+      if (!okf.Update(t, {c("gyr_x"), c("gyr_y"), c("gyr_z")}, f,
+                      1e-6 * Eigen::Vector3d(c("mag_x"), c("mag_y"), c("mag_z"))))
+        continue;
+      if (!okf.initialized()) continue;
+      orientation[utime] = transport::ToOrientationEstimate(okf, utime);
+      // The position KF sees the orientation as published (a unit quaternion → R).
+      std::string error;
+      const auto R = transport::RotationFromMessage(orientation[utime], &error);
+      if (pkf.UpdateAccel(t, f, *R) && pkf.initialized())
+        tool.emplace_back(utime, transport::ToToolPositionEstimate(pkf, utime));
+      const Eigen::Vector3d p(c("pos_x"), c("pos_y"), c("pos_z"));
+      if (p.allFinite() && t_s >= next_pos_t - 1e-9) {
+        next_pos_t = (std::isfinite(next_pos_t) ? next_pos_t : t_s) + 1.0 / 20;
+        if (pkf.UpdatePosition(t, p))
+          tool.emplace_back(utime, transport::ToToolPositionEstimate(pkf, utime));
+      }
+    }
+  }
+};
+
+const Offline& Reference() {
+  static const Offline o;
+  return o;
+}
+
+struct Listener {
+  transport::LcmTransport t{kUrl};
+  std::map<int64_t, orientation_estimate_t> orientation;
+  std::vector<std::pair<int64_t, tool_position_estimate_t>> tool;
+  std::map<std::string, health_t> health;  // latest per process
+  int duplicates = 0;
+  Listener() {
+    t.Subscribe<orientation_estimate_t>(ch::kOrientation, [this](const orientation_estimate_t& m) {
+      if (!orientation.emplace(m.utime, m).second) ++duplicates;
+    });
+    t.Subscribe<tool_position_estimate_t>(
+        ch::kToolPosition,
+        [this](const tool_position_estimate_t& m) { tool.emplace_back(m.utime, m); });
+    t.Subscribe<health_t>(ch::kHealth, [this](const health_t& m) { health[m.process] = m; });
+  }
+  bool WaitFor(const std::function<bool()>& done) {
+    return Until(done, [this] { t.HandleTimeout(100); });
+  }
+};
+
+std::vector<std::string> OrientationKfCmd() {
+  return {RCAL_ORIENTATION_KF, "--earth", "enu", "--lcm-url", kUrl};
+}
+std::vector<std::string> PositionKfCmd() {
+  return {RCAL_POSITION_KF, "--earth", "enu", "--lcm-url", kUrl};
+}
+
+class Filters : public ProcessFixture {};
+
+void ExpectSame(const double* a, const double* b, int n, const char* what, int64_t utime) {
+  for (int i = 0; i < n; ++i)
+    ASSERT_NEAR(a[i], b[i], 1e-12 * std::max(1.0, std::abs(b[i])))
+        << what << "[" << i << "] at utime " << utime;
+}
+
+TEST_F(Filters, ReplayMatchesOfflineFiltersAtTwoSpeeds) {
+  RCAL_IN_NAMESPACE("Filters.ReplayMatchesOfflineFiltersAtTwoSpeeds");
+  const Offline& ref = Reference();
+  ASSERT_GT(ref.orientation.size(), 2000u);
+  ASSERT_GT(ref.tool.size(), 2000u);
+  for (const char* speed : {"4", "16"}) {
+    SCOPED_TRACE(std::string("speed ") + speed);
+    Listener l;
+    const pid_t okf = Start(OrientationKfCmd(), std::string("orientation_kf_") + speed + ".log");
+    const pid_t pkf = Start(PositionKfCmd(), std::string("position_kf_") + speed + ".log");
+    // Both announce themselves (HEALTH at utime 0) once subscribed.
+    ASSERT_TRUE(l.WaitFor(
+        [&] { return l.health.count("orientation_kf") && l.health.count("position_kf"); }));
+    const pid_t src = Start({RCAL_SENSOR_ACQUISITION, "--source", "replay", kTrial, "--max-rows",
+                             std::to_string(kRows), "--speed", speed, "--lcm-url", kUrl},
+                            std::string("sensor_acquisition_") + speed + ".log");
+    ASSERT_TRUE(l.WaitFor([&] {
+      return l.orientation.size() >= ref.orientation.size() && l.tool.size() >= ref.tool.size();
+    })) << "orientations "
+        << l.orientation.size() << " of " << ref.orientation.size() << ", tool positions "
+        << l.tool.size() << " of " << ref.tool.size();
+    EXPECT_EQ(Wait(src), 0);
+    Reaped(src);
+    // Nothing more than the reference.
+    for (int i = 0; i < 5; ++i) l.t.HandleTimeout(20);
+    EXPECT_EQ(l.duplicates, 0);
+    ASSERT_EQ(l.orientation.size(), ref.orientation.size());
+    for (const auto& [utime, r] : ref.orientation) {
+      const auto it = l.orientation.find(utime);
+      ASSERT_NE(it, l.orientation.end()) << "no ORIENTATION at utime " << utime;
+      ExpectSame(it->second.q_EI, r.q_EI, 4, "q_EI", utime);
+      ExpectSame(it->second.covariance, r.covariance, 9, "covariance", utime);
+      ExpectSame(it->second.gyro_bias, r.gyro_bias, 3, "gyro_bias", utime);
+    }
+    ASSERT_EQ(l.tool.size(), ref.tool.size());
+    for (size_t k = 0; k < ref.tool.size(); ++k) {
+      ASSERT_EQ(l.tool[k].first, ref.tool[k].first) << "update " << k;
+      ExpectSame(l.tool[k].second.p, ref.tool[k].second.p, 3, "p", ref.tool[k].first);
+      ExpectSame(l.tool[k].second.v, ref.tool[k].second.v, 3, "v", ref.tool[k].first);
+      ExpectSame(l.tool[k].second.covariance, ref.tool[k].second.covariance, 36, "covariance",
+                 ref.tool[k].first);
+    }
+    EXPECT_EQ(Stop(okf), 0);
+    EXPECT_EQ(Stop(pkf), 0);
+  }
+}
+
+imu_sample_t Imu(int64_t utime) {
+  transport::ImuSample s;  // flat and still, ENU: f up, field north and down
+  s.utime = utime;
+  s.f_B = {0, 0, 9.81};
+  s.has_mag = true;
+  s.m_B = {0, 20e-6, -40e-6};
+  return transport::ToMessage(s);
+}
+
+TEST_F(Filters, MalformedAndWrongTypeMessagesAreRejectedAndCounted) {
+  RCAL_IN_NAMESPACE("Filters.MalformedAndWrongTypeMessagesAreRejectedAndCounted");
+  Listener l;
+  const pid_t okf = Start(OrientationKfCmd(), "orientation_kf.log");
+  const pid_t pkf = Start(PositionKfCmd(), "position_kf.log");
+  ASSERT_TRUE(
+      l.WaitFor([&] { return l.health.count("orientation_kf") && l.health.count("position_kf"); }));
+  // Good samples first: one heartbeat each at 1 s, no rejection yet.
+  for (int64_t u = 1'000'000; u <= 1'050'000; u += 10'000) l.t.Publish(ch::kImu, Imu(u));
+  ASSERT_TRUE(l.WaitFor([&] { return l.orientation.count(1'050'000) > 0; }));
+  // Bad ones on IMU: garbage bytes, a HEALTH message (wrong type: its fingerprint differs),
+  // a NaN gyro, a duplicate utime, a sample without magnetometer.
+  const char garbage[] = "not an LCM message at all";
+  l.t.PublishRaw(ch::kImu, garbage, sizeof garbage);
+  health_t wrong;  // a well-formed message of another type
+  wrong.utime = 1'060'000;
+  wrong.process = "impostor";
+  wrong.pid = 1;
+  wrong.received = wrong.rejected = wrong.published = 0;
+  l.t.Publish(ch::kImu, wrong);
+  auto nan = Imu(1'060'000);
+  nan.gyro[1] = NAN;
+  l.t.Publish(ch::kImu, nan);
+  l.t.Publish(ch::kImu, Imu(1'050'000));
+  auto no_mag = Imu(1'070'000);
+  no_mag.has_mag = false;
+  l.t.Publish(ch::kImu, no_mag);
+  // And on POSITION: garbage and a wrong type.
+  l.t.PublishRaw(ch::kPosition, garbage, sizeof garbage);
+  l.t.Publish(ch::kPosition, wrong);
+  // Good samples again, past the next heartbeat (1 s of sensor time later).
+  for (int64_t u = 2'000'000; u <= 2'100'000; u += 10'000) l.t.Publish(ch::kImu, Imu(u));
+  ASSERT_TRUE(l.WaitFor([&] {
+    return l.orientation.count(2'100'000) > 0 && l.health["orientation_kf"].utime >= 2'000'000 &&
+           l.health["position_kf"].utime >= 2'000'000;
+  }));
+  const health_t& ho = l.health["orientation_kf"];
+  EXPECT_EQ(ho.rejected, 5) << ho.last_error;
+  EXPECT_EQ(ho.received, 6 + 5 + 1);  // the heartbeat at 2 s counts up to its own sample
+  EXPECT_GT(ho.published, 6);
+  // position_kf: 2 bad POSITION + garbage and wrong type on IMU + NaN + duplicate on IMU.
+  // (The sample without magnetometer is fine for the accelerometer.)
+  const health_t& hp = l.health["position_kf"];
+  EXPECT_EQ(hp.rejected, 6) << hp.last_error;
+  EXPECT_TRUE(Running(okf));
+  EXPECT_TRUE(Running(pkf));
+  EXPECT_EQ(Stop(okf), 0);
+  EXPECT_EQ(Stop(pkf), 0);
+}
+
+}  // namespace
+}  // namespace rcal

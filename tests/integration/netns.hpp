@@ -1,0 +1,125 @@
+// Shared by the integration tests: spawn real processes in their own process group with their
+// output in a file, and run a test body inside deploy/netns-run (a private network namespace
+// with multicast on loopback) unless already there.
+#pragma once
+
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace rcal::integration {
+
+namespace fs = std::filesystem;
+
+inline pid_t Spawn(const std::vector<std::string>& argv, const fs::path& log) {
+  const pid_t pid = fork();
+  if (pid == 0) {
+    setpgid(0, 0);
+    FILE* f = std::fopen(log.c_str(), "w");
+    if (f) {
+      dup2(fileno(f), 1);
+      dup2(fileno(f), 2);
+    }
+    std::vector<char*> args;
+    for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+    args.push_back(nullptr);
+    execv(args[0], args.data());
+    _exit(127);
+  }
+  return pid;
+}
+
+/// Exit code, or −signal.
+inline int Wait(pid_t pid) {
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -WTERMSIG(status);
+}
+
+/// True while `pid` (a child) has not exited.
+inline bool Running(pid_t pid) {
+  int status = 0;
+  return waitpid(pid, &status, WNOHANG) == 0;
+}
+
+/// Calls `step` until `done` is true or the guard (only there to turn a hang into a failure)
+/// runs out.
+inline bool Until(const std::function<bool()>& done, const std::function<void()>& step,
+                  double guard_s = 120) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(guard_s);
+  while (!done()) {
+    if (std::chrono::steady_clock::now() > end) return false;
+    step();
+  }
+  return true;
+}
+
+enum class Where { kHere, kDelegated, kNotPermitted };
+
+inline Where InNamespaceOrDelegate(const char* filter) {
+  if (std::getenv("RCAL_IN_NETNS")) return Where::kHere;
+  const std::string netns = RCAL_SOURCE_DIR "/deploy/netns-run";
+  if (std::system((netns + " true >/dev/null 2>&1").c_str()) != 0) return Where::kNotPermitted;
+  const std::string self = fs::read_symlink("/proc/self/exe").string();
+  const int rc = std::system((netns + " " + self + " --gtest_filter=" + filter).c_str());
+  EXPECT_EQ(rc, 0) << "the test inside the namespace failed (output above)";
+  return Where::kDelegated;
+}
+
+#define RCAL_IN_NAMESPACE(filter)                                                   \
+  switch (::rcal::integration::InNamespaceOrDelegate(filter)) {                     \
+    case ::rcal::integration::Where::kNotPermitted:                                 \
+      GTEST_SKIP() << "unshare -n is not permitted here (deploy/netns-run failed)"; \
+    case ::rcal::integration::Where::kDelegated:                                    \
+      return;                                                                       \
+    case ::rcal::integration::Where::kHere:                                         \
+      break;                                                                        \
+  }
+
+/// A temporary directory and the processes started in it; kills what is left at the end and
+/// keeps the directory (with the processes' logs) when the test failed.
+class ProcessFixture : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ =
+        fs::temp_directory_path() /
+        ("rcal_it_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) +
+         "_" + std::to_string(getpid()));
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    for (pid_t p : pids_) {
+      kill(-p, SIGKILL);
+      waitpid(p, nullptr, 0);
+    }
+    if (!HasFailure())
+      fs::remove_all(dir_);
+    else
+      std::fprintf(stderr, "logs kept in %s\n", dir_.c_str());
+  }
+  pid_t Start(const std::vector<std::string>& argv, const std::string& log) {
+    const pid_t p = Spawn(argv, dir_ / log);
+    pids_.push_back(p);
+    return p;
+  }
+  /// SIGINT to the process group and wait; returns the exit code.
+  int Stop(pid_t p) {
+    kill(-p, SIGINT);
+    std::erase(pids_, p);
+    return Wait(p);
+  }
+  void Reaped(pid_t p) { std::erase(pids_, p); }
+  fs::path dir_;
+  std::vector<pid_t> pids_;
+};
+
+}  // namespace rcal::integration
