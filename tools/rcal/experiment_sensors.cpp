@@ -261,7 +261,8 @@ OnlineResult RunOnline(const Cell& cell, const std::vector<kinematics::PoseMeasu
   const auto t0 = Clock::now();
   r.x0 = SetupGuess(cell, {cal.begin(), cal.begin() + g});
   const double guess_s = Since(t0);
-  auto ekf = MakeEkf(cell, r.x0);
+  r.ekf = std::make_shared<identification::EkfIdentifier>(MakeEkf(cell, r.x0));
+  auto& ekf = *r.ekf;
   for (size_t k = 0; k < cal.size(); ++k) {
     const auto t1 = Clock::now();
     ekf.Update(cal[k]);
@@ -278,42 +279,4 @@ OnlineResult RunOnline(const Cell& cell, const std::vector<kinematics::PoseMeasu
   return r;
 }
 
-}  // namespace rcal::tool::exp
-
-namespace rcal::tool::exp {
-int RunSensorsExperiment(const ReportOptions& o) {
-  const auto t_start = Clock::now();
-  const io::LoadedRobot robot = io::LoadRobot(ResolvePath(o.robot));
-  const Cell cell = MakeCell(robot.spec, o.seed);
-  const auto& model = cell.model;
-  spdlog::info("cell: {} parameters, rank {}, eq residual {:.2e} m ({:.1f} s)", model.num_params(),
-               cell.ident.rank, cell.eq_residual_m, Since(t_start));
-  for (int i = 0; i < model.num_params(); ++i)
-    if (std::find(cell.base.begin(), cell.base.end(), i) == cell.base.end())
-      spdlog::info("  dropped {}", model.parameters()[i].name);
-  RunSettings rs;
-  rs.seed = o.seed;
-  rs.num_cal = o.num_cal;
-  rs.num_test = o.num_test;
-  const Windows w = SimulateWindows(cell, rs);
-  spdlog::info(
-      "windows: {} cal {} test, emitted {} dropped {} missing {}; err {:.4f} mm {:.4f} deg, NEES "
-      "{:.2f}; sim {:.2f} s pipe {:.2f} s",
-      w.cal.size(), w.test.size(), w.emitted, w.dropped, w.missing, w.mean_position_error_m * 1e3,
-      w.mean_orientation_error_rad * 180 / std::numbers::pi, w.mean_nees, w.sim_wall_s,
-      w.pipeline_wall_s);
-  std::vector<Eigen::VectorXd> test_q;
-  for (const auto& m : w.test) test_q.push_back(m.q);
-  const OnlineResult on = RunOnline(cell, w.cal, test_q);
-  spdlog::info("online: accepted {} rejected {}, test error {:.4f} mm (after 6: {:.3f})",
-               on.accepted, on.rejected, on.test_error_after_pose_mm.back(),
-               on.test_error_after_pose_mm[5]);
-  for (int p : cell.base) {
-    spdlog::info("{:10s} true {:+.6f} eq {:+.6f} x0 {:+.6f} ekf {:+.6f} ± {:.6f}  z {:+.2f}",
-                 model.parameters()[p].name, cell.x_true(p), cell.x_eq(p), on.x0(p), on.x(p),
-                 on.sigma(p), (on.x(p) - cell.x_eq(p)) / on.sigma(p));
-  }
-  spdlog::info("total {:.1f} s", Since(t_start));
-  return 0;
-}
 }  // namespace rcal::tool::exp

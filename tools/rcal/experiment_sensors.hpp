@@ -11,6 +11,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -71,6 +72,7 @@ identification::EkfIdentifier MakeEkf(const Cell& cell, const Eigen::VectorXd& x
 
 /// Result of a run: the identifier fed with the cal windows (first `guess_poses` give x0).
 struct OnlineResult {
+  std::shared_ptr<identification::EkfIdentifier> ekf;  ///< still running (peg-in-hole phase)
   Eigen::VectorXd x0, x, sigma;
   std::vector<double> test_error_after_pose_mm;  ///< vs truth, after each pose
   std::vector<double> update_s;                  ///< computation per update [s]
