@@ -1,0 +1,150 @@
+// Sensor-level simulation against independent truth: the finite-difference velocities and rates
+// against the analytic joint Jacobian, the acceleration against differences of that velocity,
+// the IMU at rest against gravity and the earth field, the streams' determinism.
+#include "rcal/sim/sensor_sim.hpp"
+
+#include <gtest/gtest.h>
+
+#include <numbers>
+
+#include "rcal/geometry/so3.hpp"
+#include "rcal/sim/pose_sim.hpp"
+
+namespace rcal::sim {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+// GRB3016 (NOTES.md Table 1) with the set-up frames of a real cell.
+kinematics::KinematicModel Cell() {
+  kinematics::ModelBuilder b("grb3016");
+  auto j = [](const char* n) {
+    return kinematics::Joint{n, kinematics::JointType::kRevolute, -3, 3};
+  };
+  b.BaseFrame(Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero());
+  b.DhLink(0.150, -kPi / 2, 0.250, 0, j("j1"));
+  b.DhLink(0.570, -kPi, 0, -kPi / 2, j("j2"));
+  b.DhLink(0.150, kPi / 2, 0, 0, j("j3"));
+  b.DhLink(0, -kPi / 2, 0.645, 0, j("j4"));
+  b.DhLink(0, kPi / 2, 0, -kPi / 2, j("j5"));
+  b.DhLink(0, 0, -0.200, 0, j("j6"));
+  b.MarkerOffset(Eigen::Vector3d(0.03, 0, 0.12));
+  b.ImuMounting(Eigen::Vector3d::Zero());
+  b.EarthFrame(Eigen::Vector3d::Zero());
+  return b.Build();
+}
+
+Eigen::VectorXd Truth(const kinematics::KinematicModel& m) {
+  Eigen::VectorXd x = Table3Errors(m);
+  x(m.FindParameter("base_x")) = 1.2;
+  x(m.FindParameter("base_rz")) = 0.6;
+  x(m.FindParameter("earth_rz")) = 0.9;
+  x(m.FindParameter("earth_ry")) = 0.02;
+  x(m.FindParameter("imu_rz")) = 0.3;
+  return x;
+}
+
+JointTrajectory Program(const kinematics::KinematicModel& m, int stops, unsigned seed) {
+  Rng rng(seed);
+  return JointTrajectory(SampleJoints(m, stops, rng));
+}
+
+TEST(ToolMotionTruth, DerivativesMatchTheJointJacobian) {
+  const auto m = Cell();
+  const Eigen::VectorXd x = Truth(m);
+  const ToolMotionTruth truth(m, x, Program(m, 4, 3));
+  const Eigen::Matrix3d R_EW = geometry::FromRpy(Eigen::Vector3d(0, 0.02, 0.9));
+  EXPECT_LT((truth.R_EW() - R_EW).norm(), 1e-12);
+  int checked = 0;
+  for (double t = 0.05; t < truth.trajectory().duration(); t += 0.173) {
+    const ToolState s = truth.At(t);
+    Eigen::VectorXd q, qd, qdd;
+    truth.trajectory().Sample(t, q, &qd, &qdd);
+    if (qd.norm() < 1e-3) continue;
+    const Eigen::MatrixXd J = m.JointJacobian(q, x);  // world frame, tool (marker) origin
+    const Eigen::Vector3d v = J.topRows(3) * qd;
+    const Eigen::Vector3d w_W = J.bottomRows(3) * qd;
+    const Eigen::Matrix3d R_WI = R_EW.transpose() * s.R_EI;
+    EXPECT_LT((s.v_WM_W - v).norm(), 1e-5 * (1 + v.norm())) << t;
+    EXPECT_LT((s.omega_I - R_WI.transpose() * w_W).norm(), 1e-5 * (1 + w_W.norm())) << t;
+    // Acceleration: central difference of the closed-form velocity, a different step.
+    const double h = 1e-4;
+    Eigen::VectorXd qa, qda, qb, qdb;
+    truth.trajectory().Sample(t + h, qa, &qda);
+    truth.trajectory().Sample(t - h, qb, &qdb);
+    const Eigen::Vector3d a =
+        (m.JointJacobian(qa, x).topRows(3) * qda - m.JointJacobian(qb, x).topRows(3) * qdb) /
+        (2 * h);
+    EXPECT_LT((s.a_WM_W - a).norm(), 1e-3 * (1 + a.norm())) << t;
+    // IMU truth: earth-frame quantities.
+    const ImuTruth u = truth.Imu(s);
+    EXPECT_LT((u.a_W - R_EW * s.a_WM_W).norm(), 1e-12);
+    EXPECT_LT((u.R_WI - s.R_EI).norm(), 1e-12);
+    ++checked;
+  }
+  EXPECT_GT(checked, 5);
+}
+
+TEST(SensorSim, ImuAtRestReadsGravityAndTheFieldAndStreamsAreDeterministic) {
+  const auto m = Cell();
+  const Eigen::VectorXd x = Truth(m);
+  const ToolMotionTruth truth(m, x, Program(m, 3, 5));
+  SensorSimSettings s;
+  SensorSim a(truth, s, 42), b(truth, s, 42), c(truth, s, 43);
+  Eigen::Vector3d f_sum = Eigen::Vector3d::Zero(), m_sum = Eigen::Vector3d::Zero(),
+                  f_exp = Eigen::Vector3d::Zero(), m_exp = Eigen::Vector3d::Zero();
+  int n = 0, positions = 0;
+  bool differs = false;
+  while (auto fa = a.Next()) {
+    const auto fb = b.Next();
+    const auto fc = c.Next();
+    ASSERT_TRUE(fb && fc);
+    EXPECT_EQ(fa->imu.gyro_S, fb->imu.gyro_S);
+    EXPECT_EQ(fa->imu.accel_S, fb->imu.accel_S);
+    ASSERT_EQ(fa->position.has_value(), fb->position.has_value());
+    if (fa->position) {
+      EXPECT_EQ(fa->position->p_M, fb->position->p_M);
+      ++positions;
+    }
+    differs |= fa->imu.gyro_S != fc->imu.gyro_S;
+    if (truth.trajectory().StillAt(fa->t) == 1) {
+      const Eigen::Matrix3d R_IE = fa->truth.R_EI.transpose();
+      f_sum += fa->imu.accel_S;
+      m_sum += fa->imu.mag_S;
+      f_exp += -R_IE * s.imu.g_W;
+      m_exp += R_IE * s.imu.m_W;
+      ++n;
+    }
+  }
+  EXPECT_FALSE(b.Next());
+  EXPECT_TRUE(differs);
+  EXPECT_EQ(positions, a.num_ticks());  // 100 Hz position sensor on a 100 Hz clock
+  ASSERT_GT(n, 100);
+  // Means of white noise: σ/√n (accelerometer 5.9e-3 m/s², magnetometer 0.2 µT per sample).
+  EXPECT_LT((f_sum - f_exp).norm() / n, 5 * 5.9e-3 / std::sqrt(n));
+  EXPECT_LT((m_sum - m_exp).norm() / n, 5 * 0.2 / std::sqrt(n));
+}
+
+TEST(SensorSim, MagneticDisturbanceOnlyAtChosenStops) {
+  const auto m = Cell();
+  const ToolMotionTruth truth(m, Truth(m), Program(m, 20, 9));
+  SensorSimSettings s;
+  s.imu.white_noise = false;
+  s.mag_disturbance = true;
+  s.mag_disturbance_fraction = 0.5;
+  SensorSim sim(truth, s, 1);
+  ASSERT_FALSE(sim.disturbed_stops().empty());
+  while (auto f = sim.Next()) {
+    const Eigen::Vector3d clean = f->truth.R_EI.transpose() * s.imu.m_W;
+    const int k = truth.trajectory().StillAt(f->t);
+    const bool disturbed =
+        k >= 0 && std::count(sim.disturbed_stops().begin(), sim.disturbed_stops().end(), k) > 0;
+    if (disturbed)
+      EXPECT_NEAR((f->imu.mag_S - clean).norm(), s.mag_disturbance_uT, 1e-9);
+    else
+      EXPECT_LT((f->imu.mag_S - clean).norm(), 1e-9);
+  }
+}
+
+}  // namespace
+}  // namespace rcal::sim
