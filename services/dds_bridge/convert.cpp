@@ -3,7 +3,7 @@
 
 #include <cmath>
 #include <limits>
-#include <string_view>
+#include <type_traits>
 
 namespace rcal::dds {
 namespace {
@@ -15,17 +15,35 @@ bool Fail(std::string* error, std::string message) {
   return false;
 }
 
-// A finite value, or (allow_inf) +inf/-inf; never NaN.
-bool CheckValue(double v, const std::string& field, std::string* error, bool allow_inf = false) {
-  if (std::isnan(v)) return Fail(error, field + ": NaN");
-  if (!allow_inf && std::isinf(v)) return Fail(error, field + ": infinite");
-  return true;
+// "field[i]" (appended piecewise: GCC 12's -Wrestrict misfires on "literal" + std::string).
+std::string Indexed(const char* field, size_t i) {
+  std::string s(field);
+  s += '[';
+  s += std::to_string(i);
+  s += ']';
+  return s;
+}
+
+// A finite value, or (allow_inf) +inf/-inf; never NaN. `field` is a string or a callable that
+// returns one (built only on failure: the check runs on every value of every message).
+template <typename Field>
+bool CheckValue(double v, const Field& field, std::string* error, bool allow_inf = false) {
+  if (std::isfinite(v) || (allow_inf && std::isinf(v))) return true;
+  std::string name;
+  if constexpr (std::is_invocable_v<Field>)
+    name = field();
+  else
+    name = field;
+  name += std::isnan(v) ? ": NaN" : ": infinite";
+  return Fail(error, std::move(name));
 }
 
 template <size_t N>
-bool CheckArray(const double (&a)[N], const std::string& field, std::string* error) {
+bool CheckArray(const double (&a)[N], const char* field, std::string* error) {
   for (size_t i = 0; i < N; ++i)
-    if (!CheckValue(a[i], field + "[" + std::to_string(i) + "]", error)) return false;
+    if (!CheckValue(
+            a[i], [&] { return Indexed(field, i); }, error))
+      return false;
   return true;
 }
 
@@ -86,7 +104,11 @@ std::optional<int64_t> UtimeFromStamp(const Time& stamp, const std::string& fiel
 
 namespace {
 std::string ParamField(const char* array, size_t i, const std::string& name) {
-  return std::string("kinematic_params.") + array + "[" + std::to_string(i) + "] (" + name + ")";
+  std::string s = Indexed((std::string("kinematic_params.") + array).c_str(), i);
+  s += " (";
+  s += name;
+  s += ')';
+  return s;
 }
 }  // namespace
 
@@ -103,8 +125,10 @@ std::optional<Sample<KinematicParams>> ToDds(const kinematic_params_t& msg, std:
                              " entries, num_params is " + std::to_string(n)),
              std::nullopt;
   for (size_t i = 0; i < n; ++i)
-    if (!CheckValue(msg.values[i], ParamField("values", i, msg.names[i]), error) ||
-        !CheckValue(msg.sigmas[i], ParamField("sigmas", i, msg.names[i]), error))
+    if (!CheckValue(
+            msg.values[i], [&] { return ParamField("values", i, msg.names[i]); }, error) ||
+        !CheckValue(
+            msg.sigmas[i], [&] { return ParamField("sigmas", i, msg.names[i]); }, error))
       return std::nullopt;
 
   Sample<KinematicParams> s;
@@ -150,8 +174,10 @@ std::optional<kinematic_params_t> FromDds(const KinematicParams& d, std::string*
   m.num_params = static_cast<int32_t>(n);
   for (uint32_t i = 0; i < n; ++i) {
     m.names.push_back(Str(d.names._buffer[i]));
-    if (!CheckValue(d.values._buffer[i], ParamField("values", i, m.names.back()), error) ||
-        !CheckValue(d.sigmas._buffer[i], ParamField("sigmas", i, m.names.back()), error))
+    if (!CheckValue(
+            d.values._buffer[i], [&] { return ParamField("values", i, m.names.back()); }, error) ||
+        !CheckValue(
+            d.sigmas._buffer[i], [&] { return ParamField("sigmas", i, m.names.back()); }, error))
       return std::nullopt;
     m.values.push_back(d.values._buffer[i]);
     m.sigmas.push_back(d.sigmas._buffer[i]);
