@@ -5,7 +5,10 @@
 //     once (transient-local), equal bit for bit to what was published on LCM;
 //   - the bridge survives a restart of the LCM publisher (SIGKILL, new process, new values) and
 //     forwards the new values; a late subscriber then gets those;
-//   - every DDS message names the robot; KINEMATIC_PARAMS of another robot are rejected (HEALTH).
+//   - every DDS message names the robot; KINEMATIC_PARAMS of another robot are rejected (HEALTH);
+//   - with the real ekf_identifier fed simulated poses, SIGKILLed and restarted from its
+//     checkpoint: the bridge forwards what the identifier publishes before and after, and a late
+//     subscriber gets exactly the identifier's last KINEMATIC_PARAMS as seen on LCM.
 //
 // The truth is tests/dds/test_messages.hpp (what rcal_dds_test_publisher publishes). Run outside
 // a namespace, the test re-runs itself under deploy/netns-run (skipped when `unshare -n` is not
@@ -33,6 +36,12 @@
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/lcm_transport.hpp"
 #include "test_messages.hpp"
+
+#ifdef RCAL_EKF_IDENTIFIER
+#include "rcal/io/robot_urdf.hpp"
+#include "rcal/sim/pose_sim.hpp"
+#include "rcal/transport/adapters.hpp"
+#endif
 
 namespace rcal::dds {
 namespace {
@@ -363,6 +372,106 @@ TEST_F(DdsBridge, LateSubscriberGetsLatestExactValuesAndBridgeSurvivesPublisherR
   ASSERT_FALSE(robot_ids.empty());
   for (const auto& id : robot_ids) EXPECT_EQ(id, kRobot);
 }
+
+#ifdef RCAL_EKF_IDENTIFIER
+TEST_F(DdsBridge, ForwardsTheRealIdentifierAcrossItsRestart) {
+  RCAL_IN_NAMESPACE("DdsBridge.ForwardsTheRealIdentifierAcrossItsRestart");
+  setenv("CYCLONEDDS_URI", LoopbackConfigUri().c_str(), 1);
+  const std::string robot_yaml = RCAL_SOURCE_DIR "/config/robots/grb3016.yaml";
+  const auto model = io::LoadRobot(robot_yaml).model;
+
+  // The identifier's outputs on LCM: the truth the DDS side must equal.
+  transport::LcmTransport lcm(kUrl);
+  std::optional<kinematic_params_t> lcm_params;
+  int statuses = 0;
+  bool bridge_up = false;
+  lcm.Subscribe<kinematic_params_t>(transport::channels::kKinematicParams,
+                                    [&](const kinematic_params_t& m) { lcm_params = m; });
+  lcm.Subscribe<calibration_status_t>(transport::channels::kCalibrationStatus,
+                                      [&](const calibration_status_t&) { ++statuses; });
+  lcm.Subscribe<health_t>(transport::channels::kHealth, [&](const health_t& h) {
+    bridge_up = bridge_up || h.process == "dds_bridge";
+  });
+
+  const pid_t bridge = Start({RCAL_DDS_BRIDGE, "--robot-id", model.name(), "--lcm-url", kUrl,
+                              "--dds-domain", std::to_string(kDomain)},
+                             "bridge");
+  ASSERT_TRUE(WaitFor([&] {
+    lcm.HandleTimeout(50);
+    return bridge_up;
+  })) << ReadAll(dir_ / "bridge.err");
+
+  EntityGuard participant(dds_create_participant(kDomain, nullptr, nullptr));
+  ASSERT_GT(participant.get(), 0);
+  Reader<KinematicParams> params(participant.get(), kKinematicParamsTopic, LatchedQos());
+  std::optional<int32_t> dds_poses_used;
+  std::vector<std::string> robot_ids;
+  auto take = [&] {
+    params.Take([&](const KinematicParams& d) {
+      robot_ids.push_back(d.robot_id);
+      dds_poses_used = d.poses_used;
+    });
+  };
+
+  // Simulated still-pose measurements of the truth robot (Table 3 errors).
+  sim::Rng rng(7);
+  const auto poses = sim::MeasurePoses(model, sim::Table3Errors(model),
+                                       sim::SampleJoints(model, 8, rng), sim::PoseNoise{}, rng);
+  const fs::path checkpoint = dir_ / "ekf.checkpoint.json";
+  const std::vector<std::string> identifier = {
+      RCAL_EKF_IDENTIFIER, "--robot",   robot_yaml, "--checkpoint",
+      checkpoint.string(), "--lcm-url", kUrl};
+  // Starts the identifier, waits for its start-up CALIBRATION_STATUS (it is listening then),
+  // feeds poses [from, to) one at a time, each after the previous one was published.
+  auto run = [&](size_t from, size_t to, const std::string& log) {
+    // Handle what earlier processes published first, so an old status is not taken for the new
+    // process's start-up status (no identifier is running here, nothing more is coming).
+    while (lcm.HandleTimeout(100) > 0) {
+    }
+    const int before = statuses;
+    const pid_t p = Start(identifier, log);
+    EXPECT_TRUE(WaitFor([&] {
+      lcm.HandleTimeout(50);
+      return statuses > before;
+    })) << ReadAll(dir_ / (log + ".err"));
+    for (size_t k = from; k < to; ++k) {
+      lcm.Publish(transport::channels::kPoseMeasurement,
+                  transport::ToMessage(poses[k], 1'000'000 * static_cast<int64_t>(k + 1),
+                                       static_cast<int32_t>(k)));
+      EXPECT_TRUE(WaitFor([&] {
+        lcm.HandleTimeout(50);
+        return lcm_params && lcm_params->poses_used == static_cast<int32_t>(k + 1);
+      })) << "pose "
+          << k << ": " << ReadAll(dir_ / (log + ".err"));
+    }
+    return p;
+  };
+
+  const pid_t first = run(0, 5, "identifier1");
+  ASSERT_TRUE(lcm_params);
+  ASSERT_TRUE(WaitFor([&] {
+    take();
+    return dds_poses_used == 5;
+  }));
+  Kill(first);  // SIGKILL: no clean shutdown
+
+  const pid_t second = run(5, 8, "identifier2");  // resumes from the checkpoint
+  ASSERT_TRUE(lcm_params);
+  ASSERT_EQ(lcm_params->poses_used, 8);
+  ASSERT_TRUE(WaitFor([&] {
+    take();
+    return dds_poses_used == 8;
+  }));
+  Kill(second);
+  EXPECT_TRUE(Alive(bridge)) << ReadAll(dir_ / "bridge.err");
+
+  // A late subscriber, no identifier running: the identifier's last message, bit for bit.
+  const auto late = Echo("kinematic_params", 1, "echo_identifier");
+  ASSERT_EQ(late.size(), 1u);
+  ExpectParams(late[0], *lcm_params);
+  for (const auto& id : robot_ids) EXPECT_EQ(id, model.name());
+}
+#endif  // RCAL_EKF_IDENTIFIER
 
 }  // namespace
 }  // namespace rcal::dds
