@@ -328,7 +328,7 @@ int Run(const Options& o) {
   std::printf("\nrcal analyze — %s, %zu poses\n", o.data.c_str(), pd.measurements.size());
   if (a.effects.empty()) std::printf("  no significant effect beyond geometry\n");
   for (const auto& f : a.effects) {
-    std::printf("  %s %s:", f.cause.c_str(), f.joints.empty() ? "" : f.joints[0].c_str());
+    std::printf("  %s:", discrepancy::Describe(model, f.effect).c_str());
     for (size_t i = 0; i < f.parameters.size(); ++i)
       std::printf(" %s", ValueText(f.values(i), f.sigma(i), f.parameters[i].unit).c_str());
     std::printf("\n");

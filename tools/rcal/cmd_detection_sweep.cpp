@@ -159,7 +159,7 @@ int Run(const Options& o) {
                       {"exact_rate", double(t.exact) / t.runs},
                       {"wrong_effect_rate", double(t.wrong) / t.runs},
                       {"extra_effect_rate", double(t.extra) / t.runs}});
-      std::printf("| %s | %.0f | %d | %.0f %% | %.0f %% | %.0f %% | %.0f %% |\n", kind.name.c_str(),
+      std::printf("| %s | %g | %d | %.0f %% | %.0f %% | %.0f %% | %.0f %% |\n", kind.name.c_str(),
                   k, t.runs, 100.0 * t.detected / t.runs, 100.0 * t.exact / t.runs,
                   100.0 * t.wrong / t.runs, 100.0 * t.extra / t.runs);
     }
