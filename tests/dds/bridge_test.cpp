@@ -30,6 +30,7 @@
 #include <sstream>
 #include <thread>
 
+#include "process_helpers.hpp"
 #include "rcal/dds/convert.hpp"
 #include "rcal/dds/dds_common.hpp"
 #include "rcal/health_t.hpp"
@@ -47,62 +48,16 @@ namespace rcal::dds {
 namespace {
 
 namespace fs = std::filesystem;
+using testing::Alive;
+using testing::Spawn;
 using testing::TestParams;
 using testing::TestStatus;
 using testing::TestUtime;
+using testing::Wait;
 
 constexpr const char* kUrl = "udpm://239.255.76.67:7723?ttl=0";  // not the default port
 constexpr int kDomain = 77;                                      // not the default domain
 constexpr const char* kRobot = "robot_a";
-
-pid_t Spawn(const std::vector<std::string>& argv, const fs::path& out, const fs::path& err) {
-  const pid_t pid = fork();
-  if (pid == 0) {
-    setpgid(0, 0);
-    FILE* o = std::fopen(out.c_str(), "w");
-    FILE* e = std::fopen(err.c_str(), "w");
-    if (o) dup2(fileno(o), 1);
-    if (e) dup2(fileno(e), 2);
-    std::vector<char*> args;
-    for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-    args.push_back(nullptr);
-    execv(args[0], args.data());
-    _exit(127);
-  }
-  return pid;
-}
-
-int Wait(pid_t pid) {
-  int status = 0;
-  waitpid(pid, &status, 0);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -WTERMSIG(status);
-}
-
-bool Alive(pid_t pid) {
-  return waitpid(pid, nullptr, WNOHANG) == 0;
-}
-
-enum class Where { kHere, kDelegated, kNotPermitted };
-
-Where InNamespaceOrDelegate(const char* filter) {
-  if (std::getenv("RCAL_IN_NETNS")) return Where::kHere;
-  const std::string netns = RCAL_SOURCE_DIR "/deploy/netns-run";
-  if (std::system((netns + " true >/dev/null 2>&1").c_str()) != 0) return Where::kNotPermitted;
-  const std::string self = fs::read_symlink("/proc/self/exe").string();
-  const int rc = std::system((netns + " " + self + " --gtest_filter=" + filter).c_str());
-  EXPECT_EQ(rc, 0) << "the test inside the namespace failed (output above)";
-  return Where::kDelegated;
-}
-
-#define RCAL_IN_NAMESPACE(filter)                                                   \
-  switch (InNamespaceOrDelegate(filter)) {                                          \
-    case Where::kNotPermitted:                                                      \
-      GTEST_SKIP() << "unshare -n is not permitted here (deploy/netns-run failed)"; \
-    case Where::kDelegated:                                                         \
-      return;                                                                       \
-    case Where::kHere:                                                              \
-      break;                                                                        \
-  }
 
 // Polls `done` until true or the guard runs out (false).
 bool WaitFor(const std::function<bool()>& done, double guard_s = 60) {
@@ -283,14 +238,21 @@ TEST_F(DdsBridge, LateSubscriberGetsLatestExactValuesAndBridgeSurvivesPublisherR
     }
   };
 
+  // The bridge starts without CYCLONEDDS_URI: it must choose the loopback file itself.
+  unsetenv("CYCLONEDDS_URI");
   const pid_t bridge = Start({RCAL_DDS_BRIDGE, "--robot-id", kRobot, "--lcm-url", kUrl,
                               "--dds-domain", std::to_string(kDomain)},
                              "bridge");
+  setenv("CYCLONEDDS_URI", LoopbackConfigUri().c_str(), 1);
   ASSERT_TRUE(WaitFor([&] {
     lcm.HandleTimeout(50);
     return health.has_value();
   })) << "no HEALTH from the bridge: "
       << ReadAll(dir_ / "bridge.err");
+
+  EXPECT_NE(ReadAll(dir_ / "bridge.out").find("(CYCLONEDDS_URI " + LoopbackConfigUri() + ")"),
+            std::string::npos)
+      << ReadAll(dir_ / "bridge.out");
 
   // What the bridge forwards, seen from a DDS participant in this process.
   EntityGuard participant(dds_create_participant(kDomain, nullptr, nullptr));
