@@ -1,0 +1,57 @@
+// config/processes.dds.yaml (the process table with the DDS bridge) is a valid table for the
+// supervisor: it parses with the supervisor's own parser, starts the bridge before the
+// identifier, gives the bridge the robot id the identifier publishes (the robot YAML's name), and
+// every dds_bridge option in it is one the bridge accepts (checked by running `dds_bridge --help`).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cstdio>
+#include <memory>
+#include <string>
+
+#include "process_table.hpp"
+#include "rcal/io/robot_urdf.hpp"
+
+namespace {
+
+std::string Output(const std::string& command) {
+  std::string out;
+  std::unique_ptr<FILE, int (*)(FILE*)> p(popen(command.c_str(), "r"), pclose);
+  std::array<char, 256> buf{};
+  while (p && fgets(buf.data(), buf.size(), p.get())) out += buf.data();
+  return out;
+}
+
+TEST(DdsProcessTable, StartsTheBridgeForTheIdentifiersRobot) {
+  const auto table = rcal::services::LoadProcessTable(RCAL_SOURCE_DIR "/config/processes.dds.yaml");
+  const auto& p = table.processes;
+  auto find = [&](const std::string& name) {
+    return std::find_if(p.begin(), p.end(), [&](const auto& s) { return s.name == name; });
+  };
+  const auto bridge = find("dds_bridge"), identifier = find("ekf_identifier");
+  ASSERT_NE(bridge, p.end());
+  ASSERT_NE(identifier, p.end());
+  EXPECT_LT(bridge - p.begin(), identifier - p.begin());
+  ASSERT_FALSE(bridge->argv.empty());
+  EXPECT_EQ(bridge->argv[0], "dds_bridge");
+
+  // --robot-id equals the name of the identifier's robot (its KINEMATIC_PARAMS robot_id).
+  const auto& a = bridge->argv;
+  const auto id = std::find(a.begin(), a.end(), "--robot-id");
+  ASSERT_NE(id, a.end());
+  ASSERT_NE(id + 1, a.end());
+  const auto& b = identifier->argv;
+  const auto robot = std::find(b.begin(), b.end(), "--robot");
+  ASSERT_NE(robot + 1, b.end());
+  EXPECT_EQ(*(id + 1), rcal::io::LoadRobot(RCAL_SOURCE_DIR "/" + *(robot + 1)).model.name());
+
+  const std::string help = Output(RCAL_DDS_BRIDGE " --help");
+  for (const auto& arg : a) {
+    if (arg.rfind("--", 0) == 0) {
+      EXPECT_NE(help.find(arg), std::string::npos) << arg;
+    }
+  }
+}
+
+}  // namespace
