@@ -333,6 +333,11 @@ TEST_F(DdsBridge, LateSubscriberGetsLatestExactValuesAndBridgeSurvivesPublisherR
   // Every DDS message named this bridge's robot.
   ASSERT_FALSE(robot_ids.empty());
   for (const auto& id : robot_ids) EXPECT_EQ(id, kRobot);
+
+  // SIGINT (how the supervisor stops it) ends the bridge cleanly.
+  kill(bridge, SIGINT);
+  EXPECT_EQ(Wait(bridge), 0) << ReadAll(dir_ / "bridge.err");
+  std::erase(pids_, bridge);
 }
 
 #ifdef RCAL_EKF_IDENTIFIER
