@@ -184,10 +184,11 @@ int main(int argc, char** argv) {
       throw std::runtime_error(std::string("dds_create_participant (CYCLONEDDS_URI ") + uri +
                                "): " + dds_strretcode(participant.get()));
     rcal::transport::LcmTransport t(o.lcm_url);
-    Bridge bridge(o, t, participant.get());
+    // Logged before the start-up HEALTH goes out, so whoever sees that heartbeat finds this line.
     spdlog::info("dds_bridge for robot '{}': LCM {} -> DDS domain {} (CYCLONEDDS_URI {})",
                  o.robot_id, t.url(), o.dds_domain < 0 ? "default" : std::to_string(o.dds_domain),
                  uri);
+    Bridge bridge(o, t, participant.get());
     while (!rcal::services::StopRequested()) {
       if (t.HandleTimeout(100) < 0 && errno != EINTR) {
         spdlog::error("LCM error: {}", std::strerror(errno));
