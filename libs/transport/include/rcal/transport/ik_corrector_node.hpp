@@ -1,0 +1,56 @@
+// The ik_corrector process's node: KINEMATIC_PARAMS (the latest calibration) and IK_REQUEST in,
+// IK_COMMAND out, HEALTH at 1 Hz of the messages' utime. Each request is solved by
+// rcal::ik::LevenbergMarquardtIk on the calibrated model (the nominal one until the first
+// KINEMATIC_PARAMS) and on the nominal model; the command also says how far the nominal answer
+// would put the tool on the calibrated model (nominal_tool_error). Parameters for another model
+// (model id, names, sizes), non-finite values, malformed requests and undecodable bytes are
+// rejected, counted in HEALTH, and change nothing.
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+
+#include "rcal/ik/levenberg_marquardt_ik.hpp"
+#include "rcal/ik_request_t.hpp"
+#include "rcal/kinematic_params_t.hpp"
+#include "rcal/kinematics/model.hpp"
+#include "rcal/transport/health.hpp"
+#include "rcal/transport/transport.hpp"
+
+namespace rcal::transport {
+
+class IkCorrectorNode {
+ public:
+  struct Options {
+    std::string name = "ik_corrector";
+    std::string params_channel = "KINEMATIC_PARAMS";
+    std::string request_channel = "IK_REQUEST";
+    std::string command_channel = "IK_COMMAND";
+    std::string health_channel = "HEALTH";
+  };
+  IkCorrectorNode(Transport& t, const kinematics::KinematicModel& model, Options options);
+  IkCorrectorNode(Transport& t, const kinematics::KinematicModel& model)
+      : IkCorrectorNode(t, model, Options{}) {}
+
+  void OnParams(const kinematic_params_t& msg);
+  void OnRequest(const ik_request_t& msg);
+  void OnUndecodable(const std::string& reason);
+
+  /// Parameter errors in use [m | rad] (the nominal model's until the first KINEMATIC_PARAMS).
+  const Eigen::VectorXd& x() const { return x_; }
+  /// utime of the KINEMATIC_PARAMS in use (0: nominal).
+  int64_t params_utime() const { return params_utime_; }
+  const Health& health() const { return health_; }
+
+ private:
+  void Reject(const std::string& reason);
+  Transport& t_;
+  const kinematics::KinematicModel& model_;
+  Options o_;
+  ik::LevenbergMarquardtIk calibrated_, nominal_;
+  Eigen::VectorXd x_;
+  int64_t params_utime_ = 0, latest_ = 0;
+  Health health_;
+};
+
+}  // namespace rcal::transport

@@ -1,0 +1,127 @@
+// IkCorrectorNode over memq://: answers on the nominal model until the first calibration, then on
+// the calibrated one (checked against forward kinematics of the truth parameters), reports how
+// far the nominal answer lands, and rejects bad parameters and requests without changing state.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+#include "rcal/ik_command_t.hpp"
+#include "rcal/io/robot_urdf.hpp"
+#include "rcal/sim/pose_sim.hpp"
+#include "rcal/transport/adapters.hpp"
+#include "rcal/transport/channels.hpp"
+#include "rcal/transport/ik_corrector_node.hpp"
+#include "rcal/transport/lcm_transport.hpp"
+
+namespace rcal::transport {
+namespace {
+
+struct Fixture {
+  kinematics::KinematicModel model =
+      io::LoadRobot(RCAL_SOURCE_DIR "/config/robots/grb3016.yaml").model;
+  Eigen::VectorXd x_true = sim::Table3Errors(model);
+  LcmTransport t{"memq://"};
+  IkCorrectorNode node{t, model};
+  std::vector<ik_command_t> commands;
+  Fixture() {
+    t.Subscribe<ik_command_t>(channels::kIkCommand,
+                              [this](const ik_command_t& m) { commands.push_back(m); });
+  }
+  void Drain() {
+    while (t.HandleTimeout(0) > 0) {
+    }
+  }
+  ik_request_t Request(const Eigen::VectorXd& q_target, int64_t utime, int64_t id) {
+    IkQuery query;
+    query.request_id = id;
+    query.T_WT = model.ToolFrame(q_target, x_true);  // where the real arm's tool is at q_target
+    query.q_seed = q_target.array() + 0.05;
+    return ToMessage(query, utime);
+  }
+  kinematic_params_t Params(int64_t utime) {
+    std::vector<int> all(model.num_params());
+    for (int i = 0; i < model.num_params(); ++i) all[i] = i;
+    return ToKinematicParams(model, x_true, Eigen::VectorXd::Constant(model.num_params(), 1e-6),
+                             all, model.name(), utime, 50);
+  }
+};
+
+Eigen::VectorXd Q(const std::vector<double>& v) {
+  return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<int>(v.size()));
+}
+
+TEST(IkCorrectorNode, NominalUntilCalibratedThenCalibratedAgainstTruth) {
+  Fixture f;
+  sim::Rng rng(7);
+  const Eigen::VectorXd q_target = sim::SampleJoints(f.model, 1, rng)[0];
+  const ik_request_t request = f.Request(q_target, 1'000'000, 1);
+  const Eigen::Vector3d p_star = f.model.ToolFrame(q_target, f.x_true).translation();
+
+  // Before any calibration: both answers on the nominal model, the same.
+  f.t.Publish(channels::kIkRequest, request);
+  f.Drain();
+  ASSERT_EQ(f.commands.size(), 1u);
+  const ik_command_t& c0 = f.commands[0];
+  EXPECT_EQ(c0.request_id, 1);
+  EXPECT_EQ(c0.params_utime, 0);
+  ASSERT_TRUE(c0.converged) << c0.reason;
+  EXPECT_EQ(Q(c0.q), Q(c0.q_nominal));
+  const double nominal_miss = (f.model.ToolFrame(Q(c0.q), f.x_true).translation() - p_star).norm();
+  EXPECT_GT(nominal_miss, 1e-4);  // Table 3 errors move the tool by more than 0.1 mm
+
+  // After KINEMATIC_PARAMS with the truth: the calibrated answer reaches the target on the truth.
+  f.t.Publish(channels::kKinematicParams, f.Params(2'000'000));
+  f.t.Publish(channels::kIkRequest, f.Request(q_target, 2'100'000, 2));
+  f.Drain();
+  ASSERT_EQ(f.commands.size(), 2u);
+  const ik_command_t& c1 = f.commands[1];
+  EXPECT_EQ(c1.params_utime, 2'000'000);
+  ASSERT_TRUE(c1.converged) << c1.reason;
+  EXPECT_LT((f.model.ToolFrame(Q(c1.q), f.x_true).translation() - p_star).norm(), 1e-6);
+  // The nominal answer is still the nominal model's, and its reported miss is the truth's.
+  const double miss = (f.model.ToolFrame(Q(c1.q_nominal), f.x_true).translation() - p_star).norm();
+  EXPECT_NEAR(c1.nominal_tool_error, miss, 1e-9);
+  EXPECT_NEAR(c1.nominal_tool_error, nominal_miss, 1e-6);
+  EXPECT_EQ(f.node.health().rejected(), 0);
+}
+
+TEST(IkCorrectorNode, BadParametersAndRequestsAreRejectedAndChangeNothing) {
+  Fixture f;
+  f.t.Publish(channels::kKinematicParams, f.Params(1'000'000));
+  f.Drain();
+  const Eigen::VectorXd x_before = f.node.x();
+  ASSERT_EQ(x_before, f.x_true);
+
+  auto nan = f.Params(1'100'000);
+  nan.values[3] = NAN;
+  f.t.Publish(channels::kKinematicParams, nan);
+  auto other_model = f.Params(1'200'000);
+  other_model.model_id = "another:0000000000000000";
+  f.t.Publish(channels::kKinematicParams, other_model);
+  auto short_params = f.Params(1'300'000);
+  short_params.num_params -= 1;
+  short_params.names.pop_back();
+  short_params.values.pop_back();
+  short_params.sigmas.pop_back();
+  short_params.identified.pop_back();
+  f.t.Publish(channels::kKinematicParams, short_params);
+  sim::Rng rng(3);
+  auto wrong_joints = f.Request(sim::SampleJoints(f.model, 1, rng)[0], 1'400'000, 9);
+  wrong_joints.num_joints -= 1;
+  wrong_joints.q_seed.pop_back();
+  f.t.Publish(channels::kIkRequest, wrong_joints);
+  const char garbage[] = "garbage";
+  f.t.PublishRaw(channels::kIkRequest, garbage, sizeof garbage);
+  f.t.PublishRaw(channels::kKinematicParams, garbage, sizeof garbage);
+  f.Drain();
+
+  EXPECT_EQ(f.node.health().rejected(), 6) << f.node.health().last_error();
+  EXPECT_EQ(f.node.health().received(), 7);
+  EXPECT_EQ(f.node.x(), x_before);
+  EXPECT_EQ(f.node.params_utime(), 1'000'000);
+  EXPECT_TRUE(f.commands.empty());
+}
+
+}  // namespace
+}  // namespace rcal::transport

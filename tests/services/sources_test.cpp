@@ -1,0 +1,103 @@
+// sensor_acquisition's raw-stream replay source on a small CSV written here: IMU every row with
+// utime from t_s, magnetometer scaled to tesla, position decimated on file time and skipped where
+// NaN, order IMU before POSITION within a row, missing columns named.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "sources.hpp"
+
+namespace rcal::sensors {
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path WriteCsv(const std::string& name, const std::string& text) {
+  const fs::path p = fs::temp_directory_path() / (name + std::to_string(::getpid()) + ".csv");
+  std::ofstream(p) << text;
+  return p;
+}
+
+TEST(RawCsvReplaySource, ImuEveryRowPositionDecimatedOnFileTime) {
+  std::string csv =
+      "# comment\nt_s,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z,mag_x,mag_y,mag_z,pos_x,"
+      "pos_y,pos_z,other\n";
+  for (int k = 0; k < 12; ++k) {
+    const double t = 0.01 * k;
+    const std::string pos = k == 5 ? "nan,nan,nan" : std::to_string(k) + ",2,3";
+    csv += std::to_string(t) + ",0.1,0.2,0.3,0,0,9.81,20,0,-40," + pos + ",7\n";
+  }
+  const fs::path p = WriteCsv("replay_src", csv);
+  RawCsvReplaySettings s;
+  s.position_rate = 25;  // every 0.04 s of file time
+  s.utime_offset = 1000;
+  RawCsvReplaySource src(p.string(), s);
+  std::vector<SensorEvent> events;
+  while (auto e = src.Next(0)) events.push_back(*e);
+  EXPECT_TRUE(src.Finished());
+  int imu = 0;
+  std::vector<int64_t> pos_utimes;
+  int64_t last = -1;
+  for (size_t i = 0; i < events.size(); ++i) {
+    EXPECT_GE(Utime(events[i]), last);
+    last = Utime(events[i]);
+    if (const auto* s_imu = std::get_if<transport::ImuSample>(&events[i])) {
+      EXPECT_EQ(s_imu->utime, 10'000 * imu + 1000);
+      EXPECT_TRUE(s_imu->has_mag);
+      EXPECT_DOUBLE_EQ(s_imu->m_B(0), 20e-6);
+      EXPECT_DOUBLE_EQ(s_imu->m_B(2), -40e-6);
+      EXPECT_DOUBLE_EQ(s_imu->f_B(2), 9.81);
+      ++imu;
+    } else {
+      const auto& ps = std::get<transport::PositionSample>(events[i]);
+      // Follows the IMU sample of its row.
+      ASSERT_GT(i, 0u);
+      EXPECT_EQ(Utime(events[i - 1]), ps.utime);
+      EXPECT_DOUBLE_EQ(ps.covariance(0, 0), 1e-6);
+      pos_utimes.push_back(ps.utime);
+    }
+  }
+  EXPECT_EQ(imu, 12);
+  // Rows 0, 4, 8 (t = 0, 0.04, 0.08); row 5 is NaN but not due anyway.
+  EXPECT_EQ(pos_utimes, (std::vector<int64_t>{1000, 41'000, 81'000}));
+  fs::remove(p);
+}
+
+TEST(RawCsvReplaySource, HiddenMarkerDelaysThePositionToTheNextFiniteRow) {
+  std::string csv = "t_s,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z,mag_x,mag_y,mag_z,pos_x,pos_y,pos_z\n";
+  for (int k = 0; k < 6; ++k)
+    csv += std::to_string(0.01 * k) + ",0,0,0,0,0,9.8,1,1,1," +
+           (k == 2 ? std::string("nan,nan,nan") : std::string("1,2,3")) + "\n";
+  const fs::path p = WriteCsv("replay_nan", csv);
+  RawCsvReplaySettings s;
+  s.position_rate = 50;  // every 0.02 s on the schedule 0, 0.02, 0.04: rows 0, 2 (hidden → 3), 4
+  RawCsvReplaySource src(p.string(), s);
+  std::vector<int64_t> pos;
+  while (auto e = src.Next(0))
+    if (std::holds_alternative<transport::PositionSample>(*e)) pos.push_back(Utime(*e));
+  EXPECT_EQ(pos, (std::vector<int64_t>{0, 30'000, 40'000}));
+  fs::remove(p);
+}
+
+TEST(RawCsvReplaySource, MissingColumnIsNamed) {
+  const fs::path p = WriteCsv("replay_bad", "t_s,gyr_x,gyr_y\n0,1,2\n");
+  try {
+    RawCsvReplaySource src(p.string(), {});
+    FAIL() << "no error";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("gyr_z"), std::string::npos) << e.what();
+  }
+  fs::remove(p);
+}
+
+TEST(RawCsvReplaySource, TheBroadTrialReplaysAtTwentyHertzPosition) {
+  RawCsvReplaySource src(RCAL_SHARED_DIR "/data/broad/broad_02_100hz.csv", {});
+  int64_t imu = 0, pos = 0;
+  while (auto e = src.Next(0)) (std::holds_alternative<transport::ImuSample>(*e) ? imu : pos)++;
+  EXPECT_EQ(imu, 18634);
+  EXPECT_NEAR(static_cast<double>(pos) / imu, 0.2, 0.01);
+}
+
+}  // namespace
+}  // namespace rcal::sensors
