@@ -11,8 +11,12 @@
 // Sensor-level IMU/POSITION streams from the simulator come with the sensor-level simulator.
 //
 // Source `replay FILE`: a raw-stream CSV in the BROAD layout (sources.hpp) published as IMU (every
-// row) and POSITION (decimated to --position-rate), utime from the file, paced by --speed (1: real
-// time, 0: as fast as possible). A real sensor driver implements rcal::sensors::SensorSource.
+// row) and POSITION (decimated to --position-rate), utime from the file; or a pose dataset
+// (columns q1..qN, x, y, z, ...) published as JOINTS + POSE_MEASUREMENT per pose (utime from its
+// time column, else --start-utime + k/--rate; noise σ from --position-noise/--orientation-noise).
+// Paced by --speed (1: real time, 0: as fast as possible; over udpm a burst larger than the
+// receivers' socket buffers is dropped: use a finite speed or recv_buf_size=N in the LCM URL).
+// A real sensor driver implements rcal::sensors::SensorSource.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -61,8 +65,10 @@ int RunSource(rcal::sensors::SensorSource& source, rcal::transport::Transport& t
       ok = t.Publish(ch::kImu, transport::ToMessage(*imu));
     else if (const auto* pos = std::get_if<transport::PositionSample>(&*e))
       ok = t.Publish(ch::kPosition, transport::ToMessage(*pos));
+    else if (const auto* js = std::get_if<joint_state_t>(&*e))
+      ok = t.Publish(ch::kJoints, *js);
     else
-      ok = t.Publish(ch::kJoints, std::get<joint_state_t>(*e));
+      ok = t.Publish(ch::kPoseMeasurement, std::get<pose_measurement_t>(*e));
     if (ok) {
       health.Published();
       ++published;
@@ -128,6 +134,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--utime-offset", replay.utime_offset, "replay: added to every utime [µs]")
       ->capture_default_str();
+  bool include_test = false;
+  app.add_flag("--include-test", include_test,
+               "replay of a pose dataset: also the rows of the test set");
   CLI11_PARSE(app, argc, argv);
   if (source == "replay" && replay_file.empty()) {
     std::fprintf(stderr, "sensor_acquisition: --source replay needs FILE\n");
@@ -138,7 +147,18 @@ int main(int argc, char** argv) {
     services::InstallStopHandlers();
     transport::LcmTransport t(lcm_url);
     if (source == "replay") {
-      sensors::RawCsvReplaySource src(services::RepoPath(replay_file), replay);
+      const std::string path = services::RepoPath(replay_file);
+      if (sensors::IsRawStreamCsv(path)) {
+        sensors::RawCsvReplaySource src(path, replay);
+        return RunSource(src, t, speed);
+      }
+      sensors::PoseDatasetReplaySettings ps;
+      ps.rate = rate;
+      ps.start_utime = start_utime;
+      ps.position_sigma = position_noise;
+      ps.orientation_sigma = orientation_noise;
+      ps.include_test = include_test;
+      sensors::PoseDatasetReplaySource src(path, ps);
       return RunSource(src, t, speed);
     }
     const auto robot = io::LoadRobot(services::RepoPath(robot_path));

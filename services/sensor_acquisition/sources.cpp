@@ -4,6 +4,8 @@
 #include <limits>
 
 #include "rcal/io/csv_table.hpp"
+#include "rcal/io/pose_dataset.hpp"
+#include "rcal/transport/adapters.hpp"
 
 namespace rcal::sensors {
 
@@ -65,6 +67,64 @@ std::string RawCsvReplaySource::Describe() const {
 }
 
 std::optional<SensorEvent> RawCsvReplaySource::Next(int /*timeout_ms*/) {
+  if (Finished()) return std::nullopt;
+  return events_[next_++];
+}
+
+bool IsRawStreamCsv(const std::string& path) {
+  const io::CsvTable table = io::CsvTable::Load(path);
+  return table.Has("t_s") && table.Has("gyr_x");
+}
+
+PoseDatasetReplaySource::PoseDatasetReplaySource(const std::string& path,
+                                                 const PoseDatasetReplaySettings& settings)
+    : path_(path) {
+  const io::PoseDataset data = io::LoadPoseDataset(path, settings.num_joints);
+  std::vector<const io::PoseSample*> rows;
+  for (const auto& s : data.samples)
+    if (settings.include_test || s.set != io::PoseSample::kTest) rows.push_back(&s);
+  bool timed = !rows.empty();
+  for (const auto* s : rows) timed = timed && std::isfinite(s->time);
+  const double period_us = 1e6 / settings.rate;
+  for (size_t k = 0; k < rows.size(); ++k) {
+    const io::PoseSample& s = *rows[k];
+    const int64_t utime =
+        timed ? std::llround(s.time * 1e6)
+              : settings.start_utime + static_cast<int64_t>(std::llround(k * period_us));
+    kinematics::PoseMeasurement z;
+    z.q = s.q;
+    z.p_WM_W = s.p_WM_W;
+    z.has_orientation = s.has_orientation;
+    const int dim = z.dimension();
+    z.covariance = Eigen::MatrixXd::Identity(dim, dim);
+    z.covariance.topLeftCorner(3, 3) *= settings.position_sigma * settings.position_sigma;
+    if (s.has_orientation) {
+      const Eigen::Vector4d& w = s.q_EI_wxyz;
+      z.R_EI = Eigen::Quaterniond(w(0), w(1), w(2), w(3)).normalized().toRotationMatrix();
+      z.covariance.bottomRightCorner(3, 3) *=
+          settings.orientation_sigma * settings.orientation_sigma;
+    }
+    joint_state_t js;
+    js.utime = utime;
+    js.num_joints = static_cast<int32_t>(s.q.size());
+    for (int j = 0; j < s.q.size(); ++j) {
+      std::string name = std::to_string(j + 1);
+      name.insert(name.begin(), 'q');
+      js.names.push_back(name);
+    }
+    js.q.assign(s.q.data(), s.q.data() + s.q.size());
+    js.dq.assign(s.q.size(), 0.0);
+    events_.push_back(js);
+    events_.push_back(transport::ToMessage(z, utime, static_cast<int32_t>(k)));
+    ++poses_;
+  }
+}
+
+std::string PoseDatasetReplaySource::Describe() const {
+  return "pose dataset " + path_ + " (" + std::to_string(poses_) + " poses)";
+}
+
+std::optional<SensorEvent> PoseDatasetReplaySource::Next(int /*timeout_ms*/) {
   if (Finished()) return std::nullopt;
   return events_[next_++];
 }

@@ -15,11 +15,13 @@
 #include <vector>
 
 #include "rcal/joint_state_t.hpp"
+#include "rcal/pose_measurement_t.hpp"
 #include "rcal/transport/filter_nodes.hpp"
 
 namespace rcal::sensors {
 
-using SensorEvent = std::variant<transport::ImuSample, transport::PositionSample, joint_state_t>;
+using SensorEvent = std::variant<transport::ImuSample, transport::PositionSample, joint_state_t,
+                                 pose_measurement_t>;
 
 /// Sensor time of an event [µs].
 int64_t Utime(const SensorEvent& e);
@@ -68,6 +70,39 @@ class RawCsvReplaySource final : public SensorSource {
   std::vector<SensorEvent> events_;
   size_t next_ = 0;
   int64_t imu_count_ = 0, position_count_ = 0;
+};
+
+/// True when the CSV at `path` has the raw-stream columns (t_s, gyr_x); otherwise it is taken as a
+/// pose dataset. Throws std::runtime_error naming the file when it cannot be read.
+bool IsRawStreamCsv(const std::string& path);
+
+/// A pose dataset (ARCHITECTURE.md "Data formats", read by io::LoadPoseDataset): each still pose
+/// becomes JOINTS and a POSE_MEASUREMENT (pose_index = row among the replayed ones) with the
+/// covariance diag(σ_p² I, σ_R² I). utime: the `time` column when every replayed row has one,
+/// else start_utime + k / rate. Rows of the `test` set are skipped unless include_test.
+struct PoseDatasetReplaySettings {
+  double rate = 2.0;                    ///< [poses/s] when the file has no time column
+  int64_t start_utime = 1'000'000;      ///< [µs]
+  double position_sigma = 5e-5;         ///< [m]
+  double orientation_sigma = 1.745e-3;  ///< [rad]
+  bool include_test = false;
+  int num_joints = -1;  ///< expected joints (−1: from the q1..qN columns)
+};
+
+class PoseDatasetReplaySource final : public SensorSource {
+ public:
+  PoseDatasetReplaySource(const std::string& path, const PoseDatasetReplaySettings& settings);
+  std::string Describe() const override;
+  std::optional<SensorEvent> Next(int timeout_ms) override;
+  bool Finished() const override { return next_ >= events_.size(); }
+  bool Recorded() const override { return true; }
+  size_t size() const { return events_.size(); }
+
+ private:
+  std::string path_;
+  std::vector<SensorEvent> events_;
+  size_t next_ = 0;
+  int poses_ = 0;
 };
 
 }  // namespace rcal::sensors

@@ -99,5 +99,42 @@ TEST(RawCsvReplaySource, TheBroadTrialReplaysAtTwentyHertzPosition) {
   EXPECT_NEAR(static_cast<double>(pos) / imu, 0.2, 0.01);
 }
 
+TEST(PoseDatasetReplaySource, JointsThenPosePerCalibrationRowWithTheNoiseCovariance) {
+  const fs::path p = WriteCsv("replay_poses",
+                              "# three poses\nq1,q2,q3,x,y,z,set\n"
+                              "0.1,0.2,0.3,1,2,3,cal\n"
+                              "0.4,0.5,0.6,4,5,6,test\n"
+                              "0.7,0.8,0.9,7,8,9,cal\n");
+  EXPECT_FALSE(IsRawStreamCsv(p.string()));
+  PoseDatasetReplaySettings s;
+  s.rate = 4;
+  s.start_utime = 500;
+  s.position_sigma = 2e-3;
+  PoseDatasetReplaySource src(p.string(), s);
+  std::vector<SensorEvent> events;
+  while (auto e = src.Next(0)) events.push_back(*e);
+  ASSERT_EQ(events.size(), 4u);  // the test row is skipped
+  const auto& j0 = std::get<joint_state_t>(events[0]);
+  const auto& z0 = std::get<pose_measurement_t>(events[1]);
+  const auto& z1 = std::get<pose_measurement_t>(events[3]);
+  EXPECT_EQ(j0.utime, 500);
+  EXPECT_EQ(j0.q, (std::vector<double>{0.1, 0.2, 0.3}));
+  EXPECT_EQ(z0.utime, 500);
+  EXPECT_EQ(z1.utime, 250'500);
+  EXPECT_EQ(z1.pose_index, 1);
+  EXPECT_EQ(z1.q, (std::vector<double>{0.7, 0.8, 0.9}));
+  EXPECT_DOUBLE_EQ(z1.p[2], 9);
+  EXPECT_FALSE(z1.has_orientation);
+  ASSERT_EQ(z1.dimension, 3);
+  EXPECT_DOUBLE_EQ(z1.covariance[0], 4e-6);
+  EXPECT_DOUBLE_EQ(z1.covariance[1], 0);
+  EXPECT_DOUBLE_EQ(z1.covariance[8], 4e-6);
+  fs::remove(p);
+}
+
+TEST(PoseDatasetReplaySource, TheBroadTrialIsARawStream) {
+  EXPECT_TRUE(IsRawStreamCsv(RCAL_SHARED_DIR "/data/broad/broad_02_100hz.csv"));
+}
+
 }  // namespace
 }  // namespace rcal::sensors
