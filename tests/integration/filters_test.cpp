@@ -4,6 +4,7 @@
 // speeds (the filters run on sensor time, so speed must not matter). And: malformed and
 // wrong-type messages on live channels are rejected, counted in HEALTH, and the processes keep
 // running.
+#include <Eigen/Geometry>
 #include <cmath>
 #include <map>
 #include <optional>
@@ -151,6 +152,62 @@ TEST_F(Filters, ReplayMatchesOfflineFiltersAtTwoSpeeds) {
     EXPECT_EQ(Stop(okf), 0);
     EXPECT_EQ(Stop(pkf), 0);
   }
+}
+
+// SIGKILL orientation_kf mid-replay and start a new one (as the supervisor would): position_kf
+// keeps running and publishing without rejecting anything, and at the end both estimates agree
+// with the uninterrupted offline filters within their σ.
+TEST_F(Filters, PositionKfSurvivesASigkilledOrientationKf) {
+  RCAL_IN_NAMESPACE("Filters.PositionKfSurvivesASigkilledOrientationKf");
+  const Offline& ref = Reference();
+  Listener l;
+  pid_t okf = Start(OrientationKfCmd(), "orientation_kf_1.log");
+  const pid_t pkf = Start(PositionKfCmd(), "position_kf.log");
+  ASSERT_TRUE(
+      l.WaitFor([&] { return l.health.count("orientation_kf") && l.health.count("position_kf"); }));
+  const pid_t src = Start({RCAL_SENSOR_ACQUISITION, "--source", "replay", kTrial, "--max-rows",
+                           std::to_string(kRows), "--speed", "4", "--lcm-url", kUrl},
+                          "sensor_acquisition.log");
+  const int64_t kill_at = 10'000'000, last = ref.orientation.rbegin()->first;
+  ASSERT_TRUE(l.WaitFor(
+      [&] { return !l.orientation.empty() && l.orientation.rbegin()->first >= kill_at; }));
+  kill(-okf, SIGKILL);
+  EXPECT_EQ(Wait(okf), -SIGKILL);
+  Reaped(okf);
+  const int64_t killed_after = l.orientation.rbegin()->first;
+  l.health.erase("orientation_kf");
+  okf = Start(OrientationKfCmd(), "orientation_kf_2.log");
+  ASSERT_TRUE(l.WaitFor([&] { return l.orientation.count(last) > 0; }));
+  ASSERT_TRUE(l.WaitFor([&] { return !l.tool.empty() && l.tool.back().first >= last; }));
+  EXPECT_EQ(Wait(src), 0);
+  Reaped(src);
+  for (int i = 0; i < 5; ++i) l.t.HandleTimeout(20);
+  // The gap: the samples published while no orientation_kf ran have no estimate.
+  EXPECT_LT(l.orientation.size(), ref.orientation.size());
+  EXPECT_GT(l.orientation.size(), ref.orientation.size() / 2);
+  // position_kf went on: estimates all along, nothing rejected, still running.
+  size_t after_kill = 0;
+  for (const auto& [utime, m] : l.tool) after_kill += utime > killed_after;
+  EXPECT_GT(after_kill, 1000u);
+  ASSERT_TRUE(l.WaitFor([&] { return l.health.count("position_kf") > 0; }));
+  EXPECT_EQ(l.health["position_kf"].rejected, 0) << l.health["position_kf"].last_error;
+  EXPECT_TRUE(Running(pkf));
+  // Final estimates against the uninterrupted offline ones, within 3σ of both.
+  const auto& p_live = l.tool.back().second;
+  const auto& p_ref = ref.tool.back().second;
+  for (int a = 0; a < 3; ++a) {
+    const double var = p_live.covariance[6 * a + a] + p_ref.covariance[6 * a + a];
+    EXPECT_LT(std::abs(p_live.p[a] - p_ref.p[a]), 3 * std::sqrt(var)) << "axis " << a;
+  }
+  const auto& q_live = l.orientation.at(last);
+  const auto& q_ref = ref.orientation.at(last);
+  const Eigen::Quaterniond a(q_live.q_EI[0], q_live.q_EI[1], q_live.q_EI[2], q_live.q_EI[3]),
+      b(q_ref.q_EI[0], q_ref.q_EI[1], q_ref.q_EI[2], q_ref.q_EI[3]);
+  double var = 0;
+  for (int i = 0; i < 3; ++i) var += q_live.covariance[4 * i] + q_ref.covariance[4 * i];
+  EXPECT_LT(a.angularDistance(b), 3 * std::sqrt(var));
+  EXPECT_EQ(Stop(okf), 0);
+  EXPECT_EQ(Stop(pkf), 0);
 }
 
 imu_sample_t Imu(int64_t utime) {
