@@ -19,6 +19,7 @@
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/io/robot_yaml.hpp"
 #include "report.hpp"
+#include "robot_setup.hpp"
 
 namespace rcal::tool {
 namespace {
@@ -72,43 +73,15 @@ io::Series Histogram(const std::string& title, const std::vector<double>& v_mm, 
 }
 
 int Run(const Options& o) {
-  const bool frames = o.frames == "auto";
-  if (!frames && o.frames != "none") throw std::runtime_error("--frames: auto or none");
-  io::UrdfOptions uo;
-  uo.tip_link = o.tip_link;
-  uo.base_link = o.base_link;
-  uo.add_base_frame = frames;
-  uo.add_marker = frames;
-  io::LoadedRobot robot = io::LoadRobot(ResolvePath(o.robot), uo);
-  std::vector<std::string> joint_names;
-  for (const auto& j : robot.model.joints()) joint_names.push_back(j.name);
-  const io::PoseDataset data =
-      io::LoadPoseDataset(ResolvePath(o.data), robot.model.num_joints(), joint_names);
-  if (data.samples.empty()) throw std::runtime_error(o.data + ": no poses");
-  for (const auto& s : data.samples)
-    if (s.marker != 0)
-      throw std::runtime_error(o.data +
-                               ": column 'marker': several markers per tool are not "
-                               "supported by rcal analyze yet");
-  if (frames) {
-    if (!robot.from_urdf) {
-      if (!robot.spec.base) robot.spec.base = io::FrameSpec{};
-      if (!robot.spec.marker && !robot.spec.tool) robot.spec.marker = io::FrameSpec{};
-    }
-    if (data.has_orientation && !robot.spec.imu) robot.spec.imu = io::FrameSpec{};
-    robot.model = io::BuildModel(robot.spec);
-  }
+  io::LoadedRobot robot = LoadRobotForCell(o.robot, o.tip_link, o.base_link, o.frames);
+  const io::PoseDataset data = LoadPoseDataFor(robot, o.data, "rcal analyze");
+  if (o.frames == "auto" && data.has_orientation) AddOrientationFrame(robot);
   const kinematics::KinematicModel& model = robot.model;
 
   discrepancy::PoseData pd;
   bool has_test = false;
+  pd.measurements = ToMeasurements(data);
   for (const auto& s : data.samples) {
-    kinematics::PoseMeasurement m;
-    m.q = s.q;
-    m.p_WM_W = s.p_WM_W;
-    m.has_orientation = data.has_orientation;
-    if (m.has_orientation) m.R_EI = geometry::QuatToMatrix(s.q_EI_wxyz);
-    pd.measurements.push_back(m);
     kinematics::EffectContext c;
     c.temperature_c = s.temperature;
     c.payload_kg = std::isfinite(s.payload) ? s.payload : 0.0;

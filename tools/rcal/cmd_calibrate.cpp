@@ -15,6 +15,7 @@
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/io/robot_yaml.hpp"
 #include "report.hpp"
+#include "robot_setup.hpp"
 
 namespace rcal::tool {
 namespace {
@@ -57,48 +58,16 @@ std::vector<std::string> Row(const std::string& name, const identification::Pose
 }
 
 int Run(const Options& o) {
-  // Robot: URDF chains get the set-up frames a real cell has; YAML files get what they lack.
-  const bool frames = o.frames == "auto";
-  if (!frames && o.frames != "none") throw std::runtime_error("--frames: auto or none");
-  io::UrdfOptions uo;
-  uo.tip_link = o.tip_link;
-  uo.base_link = o.base_link;
-  uo.add_base_frame = frames;
-  uo.add_marker = frames;
-  io::LoadedRobot robot = io::LoadRobot(ResolvePath(o.robot), uo);
-
-  std::vector<std::string> joint_names;
-  for (const auto& j : robot.model.joints()) joint_names.push_back(j.name);
-  const io::PoseDataset data =
-      io::LoadPoseDataset(ResolvePath(o.data), robot.model.num_joints(), joint_names);
-  if (data.samples.empty()) throw std::runtime_error(o.data + ": no poses");
-  for (const auto& s : data.samples)
-    if (s.marker != 0)
-      throw std::runtime_error(o.data +
-                               ": column 'marker': several markers per tool are not "
-                               "supported by rcal calibrate yet (found id " +
-                               std::to_string(s.marker) + ")");
-  if (frames) {
-    if (!robot.from_urdf) {
-      if (!robot.spec.base) robot.spec.base = io::FrameSpec{};
-      if (!robot.spec.marker && !robot.spec.tool) robot.spec.marker = io::FrameSpec{};
-    }
-    if (data.has_orientation && !robot.spec.imu) robot.spec.imu = io::FrameSpec{};
-    robot.model = io::BuildModel(robot.spec);
-  }
+  // The robot with the set-up frames a real cell has (URDF chains get them; YAML files get what
+  // they lack), and the IMU/marker rotation when the data measures orientation.
+  io::LoadedRobot robot = LoadRobotForCell(o.robot, o.tip_link, o.base_link, o.frames);
+  const io::PoseDataset data = LoadPoseDataFor(robot, o.data, "rcal calibrate");
+  if (o.frames == "auto" && data.has_orientation) AddOrientationFrame(robot);
   const auto& model = robot.model;
 
-  std::vector<kinematics::PoseMeasurement> ms;
+  std::vector<kinematics::PoseMeasurement> ms = ToMeasurements(data);
   std::vector<bool> is_test;
-  for (const auto& s : data.samples) {
-    kinematics::PoseMeasurement m;
-    m.q = s.q;
-    m.p_WM_W = s.p_WM_W;
-    m.has_orientation = data.has_orientation;
-    if (m.has_orientation) m.R_EI = geometry::QuatToMatrix(s.q_EI_wxyz);
-    ms.push_back(m);
-    is_test.push_back(s.set == io::PoseSample::kTest);
-  }
+  for (const auto& s : data.samples) is_test.push_back(s.set == io::PoseSample::kTest);
   identification::SetNoise(ms, o.position_sigma_mm / kMm, o.orientation_sigma_deg / kDeg);
   identification::CalibrationSettings settings;
   settings.method = o.method == "ekf" ? identification::CalibrationSettings::Method::kEkf

@@ -16,6 +16,7 @@
 #include "rcal/io/robot_yaml.hpp"
 #include "rcal/sim/effects.hpp"
 #include "report.hpp"
+#include "robot_setup.hpp"
 
 namespace rcal::tool {
 namespace {
@@ -48,19 +49,7 @@ struct Options {
 };
 
 int Run(const Options& o) {
-  const bool frames = o.frames == "auto";
-  if (!frames && o.frames != "none") throw std::runtime_error("--frames: auto or none");
-  io::UrdfOptions uo;
-  uo.tip_link = o.tip_link;
-  uo.base_link = o.base_link;
-  uo.add_base_frame = frames;
-  uo.add_marker = frames;
-  io::LoadedRobot robot = io::LoadRobot(ResolvePath(o.robot), uo);
-  if (frames && !robot.from_urdf) {
-    if (!robot.spec.base) robot.spec.base = io::FrameSpec{};
-    if (!robot.spec.marker && !robot.spec.tool) robot.spec.marker = io::FrameSpec{};
-    robot.model = io::BuildModel(robot.spec);
-  }
+  const io::LoadedRobot robot = LoadRobotForCell(o.robot, o.tip_link, o.base_link, o.frames);
   const kinematics::KinematicModel& model = robot.model;
 
   sim::Rng rng(o.seed);

@@ -128,24 +128,7 @@ kinematics::PoseMeasurement MeasurePoseWithEffects(const EffectTruth& truth,
                                                    const Eigen::VectorXd& q,
                                                    const kinematics::EffectContext& ctx,
                                                    const PoseNoise& noise, Rng& rng) {
-  std::normal_distribution<double> n(0.0, 1.0);
-  const kinematics::ToolPose pose = truth.model.Forward(q, ctx, x_true, truth.e);
-  kinematics::PoseMeasurement m;
-  m.q = q;
-  m.p_WM_W = pose.p_WM_W + noise.position_sigma * Eigen::Vector3d(n(rng), n(rng), n(rng));
-  m.has_orientation = noise.orientation;
-  const int dim = noise.orientation ? 6 : 3;
-  m.covariance = Eigen::MatrixXd::Zero(dim, dim);
-  m.covariance.topLeftCorner<3, 3>().diagonal().setConstant(noise.position_sigma *
-                                                            noise.position_sigma);
-  if (noise.orientation) {
-    const Eigen::Vector3d dtheta =
-        noise.orientation_sigma * Eigen::Vector3d(n(rng), n(rng), n(rng));
-    m.R_EI = geometry::Exp(dtheta) * pose.R_EI;  // left error, earth frame (measurement.hpp)
-    m.covariance.bottomRightCorner<3, 3>().diagonal().setConstant(noise.orientation_sigma *
-                                                                  noise.orientation_sigma);
-  }
-  return m;
+  return MeasureTruePose(truth.model.Forward(q, ctx, x_true, truth.e), q, noise, rng);
 }
 
 std::vector<kinematics::PoseMeasurement> MeasurePosesWithEffects(

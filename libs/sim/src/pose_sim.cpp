@@ -58,8 +58,13 @@ std::vector<Eigen::VectorXd> SampleJoints(const kinematics::KinematicModel& mode
 kinematics::PoseMeasurement MeasurePose(const kinematics::KinematicModel& model,
                                         const Eigen::VectorXd& x_true, const Eigen::VectorXd& q,
                                         const PoseNoise& noise, Rng& rng) {
+  return MeasureTruePose(model.Forward(q, x_true), q, noise, rng);
+}
+
+kinematics::PoseMeasurement MeasureTruePose(const kinematics::ToolPose& truth,
+                                            const Eigen::VectorXd& q, const PoseNoise& noise,
+                                            Rng& rng) {
   std::normal_distribution<double> n(0.0, 1.0);
-  const kinematics::ToolPose truth = model.Forward(q, x_true);
   kinematics::PoseMeasurement m;
   m.q = q;
   m.p_WM_W = truth.p_WM_W + noise.position_sigma * Eigen::Vector3d(n(rng), n(rng), n(rng));

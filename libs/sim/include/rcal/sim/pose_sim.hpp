@@ -33,6 +33,13 @@ struct PoseNoise {
   bool orientation = true;              ///< false: position-only measurements (laser tracker)
 };
 
+/// A measurement of the known true pose `truth` taken at joints q, with `noise` (position per
+/// axis, orientation as a left rotation error in the earth frame); it carries the noise's
+/// covariance. Every truth model (geometric or with effects) measures through this.
+kinematics::PoseMeasurement MeasureTruePose(const kinematics::ToolPose& truth,
+                                            const Eigen::VectorXd& q, const PoseNoise& noise,
+                                            Rng& rng);
+
 /// The pose the truth robot (model at errors x_true) reaches at q, measured with `noise`; the
 /// measurement carries the noise's covariance.
 kinematics::PoseMeasurement MeasurePose(const kinematics::KinematicModel& model,

@@ -1,0 +1,65 @@
+#include "robot_setup.hpp"
+
+#include <stdexcept>
+
+#include "command.hpp"
+#include "rcal/geometry/so3.hpp"
+#include "rcal/io/robot_yaml.hpp"
+
+namespace rcal::tool {
+
+io::LoadedRobot LoadRobotForCell(const std::string& robot_path, const std::string& tip_link,
+                                 const std::string& base_link, const std::string& frames) {
+  const bool add = frames == "auto";
+  if (!add && frames != "none") throw std::runtime_error("--frames: auto or none");
+  io::UrdfOptions uo;
+  uo.tip_link = tip_link;
+  uo.base_link = base_link;
+  uo.add_base_frame = add;
+  uo.add_marker = add;
+  io::LoadedRobot robot = io::LoadRobot(ResolvePath(robot_path), uo);
+  if (add) {
+    if (!robot.from_urdf) {
+      if (!robot.spec.base) robot.spec.base = io::FrameSpec{};
+      if (!robot.spec.marker && !robot.spec.tool) robot.spec.marker = io::FrameSpec{};
+    }
+    robot.model = io::BuildModel(robot.spec);
+  }
+  return robot;
+}
+
+void AddOrientationFrame(io::LoadedRobot& robot) {
+  if (robot.spec.imu) return;
+  robot.spec.imu = io::FrameSpec{};
+  robot.model = io::BuildModel(robot.spec);
+}
+
+io::PoseDataset LoadPoseDataFor(const io::LoadedRobot& robot, const std::string& data_path,
+                                const std::string& command) {
+  std::vector<std::string> joint_names;
+  for (const auto& j : robot.model.joints()) joint_names.push_back(j.name);
+  io::PoseDataset data =
+      io::LoadPoseDataset(ResolvePath(data_path), robot.model.num_joints(), joint_names);
+  if (data.samples.empty()) throw std::runtime_error(data_path + ": no poses");
+  for (const auto& s : data.samples)
+    if (s.marker != 0)
+      throw std::runtime_error(data_path +
+                               ": column 'marker': several markers per tool are not supported by " +
+                               command + " yet (found id " + std::to_string(s.marker) + ")");
+  return data;
+}
+
+std::vector<kinematics::PoseMeasurement> ToMeasurements(const io::PoseDataset& data) {
+  std::vector<kinematics::PoseMeasurement> ms;
+  for (const auto& s : data.samples) {
+    kinematics::PoseMeasurement m;
+    m.q = s.q;
+    m.p_WM_W = s.p_WM_W;
+    m.has_orientation = data.has_orientation;
+    if (m.has_orientation) m.R_EI = geometry::QuatToMatrix(s.q_EI_wxyz);
+    ms.push_back(m);
+  }
+  return ms;
+}
+
+}  // namespace rcal::tool
