@@ -204,46 +204,7 @@ Windows SimulateWindows(const Cell& cell, const RunSettings& s) {
 }
 
 Eigen::VectorXd SetupGuess(const Cell& cell, const std::vector<kinematics::PoseMeasurement>& ms) {
-  const auto& model = cell.model;
-  Eigen::VectorXd x = identification::InitialSetupGuess(model, ms);
-  const char* earth_names[3] = {"earth_rz", "earth_ry", "earth_rx"};
-  const char* imu_names[3] = {"imu_rz", "imu_ry", "imu_rx"};
-  int ie[3], ii[3];
-  bool ok = true;
-  for (int k = 0; k < 3; ++k) {
-    ok &= (ie[k] = model.FindParameter(earth_names[k])) >= 0;
-    ok &= (ii[k] = model.FindParameter(imu_names[k])) >= 0;
-  }
-  std::vector<const kinematics::PoseMeasurement*> with;
-  for (const auto& m : ms)
-    if (m.has_orientation) with.push_back(&m);
-  if (!ok || with.size() < 3) return x;
-  // R_meas,k = Y A_k X with A_k the model's orientation at earth = imu = identity (nominal 0).
-  for (int k = 0; k < 3; ++k) x(ie[k]) = x(ii[k]) = 0;
-  std::vector<Eigen::Matrix3d> A, M;
-  for (const auto* m : with) {
-    A.push_back(model.Forward(m->q, x).R_EI);
-    M.push_back(m->R_EI);
-  }
-  // Log(M_k M_lᵀ) = Y Log(A_k A_lᵀ): align the rotation vectors of every pair.
-  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
-  for (size_t k = 0; k < A.size(); ++k)
-    for (size_t l = k + 1; l < A.size(); ++l)
-      H += geometry::Log(A[k] * A[l].transpose()) *
-           geometry::Log(M[k] * M[l].transpose()).transpose();
-  Eigen::JacobiSVD<Eigen::Matrix3d> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
-  D(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1.0 : 1.0;
-  const Eigen::Matrix3d Y = svd.matrixV() * D * svd.matrixU().transpose();
-  Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
-  for (size_t k = 0; k < A.size(); ++k) sum += A[k].transpose() * Y.transpose() * M[k];
-  const Eigen::Matrix3d X = geometry::Orthonormalize(sum);
-  const Eigen::Vector3d rpy_y = geometry::ToRpy(Y), rpy_x = geometry::ToRpy(X);
-  for (int k = 0; k < 3; ++k) {
-    x(ie[k]) = rpy_y(2 - k);
-    x(ii[k]) = rpy_x(2 - k);
-  }
-  return x;
+  return identification::InitialSetupGuess(cell.model, ms);
 }
 
 identification::EkfIdentifier MakeEkf(const Cell& cell, const Eigen::VectorXd& x0) {

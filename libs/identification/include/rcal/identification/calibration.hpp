@@ -34,9 +34,11 @@ Eigen::Isometry3d FitRigidTransform(const std::vector<Eigen::Vector3d>& a,
 /// Parameters of the set-up frames: groups base, marker, imu, earth.
 std::vector<int> SetupParameters(const kinematics::KinematicModel& model);
 
-/// Starting errors with the set-up frames guessed from the data (see the file comment). Works
-/// when the model's base frame is the ETs Tx Ty Tz Rz Ry Rx at nominal 0 (as ModelBuilder lays
-/// it out); otherwise those parameters stay 0.
+/// Starting errors with the set-up frames guessed from the data: world ← base by a rigid
+/// alignment of positions; earth ← world and flange → IMU rotations by a hand–eye solve of the
+/// orientations (R_meas = Y·A·X), or the IMU rotation alone by a chordal mean when there is no
+/// earth frame. Frames the model lacks, or too few poses (3 positions, 3 orientations for the
+/// earth frame), leave those parameters at 0.
 Eigen::VectorXd InitialSetupGuess(const kinematics::KinematicModel& model,
                                   const std::vector<kinematics::PoseMeasurement>& ms);
 
