@@ -7,6 +7,12 @@
 // every accepted pose, so a restarted process resumes where it stopped. Bad messages (fail to
 // decode, wrong sizes, NaN, time not after the last pose) are rejected, counted in HEALTH, and
 // leave the state untouched.
+//
+// --cell-seed S (sensor level): the model, base set and start of the offline
+// `rcal experiment paper --sensors --seed S` (rcal::tool::exp::MakeCell: the arm plus the set-up
+// frames base/earth/marker/IMU). The first --guess-poses poses are held back, the set-up guess is
+// fitted to them (SetupGuess), the EKF is started there (MakeEkf) and then updated with them and
+// every later pose, exactly as the offline RunOnline.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -14,7 +20,10 @@
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
+#include <memory>
+#include <optional>
 
+#include "experiment_sensors.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
 #include "rcal/identification/metrics.hpp"
 #include "rcal/io/robot_urdf.hpp"
@@ -37,6 +46,8 @@ struct Options {
   std::string checkpoint;  // empty: no checkpoint
   std::string lcm_url;
   unsigned ident_seed = 1;
+  unsigned cell_seed = 0;  // > 0: the sensor-level experiment's cell
+  int guess_poses = 6;
   bool position_only = false;
   std::string name = "ekf_identifier";
 };
@@ -47,11 +58,24 @@ class Identifier {
       : o_(o),
         t_(t),
         robot_(io::LoadRobot(services::RepoPath(o.robot))),
-        base_(BaseSet(robot_.model, o)),
-        ekf_(robot_.model, base_),
-        model_id_(transport::ModelId(robot_.model)),
+        cell_(o.cell_seed > 0
+                  ? std::optional<tool::exp::Cell>(tool::exp::MakeCell(robot_.spec, o.cell_seed))
+                  : std::nullopt),
+        model_(cell_ ? cell_->model : robot_.model),
+        base_(cell_ ? cell_->base : BaseSet(model_, o)),
+        ekf_(cell_ ? std::make_unique<identification::EkfIdentifier>(
+                         tool::exp::MakeEkf(*cell_, model_.Nominal()))
+                   : std::make_unique<identification::EkfIdentifier>(model_, base_)),
+        model_id_(transport::ModelId(model_)),
         health_(o.name) {
+    started_ = !cell_;
+    if (cell_)
+      spdlog::info(
+          "cell of seed {}: {} parameters, base set of {}; set-up guess from the first {} "
+          "poses",
+          o.cell_seed, model_.num_params(), base_.size(), o.guess_poses);
     if (!o.checkpoint.empty() && std::filesystem::exists(o.checkpoint)) Resume();
+    if (ekf_->accepted() > 0) started_ = true;
     t_.Subscribe<pose_measurement_t>(
         ch::kPoseMeasurement, [this](const pose_measurement_t& m) { OnPose(m); },
         [this](const std::string& e) {
@@ -63,12 +87,11 @@ class Identifier {
   /// At start: the restored estimate (if any) and a CALIBRATION_STATUS that tells listeners the
   /// process is up and how many poses it resumed with.
   void PublishCurrent() {
-    const int64_t utime = ekf_.accepted() > 0 ? last_utime_ : 0;
-    if (ekf_.accepted() > 0 &&
-        t_.Publish(ch::kKinematicParams,
-                   transport::ToKinematicParams(ekf_, robot_.model.name(), utime)))
+    const int64_t utime = ekf_->accepted() > 0 ? last_utime_ : 0;
+    if (ekf_->accepted() > 0 &&
+        t_.Publish(ch::kKinematicParams, transport::ToKinematicParams(*ekf_, model_.name(), utime)))
       health_.Published();
-    if (t_.Publish(ch::kCalibrationStatus, transport::ToCalibrationStatus(ekf_, {}, utime)))
+    if (t_.Publish(ch::kCalibrationStatus, transport::ToCalibrationStatus(*ekf_, {}, utime)))
       health_.Published();
   }
 
@@ -90,11 +113,11 @@ class Identifier {
       const auto f = transport::LoadCheckpoint(o_.checkpoint);
       if (f.model_id != model_id_)
         throw std::runtime_error("model_id " + f.model_id + " is not " + model_id_);
-      ekf_.Restore(f.checkpoint);
+      ekf_->Restore(f.checkpoint);
       last_utime_ = f.utime;
       last_pose_index_ = f.last_pose_index;
       spdlog::info("resumed from {}: {} poses accepted, last utime {}", o_.checkpoint,
-                   ekf_.accepted(), last_utime_);
+                   ekf_->accepted(), last_utime_);
     } catch (const std::exception& e) {
       // A checkpoint that does not fit is reported and kept aside, never silently overwritten.
       const std::string aside = o_.checkpoint + ".rejected";
@@ -113,7 +136,7 @@ class Identifier {
     health_.Received();
     std::string error;
     auto z = transport::FromMessage(msg, &error);
-    if (z) error = kinematics::Validate(robot_.model, *z);
+    if (z) error = kinematics::Validate(model_, *z);
     if (error.empty() && msg.utime <= last_utime_)
       error = "pose_measurement.utime: " + std::to_string(msg.utime) +
               " is not after the last pose (" + std::to_string(last_utime_) + ")";
@@ -122,17 +145,43 @@ class Identifier {
       health_.Tick(std::max(msg.utime, last_utime_), t_);
       return;
     }
-    const Eigen::VectorXd x_before = ekf_.x();
-    const auto r = ekf_.Update(*z);
-    if (!r.accepted) {
-      Reject("pose " + std::to_string(msg.pose_index) + ": " + r.reason);
-    } else {
+    if (!started_) {
+      // Held back for the set-up guess (time order checked against the held poses too).
       last_utime_ = msg.utime;
-      last_pose_index_ = msg.pose_index;
+      held_.push_back({*z, msg.utime, msg.pose_index});
+      spdlog::info("pose {}: held for the set-up guess ({} of {})", msg.pose_index, held_.size(),
+                   o_.guess_poses);
+      if (static_cast<int>(held_.size()) < std::max(o_.guess_poses, 1)) {
+        health_.Tick(msg.utime, t_);
+        return;
+      }
+      std::vector<kinematics::PoseMeasurement> ms;
+      for (const auto& h : held_) ms.push_back(h.z);
+      const Eigen::VectorXd x0 = tool::exp::SetupGuess(*cell_, ms);
+      ekf_ = std::make_unique<identification::EkfIdentifier>(tool::exp::MakeEkf(*cell_, x0));
+      started_ = true;
+      spdlog::info("set-up guess from {} poses; EKF started", ms.size());
+      const auto held = std::move(held_);
+      held_.clear();
+      for (const auto& h : held) Apply(h.z, h.utime, h.pose_index);
+      return;
+    }
+    Apply(*z, msg.utime, msg.pose_index);
+  }
+
+  void Apply(const kinematics::PoseMeasurement& zz, int64_t utime, int64_t pose_index) {
+    const auto* z = &zz;
+    const Eigen::VectorXd x_before = ekf_->x();
+    const auto r = ekf_->Update(*z);
+    if (!r.accepted) {
+      Reject("pose " + std::to_string(pose_index) + ": " + r.reason);
+    } else {
+      last_utime_ = utime;
+      last_pose_index_ = pose_index;
       if (!o_.checkpoint.empty()) {
         try {
           transport::SaveCheckpoint(o_.checkpoint,
-                                    {model_id_, last_utime_, last_pose_index_, ekf_.Checkpoint()});
+                                    {model_id_, last_utime_, last_pose_index_, ekf_->Checkpoint()});
         } catch (const std::exception& e) {
           health_.Error(e.what());
           spdlog::error("{}", e.what());
@@ -141,46 +190,54 @@ class Identifier {
     }
     transport::StatusFigures fig;
     fig.last_nis = r.nis;
-    const Eigen::VectorXd dx = ekf_.x() - x_before, sigma = ekf_.sigma();
+    const Eigen::VectorXd dx = ekf_->x() - x_before, sigma = ekf_->sigma();
     double max_step = 0;
     for (int i : base_) max_step = std::max(max_step, std::abs(dx(i)) / std::max(sigma(i), 1e-300));
     // Converged: enough equations for the unknowns, and the last pose moved no parameter by more
     // than a tenth of its σ.
     fig.converged =
-        ekf_.accepted() * z->dimension() >= 2 * static_cast<int>(base_.size()) && max_step < 0.1;
-    Publish(msg.utime, fig);
-    health_.Tick(msg.utime, t_);
-    spdlog::info("pose {}: {} (accepted {}, rejected {}, NIS {:.2f})", msg.pose_index,
-                 r.accepted ? "accepted" : "rejected", ekf_.accepted(), ekf_.rejected(), r.nis);
+        ekf_->accepted() * z->dimension() >= 2 * static_cast<int>(base_.size()) && max_step < 0.1;
+    Publish(utime, fig);
+    health_.Tick(utime, t_);
+    spdlog::info("pose {}: {} (accepted {}, rejected {}, NIS {:.2f})", pose_index,
+                 r.accepted ? "accepted" : "rejected", ekf_->accepted(), ekf_->rejected(), r.nis);
   }
 
   void Publish(int64_t utime, transport::StatusFigures fig) {
-    if (t_.Publish(ch::kKinematicParams,
-                   transport::ToKinematicParams(ekf_, robot_.model.name(), utime)))
+    if (t_.Publish(ch::kKinematicParams, transport::ToKinematicParams(*ekf_, model_.name(), utime)))
       health_.Published();
-    const auto history = ekf_.Checkpoint().history;
+    const auto history = ekf_->Checkpoint().history;
     if (!history.empty()) {
-      const auto stats = identification::ErrorsAgainstMeasurements(robot_.model, ekf_.x(), history);
+      const auto stats = identification::ErrorsAgainstMeasurements(model_, ekf_->x(), history);
       fig.rms_position_residual = stats.rms_position_m;
       fig.rms_orientation_residual = stats.rms_orientation_rad;
       std::vector<Eigen::VectorXd> qs;
       for (const auto& m : history) qs.push_back(m.q);
       fig.condition_number =
-          kinematics::AnalyzeIdentifiability(robot_.model, qs, ekf_.x(),
+          kinematics::AnalyzeIdentifiability(model_, qs, ekf_->x(),
                                              history.front().has_orientation
                                                  ? kinematics::MeasurementKind::kFullPose
                                                  : kinematics::MeasurementKind::kPositionOnly)
               .condition_number;
     }
-    if (t_.Publish(ch::kCalibrationStatus, transport::ToCalibrationStatus(ekf_, fig, utime)))
+    if (t_.Publish(ch::kCalibrationStatus, transport::ToCalibrationStatus(*ekf_, fig, utime)))
       health_.Published();
   }
 
   Options o_;
   transport::Transport& t_;
   io::LoadedRobot robot_;
+  std::optional<tool::exp::Cell> cell_;
+  kinematics::KinematicModel model_;
   std::vector<int> base_;
-  identification::EkfIdentifier ekf_;
+  std::unique_ptr<identification::EkfIdentifier> ekf_;
+  struct Held {
+    kinematics::PoseMeasurement z;
+    int64_t utime;
+    int64_t pose_index;
+  };
+  std::vector<Held> held_;
+  bool started_ = true;
   std::string model_id_;
   transport::Health health_;
   int64_t last_utime_ = std::numeric_limits<int64_t>::min();
@@ -204,6 +261,14 @@ int main(int argc, char** argv) {
                  "seed of the joint sample that selects the identifiable parameter set")
       ->capture_default_str();
   app.add_flag("--position-only", o.position_only, "identify from positions only");
+  app.add_option("--cell-seed", o.cell_seed,
+                 "> 0: the model, base set and set-up guess of `rcal experiment paper --sensors "
+                 "--seed S` (arm + set-up frames)")
+      ->capture_default_str();
+  app.add_option("--guess-poses", o.guess_poses,
+                 "with --cell-seed: poses the set-up guess is fitted to before the EKF starts")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   app.add_option("--name", o.name, "process name in HEALTH")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 

@@ -8,7 +8,15 @@
 // unlimited) from mt19937_64(S·1000 + 3), each block then measured in order from the same
 // generator. Sensor time starts at --start-utime and advances 1/rate per pose; --speed paces
 // it against the wall clock (1: real time, 0: as fast as possible).
-// Sensor-level IMU/POSITION streams from the simulator come with the sensor-level simulator.
+//
+// Source `sim --level sensors`: the truth cell of the offline `rcal experiment paper --sensors`
+// (the arm's Table 3 errors plus the set-up frames: position-sensor base, earth, marker, IMU;
+// rcal::tool::exp::MakeCell) moves through the same programme (home, then --poses calibration
+// stops drawn with the --test-poses test stops from mt19937_64(S·1000 + 3), 1.5 s still at each)
+// and rcal::sim::SensorSim publishes every 100 Hz tick as JOINTS, IMU (magnetic field in T) and
+// POSITION (when the sensor fired, covariance σ² I), utime = --start-utime + t_sim. The programme
+// ends with the move to the first test stop, so the last calibration window closes exactly as
+// offline and no test window follows. Paced by --speed (0: as fast as possible).
 //
 // Source `replay FILE`: a raw-stream CSV in the BROAD layout (sources.hpp) published as IMU (every
 // row) and POSITION (decimated to --position-rate), utime from the file; or a pose dataset
@@ -24,9 +32,11 @@
 #include <optional>
 #include <thread>
 
+#include "experiment_sensors.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/services/common.hpp"
 #include "rcal/sim/pose_sim.hpp"
+#include "rcal/sim/sensor_sim.hpp"
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/health.hpp"
@@ -82,12 +92,83 @@ int RunSource(rcal::sensors::SensorSource& source, rcal::transport::Transport& t
   return 0;
 }
 
+// Waits until sensor time `utime` is due at `speed` (0: never waits).
+void Pace(int64_t utime, int64_t utime0, long long wall0, double speed) {
+  if (speed <= 0) return;
+  const long long due = wall0 + static_cast<long long>((utime - utime0) / speed);
+  while (!rcal::services::StopRequested()) {
+    const long long now = rcal::services::MonotonicMicros();
+    if (now >= due) break;
+    std::this_thread::sleep_for(std::chrono::microseconds(std::min(due - now, 50'000LL)));
+  }
+}
+
+// The sensor-level simulation of the offline experiment's cell (see the file comment).
+int RunSensorSim(const rcal::io::LoadedRobot& robot, unsigned seed, int num_cal, int num_test,
+                 int64_t start_utime, double speed, rcal::transport::LcmTransport& t) {
+  using namespace rcal;
+  namespace ch = transport::channels;
+  const tool::exp::Cell cell = tool::exp::MakeCell(robot.spec, seed);
+  const auto& model = cell.model;
+  // SimulateWindows' programme: the home pose, then the calibration and test stops.
+  sim::Rng rng(seed * 1000 + 3);
+  std::vector<Eigen::VectorXd> waypoints;
+  waypoints.push_back(sim::SampleJoints(model, 1, rng).front());
+  const auto stops = sim::SampleJoints(model, num_cal + num_test, rng);
+  for (int k = 0; k < num_cal + std::min(num_test, 1); ++k) waypoints.push_back(stops[k]);
+  sim::TrajectorySettings ts;
+  ts.still_time = 1.5;
+  const sim::ToolMotionTruth truth(model, cell.x_true, sim::JointTrajectory(waypoints, ts));
+  sim::SensorSimSettings ss;
+  sim::SensorSim sensors(truth, ss, seed);
+  const Eigen::Matrix3d pos_cov =
+      ss.position.sigma * ss.position.sigma * Eigen::Matrix3d::Identity();
+  transport::Health health("sensor_acquisition");
+  spdlog::info(
+      "sensor_acquisition sim sensors on {}: seed {}, {} calibration stops, {} ticks "
+      "({:.1f} s of sensor time), speed {}",
+      t.url(), seed, num_cal, sensors.num_ticks(), truth.trajectory().duration(), speed);
+  const long long wall0 = services::MonotonicMicros();
+  int64_t published = 0;
+  auto count = [&](bool ok) {
+    if (ok) {
+      health.Published();
+      ++published;
+    }
+  };
+  while (!services::StopRequested()) {
+    const auto f = sensors.Next();
+    if (!f) break;
+    const int64_t utime = start_utime + std::llround(f->t * 1e6);
+    Pace(utime, start_utime, wall0, speed);
+    count(t.Publish(ch::kJoints, transport::ToJointState(model, f->q, utime)));
+    transport::ImuSample imu;
+    imu.utime = utime;
+    imu.gyro_B = f->imu.gyro_S;
+    imu.f_B = f->imu.accel_S;
+    imu.has_mag = true;
+    imu.m_B = f->imu.mag_S * 1e-6;  // µT → T
+    count(t.Publish(ch::kImu, transport::ToMessage(imu)));
+    if (f->position) {
+      transport::PositionSample pos;
+      pos.utime = start_utime + std::llround(f->position->t * 1e6);
+      pos.p = f->position->p_M;
+      pos.covariance = pos_cov;
+      count(t.Publish(ch::kPosition, transport::ToMessage(pos)));
+    }
+    health.Tick(utime, t);
+    t.HandleTimeout(0);  // keeps LCM's receive queue empty
+  }
+  spdlog::info("done: {} samples published", published);
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   using namespace rcal;
   namespace ch = transport::channels;
-  std::string source = "sim", robot_path = "config/robots/grb3016.yaml", lcm_url;
+  std::string source = "sim", level = "poses", robot_path = "config/robots/grb3016.yaml", lcm_url;
   unsigned seed = 1;
   int poses = 0;
   double rate = 2.0, speed = 1.0, position_noise = 5e-5, orientation_noise = 1.745e-3;
@@ -102,6 +183,17 @@ int main(int argc, char** argv) {
   rcal::sensors::RawCsvReplaySettings replay;
   app.add_option("--source", source, "sim | replay (FILE: a raw-stream CSV, BROAD layout)")
       ->check(CLI::IsMember({"sim", "replay"}))
+      ->capture_default_str();
+  app.add_option("--level", level,
+                 "sim: poses (JOINTS + POSE_MEASUREMENT per stop) | sensors (JOINTS, IMU, POSITION "
+                 "at 100 Hz from the sensor-level simulation of `rcal experiment paper --sensors`)")
+      ->check(CLI::IsMember({"poses", "sensors"}))
+      ->capture_default_str();
+  int test_poses = 50;
+  app.add_option("--test-poses", test_poses,
+                 "sim sensors: test stops drawn after the calibration stops (as the offline "
+                 "experiment's --test; not driven to)")
+      ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   app.add_option("--robot", robot_path, "robot YAML or URDF")->capture_default_str();
   app.add_option("--seed", seed, "random seed (the offline experiment's)")->capture_default_str();
@@ -162,6 +254,8 @@ int main(int argc, char** argv) {
       return RunSource(src, t, speed);
     }
     const auto robot = io::LoadRobot(services::RepoPath(robot_path));
+    if (level == "sensors")
+      return RunSensorSim(robot, seed, poses > 0 ? poses : 50, test_poses, start_utime, speed, t);
     const auto& model = robot.model;
     const Eigen::VectorXd x_true = sim::Table3Errors(model);
     sim::PoseNoise noise;

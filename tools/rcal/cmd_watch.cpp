@@ -1,0 +1,150 @@
+// rcal watch: a live line per pose of the online calibration. Listens on LCM for
+// KINEMATIC_PARAMS and CALIBRATION_STATUS (published in that order after every pose by
+// ekf_identifier) and prints, per pose: poses used, the largest parameter change of that pose
+// (in its σ, and the change's norm over lengths [mm] and angles [mrad]), the RMS residuals, and —
+// with --seed S — the mean position error on the test poses against the simulator's truth, as the
+// offline `rcal experiment paper --sensors --seed S` reports it (the same truth cell, MakeCell,
+// and the same test stops: drawn after the --poses calibration stops from mt19937_64(S·1000+3)).
+// Ends after --poses poses (0: never), on Ctrl-C, or when nothing was heard for --idle seconds
+// after the first pose (wall clock: a viewer, not a filter).
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <memory>
+#include <optional>
+
+#include "command.hpp"
+#include "experiment_sensors.hpp"
+#include "rcal/calibration_status_t.hpp"
+#include "rcal/identification/metrics.hpp"
+#include "rcal/io/robot_urdf.hpp"
+#include "rcal/kinematic_params_t.hpp"
+#include "rcal/sim/pose_sim.hpp"
+#include "rcal/transport/adapters.hpp"
+#include "rcal/transport/channels.hpp"
+#include "rcal/transport/lcm_transport.hpp"
+
+namespace rcal::tool {
+namespace {
+
+std::atomic<bool> g_stop{false};
+void OnSignal(int) {
+  g_stop = true;
+}
+
+struct Options {
+  std::string lcm_url;
+  std::string robot = "config/robots/grb3016.yaml";
+  unsigned seed = 0;
+  int poses = 0, test_poses = 50;
+  double idle_s = 30.0;
+};
+
+int Run(const Options& o) {
+  std::signal(SIGINT, OnSignal);
+  std::signal(SIGTERM, OnSignal);
+  transport::LcmTransport t(o.lcm_url);
+  std::optional<exp::Cell> cell;
+  std::vector<Eigen::VectorXd> test_q;
+  if (o.seed > 0) {
+    cell = exp::MakeCell(io::LoadRobot(ResolvePath(o.robot)).spec, o.seed);
+    sim::Rng rng(o.seed * 1000 + 3);
+    sim::SampleJoints(cell->model, 1, rng);  // home
+    const auto stops = sim::SampleJoints(cell->model, o.poses + o.test_poses, rng);
+    test_q.assign(stops.begin() + o.poses, stops.end());
+  }
+  std::optional<kinematic_params_t> params, previous;
+  std::optional<double> last_test_mm;
+  int last_poses = 0;
+  auto last_heard = std::chrono::steady_clock::now();
+  bool heard = false;
+  t.Subscribe<kinematic_params_t>(transport::channels::kKinematicParams,
+                                  [&](const kinematic_params_t& m) {
+                                    params = m;
+                                    last_heard = std::chrono::steady_clock::now();
+                                    heard = true;
+                                  });
+  t.Subscribe<calibration_status_t>(
+      transport::channels::kCalibrationStatus, [&](const calibration_status_t& s) {
+        last_heard = std::chrono::steady_clock::now();
+        if (!params || params->utime != s.utime || params->poses_used == last_poses) return;
+        const kinematic_params_t& p = *params;
+        double max_step = 0, d_len = 0, d_ang = 0;
+        if (previous && previous->num_params == p.num_params)
+          for (int i = 0; i < p.num_params; ++i) {
+            const double d = p.values[i] - previous->values[i];
+            if (p.sigmas[i] > 0) max_step = std::max(max_step, std::abs(d) / p.sigmas[i]);
+            const bool angle = cell && i < cell->model.num_params()
+                                   ? cell->model.parameters()[i].is_angle
+                                   : (p.names[i].find("alpha") != std::string::npos ||
+                                      p.names[i].find("theta") != std::string::npos ||
+                                      p.names[i].find("beta") != std::string::npos ||
+                                      p.names[i].find("_r") != std::string::npos);
+            (angle ? d_ang : d_len) += d * d;
+          }
+        std::string test = "";
+        if (cell) {
+          std::string error;
+          const auto x = transport::ParamsFromMessage(p, cell->model, &error);
+          if (x) {
+            last_test_mm = identification::ErrorsAgainstTruth(cell->model, *x, cell->x_true, test_q)
+                               .mean_position_m *
+                           1e3;
+            char b[64];
+            std::snprintf(b, sizeof b, "  test error %7.3f mm", *last_test_mm);
+            test = b;
+          } else {
+            test = "  (" + error + ")";
+          }
+        }
+        std::printf(
+            "pose %3d  t %8.2f s  change max %7.2f σ (|Δ| %7.3f mm, %7.3f mrad)  RMS residual "
+            "%6.3f mm %6.3f mrad  rejected %d%s%s\n",
+            p.poses_used, s.utime * 1e-6, max_step, std::sqrt(d_len) * 1e3, std::sqrt(d_ang) * 1e3,
+            s.rms_position_residual * 1e3, s.rms_orientation_residual * 1e3, s.poses_rejected,
+            test.c_str(), s.converged ? "  converged" : "");
+        std::fflush(stdout);
+        last_poses = p.poses_used;
+        previous = p;
+      });
+  std::printf(
+      "rcal watch on %s%s\n", t.url().c_str(),
+      cell ? (" (truth: sensor-level cell of seed " + std::to_string(o.seed) + ")").c_str() : "");
+  std::fflush(stdout);
+  while (!g_stop && (o.poses <= 0 || last_poses < o.poses)) {
+    t.HandleTimeout(100);
+    if (heard && o.idle_s > 0 &&
+        std::chrono::steady_clock::now() - last_heard > std::chrono::duration<double>(o.idle_s)) {
+      std::printf("nothing heard for %.0f s\n", o.idle_s);
+      break;
+    }
+  }
+  if (last_test_mm)
+    std::printf("final: %d poses, test error %.3f mm\n", last_poses, *last_test_mm);
+  else
+    std::printf("final: %d poses\n", last_poses);
+  return (o.poses > 0 && last_poses < o.poses) ? 1 : 0;
+}
+
+const RegisterCommand kWatch(
+    "watch", "A live line per pose of the online calibration (KINEMATIC_PARAMS on LCM)",
+    [](CLI::App& sub) -> std::function<int()> {
+      auto o = std::make_shared<Options>();
+      sub.add_option("--lcm-url", o->lcm_url,
+                     "LCM URL (default $RCAL_LCM_URL, else udpm://239.255.76.67:7667?ttl=0)");
+      sub.add_option("--robot", o->robot, "robot YAML or URDF")->capture_default_str();
+      sub.add_option("--seed", o->seed,
+                     "sim seed: show the test error against the sensor-level sim's truth (0: no)")
+          ->capture_default_str();
+      sub.add_option("--poses", o->poses, "stop after this many poses used (0: Ctrl-C)")
+          ->capture_default_str();
+      sub.add_option("--test-poses", o->test_poses, "test stops (as the sim's --test-poses)")
+          ->capture_default_str();
+      sub.add_option("--idle", o->idle_s, "stop when nothing heard this long [s] (0: never)")
+          ->capture_default_str();
+      return [o]() { return Run(*o); };
+    });
+
+}  // namespace
+}  // namespace rcal::tool
