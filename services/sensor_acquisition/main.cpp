@@ -105,7 +105,7 @@ void Pace(int64_t utime, int64_t utime0, long long wall0, double speed) {
 
 // The sensor-level simulation of the offline experiment's cell (see the file comment).
 int RunSensorSim(const rcal::io::LoadedRobot& robot, unsigned seed, int num_cal, int num_test,
-                 int64_t start_utime, double speed, rcal::transport::LcmTransport& t) {
+                 bool linger, int64_t start_utime, double speed, rcal::transport::LcmTransport& t) {
   using namespace rcal;
   namespace ch = transport::channels;
   const tool::exp::Cell cell = tool::exp::MakeCell(robot.spec, seed);
@@ -160,6 +160,11 @@ int RunSensorSim(const rcal::io::LoadedRobot& robot, unsigned seed, int num_cal,
     t.HandleTimeout(0);  // keeps LCM's receive queue empty
   }
   spdlog::info("done: {} samples published", published);
+  if (linger) {
+    // Under a supervisor: stay up (an exit would be restarted and replay the programme).
+    spdlog::info("lingering until stopped");
+    while (!services::StopRequested()) t.HandleTimeout(100);
+  }
   return 0;
 }
 
@@ -190,6 +195,10 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"poses", "sensors"}))
       ->capture_default_str();
   int test_poses = 50;
+  bool linger = false;
+  app.add_flag("--linger", linger,
+               "sim sensors: after the programme, stay up until SIGINT/SIGTERM instead of exiting "
+               "(under the supervisor, which restarts exited processes)");
   app.add_option("--test-poses", test_poses,
                  "sim sensors: test stops drawn after the calibration stops (as the offline "
                  "experiment's --test; not driven to)")
@@ -255,7 +264,8 @@ int main(int argc, char** argv) {
     }
     const auto robot = io::LoadRobot(services::RepoPath(robot_path));
     if (level == "sensors")
-      return RunSensorSim(robot, seed, poses > 0 ? poses : 50, test_poses, start_utime, speed, t);
+      return RunSensorSim(robot, seed, poses > 0 ? poses : 50, test_poses, linger, start_utime,
+                          speed, t);
     const auto& model = robot.model;
     const Eigen::VectorXd x_true = sim::Table3Errors(model);
     sim::PoseNoise noise;

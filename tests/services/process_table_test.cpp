@@ -3,6 +3,7 @@
 // missing or duplicate entries) naming the key and the line.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <string>
 
 #include "process_table.hpp"
@@ -29,6 +30,21 @@ TEST(ProcessTable, TheShippedTableStartsTheLoggerFirst) {
     for (const auto& p : t.processes) found |= p.name == name && p.argv.at(0) == name;
     EXPECT_TRUE(found) << name;
   }
+}
+
+TEST(ProcessTable, TheDemoTableParses) {
+  // deploy/rcal-up --demo: the sensor-level chain, logger first, the sensors started last.
+  const auto t = LoadProcessTable(RCAL_SOURCE_DIR "/config/processes.demo.yaml");
+  std::vector<std::string> names;
+  for (const auto& p : t.processes) {
+    names.push_back(p.name);
+    EXPECT_EQ(p.argv.at(0), p.name);
+  }
+  EXPECT_EQ(names, (std::vector<std::string>{"logger", "ekf_identifier", "still_window",
+                                             "sensor_acquisition"}));
+  const auto& sa = t.processes.back().argv;
+  EXPECT_NE(std::find(sa.begin(), sa.end(), "--linger"), sa.end());
+  EXPECT_NE(std::find(sa.begin(), sa.end(), "sensors"), sa.end());
 }
 
 TEST(ProcessTable, EveryKey) {
