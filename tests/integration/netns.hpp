@@ -20,15 +20,16 @@ namespace rcal::integration {
 
 namespace fs = std::filesystem;
 
-inline pid_t Spawn(const std::vector<std::string>& argv, const fs::path& log) {
+/// Starts argv[0] with argv in a new process group, stdout to `out` and stderr to `err` (one
+/// file when they are the same path).
+inline pid_t Spawn(const std::vector<std::string>& argv, const fs::path& out, const fs::path& err) {
   const pid_t pid = fork();
   if (pid == 0) {
     setpgid(0, 0);
-    FILE* f = std::fopen(log.c_str(), "w");
-    if (f) {
-      dup2(fileno(f), 1);
-      dup2(fileno(f), 2);
-    }
+    FILE* o = std::fopen(out.c_str(), "w");
+    FILE* e = err == out ? o : std::fopen(err.c_str(), "w");
+    if (o) dup2(fileno(o), 1);
+    if (e) dup2(fileno(e), 2);
     std::vector<char*> args;
     for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
     args.push_back(nullptr);
@@ -36,6 +37,11 @@ inline pid_t Spawn(const std::vector<std::string>& argv, const fs::path& log) {
     _exit(127);
   }
   return pid;
+}
+
+/// Starts argv[0] with stdout and stderr both in `log`.
+inline pid_t Spawn(const std::vector<std::string>& argv, const fs::path& log) {
+  return Spawn(argv, log, log);
 }
 
 /// Exit code, or −signal.
