@@ -189,12 +189,10 @@ int main(int argc, char** argv) {
                  o.robot_id, t.url(), o.dds_domain < 0 ? "default" : std::to_string(o.dds_domain),
                  uri);
     Bridge bridge(o, t, participant.get());
-    while (!rcal::services::StopRequested()) {
-      if (t.HandleTimeout(100) < 0 && errno != EINTR) {
-        spdlog::error("LCM error: {}", std::strerror(errno));
-        return 1;
-      }
-    }
+    if (const int rc =
+            rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
+        rc != 0)
+      return rc;
     spdlog::info("stopped");
     return 0;
   } catch (const std::exception& e) {

@@ -278,12 +278,10 @@ int main(int argc, char** argv) {
     spdlog::info("ekf_identifier on {}", t.url());
     Identifier id(o, t);
     id.PublishCurrent();
-    while (!rcal::services::StopRequested()) {
-      if (t.HandleTimeout(100) < 0 && errno != EINTR) {
-        spdlog::error("LCM error: {}", std::strerror(errno));
-        return 1;
-      }
-    }
+    if (const int rc =
+            rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
+        rc != 0)
+      return rc;
     spdlog::info("stopped");
     return 0;
   } catch (const std::exception& e) {

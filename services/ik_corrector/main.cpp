@@ -30,12 +30,10 @@ int main(int argc, char** argv) {
     const auto robot = io::LoadRobot(services::RepoPath(robot_path));
     transport::IkCorrectorNode node(t, robot.model, options);
     spdlog::info("ik_corrector on {} ({})", t.url(), robot.model.name());
-    while (!services::StopRequested()) {
-      if (t.HandleTimeout(100) < 0 && errno != EINTR) {
-        spdlog::error("LCM error: {}", std::strerror(errno));
-        return 1;
-      }
-    }
+    if (const int rc =
+            rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
+        rc != 0)
+      return rc;
     return 0;
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());

@@ -87,8 +87,10 @@ int main(int argc, char** argv) {
           health.Tick(m.utime, t);
         },
         [&](const std::string& e) { health.Rejected(e); });
-    while (!services::StopRequested())
-      if (t.HandleTimeout(100) < 0 && errno != EINTR) return 1;
+    if (const int rc =
+            rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
+        rc != 0)
+      return rc;
     spdlog::info("stopped after {} events", event);
     return 0;
   } catch (const std::exception& e) {

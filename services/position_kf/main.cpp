@@ -48,12 +48,10 @@ int main(int argc, char** argv) {
     transport::PositionKfNode node(t, settings, options);
     node.Announce();
     spdlog::info("position_kf on {} (earth {})", t.url(), earth);
-    while (!services::StopRequested()) {
-      if (t.HandleTimeout(100) < 0 && errno != EINTR) {
-        spdlog::error("LCM error: {}", std::strerror(errno));
-        return 1;
-      }
-    }
+    if (const int rc =
+            rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
+        rc != 0)
+      return rc;
     const auto& h = node.health();
     spdlog::info("stopped: received {}, rejected {}, published {}", h.received(), h.rejected(),
                  h.published());

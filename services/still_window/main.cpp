@@ -159,12 +159,10 @@ int main(int argc, char** argv) {
     ps.use_orientation = !position_only;
     spdlog::info("still_window on {}", t.url());
     StillWindowNode node(ps, warmup, t, name);
-    while (!services::StopRequested()) {
-      if (t.HandleTimeout(100) < 0 && errno != EINTR) {
-        spdlog::error("LCM error: {}", std::strerror(errno));
-        return 1;
-      }
-    }
+    if (const int rc =
+            rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
+        rc != 0)
+      return rc;
     spdlog::info("stopped: {} poses published", node.emitted());
     return 0;
   } catch (const std::exception& e) {

@@ -1,6 +1,10 @@
 #include "rcal/services/common.hpp"
 
+#include <spdlog/spdlog.h>
+
+#include <cerrno>
 #include <chrono>
+#include <cstring>
 #include <filesystem>
 
 namespace rcal::services {
@@ -34,6 +38,16 @@ long long MonotonicMicros() {
   return std::chrono::duration_cast<std::chrono::microseconds>(
              std::chrono::steady_clock::now().time_since_epoch())
       .count();
+}
+
+int ServeUntilStopped(const std::function<int(int)>& handle) {
+  while (!StopRequested()) {
+    if (handle(100) < 0 && errno != EINTR) {
+      spdlog::error("LCM error: {}", std::strerror(errno));
+      return 1;
+    }
+  }
+  return 0;
 }
 
 }  // namespace rcal::services
