@@ -9,7 +9,7 @@
 // leave the state untouched.
 //
 // --cell-seed S (sensor level): the model, base set and start of the offline
-// `rcal experiment paper --sensors --seed S` (rcal::tool::exp::MakeCell: the arm plus the set-up
+// `rcal experiment paper --sensors --seed S` (rcal::cell::MakeCell: the arm plus the set-up
 // frames base/earth/marker/IMU). The first --guess-poses poses are held back, the set-up guess is
 // fitted to them (SetupGuess), the EKF is started there (MakeEkf) and then updated with them and
 // every later pose, exactly as the offline RunOnline.
@@ -23,7 +23,7 @@
 #include <memory>
 #include <optional>
 
-#include "experiment_sensors.hpp"
+#include "rcal/cell/sim_cell.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
 #include "rcal/identification/metrics.hpp"
 #include "rcal/io/robot_urdf.hpp"
@@ -58,13 +58,12 @@ class Identifier {
       : o_(o),
         t_(t),
         robot_(io::LoadRobot(services::RepoPath(o.robot))),
-        cell_(o.cell_seed > 0
-                  ? std::optional<tool::exp::Cell>(tool::exp::MakeCell(robot_.spec, o.cell_seed))
-                  : std::nullopt),
+        cell_(o.cell_seed > 0 ? std::optional<cell::Cell>(cell::MakeCell(robot_.spec, o.cell_seed))
+                              : std::nullopt),
         model_(cell_ ? cell_->model : robot_.model),
         base_(cell_ ? cell_->base : BaseSet(model_, o)),
         ekf_(cell_ ? std::make_unique<identification::EkfIdentifier>(
-                         tool::exp::MakeEkf(*cell_, model_.Nominal()))
+                         cell::MakeEkf(*cell_, model_.Nominal()))
                    : std::make_unique<identification::EkfIdentifier>(model_, base_)),
         model_id_(transport::ModelId(model_)),
         health_(o.name) {
@@ -157,8 +156,8 @@ class Identifier {
       }
       std::vector<kinematics::PoseMeasurement> ms;
       for (const auto& h : held_) ms.push_back(h.z);
-      const Eigen::VectorXd x0 = tool::exp::SetupGuess(*cell_, ms);
-      ekf_ = std::make_unique<identification::EkfIdentifier>(tool::exp::MakeEkf(*cell_, x0));
+      const Eigen::VectorXd x0 = cell::SetupGuess(*cell_, ms);
+      ekf_ = std::make_unique<identification::EkfIdentifier>(cell::MakeEkf(*cell_, x0));
       started_ = true;
       spdlog::info("set-up guess from {} poses; EKF started", ms.size());
       const auto held = std::move(held_);
@@ -227,7 +226,7 @@ class Identifier {
   Options o_;
   transport::Transport& t_;
   io::LoadedRobot robot_;
-  std::optional<tool::exp::Cell> cell_;
+  std::optional<cell::Cell> cell_;
   kinematics::KinematicModel model_;
   std::vector<int> base_;
   std::unique_ptr<identification::EkfIdentifier> ekf_;

@@ -11,7 +11,7 @@
 //
 // Source `sim --level sensors`: the truth cell of the offline `rcal experiment paper --sensors`
 // (the arm's Table 3 errors plus the set-up frames: position-sensor base, earth, marker, IMU;
-// rcal::tool::exp::MakeCell) moves through the same programme (home, then --poses calibration
+// rcal::cell::MakeCell) moves through the same programme (home, then --poses calibration
 // stops drawn with the --test-poses test stops from mt19937_64(S·1000 + 3), 1.5 s still at each)
 // and rcal::sim::SensorSim publishes every 100 Hz tick as JOINTS, IMU (magnetic field in T) and
 // POSITION (when the sensor fired, covariance σ² I), utime = --start-utime + t_sim. The programme
@@ -32,7 +32,7 @@
 #include <optional>
 #include <thread>
 
-#include "experiment_sensors.hpp"
+#include "rcal/cell/sim_cell.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/services/common.hpp"
 #include "rcal/sim/pose_sim.hpp"
@@ -108,7 +108,7 @@ int RunSensorSim(const rcal::io::LoadedRobot& robot, unsigned seed, int num_cal,
                  bool linger, int64_t start_utime, double speed, rcal::transport::LcmTransport& t) {
   using namespace rcal;
   namespace ch = transport::channels;
-  const tool::exp::Cell cell = tool::exp::MakeCell(robot.spec, seed);
+  const cell::Cell cell = cell::MakeCell(robot.spec, seed);
   const auto& model = cell.model;
   // SimulateWindows' programme: the home pose, then the calibration and test stops.
   sim::Rng rng(seed * 1000 + 3);

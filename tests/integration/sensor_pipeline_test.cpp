@@ -12,9 +12,9 @@
 
 #include <optional>
 
-#include "experiment_sensors.hpp"
 #include "netns.hpp"
 #include "rcal/calibration_status_t.hpp"
+#include "rcal/cell/sim_cell.hpp"
 #include "rcal/identification/metrics.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/kinematic_params_t.hpp"
@@ -37,15 +37,15 @@ class SensorPipeline : public ProcessFixture {};
 TEST_F(SensorPipeline, CalibratesToTheOfflineFigure) {
   RCAL_IN_NAMESPACE("SensorPipeline.CalibratesToTheOfflineFigure");
   const auto robot = io::LoadRobot(RCAL_SOURCE_DIR "/config/robots/grb3016.yaml");
-  const tool::exp::Cell cell = tool::exp::MakeCell(robot.spec, kSeed);
-  tool::exp::RunSettings rs;
+  const cell::Cell cell = cell::MakeCell(robot.spec, kSeed);
+  cell::RunSettings rs;
   rs.seed = kSeed;
   rs.num_cal = kCal;
   rs.num_test = kTest;
-  const auto w = tool::exp::SimulateWindows(cell, rs);
+  const auto w = cell::SimulateWindows(cell, rs);
   std::vector<Eigen::VectorXd> test_q;
   for (const auto& m : w.test) test_q.push_back(m.q);
-  const auto offline = tool::exp::RunOnline(cell, w.cal, test_q);
+  const auto offline = cell::RunOnline(cell, w.cal, test_q);
   const double offline_mm = offline.test_error_after_pose_mm.back();
 
   transport::LcmTransport t(kUrl);

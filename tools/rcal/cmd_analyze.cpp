@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "analyze_imu.hpp"
 #include "command.hpp"
 #include "rcal/discrepancy/analysis.hpp"
 #include "rcal/geometry/so3.hpp"
@@ -73,6 +74,9 @@ io::Series Histogram(const std::string& title, const std::vector<double>& v_mm, 
 }
 
 int Run(const Options& o) {
+  if (IsImuStreamCsv(ResolvePath(o.data)))  // BROAD layout: the IMU-stream analysis, no robot
+    return RunAnalyzeImu({o.data, o.out, o.json_path, o.alpha});
+  if (o.robot.empty()) throw std::runtime_error("rcal analyze: --robot is required for pose data");
   io::LoadedRobot robot = LoadRobotForCell(o.robot, o.tip_link, o.base_link, o.frames);
   const io::PoseDataset data = LoadPoseDataFor(robot, o.data, "rcal analyze");
   if (o.frames == "auto" && data.has_orientation) AddOrientationFrame(robot);
@@ -318,8 +322,9 @@ const RegisterCommand kAnalyze(
     "Find what the geometric model gets wrong in a pose dataset, and the gain of fixing it",
     [](CLI::App& sub) -> std::function<int()> {
       auto o = std::make_shared<Options>();
-      sub.add_option("data", o->data, "pose dataset CSV (rcal or FIGAROH layout)")->required();
-      sub.add_option("--robot", o->robot, "robot file (YAML or URDF)")->required();
+      sub.add_option("data", o->data, "pose dataset CSV (rcal or FIGAROH layout) or IMU stream CSV")
+          ->required();
+      sub.add_option("--robot", o->robot, "robot file (YAML or URDF); not for IMU streams");
       sub.add_option("--tip", o->tip_link, "URDF: last link of the chain (the flange)");
       sub.add_option("--base-link", o->base_link, "URDF: first link of the chain");
       sub.add_option("--out", o->out, "output folder")->capture_default_str();

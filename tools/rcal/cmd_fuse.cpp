@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "command.hpp"
+#include "rcal/discrepancy/imu_scoring.hpp"
 #include "rcal/estimation/fqa.hpp"
 #include "rcal/estimation/orientation_kf.hpp"
 #include "rcal/estimation/position_kf.hpp"
@@ -106,47 +107,18 @@ est::PositionKfSettings BroadPositionSettings(double pos_noise_m) {
   return s;
 }
 
-// BROAD error angles [rad] of an estimate against truth, both IMU → ENU [w,x,y,z].
-struct AngleErrors {
-  double total, heading, inclination;
-};
-AngleErrors BroadErrors(const Eigen::Vector4d& q_est, const Eigen::Vector4d& q_truth) {
-  const Eigen::Vector4d e =
-      geometry::QuatMultiply(q_est.normalized(), geometry::QuatConjugate(q_truth.normalized()));
-  const double w = std::abs(e(0));
-  AngleErrors a;
-  a.total = 2.0 * std::acos(std::min(1.0, w));
-  a.heading = 2.0 * std::atan(std::abs(e(3) / e(0)));
-  a.inclination = 2.0 * std::acos(std::min(1.0, std::sqrt(e(0) * e(0) + e(3) * e(3))));
-  return a;
+// BROAD scoring (discrepancy/imu_scoring.hpp, shared with `rcal analyze` on IMU streams).
+using discrepancy::AngleErrors;
+using discrepancy::BroadErrors;
+using discrepancy::OrientationScore;
+using discrepancy::Rms;
+
+nlohmann::json ScoreJson(const OrientationScore& s) {
+  return {{"total_rmse_rad", s.total.value()},
+          {"heading_rmse_rad", s.heading.value()},
+          {"inclination_rmse_rad", s.inclination.value()},
+          {"samples", s.total.n}};
 }
-
-struct Rms {
-  double sum = 0.0;
-  long n = 0;
-  void Add(double v) {
-    sum += v * v;
-    ++n;
-  }
-  double value() const {
-    return n > 0 ? std::sqrt(sum / n) : std::numeric_limits<double>::quiet_NaN();
-  }
-};
-
-struct OrientationScore {
-  Rms total, heading, inclination;
-  void Add(const AngleErrors& e) {
-    total.Add(e.total);
-    heading.Add(e.heading);
-    inclination.Add(e.inclination);
-  }
-  nlohmann::json Json() const {
-    return {{"total_rmse_rad", total.value()},
-            {"heading_rmse_rad", heading.value()},
-            {"inclination_rmse_rad", inclination.value()},
-            {"samples", total.n}};
-  }
-};
 
 std::string Fixed(double v, int digits) {
   std::ostringstream o;
@@ -262,8 +234,8 @@ int RunFuse(const FuseOptions& opt) {
   nlohmann::json j;
   j["trial"] = path;
   j["samples"] = n;
-  j["orientation_kf"] = kf_score.Json();
-  j["fqa"] = fqa_score.Json();
+  j["orientation_kf"] = ScoreJson(kf_score);
+  j["fqa"] = ScoreJson(fqa_score);
   j["position_rmse_m"] = pos_all.value();
   j["position_rmse_movement_m"] = pos_moving.value();
   j["position_sensor"] = {{"rate_hz", opt.pos_rate_hz},

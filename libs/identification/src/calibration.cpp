@@ -160,6 +160,39 @@ std::vector<int> IdentifiableSubset(const kinematics::KinematicModel& model,
   return out;
 }
 
+std::vector<int> PreferredBaseSet(const kinematics::KinematicModel& model,
+                                  const std::vector<Eigen::VectorXd>& qs, const Eigen::VectorXd& x,
+                                  kinematics::MeasurementKind kind) {
+  Eigen::MatrixXd J = kinematics::StackedJacobian(model, qs, x, kind);
+  for (int k = 0; k < J.cols(); ++k)
+    if (J.col(k).norm() > 0) J.col(k).normalize();
+  const auto& params = model.parameters();
+  std::vector<int> order;
+  for (const char* g : {"base", "earth", "imu", "marker"})
+    for (int i = 0; i < model.num_params(); ++i)
+      if (params[i].group == g) order.push_back(i);
+  for (int i = 0; i < model.num_params(); ++i)
+    if (std::find(order.begin(), order.end(), i) == order.end() && params[i].group != "tool")
+      order.push_back(i);
+  for (int i = 0; i < model.num_params(); ++i)
+    if (params[i].group == "tool") order.push_back(i);
+  std::vector<int> chosen;
+  Eigen::Index rank = 0;
+  for (int i : order) {
+    Eigen::MatrixXd S(J.rows(), chosen.size() + 1);
+    for (size_t k = 0; k < chosen.size(); ++k) S.col(k) = J.col(chosen[k]);
+    S.col(chosen.size()) = J.col(i);
+    Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(S);
+    qr.setThreshold(1e-9);
+    if (qr.rank() > rank) {
+      chosen.push_back(i);
+      rank = qr.rank();
+    }
+  }
+  std::sort(chosen.begin(), chosen.end());
+  return chosen;
+}
+
 void SetNoise(std::vector<kinematics::PoseMeasurement>& ms, double sp, double so) {
   for (auto& m : ms) {
     const int d = m.dimension();

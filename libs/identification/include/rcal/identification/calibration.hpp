@@ -21,6 +21,7 @@
 
 #include "rcal/identification/batch_lm.hpp"
 #include "rcal/identification/metrics.hpp"
+#include "rcal/kinematics/identifiability.hpp"
 #include "rcal/kinematics/measurement.hpp"
 #include "rcal/kinematics/model.hpp"
 
@@ -47,6 +48,16 @@ Eigen::VectorXd InitialSetupGuess(const kinematics::KinematicModel& model,
 std::vector<int> IdentifiableSubset(const kinematics::KinematicModel& model,
                                     const std::vector<kinematics::PoseMeasurement>& ms,
                                     const Eigen::VectorXd& x, const std::vector<int>& candidates);
+
+/// A base (identifiable) parameter set chosen in an order of preference: a parameter joins when
+/// it raises the rank of the column-scaled stacked Jacobian at x over the joints qs (pivoted QR,
+/// threshold 1e-9), tried in the order set-up frames (groups base, earth, imu, marker), then the
+/// arm's parameters in model order, the D–H tool (group tool) last. So link and tool errors that
+/// a rotated IMU or a shifted marker explain are reported as part of those frames, as a user who
+/// mounted them expects. Ascending.
+std::vector<int> PreferredBaseSet(const kinematics::KinematicModel& model,
+                                  const std::vector<Eigen::VectorXd>& qs, const Eigen::VectorXd& x,
+                                  kinematics::MeasurementKind kind);
 
 struct CalibrationSettings {
   enum class Method { kLm, kEkf };

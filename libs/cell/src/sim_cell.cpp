@@ -1,14 +1,12 @@
-#include "experiment_sensors.hpp"
+#include "rcal/cell/sim_cell.hpp"
 
 #include <spdlog/spdlog.h>
 
-#include <Eigen/QR>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <numbers>
 
-#include "command.hpp"
 #include "rcal/estimation/pose_pipeline.hpp"
 #include "rcal/geometry/so3.hpp"
 #include "rcal/identification/batch_lm.hpp"
@@ -18,7 +16,7 @@
 #include "rcal/sim/pose_sim.hpp"
 #include "rcal/sim/sensor_sim.hpp"
 
-namespace rcal::tool::exp {
+namespace rcal::cell {
 
 namespace {
 using Clock = std::chrono::steady_clock;
@@ -56,43 +54,10 @@ Cell MakeCell(io::RobotSpec arm, unsigned seed) {
   for (int i : identification::SetupParameters(m)) x_structure(i) = c.x_true(i);
   c.ident = kinematics::AnalyzeIdentifiability(m, sim::SampleJoints(m, 200, rng_id), x_structure,
                                                kinematics::MeasurementKind::kFullPose);
-  // The base set, by preference: set-up frames first (what a user mounts and must know), then
-  // the links in order, the D–H tool last; a parameter joins when it raises the rank of the
-  // column-scaled stacked Jacobian. So link-6 and tool errors that a rotated IMU or a shifted
-  // marker explain are reported as part of those frames.
-  {
-    sim::Rng rng_b(seed * 1000 + 5);
-    Eigen::MatrixXd J = kinematics::StackedJacobian(
-        m, sim::SampleJoints(m, 100, rng_b), x_structure, kinematics::MeasurementKind::kFullPose);
-    for (int k = 0; k < J.cols(); ++k)
-      if (J.col(k).norm() > 0) J.col(k).normalize();
-    std::vector<int> order;
-    const std::vector<std::string> setup_groups = {"base", "earth", "imu", "marker"};
-    for (const auto& g : setup_groups)
-      for (int i = 0; i < m.num_params(); ++i)
-        if (m.parameters()[i].group == g) order.push_back(i);
-    for (int i = 0; i < m.num_params(); ++i)
-      if (std::find(order.begin(), order.end(), i) == order.end() &&
-          m.parameters()[i].group != "tool")
-        order.push_back(i);
-    for (int i = 0; i < m.num_params(); ++i)
-      if (m.parameters()[i].group == "tool") order.push_back(i);
-    std::vector<int> chosen;
-    int rank = 0;
-    for (int i : order) {
-      Eigen::MatrixXd S(J.rows(), chosen.size() + 1);
-      for (size_t k = 0; k < chosen.size(); ++k) S.col(k) = J.col(chosen[k]);
-      S.col(chosen.size()) = J.col(i);
-      Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(S);
-      qr.setThreshold(1e-9);
-      if (qr.rank() > rank) {
-        chosen.push_back(i);
-        rank = static_cast<int>(qr.rank());
-      }
-    }
-    std::sort(chosen.begin(), chosen.end());
-    c.base = chosen;
-  }
+  // The base set, by preference: set-up frames first (what a user mounts and must know).
+  sim::Rng rng_b(seed * 1000 + 5);
+  c.base = identification::PreferredBaseSet(m, sim::SampleJoints(m, 100, rng_b), x_structure,
+                                            kinematics::MeasurementKind::kFullPose);
   c.setup = identification::SetupParameters(m);
   // The truth on the base set: LM on dense noise-free poses from the truth with the dropped
   // parameters at nominal.
@@ -245,4 +210,4 @@ OnlineResult RunOnline(const Cell& cell, const std::vector<kinematics::PoseMeasu
   return r;
 }
 
-}  // namespace rcal::tool::exp
+}  // namespace rcal::cell
