@@ -1,7 +1,7 @@
 # LCM message types: the only contract between the pipeline's processes.
 #
-# Included (once, include_guard) from lcmtypes/CMakeLists.txt and from libs/transport, which the
-# top level adds before lcmtypes/. Outputs go to ${PROJECT_BINARY_DIR}/lcmtypes either way.
+# Included (once, include_guard) from lcmtypes/CMakeLists.txt and from services/transport.
+# Outputs go to ${PROJECT_BINARY_DIR}/lcmtypes either way.
 include_guard(GLOBAL)
 #
 # rcal_lcm_gen(TARGET name JAR jarname LCM_FILES f1.lcm ...)

@@ -1,10 +1,14 @@
 #include "robot_setup.hpp"
 
+#include <spdlog/spdlog.h>
+
 #include <stdexcept>
 
 #include "command.hpp"
+#include "pose_log.hpp"
 #include "rcal/geometry/so3.hpp"
 #include "rcal/io/robot_yaml.hpp"
+#include "rcal/transport/channels.hpp"
 
 namespace rcal::tool {
 
@@ -38,8 +42,18 @@ io::PoseDataset LoadPoseDataFor(const io::LoadedRobot& robot, const std::string&
                                 const std::string& command) {
   std::vector<std::string> joint_names;
   for (const auto& j : robot.model.joints()) joint_names.push_back(j.name);
-  io::PoseDataset data =
-      io::LoadPoseDataset(ResolvePath(data_path), robot.model.num_joints(), joint_names);
+  const std::string path = ResolvePath(data_path);
+  io::PoseDataset data;
+  if (IsLcmLog(path)) {
+    // A log of the pipeline: its POSE_MEASUREMENT events, checked as ekf_identifier checks them.
+    const PoseLog log = ReadPoseLog(path, robot.model, transport::channels::kPoseMeasurement);
+    if (log.skipped > 0)
+      spdlog::warn("{}: {} of {} {} events skipped (first: {})", data_path, log.skipped, log.events,
+                   transport::channels::kPoseMeasurement, log.first_skip_reason);
+    data = ToPoseDataset(log, robot.model.num_joints());
+  } else {
+    data = io::LoadPoseDataset(path, robot.model.num_joints(), joint_names);
+  }
   if (data.samples.empty()) throw std::runtime_error(data_path + ": no poses");
   for (const auto& s : data.samples)
     if (s.marker != 0)

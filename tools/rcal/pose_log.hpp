@@ -1,0 +1,43 @@
+// Pose measurements from a recorded LCM event log (lcm-logger, the logger service): the
+// POSE_MEASUREMENT events in log order, decoded and checked exactly as ekf_identifier checks them
+// (transport::FromMessage, then kinematics::Validate against the robot), so offline commands see
+// the poses the live identifier saw. Events that fail are skipped and counted, with the first
+// reason kept for the message to the user.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "rcal/io/pose_dataset.hpp"
+#include "rcal/kinematics/measurement.hpp"
+#include "rcal/kinematics/model.hpp"
+
+namespace rcal::tool {
+
+/// True when the file starts with an LCM event-log record (sync word 0xEDA1DA01, big-endian).
+bool IsLcmLog(const std::filesystem::path& path);
+
+struct LoggedPose {
+  kinematics::PoseMeasurement measurement;  ///< with the logged covariance
+  int64_t utime = 0;                        ///< sensor time [µs]
+  int32_t pose_index = 0;
+};
+
+struct PoseLog {
+  std::vector<LoggedPose> poses;  ///< valid and strictly increasing in utime, in log order
+  int64_t events = 0;             ///< events on the channel
+  int64_t skipped = 0;            ///< undecodable, invalid for the robot, or not after the last
+  std::string first_skip_reason;  ///< empty when none skipped
+};
+
+/// Reads `channel` of the log. Throws std::runtime_error naming the file when it cannot be read.
+PoseLog ReadPoseLog(const std::filesystem::path& path, const kinematics::KinematicModel& model,
+                    const std::string& channel);
+
+/// The poses as a pose dataset (time = utime [s]; no temperature, payload or approach sign: the
+/// pipeline's messages do not carry them).
+io::PoseDataset ToPoseDataset(const PoseLog& log, int num_joints);
+
+}  // namespace rcal::tool
