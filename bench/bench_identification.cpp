@@ -26,6 +26,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_common.hpp"
 #include "rcal/identification/batch_lm.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
 #include "rcal/kinematics/identifiability.hpp"
@@ -250,54 +251,17 @@ void EkfUpdate(benchmark::State& state, int iterations) {
   state.counters["relinearization_passes"] = ekf.relinearizations() - checkpoint.relinearizations;
 }
 
-class TableReporter : public benchmark::ConsoleReporter {
- public:
-  void ReportRuns(const std::vector<Run>& reports) override {
-    ConsoleReporter::ReportRuns(reports);
-    for (const Run& r : reports) {
-      if (r.error_occurred) continue;
-      const double ns = r.GetAdjustedRealTime() * (r.time_unit == benchmark::kMillisecond   ? 1e6
-                                                   : r.time_unit == benchmark::kMicrosecond ? 1e3
-                                                   : r.time_unit == benchmark::kSecond      ? 1e9
-                                                                                            : 1.0);
-      const std::string name = r.run_name.function_name;
-      if (r.run_type == Run::RT_Aggregate && r.aggregate_name == "median") median_[name] = ns;
-      if (r.run_type == Run::RT_Iteration) single_[name] = ns;
-    }
-  }
-  double Ns(const std::string& name) const {
-    if (auto it = median_.find(name); it != median_.end()) return it->second;
-    if (auto it = single_.find(name); it != single_.end()) return it->second;
-    return -1.0;
-  }
-  bool has_medians() const { return !median_.empty(); }
-
- private:
-  std::map<std::string, double> median_, single_;
-};
-
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::vector<char*> args(argv, argv + argc);
-  bool chose_repetitions = false;
-  for (int i = 1; i < argc; ++i)
-    if (std::string(argv[i]).rfind("--benchmark_repetitions", 0) == 0) chose_repetitions = true;
-  std::string reps = "--benchmark_repetitions=5", only = "--benchmark_report_aggregates_only=true";
-  if (!chose_repetitions) {
-    args.push_back(reps.data());
-    args.push_back(only.data());
-  }
-  int n = static_cast<int>(args.size());
-  benchmark::Initialize(&n, args.data());
-  if (benchmark::ReportUnrecognizedArguments(n, args.data())) return 1;
+  if (!rcal::bench::InitializeWithMedians(argc, argv)) return 1;
 
   S();
   benchmark::RegisterBenchmark("batch50/rcal", BatchRcal)->Unit(benchmark::kMillisecond);
   benchmark::RegisterBenchmark("batch50/ceres", BatchCeres)->Unit(benchmark::kMillisecond);
   benchmark::RegisterBenchmark("ekf_update/iterated", EkfUpdate, 10)->Unit(benchmark::kMicrosecond);
   benchmark::RegisterBenchmark("ekf_update/plain", EkfUpdate, 1)->Unit(benchmark::kMicrosecond);
-  TableReporter reporter;
+  rcal::bench::TableReporter reporter;
   benchmark::RunSpecifiedBenchmarks(&reporter);
   benchmark::Shutdown();
 

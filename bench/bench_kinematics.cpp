@@ -36,6 +36,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_common.hpp"
 #include "rcal/geometry/so3.hpp"
 #include "rcal/ik/levenberg_marquardt_ik.hpp"
 #include "rcal/kinematics/compiled_chain.hpp"
@@ -326,60 +327,11 @@ void IkKdl(benchmark::State& state, int which) {
 
 // Console output as usual, plus the per-benchmark time kept for the summary table: the median
 // aggregate when there are repetitions, the single run otherwise.
-class TableReporter : public benchmark::ConsoleReporter {
- public:
-  void ReportRuns(const std::vector<Run>& reports) override {
-    ConsoleReporter::ReportRuns(reports);
-    for (const Run& r : reports) {
-      if (r.error_occurred) continue;
-      const std::string name = r.run_name.function_name;
-      const double ns = r.GetAdjustedRealTime() * ToNs(r.time_unit);
-      if (r.run_type == Run::RT_Aggregate && r.aggregate_name == "median") {
-        median_[name] = ns;
-      } else if (r.run_type == Run::RT_Iteration) {
-        single_[name] = ns;
-      }
-    }
-  }
-  double Ns(const std::string& name) const {
-    if (auto it = median_.find(name); it != median_.end()) return it->second;
-    if (auto it = single_.find(name); it != single_.end()) return it->second;
-    return -1.0;
-  }
-  bool has_medians() const { return !median_.empty(); }
-
- private:
-  static double ToNs(benchmark::TimeUnit u) {
-    switch (u) {
-      case benchmark::kSecond:
-        return 1e9;
-      case benchmark::kMillisecond:
-        return 1e6;
-      case benchmark::kMicrosecond:
-        return 1e3;
-      default:
-        return 1.0;
-    }
-  }
-  std::map<std::string, double> median_, single_;
-};
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  // Default to 5 repetitions with medians unless the caller chose.
-  std::vector<char*> args(argv, argv + argc);
-  bool chose_repetitions = false;
-  for (int i = 1; i < argc; ++i)
-    if (std::string(argv[i]).rfind("--benchmark_repetitions", 0) == 0) chose_repetitions = true;
-  std::string reps = "--benchmark_repetitions=5", only = "--benchmark_report_aggregates_only=true";
-  if (!chose_repetitions) {
-    args.push_back(reps.data());
-    args.push_back(only.data());
-  }
-  int n = static_cast<int>(args.size());
-  benchmark::Initialize(&n, args.data());
-  if (benchmark::ReportUnrecognizedArguments(n, args.data())) return 1;
+  if (!rcal::bench::InitializeWithMedians(argc, argv)) return 1;
 
   S();  // build and check everything before timing
   benchmark::RegisterBenchmark("fk/rcal", FkRcal);
@@ -393,7 +345,7 @@ int main(int argc, char** argv) {
   benchmark::RegisterBenchmark("ik_1e-10/rcal", IkRcal, 1);
   benchmark::RegisterBenchmark("ik_1e-10/kdl", IkKdl, 1);
 
-  TableReporter reporter;
+  rcal::bench::TableReporter reporter;
   benchmark::RunSpecifiedBenchmarks(&reporter);
   benchmark::Shutdown();
 
