@@ -1,0 +1,169 @@
+// Where an IMU stream disagrees with the sensor model the simulator assumes, the cause, the
+// extended model and its gain on data the fit did not use (issue 6, IMU streams).
+//
+// Data: the BROAD layout (../shared/data/broad/README.md): t [s], gyro [rad/s], specific force
+// [m/s²], field [µT] in the IMU frame, optional truth q_WI (IMU → ENU, [w,x,y,z]) and movement.
+//
+// Base model (sim/imu_model.hpp, sim/imu_stream.hpp with every effect off):
+//   gyro  ω_m = ω + b + n_g,   b constant,                  n_g white, density N_g [rad/s/√Hz]
+//   acc   f   = R_WIᵀ(−g_W) + n_a   (gravity only),          n_a white, density N_a [m/s²/√Hz]
+//   mag   m   = R_WIᵀ m_W + n_m,  |m_W| and dip δ constant,   n_m white, density N_m [µT/√Hz]
+// and the filter that trusts it: the orientation KF (estimation/orientation_kf.hpp) with
+// reject_mag = reject_accel = false and gyro_bias_random_walk = base_bias_random_walk.
+// Fit: rest segments (movement = 0, or detected still when there is no movement column) of at
+// least min_rest_s; the reference field (norm m₀, dip δ₀ = asin(−m·f / |m||f|)) and the noise
+// levels σ_|m|, σ_δ, σ_|f| (never below the stated densities · √rate) on the first rest segment.
+//
+// Candidates (cause vocabulary), each tested at α / 4 (Bonferroni over the four):
+//  gyro_bias   overlapping Allan variance per axis over the rest segments (pooled), relative
+//              confidence s(τ) = 1/√(2 Σ_seg (N_seg/m − 1)); fitted AVAR = N²/τ + (2 ln2/π) B² +
+//              K² τ/3 (white density N, bias instability B, rate random walk K, weighted LS).
+//              Test: z(τ) = (σ_A(τ) / (N_w/√τ) − 1) / s(τ) for τ ≥ allan_test_tau_min_s, N_w the
+//              white level read at short τ (max of the stated density and the data's); and the
+//              drift z = (mean_last − mean_first) / √(N_w²/T₁ + N_w²/T₂ + Ω_E²) per axis (Ω_E the
+//              earth rate: the rests may differ in orientation). Bonferroni over axes × tests.
+//              Extension: gyro_bias_random_walk = max(K, B/√bias_time_constant_s).
+//  magnetic_disturbance  per sample |m| − m₀ and δ − δ₀ (δ from the base filter's attitude):
+//              fraction outside the noise band (band_z σ), and outside the gate band
+//              (max(band_z σ, filter tolerance)); one-sided binomial test of the gate-band count
+//              against p₀ = P(|N(0,1)| > gate/σ) (either of norm or dip, p₀ summed).
+//              Extension: reject_mag with mag_ref_norm = m₀, mag_ref_dip = δ₀.
+//  accel_motion  |f| − g₀ during motion (g₀ = mean |f| at the reference rest): binomial test of
+//              the samples outside band_z σ_|f|, and the RMS angle between f and the base
+//              filter's gravity direction. Extension: reject_accel.
+//  time_offset  (truth present) lag L minimising Σ|ω_m(t) − b̄ − ω_truth(t − L)|² over motion
+//              samples (ω_truth by central differences of the truth quaternion), integer grid to
+//              ±max_lag_s then a parabola through the minimum; σ from offset_blocks contiguous
+//              blocks (sd/√B). Effect when |τ|/σ > Φ⁻¹(1 − α/8) and |τ| ≥ min_offset_periods
+//              sample periods. Extension: the estimate stamped t is compared with truth at t − τ,
+//              τ fitted on the other half of the movement samples (2-fold).
+// Gain: the truth is never used by a fit except the time offset's (cross-fitted), so the gain
+// of an extension is the BROAD RMSE (discrepancy/imu_scoring.hpp) over movement samples of the
+// base filter vs the same filter with the extension; `gain` is base vs all selected
+// extensions together, metric total RMSE (heading for magnetic disturbance alone). Without truth
+// the gain is not measured (has_truth = false, NaN figures).
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <string>
+#include <vector>
+
+#include "rcal/discrepancy/imu_scoring.hpp"
+#include "rcal/estimation/orientation_kf.hpp"
+#include "rcal/sim/imu_model.hpp"
+
+namespace rcal::discrepancy {
+
+/// An IMU stream in SI units (µT for the field, as BROAD). Vectors of equal length.
+struct ImuStreamData {
+  std::vector<double> t;                 ///< [s], strictly increasing, uniform rate
+  std::vector<Eigen::Vector3d> gyro;     ///< [rad/s]
+  std::vector<Eigen::Vector3d> accel;    ///< specific force [m/s²]
+  std::vector<Eigen::Vector3d> mag_uT;   ///< [µT]
+  std::vector<Eigen::Vector4d> q_truth;  ///< IMU → ENU [w,x,y,z]; empty: none; NaN: occluded
+  std::vector<int> movement;             ///< 1 moving, 0 rest; empty: rest detected
+};
+
+/// The base model's stated noise and the tests' settings.
+struct ImuAnalysisSettings {
+  double gyro_noise_density = sim::ImuModelSettings{}.gyro_noise_density;    ///< [rad/s/√Hz]
+  double accel_noise_density = sim::ImuModelSettings{}.accel_noise_density;  ///< [m/s²/√Hz]
+  double mag_noise_density_uT = sim::ImuModelSettings{}.mag_noise_density;   ///< [µT/√Hz]
+  double alpha = 0.01;  ///< false-positive rate of the whole selection [-]
+  // Rest segments.
+  double min_rest_s = 3.0;     ///< shorter rests are not used [s]
+  double still_gyro = 0.05;    ///< detected still: |ω_m − median| below [rad/s]
+  double still_accel = 0.3;    ///< and ||f| − g| below [m/s²]
+  double gravity = 9.81;       ///< [m/s²], for still detection only
+  double reference_max_s = 30.0;  ///< the reference uses at most this much of the first rest [s]
+  // Allan deviation.
+  double allan_white_tau_min_s = 0.05;  ///< white level read over [min, max] [s]
+  double allan_white_tau_max_s = 0.5;
+  double allan_test_tau_min_s = 1.0;  ///< long-τ test from here [s]
+  double allan_max_rel_sigma = 0.4;   ///< τ with a larger relative confidence are not used [-]
+  double earth_rate = 7.292e-5;       ///< [rad/s]
+  double bias_time_constant_s = 100.0;  ///< turns B into a random walk for the extension [s]
+  double base_bias_random_walk = 1e-7;  ///< the base filter's "constant" bias [rad/s/√s]
+  // Field and accelerometer bands.
+  double band_z = 4.0;  ///< noise band half-width in σ [-]
+  /// Outlier fraction the base model tolerates: the binomial tests' p₀ never goes below it [-].
+  double outlier_rate = 1e-3;
+  // Time offset.
+  double max_lag_s = 0.2;            ///< lag grid ± [s]
+  int offset_blocks = 8;             ///< blocks for the offset's σ [-]
+  double min_offset_periods = 0.5;   ///< smallest reported offset [sample periods]
+  /// The filter (base and extensions differ only in the fields named above). ENU.
+  estimation::OrientationKfSettings filter = [] {
+    estimation::OrientationKfSettings s;
+    s.earth = estimation::EarthFrame::kEnu;
+    return s;
+  }();
+};
+
+struct ImuValue {
+  std::string name;  ///< with its unit, e.g. "white_noise_density_rad_s_sqrt_hz"
+  double value = 0.0;
+  double sigma = 0.0;
+};
+
+/// One candidate: its test, and (with truth) its gain.
+struct ImuCandidate {
+  std::string cause;               ///< gyro_bias | magnetic_disturbance | accel_motion | time_offset
+  std::vector<std::string> axes;   ///< axes found ("x","y","z") or the sensor
+  std::vector<ImuValue> values;    ///< fitted figures with σ (SI, unit in the name)
+  double statistic = 0.0;          ///< z (or −Φ⁻¹(p) for a binomial test)
+  double critical = 0.0;           ///< its critical value after Bonferroni
+  bool significant = false;
+  bool tested = false;             ///< false: not testable on this stream (reason in note)
+  std::string note;
+  OrientationScore before, after;  ///< base filter vs base + this extension (movement samples)
+};
+
+struct AllanCurve {
+  std::vector<double> tau_s;
+  std::array<std::vector<double>, 3> adev_rad_s;  ///< per axis
+  std::vector<double> rel_sigma;                  ///< s(τ)
+  std::array<double, 3> white_level{};            ///< N_w per axis [rad/s/√Hz]
+};
+
+struct ImuAnalysis {
+  int samples = 0;
+  double rate_hz = 0.0;
+  bool has_truth = false, has_movement = false;
+  std::vector<std::pair<int, int>> rests;  ///< [begin, end) sample ranges
+  // Reference fitted on the first rest.
+  double mag_ref_norm_uT = 0.0, mag_ref_dip_rad = 0.0, gravity_ref = 0.0;
+  double sigma_mag_norm_uT = 0.0, sigma_dip_rad = 0.0, sigma_accel_norm = 0.0;
+  AllanCurve allan;
+  std::vector<ImuCandidate> candidates;  ///< all four, tested or not
+  std::vector<const ImuCandidate*> effects() const;
+  // Gain of all selected extensions together.
+  std::string gain_metric;  ///< "total" | "heading"
+  OrientationScore base_score, extended_score;
+  double time_offset_s = 0.0;  ///< applied in extended_score (0 when not selected)
+  // Per-sample series for plots (full length; NaN where undefined).
+  std::vector<double> mag_norm_uT, mag_dip_rad;
+  std::vector<double> heading_err_base_rad, heading_err_ext_rad;
+  std::vector<double> total_err_base_rad, total_err_ext_rad;
+};
+
+/// Checks the stream (equal lengths, finite IMU values, increasing time) and throws
+/// std::invalid_argument naming the field and the row otherwise.
+void ValidateImuStream(const ImuStreamData& data);
+
+/// The analysis described in the header comment. Progress lines go to spdlog.
+ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSettings& settings = {});
+
+/// Runs the orientation KF over the stream; q_WI estimate per sample (NaN before the first
+/// accepted sample).
+std::vector<Eigen::Vector4d> RunOrientationFilter(const ImuStreamData& data,
+                                                  const estimation::OrientationKfSettings& s);
+
+/// BROAD score of estimates against the truth at t − offset (truth nlerp-interpolated) over the
+/// movement samples [begin, end) with finite truth.
+OrientationScore ScoreAgainstTruth(const ImuStreamData& data,
+                                   const std::vector<Eigen::Vector4d>& q_est, double offset_s = 0.0,
+                                   int begin = 0, int end = -1);
+
+}  // namespace rcal::discrepancy

@@ -1,0 +1,691 @@
+#include "rcal/discrepancy/imu_analysis.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <numbers>
+#include <stdexcept>
+#include <string>
+
+#include "rcal/geometry/so3.hpp"
+
+namespace rcal::discrepancy {
+namespace {
+
+namespace est = rcal::estimation;
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr const char* kAxis[3] = {"x", "y", "z"};
+
+// Upper-tail probability of the standard normal, P(Z > z).
+double NormalUpper(double z) {
+  return 0.5 * std::erfc(z / std::numbers::sqrt2);
+}
+// z with P(Z > z) = p (bisection on erfc; p in (0, 1)).
+double NormalQuantileUpper(double p) {
+  p = std::clamp(p, 1e-300, 1.0 - 1e-16);
+  double lo = -40.0, hi = 40.0;
+  for (int i = 0; i < 200; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (NormalUpper(mid) > p ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+// P(X ≥ k), X ~ Binomial(n, p), summed in log space.
+double BinomialUpper(long k, long n, double p) {
+  if (k <= 0) return 1.0;
+  if (k > n) return 0.0;
+  if (p <= 0.0) return 0.0;
+  if (p >= 1.0) return 1.0;
+  const double lp = std::log(p), lq = std::log1p(-p);
+  auto log_pmf = [&](long i) {
+    return std::lgamma(n + 1.0) - std::lgamma(i + 1.0) - std::lgamma(n - i + 1.0) + i * lp +
+           (n - i) * lq;
+  };
+  const double mode = std::max(static_cast<double>(k), std::floor((n + 1) * p));
+  double lmax = log_pmf(static_cast<long>(std::min<double>(mode, n)));
+  double sum = 0.0;
+  for (long i = k; i <= n; ++i) {
+    const double l = log_pmf(i);
+    sum += std::exp(l - lmax);
+    if (i > mode && l - lmax < -40.0) break;
+  }
+  return std::min(1.0, std::exp(lmax) * sum);
+}
+// A p-value as the equivalent one-sided z.
+double ZOf(double p) {
+  return NormalQuantileUpper(std::max(p, 1e-300));
+}
+
+double Mean(const std::vector<double>& v) {
+  double s = 0.0;
+  for (double x : v) s += x;
+  return v.empty() ? kNaN : s / static_cast<double>(v.size());
+}
+double Sd(const std::vector<double>& v) {
+  if (v.size() < 2) return kNaN;
+  const double m = Mean(v);
+  double s = 0.0;
+  for (double x : v) s += (x - m) * (x - m);
+  return std::sqrt(s / static_cast<double>(v.size() - 1));
+}
+double Median(std::vector<double> v) {
+  if (v.empty()) return kNaN;
+  std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
+
+Eigen::Vector4d QuatNlerp(const Eigen::Vector4d& a, Eigen::Vector4d b, double u) {
+  if (a.dot(b) < 0.0) b = -b;
+  return ((1.0 - u) * a + u * b).normalized();
+}
+
+bool Moving(const ImuStreamData& d, const std::vector<char>& rest_mask, int k) {
+  return d.movement.empty() ? !rest_mask[k] : d.movement[k] == 1;
+}
+
+// Overlapping Allan variance terms of one segment for cluster size m: (Σ (θ-diff)², count).
+std::pair<double, long> AllanTerms(const std::vector<double>& cum, int b, int e, int m,
+                                   double tau0) {
+  const long n = e - b;
+  const long count = n - 2L * m + 1;
+  if (count <= 0) return {0.0, 0};
+  double s = 0.0;
+  for (long k = 0; k < count; ++k) {
+    // mean over [k, k+m) and [k+m, k+2m) of the rate
+    const double a1 = (cum[b + k + m] - cum[b + k]) / m;
+    const double a2 = (cum[b + k + 2 * m] - cum[b + k + m]) / m;
+    s += (a2 - a1) * (a2 - a1);
+  }
+  (void)tau0;
+  return {s, count};
+}
+
+}  // namespace
+
+std::vector<const ImuCandidate*> ImuAnalysis::effects() const {
+  std::vector<const ImuCandidate*> out;
+  for (const auto& c : candidates)
+    if (c.significant) out.push_back(&c);
+  return out;
+}
+
+void ValidateImuStream(const ImuStreamData& d) {
+  const size_t n = d.t.size();
+  if (n < 10) throw std::invalid_argument("IMU stream: fewer than 10 samples");
+  if (d.gyro.size() != n || d.accel.size() != n || d.mag_uT.size() != n)
+    throw std::invalid_argument("IMU stream: gyro, accel and mag must have one row per t_s");
+  if (!d.q_truth.empty() && d.q_truth.size() != n)
+    throw std::invalid_argument("IMU stream: q_truth must be empty or one row per t_s");
+  if (!d.movement.empty() && d.movement.size() != n)
+    throw std::invalid_argument("IMU stream: movement must be empty or one row per t_s");
+  auto row = [](size_t k) { return " at row " + std::to_string(k + 1); };
+  for (size_t k = 0; k < n; ++k) {
+    if (!std::isfinite(d.t[k])) throw std::invalid_argument("IMU stream: t_s is not finite" + row(k));
+    if (k > 0 && !(d.t[k] > d.t[k - 1]))
+      throw std::invalid_argument("IMU stream: t_s does not increase" + row(k));
+    if (!d.gyro[k].allFinite())
+      throw std::invalid_argument("IMU stream: gyr_x..gyr_z not finite" + row(k));
+    if (!d.accel[k].allFinite())
+      throw std::invalid_argument("IMU stream: acc_x..acc_z not finite" + row(k));
+    if (!d.mag_uT[k].allFinite())
+      throw std::invalid_argument("IMU stream: mag_x..mag_z not finite" + row(k));
+  }
+}
+
+std::vector<Eigen::Vector4d> RunOrientationFilter(const ImuStreamData& d,
+                                                  const est::OrientationKfSettings& s) {
+  est::OrientationKf kf(s);
+  std::vector<Eigen::Vector4d> q(d.t.size(), Eigen::Vector4d::Constant(kNaN));
+  for (size_t k = 0; k < d.t.size(); ++k)
+    if (kf.Update(d.t[k], d.gyro[k], d.accel[k], d.mag_uT[k]).ok()) q[k] = kf.q_EB();
+  return q;
+}
+
+OrientationScore ScoreAgainstTruth(const ImuStreamData& d, const std::vector<Eigen::Vector4d>& q,
+                                   double offset_s, int begin, int end) {
+  OrientationScore s;
+  if (d.q_truth.empty()) return s;
+  const int n = static_cast<int>(d.t.size());
+  if (end < 0 || end > n) end = n;
+  const double dt = (d.t.back() - d.t.front()) / (n - 1);
+  for (int k = std::max(begin, 0); k < end; ++k) {
+    if (!d.movement.empty() && d.movement[k] != 1) continue;
+    if (!q[k].allFinite()) continue;
+    Eigen::Vector4d qt = d.q_truth[k];
+    if (offset_s != 0.0) {
+      const double x = k - offset_s / dt;
+      const int i = static_cast<int>(std::floor(x));
+      if (i < 0 || i + 1 >= n) continue;
+      if (!d.q_truth[i].allFinite() || !d.q_truth[i + 1].allFinite()) continue;
+      qt = QuatNlerp(d.q_truth[i], d.q_truth[i + 1], x - i);
+    }
+    if (!qt.allFinite()) continue;
+    s.Add(BroadErrors(q[k], qt));
+  }
+  return s;
+}
+
+namespace {
+
+struct Context {
+  const ImuStreamData& d;
+  const ImuAnalysisSettings& s;
+  int n = 0;
+  double dt = 0.0, rate = 0.0;
+  std::vector<char> rest_mask;  // sample in a used rest segment
+};
+
+std::vector<std::pair<int, int>> FindRests(Context& c) {
+  const auto& d = c.d;
+  std::vector<char> still(c.n, 0);
+  if (!d.movement.empty()) {
+    for (int k = 0; k < c.n; ++k) still[k] = d.movement[k] == 0;
+  } else {
+    std::array<std::vector<double>, 3> g;
+    for (int k = 0; k < c.n; ++k)
+      for (int i = 0; i < 3; ++i) g[i].push_back(d.gyro[k](i));
+    Eigen::Vector3d med(Median(g[0]), Median(g[1]), Median(g[2]));
+    for (int k = 0; k < c.n; ++k)
+      still[k] = (d.gyro[k] - med).norm() < c.s.still_gyro &&
+                 std::abs(d.accel[k].norm() - c.s.gravity) < c.s.still_accel;
+  }
+  // Runs of still samples, trimmed by 0.5 s at both ends (transitions).
+  const int trim = static_cast<int>(std::round(0.5 * c.rate));
+  const int min_len = static_cast<int>(std::round(c.s.min_rest_s * c.rate));
+  std::vector<std::pair<int, int>> rests;
+  int k = 0;
+  while (k < c.n) {
+    if (!still[k]) {
+      ++k;
+      continue;
+    }
+    int e = k;
+    while (e < c.n && still[e]) ++e;
+    const int b2 = k == 0 ? 0 : k + trim;
+    const int e2 = e == c.n ? e : e - trim;
+    if (e2 - b2 >= min_len) rests.emplace_back(b2, e2);
+    k = e;
+  }
+  c.rest_mask.assign(c.n, 0);
+  for (auto [b, e] : rests)
+    for (int i = b; i < e; ++i) c.rest_mask[i] = 1;
+  return rests;
+}
+
+// Truth body rate by central differences, NaN where undefined.
+std::vector<Eigen::Vector3d> TruthRates(const Context& c) {
+  std::vector<Eigen::Vector3d> w(c.n, Eigen::Vector3d::Constant(kNaN));
+  for (int k = 1; k + 1 < c.n; ++k) {
+    const auto& a = c.d.q_truth[k - 1];
+    const auto& b = c.d.q_truth[k + 1];
+    if (!a.allFinite() || !b.allFinite()) continue;
+    const Eigen::Matrix3d R = geometry::QuatToMatrix(a).transpose() * geometry::QuatToMatrix(b);
+    w[k] = geometry::Log(R) / (2.0 * c.dt);
+  }
+  return w;
+}
+
+// Lag τ [s] with ω_m(t) ≈ ω_truth(t − τ) over the samples idx; NaN when undefined.
+double EstimateLag(const Context& c, const std::vector<Eigen::Vector3d>& w_truth,
+                   const std::vector<int>& idx) {
+  const int L = std::max(1, static_cast<int>(std::round(c.s.max_lag_s * c.rate)));
+  std::vector<double> J(2 * L + 1, kNaN);
+  for (int l = -L; l <= L; ++l) {
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    double sq = 0.0;
+    long cnt = 0;
+    for (int k : idx) {
+      const int j = k - l;
+      if (j < 0 || j >= c.n || !w_truth[j].allFinite()) continue;
+      const Eigen::Vector3d r = c.d.gyro[k] - w_truth[j];
+      sum += r;
+      sq += r.squaredNorm();
+      ++cnt;
+    }
+    if (cnt > 10) J[l + L] = (sq - sum.squaredNorm() / cnt) / cnt;
+  }
+  int best = -1;
+  for (int i = 0; i < 2 * L + 1; ++i)
+    if (std::isfinite(J[i]) && (best < 0 || J[i] < J[best])) best = i;
+  if (best < 0) return kNaN;
+  double delta = 0.0;
+  if (best > 0 && best < 2 * L && std::isfinite(J[best - 1]) && std::isfinite(J[best + 1])) {
+    const double den = J[best - 1] - 2.0 * J[best] + J[best + 1];
+    if (den > 0.0) delta = std::clamp(0.5 * (J[best - 1] - J[best + 1]) / den, -0.5, 0.5);
+  }
+  return (best - L + delta) * c.dt;
+}
+
+est::OrientationKfSettings BaseFilter(const ImuAnalysisSettings& s) {
+  est::OrientationKfSettings f = s.filter;
+  f.reject_mag = false;
+  f.reject_accel = false;
+  f.estimate_gyro_bias = true;
+  f.gyro_bias_random_walk = s.base_bias_random_walk;
+  return f;
+}
+
+}  // namespace
+
+ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSettings& settings) {
+  ValidateImuStream(data);
+  Context c{data, settings, 0, 0.0, 0.0, {}};
+  c.n = static_cast<int>(data.t.size());
+  c.dt = (data.t.back() - data.t.front()) / (c.n - 1);
+  c.rate = 1.0 / c.dt;
+  const auto& s = settings;
+  const double alpha_c = s.alpha / 4.0;  // Bonferroni over the four candidates
+
+  ImuAnalysis a;
+  a.samples = c.n;
+  a.rate_hz = c.rate;
+  a.has_movement = !data.movement.empty();
+  a.has_truth = false;
+  for (const auto& q : data.q_truth) a.has_truth |= q.allFinite();
+  a.rests = FindRests(c);
+  spdlog::info("imu analysis: {} samples at {:.1f} Hz, {} rest segments, truth {}", c.n, c.rate,
+               a.rests.size(), a.has_truth ? "yes" : "no");
+  if (a.rests.empty())
+    throw std::invalid_argument("IMU stream: no rest segment of at least " +
+                                std::to_string(s.min_rest_s) + " s (movement = 0 or still)");
+
+  // --- Reference on the first rest ---
+  const auto [rb, re_full] = a.rests.front();
+  const int re = std::min(re_full, rb + static_cast<int>(s.reference_max_s * c.rate));
+  {
+    std::vector<double> nm, dip, fn;
+    for (int k = rb; k < re; ++k) {
+      const double m = data.mag_uT[k].norm(), f = data.accel[k].norm();
+      nm.push_back(m);
+      fn.push_back(f);
+      dip.push_back(std::asin(std::clamp(-data.mag_uT[k].dot(data.accel[k]) / (m * f), -1.0, 1.0)));
+    }
+    a.mag_ref_norm_uT = Mean(nm);
+    a.mag_ref_dip_rad = Mean(dip);
+    a.gravity_ref = Mean(fn);
+    const double sm = s.mag_noise_density_uT * std::sqrt(c.rate);
+    const double sa = s.accel_noise_density * std::sqrt(c.rate);
+    a.sigma_mag_norm_uT = std::max(Sd(nm), sm);
+    a.sigma_accel_norm = std::max(Sd(fn), sa);
+    a.sigma_dip_rad = std::max(Sd(dip), std::hypot(sm / a.mag_ref_norm_uT, sa / a.gravity_ref));
+  }
+
+  // --- Base filter ---
+  spdlog::info("imu analysis: base filter (trusts every sample, constant gyro bias)");
+  const est::OrientationKfSettings base_f = BaseFilter(s);
+  std::map<std::string, std::vector<Eigen::Vector4d>> runs;
+  runs["base"] = RunOrientationFilter(data, base_f);
+  const auto& q_base = runs["base"];
+  const Eigen::Vector3d up(0, 0, 1);
+
+  // ===== gyro_bias =====
+  ImuCandidate gb;
+  gb.cause = "gyro_bias";
+  gb.tested = true;
+  {
+    spdlog::info("imu analysis: Allan deviation over {} rests", a.rests.size());
+    std::array<std::vector<double>, 3> cum;
+    for (int i = 0; i < 3; ++i) {
+      cum[i].assign(c.n + 1, 0.0);
+      for (int k = 0; k < c.n; ++k) cum[i][k + 1] = cum[i][k] + data.gyro[k](i);
+    }
+    int longest = 0;
+    for (auto [b, e] : a.rests) longest = std::max(longest, e - b);
+    std::vector<int> ms;
+    for (double lm = 0.0; std::pow(10.0, lm) <= longest / 2.0; lm += 0.1) {
+      const int m = static_cast<int>(std::round(std::pow(10.0, lm)));
+      if (ms.empty() || m != ms.back()) ms.push_back(m);
+    }
+    auto& A = a.allan;
+    for (int m : ms) {
+      double clusters = 0.0;
+      for (auto [b, e] : a.rests) clusters += std::max(0.0, (e - b) / static_cast<double>(m) - 1.0);
+      const double rel = clusters > 0 ? 1.0 / std::sqrt(2.0 * clusters) : kNaN;
+      if (!(rel <= s.allan_max_rel_sigma)) continue;
+      std::array<double, 3> av{};
+      for (int i = 0; i < 3; ++i) {
+        double sum = 0.0;
+        long cnt = 0;
+        for (auto [b, e] : a.rests) {
+          const auto [ss, cc] = AllanTerms(cum[i], b, e, m, c.dt);
+          sum += ss;
+          cnt += cc;
+        }
+        av[i] = cnt > 0 ? std::sqrt(0.5 * sum / cnt) : kNaN;
+      }
+      A.tau_s.push_back(m * c.dt);
+      A.rel_sigma.push_back(rel);
+      for (int i = 0; i < 3; ++i) A.adev_rad_s[i].push_back(av[i]);
+    }
+    // White level N_w: median of σ_A √τ over the short-τ range (never below the stated density).
+    std::array<double, 3> white_rel{};
+    for (int i = 0; i < 3; ++i) {
+      std::vector<double> v;
+      double rel = kNaN;
+      for (size_t j = 0; j < A.tau_s.size(); ++j)
+        if (A.tau_s[j] >= s.allan_white_tau_min_s - 1e-12 &&
+            A.tau_s[j] <= s.allan_white_tau_max_s + 1e-12) {
+          v.push_back(A.adev_rad_s[i][j] * std::sqrt(A.tau_s[j]));
+          rel = A.rel_sigma[j];
+        }
+      if (v.empty() && !A.tau_s.empty()) {
+        v.push_back(A.adev_rad_s[i][0] * std::sqrt(A.tau_s[0]));
+        rel = A.rel_sigma[0];
+      }
+      const double w = v.empty() ? s.gyro_noise_density : Median(v);
+      A.white_level[i] = std::max(w, s.gyro_noise_density);
+      white_rel[i] = std::isfinite(rel) ? rel / std::sqrt(std::max<size_t>(1, v.size())) : 0.0;
+    }
+    // Fit AVAR = c0/τ + c1 + c2 τ (weighted LS) per axis: N = √c0, B = √(c1 π / 2ln2), K = √(3c2).
+    std::vector<int> test_idx;
+    for (size_t j = 0; j < A.tau_s.size(); ++j)
+      if (A.tau_s[j] >= s.allan_test_tau_min_s - 1e-12) test_idx.push_back(static_cast<int>(j));
+    const int tests = 3 * (static_cast<int>(test_idx.size()) + 1);
+    gb.critical = NormalQuantileUpper(alpha_c / std::max(1, tests));
+    double best_z = -1e300;
+    std::array<bool, 3> axis_hit{};
+    std::array<double, 3> K{}, Ks{}, B{}, Bs{}, N{}, Ns{};
+    for (int i = 0; i < 3; ++i) {
+      const int m = static_cast<int>(A.tau_s.size());
+      if (m >= 3) {
+        Eigen::MatrixXd H(m, 3);
+        Eigen::VectorXd y(m);
+        for (int j = 0; j < m; ++j) {
+          const double av = A.adev_rad_s[i][j] * A.adev_rad_s[i][j];
+          const double sd = 2.0 * A.rel_sigma[j] * av;  // σ of AVAR
+          H(j, 0) = 1.0 / A.tau_s[j] / sd;
+          H(j, 1) = 1.0 / sd;
+          H(j, 2) = A.tau_s[j] / sd;
+          y(j) = av / sd;
+        }
+        const Eigen::Matrix3d HtH = H.transpose() * H;
+        const Eigen::Vector3d coef = HtH.ldlt().solve(H.transpose() * y);
+        const Eigen::Matrix3d cov = HtH.inverse();
+        auto root = [](double v, double var, double scale, double* sig) {
+          const double x = std::sqrt(std::max(v, 0.0) * scale);
+          // σ of √(v·scale) by the delta method; at v ≤ 0 the one-σ upper value.
+          *sig = v > 0 ? 0.5 * scale * std::sqrt(var) / x
+                       : std::sqrt(std::max(0.0, (v + std::sqrt(var)) * scale));
+          return x;
+        };
+        N[i] = root(coef(0), cov(0, 0), 1.0, &Ns[i]);
+        B[i] = root(coef(1), cov(1, 1), std::numbers::pi / (2.0 * std::log(2.0)), &Bs[i]);
+        K[i] = root(coef(2), cov(2, 2), 3.0, &Ks[i]);
+      }
+      for (int j : test_idx) {
+        const double line = A.white_level[i] / std::sqrt(A.tau_s[j]);
+        const double z = (A.adev_rad_s[i][j] / line - 1.0) /
+                         std::hypot(A.rel_sigma[j], white_rel[i]);
+        best_z = std::max(best_z, z);
+        if (z > gb.critical) axis_hit[i] = true;
+      }
+    }
+    // Drift: mean of the first rest vs the last.
+    std::array<double, 3> drift{}, drift_sigma{};
+    if (a.rests.size() >= 2) {
+      const auto [b1, e1] = a.rests.front();
+      const auto [b2, e2] = a.rests.back();
+      for (int i = 0; i < 3; ++i) {
+        double m1 = 0, m2 = 0;
+        for (int k = b1; k < e1; ++k) m1 += data.gyro[k](i);
+        for (int k = b2; k < e2; ++k) m2 += data.gyro[k](i);
+        m1 /= (e1 - b1);
+        m2 /= (e2 - b2);
+        const double w = A.white_level[i];
+        drift[i] = m2 - m1;
+        drift_sigma[i] = std::sqrt(w * w / ((e1 - b1) * c.dt) + w * w / ((e2 - b2) * c.dt) +
+                                   s.earth_rate * s.earth_rate);
+        const double z = std::abs(drift[i]) / drift_sigma[i];
+        best_z = std::max(best_z, z);
+        if (z > gb.critical) axis_hit[i] = true;
+      }
+    }
+    gb.statistic = best_z;
+    for (int i = 0; i < 3; ++i) {
+      if (axis_hit[i]) gb.axes.push_back(kAxis[i]);
+      const std::string ax = std::string("_") + kAxis[i];
+      gb.values.push_back({"white_noise_density" + ax + "_rad_s_sqrt_hz", N[i], Ns[i]});
+      gb.values.push_back({"bias_instability" + ax + "_rad_s", B[i], Bs[i]});
+      gb.values.push_back({"rate_random_walk" + ax + "_rad_s_sqrt_s", K[i], Ks[i]});
+      if (a.rests.size() >= 2) gb.values.push_back({"bias_drift" + ax + "_rad_s", drift[i], drift_sigma[i]});
+    }
+    gb.significant = !gb.axes.empty();
+    gb.note = "white line from the data's short-τ level (stated " +
+              std::to_string(s.gyro_noise_density) + " rad/s/√Hz)";
+    if (A.tau_s.empty() || test_idx.empty()) {
+      gb.note = "rests too short for the long-τ Allan test";
+    }
+    double k_ext = s.base_bias_random_walk;
+    for (int i = 0; i < 3; ++i)
+      k_ext = std::max({k_ext, K[i], B[i] / std::sqrt(s.bias_time_constant_s)});
+    gb.values.push_back({"extension_bias_random_walk_rad_s_sqrt_s", k_ext, 0.0});
+  }
+  const double ext_bias_rw = gb.values.back().value;
+
+  // ===== magnetic_disturbance =====
+  ImuCandidate md;
+  md.cause = "magnetic_disturbance";
+  md.tested = true;
+  md.axes = {"magnetometer"};
+  a.mag_norm_uT.assign(c.n, kNaN);
+  a.mag_dip_rad.assign(c.n, kNaN);
+  {
+    const double gate_n = std::max(s.band_z * a.sigma_mag_norm_uT,
+                                   s.filter.mag_norm_tolerance * a.mag_ref_norm_uT);
+    const double gate_d = std::max(s.band_z * a.sigma_dip_rad, s.filter.mag_dip_tolerance);
+    long n_all = 0, out_noise = 0, out_gate = 0, out_gate_norm = 0, out_gate_dip = 0;
+    double max_dn = 0.0, max_dd = 0.0;
+    for (int k = 0; k < c.n; ++k) {
+      const double m = data.mag_uT[k].norm();
+      a.mag_norm_uT[k] = m;
+      if (q_base[k].allFinite()) {
+        const Eigen::Vector3d down_B = -geometry::QuatToMatrix(q_base[k]).transpose() * up;
+        a.mag_dip_rad[k] = std::asin(std::clamp(data.mag_uT[k].dot(down_B) / m, -1.0, 1.0));
+      }
+      if (k >= rb && k < re) continue;  // the reference itself
+      ++n_all;
+      const double dn = std::abs(m - a.mag_ref_norm_uT);
+      // Dip tested where the accelerometer measures gravity alone (rests).
+      double dd = 0.0;
+      if (c.rest_mask[k]) {
+        const double f = data.accel[k].norm();
+        dd = std::abs(std::asin(std::clamp(-data.mag_uT[k].dot(data.accel[k]) / (m * f), -1.0, 1.0)) -
+                      a.mag_ref_dip_rad);
+      }
+      max_dn = std::max(max_dn, dn);
+      max_dd = std::max(max_dd, dd);
+      if (dn > s.band_z * a.sigma_mag_norm_uT || dd > s.band_z * a.sigma_dip_rad) ++out_noise;
+      const bool gn = dn > gate_n, gd = dd > gate_d;
+      out_gate += gn || gd;
+      out_gate_norm += gn;
+      out_gate_dip += gd;
+    }
+    const double p_band = 2.0 * NormalUpper(s.band_z);
+    const double p0 = std::max(2.0 * NormalUpper(gate_n / a.sigma_mag_norm_uT) +
+                                   2.0 * NormalUpper(gate_d / a.sigma_dip_rad),
+                               s.outlier_rate);
+    const double p_noise = BinomialUpper(out_noise, n_all, std::max(2.0 * p_band, s.outlier_rate));
+    const double p_gate = BinomialUpper(out_gate, n_all, p0);
+    md.statistic = ZOf(p_gate);
+    md.critical = NormalQuantileUpper(alpha_c);
+    md.significant = p_gate < alpha_c;
+    const double frac_noise = n_all ? static_cast<double>(out_noise) / n_all : 0.0;
+    const double frac_gate = n_all ? static_cast<double>(out_gate) / n_all : 0.0;
+    auto binom_sigma = [&](double f) { return n_all ? std::sqrt(f * (1 - f) / n_all) : 0.0; };
+    md.values = {{"reference_norm_uT", a.mag_ref_norm_uT, a.sigma_mag_norm_uT},
+                 {"reference_dip_rad", a.mag_ref_dip_rad, a.sigma_dip_rad},
+                 {"max_norm_deviation_uT", max_dn, a.sigma_mag_norm_uT},
+                 {"max_dip_deviation_at_rest_rad", max_dd, a.sigma_dip_rad},
+                 {"fraction_outside_noise_band", frac_noise, binom_sigma(frac_noise)},
+                 {"fraction_outside_gate", frac_gate, binom_sigma(frac_gate)},
+                 {"samples_outside_gate_norm", static_cast<double>(out_gate_norm), 0.0},
+                 {"samples_outside_gate_dip", static_cast<double>(out_gate_dip), 0.0},
+                 {"p_value_noise_band", p_noise, 0.0},
+                 {"p_value_gate", p_gate, 0.0}};
+  }
+
+  // ===== accel_motion =====
+  ImuCandidate am;
+  am.cause = "accel_motion";
+  am.tested = true;
+  am.axes = {"accelerometer"};
+  {
+    long n_mov = 0, out = 0;
+    Rms norm_err, angle;
+    for (int k = 0; k < c.n; ++k) {
+      if (!Moving(data, c.rest_mask, k)) continue;
+      ++n_mov;
+      const double f = data.accel[k].norm();
+      const double dn = f - a.gravity_ref;
+      norm_err.Add(dn);
+      if (std::abs(dn) > s.band_z * a.sigma_accel_norm) ++out;
+      if (q_base[k].allFinite() && f > 0) {
+        const Eigen::Vector3d up_B = geometry::QuatToMatrix(q_base[k]).transpose() * up;
+        angle.Add(std::acos(std::clamp(up_B.dot(data.accel[k]) / f, -1.0, 1.0)));
+      }
+    }
+    const double p0 = std::max(2.0 * NormalUpper(s.band_z), s.outlier_rate);
+    const double p = BinomialUpper(out, n_mov, p0);
+    am.statistic = ZOf(p);
+    am.critical = NormalQuantileUpper(alpha_c);
+    am.significant = n_mov > 0 && p < alpha_c;
+    const double frac = n_mov ? static_cast<double>(out) / n_mov : 0.0;
+    am.values = {{"gravity_reference_m_s2", a.gravity_ref, a.sigma_accel_norm},
+                 {"rms_norm_minus_g_in_motion_m_s2", norm_err.value(), a.sigma_accel_norm},
+                 {"rms_gravity_disagreement_rad", angle.value(), a.sigma_accel_norm / a.gravity_ref},
+                 {"fraction_outside_noise_band", frac, n_mov ? std::sqrt(frac * (1 - frac) / n_mov) : 0.0},
+                 {"p_value", p, 0.0}};
+    if (n_mov == 0) {
+      am.tested = false;
+      am.note = "no motion samples";
+    }
+  }
+
+  // ===== time_offset =====
+  ImuCandidate to;
+  to.cause = "time_offset";
+  to.axes = {"imu"};
+  std::vector<int> motion_idx;
+  std::vector<Eigen::Vector3d> w_truth;
+  double tau_first = kNaN, tau_second = kNaN;
+  int split = c.n;
+  if (a.has_truth) {
+    spdlog::info("imu analysis: time offset gyro vs truth rate");
+    w_truth = TruthRates(c);
+    for (int k = 0; k < c.n; ++k)
+      if (Moving(data, c.rest_mask, k) && w_truth[k].allFinite()) motion_idx.push_back(k);
+    if (motion_idx.size() > 100) {
+      to.tested = true;
+      const double tau = EstimateLag(c, w_truth, motion_idx);
+      const int B = std::max(2, s.offset_blocks);
+      std::vector<double> taus;
+      for (int b = 0; b < B; ++b) {
+        const size_t i0 = motion_idx.size() * b / B, i1 = motion_idx.size() * (b + 1) / B;
+        const std::vector<int> blk(motion_idx.begin() + static_cast<long>(i0),
+                                   motion_idx.begin() + static_cast<long>(i1));
+        const double t = EstimateLag(c, w_truth, blk);
+        if (std::isfinite(t)) taus.push_back(t);
+      }
+      const double sigma = taus.size() >= 2 ? Sd(taus) / std::sqrt(taus.size()) : kNaN;
+      const size_t h = motion_idx.size() / 2;
+      split = motion_idx[h];
+      tau_first = EstimateLag(c, w_truth, {motion_idx.begin(), motion_idx.begin() + static_cast<long>(h)});
+      tau_second = EstimateLag(c, w_truth, {motion_idx.begin() + static_cast<long>(h), motion_idx.end()});
+      to.statistic = std::isfinite(sigma) && sigma > 0 ? std::abs(tau) / sigma : 0.0;
+      to.critical = NormalQuantileUpper(alpha_c / 2.0);
+      to.significant = to.statistic > to.critical && std::abs(tau) >= s.min_offset_periods * c.dt;
+      to.values = {{"time_offset_s", tau, sigma},
+                   {"time_offset_first_half_s", tau_first, sigma * std::sqrt(2.0)},
+                   {"time_offset_second_half_s", tau_second, sigma * std::sqrt(2.0)},
+                   {"sample_period_s", c.dt, 0.0}};
+    } else {
+      to.note = "too few motion samples with truth";
+    }
+  } else {
+    to.note = "no truth orientation (q_w..q_z) in the stream: no second source to time";
+  }
+
+  // ===== Gains =====
+  auto run = [&](const std::string& key, const est::OrientationKfSettings& f) {
+    if (!runs.count(key)) {
+      spdlog::info("imu analysis: filter run '{}'", key);
+      runs[key] = RunOrientationFilter(data, f);
+    }
+    return runs[key];
+  };
+  auto with = [&](bool bias, bool mag, bool acc) {
+    est::OrientationKfSettings f = base_f;
+    if (bias) f.gyro_bias_random_walk = ext_bias_rw;
+    if (mag) {
+      f.reject_mag = true;
+      f.mag_ref_norm = a.mag_ref_norm_uT;
+      f.mag_ref_dip = a.mag_ref_dip_rad;
+    }
+    if (acc) f.reject_accel = true;
+    return f;
+  };
+  auto key = [](bool b, bool m, bool x) {
+    return std::string(b ? "B" : "-") + (m ? "M" : "-") + (x ? "A" : "-");
+  };
+  // Cross-fitted offset scoring: τ from one half applied to the other.
+  auto score_shifted = [&](const std::vector<Eigen::Vector4d>& q) {
+    OrientationScore s1 = ScoreAgainstTruth(data, q, tau_second, 0, split);
+    const OrientationScore s2 = ScoreAgainstTruth(data, q, tau_first, split, c.n);
+    for (Rms* r : {&s1.total, &s1.heading, &s1.inclination}) (void)r;
+    s1.total.sum += s2.total.sum;
+    s1.total.n += s2.total.n;
+    s1.heading.sum += s2.heading.sum;
+    s1.heading.n += s2.heading.n;
+    s1.inclination.sum += s2.inclination.sum;
+    s1.inclination.n += s2.inclination.n;
+    return s1;
+  };
+  if (a.has_truth) {
+    const OrientationScore base_score = ScoreAgainstTruth(data, q_base);
+    gb.before = md.before = am.before = to.before = base_score;
+    gb.after = ScoreAgainstTruth(data, run(key(true, false, false), with(true, false, false)));
+    md.after = ScoreAgainstTruth(data, run(key(false, true, false), with(false, true, false)));
+    am.after = ScoreAgainstTruth(data, run(key(false, false, true), with(false, false, true)));
+    if (to.tested && std::isfinite(tau_first) && std::isfinite(tau_second))
+      to.after = score_shifted(q_base);
+  }
+  a.candidates = {gb, md, am, to};
+
+  const bool sb = gb.significant, sm = md.significant, sa = am.significant, st = to.significant;
+  a.gain_metric = (sm && !sb && !sa && !st) ? "heading" : "total";
+  if (a.has_truth) {
+    const auto& q_ext = run(key(sb, sm, sa), with(sb, sm, sa));
+    a.base_score = ScoreAgainstTruth(data, q_base);
+    a.extended_score = st ? score_shifted(q_ext) : ScoreAgainstTruth(data, q_ext);
+    a.time_offset_s = st ? a.candidates[3].values[0].value : 0.0;
+    a.heading_err_base_rad.assign(c.n, kNaN);
+    a.heading_err_ext_rad.assign(c.n, kNaN);
+    a.total_err_base_rad.assign(c.n, kNaN);
+    a.total_err_ext_rad.assign(c.n, kNaN);
+    for (int k = 0; k < c.n; ++k) {
+      const auto& qt = data.q_truth[k];
+      if (!qt.allFinite()) continue;
+      if (q_base[k].allFinite()) {
+        const AngleErrors e = BroadErrors(q_base[k], qt);
+        a.heading_err_base_rad[k] = e.heading;
+        a.total_err_base_rad[k] = e.total;
+      }
+      if (q_ext[k].allFinite()) {
+        const AngleErrors e = BroadErrors(q_ext[k], qt);
+        a.heading_err_ext_rad[k] = e.heading;
+        a.total_err_ext_rad[k] = e.total;
+      }
+    }
+  }
+  for (const auto& cnd : a.candidates)
+    spdlog::info("imu analysis: {} {} (statistic {:.2f}, critical {:.2f})", cnd.cause,
+                 !cnd.tested ? "not tested" : cnd.significant ? "FOUND" : "not significant",
+                 cnd.statistic, cnd.critical);
+  return a;
+}
+
+}  // namespace rcal::discrepancy
