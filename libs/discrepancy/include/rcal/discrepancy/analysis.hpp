@@ -17,7 +17,8 @@
 //    poses is significant: one-sided z = mean(d)/(sd(d)/√n) > Φ⁻¹(1 − α/m), d the per-pose drop of
 //    the whitened squared residual, m the candidates tried that round (Bonferroni), so an effect
 //    that is not there is reported with probability ≲ α.
-// 5. The selected model is refitted (nonlinear, batch) on all calibration poses: values with σ.
+// 5. The selected model is refitted (nonlinear, batch: identification::FitExtended) on all
+//    calibration poses: values with σ.
 //    Gain: held-out position RMS of geometry alone and of the selected model, on the `set` test
 //    poses when there are any (selection then never saw them), else by the same k-fold.
 #pragma once
@@ -27,6 +28,7 @@
 #include <vector>
 
 #include "rcal/identification/calibration.hpp"
+#include "rcal/identification/extended_lm.hpp"
 #include "rcal/kinematics/joint_effects.hpp"
 #include "rcal/kinematics/measurement.hpp"
 #include "rcal/kinematics/model.hpp"
@@ -135,22 +137,6 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
 double HeldOutRms(const kinematics::KinematicModel& model, const PoseData& data,
                   const std::vector<kinematics::Effect>& effects,
                   const AnalysisSettings& settings = {});
-
-/// Batch fit of an extended model: the geometric errors `identified` and every effect parameter,
-/// by Levenberg–Marquardt on the whitened residuals (measurement covariances as weights), from
-/// (x0, e0). For the identifier and the IK corrector to use a model that Analyze selected.
-struct ExtendedFit {
-  Eigen::VectorXd x;            ///< geometric errors [m | rad], full length
-  Eigen::VectorXd e;            ///< effect parameters [SI]
-  Eigen::VectorXd sigma_e;      ///< 1σ of e (scaled by the a-posteriori variance factor when
-                                ///< estimate_noise)
-  double position_sigma_m = 0;  ///< position noise re-estimated from the residuals [m]
-};
-ExtendedFit FitExtended(const kinematics::ExtendedModel& model, const std::vector<int>& identified,
-                        const std::vector<kinematics::PoseMeasurement>& ms,
-                        const std::vector<kinematics::EffectContext>& contexts,
-                        const Eigen::VectorXd& x0, const Eigen::VectorXd& e0,
-                        bool estimate_noise = true);
 
 /// Human-readable name of an effect: "joint_compliance shoulder_lift", "thermal (temperature)".
 std::string Describe(const kinematics::KinematicModel& model, const kinematics::Effect& effect);
