@@ -24,12 +24,23 @@
 //   `gate_probability` is rejected and counted, not absorbed.
 // - invalid input (wrong joint count, NaN, bad covariance) is rejected with a reason naming the
 //   field; the state is untouched.
+//
+// Extended models (kinematics/joint_effects.hpp): built on an ExtendedModel, the state is
+// x = [x_identified; e], e the effect parameters [SI units of joint_effects.hpp], and h is the
+// extended model's pose at the joints as read and the pose's context c (temperature, payload,
+// time, approach direction), passed with each update:
+//   h(q, c; x_identified, e),  J = [∂h/∂x_identified  ∂h/∂e]   (extended_measurement.hpp)
+// Everything else (prediction, gate, iterated update, relinearisation passes, checkpoint) is the
+// same filter; the accepted poses are kept with their contexts. Without effects (or built on a
+// KinematicModel) h is kinematics::ResidualAndJacobian's and the filter is exactly the geometric
+// one above. The effects are constant unless drift_sigma_effects says otherwise.
 #pragma once
 
 #include <Eigen/Core>
 #include <string>
 #include <vector>
 
+#include "rcal/kinematics/joint_effects.hpp"
 #include "rcal/kinematics/measurement.hpp"
 #include "rcal/kinematics/model.hpp"
 
@@ -46,7 +57,18 @@ struct EkfSettings {
   double iteration_tolerance = 1e-12;   ///< stop when |Δx| [m | rad] falls below
   double relinearize_threshold = 1e-4;  ///< [m | rad] max |Δx| since the last pass; ≤ 0: never
   int max_relinearize_passes = 5;
+  /// Extended models: initial σ of each effect parameter [SI, joint_effects.hpp]; empty:
+  /// DefaultEffectPriorSigma(model).
+  Eigen::VectorXd prior_sigma_effects;
+  /// Extended models: random-walk σ of each effect parameter [SI per update]; empty: constant.
+  Eigen::VectorXd drift_sigma_effects;
 };
+
+/// A weak prior σ per effect parameter, by cause: joint_compliance 1e-5 rad/(N·m) (prismatic
+/// 1e-5 m/N), joint_periodic 1e-3 rad, joint_scale 1e-3, backlash 1e-3 rad (prismatic 1e-3 m),
+/// thermal 1e-4 1/K (time: 1e-7 1/s). Each is some ten times the size such effects have on
+/// industrial arms, so the data, not the prior, sets the estimate.
+Eigen::VectorXd DefaultEffectPriorSigma(const kinematics::ExtendedModel& model);
 
 struct EkfUpdateResult {
   bool accepted = false;
@@ -59,10 +81,14 @@ struct EkfUpdateResult {
 /// Everything needed to resume an identifier exactly where it stopped (a restarted process
 /// continues, it does not start over).
 struct EkfCheckpoint {
-  Eigen::VectorXd x0, x, x_lin;  ///< prior, estimate, last relinearisation point (identified)
+  Eigen::VectorXd x0, x, x_lin;  ///< prior, estimate, last relinearisation point (the state:
+                                 ///< x_identified, then e for an extended model)
   Eigen::MatrixXd P0, P;
   std::vector<kinematics::PoseMeasurement> history;  ///< accepted poses
   int accepted = 0, rejected = 0, relinearizations = 0;
+  /// The contexts of the accepted poses, one per history entry; empty: all default (what a
+  /// geometric model needs).
+  std::vector<kinematics::EffectContext> contexts;
 };
 
 class EkfIdentifier {
@@ -71,13 +97,19 @@ class EkfIdentifier {
   /// values of `x_fixed` (full length [m | rad]; empty: 0, the nominal model).
   EkfIdentifier(const kinematics::KinematicModel& model, std::vector<int> identified,
                 EkfSettings settings = {}, Eigen::VectorXd x_fixed = {});
+  /// An extended model: the state is [x_identified; e] (file comment). Throws
+  /// std::invalid_argument naming the setting when prior_sigma_effects / drift_sigma_effects
+  /// have the wrong size or are not finite and positive (drift: ≥ 0).
+  EkfIdentifier(const kinematics::ExtendedModel& model, std::vector<int> identified,
+                EkfSettings settings = {}, Eigen::VectorXd x_fixed = {});
 
   /// Back to the prior: x = 0, P = diag(prior σ²), counts zeroed.
   void Reset();
   /// Replaces the state (restoring a checkpoint); the restored state becomes the prior of later
   /// relinearisation passes. Throws std::invalid_argument naming the field if sizes differ or
   /// values are not finite.
-  void SetState(const Eigen::VectorXd& x_identified, const Eigen::MatrixXd& P);
+  /// `state` is x_identified (geometric) or [x_identified; e] (extended), P its covariance.
+  void SetState(const Eigen::VectorXd& state, const Eigen::MatrixXd& P);
 
   /// The whole state, and its exact restoration. Restore throws std::invalid_argument naming the
   /// field when the checkpoint does not fit this model and parameter set; the state is then
@@ -85,18 +117,30 @@ class EkfIdentifier {
   EkfCheckpoint Checkpoint() const;
   void Restore(const EkfCheckpoint& c);
 
-  /// One still-pose measurement. Never throws on bad data: a rejection is reported and counted.
-  EkfUpdateResult Update(const kinematics::PoseMeasurement& z);
+  /// One still-pose measurement taken under `context` (an extended model's effects depend on it;
+  /// a geometric model ignores it). Never throws on bad data: a rejection (measurement or
+  /// context, naming the field) is reported and counted.
+  EkfUpdateResult Update(const kinematics::PoseMeasurement& z,
+                         const kinematics::EffectContext& context = {});
 
   /// Full-length error vector (x_fixed where not identified) [m | rad].
   Eigen::VectorXd x() const;
-  const Eigen::VectorXd& x_identified() const { return x_; }
-  /// Covariance of x_identified().
+  /// The estimated geometric errors, in the order of identified().
+  Eigen::VectorXd x_identified() const { return x_.head(identified_.size()); }
+  /// The effect parameters [SI] (empty for a geometric model) and their 1σ.
+  Eigen::VectorXd e() const { return x_.tail(num_effect_params()); }
+  Eigen::VectorXd sigma_e() const;
+  /// The whole state: x_identified, then e.
+  const Eigen::VectorXd& state() const { return x_; }
+  /// Covariance of state() (of x_identified() for a geometric model).
   const Eigen::MatrixXd& P() const { return P_; }
-  /// Full-length 1σ; 0 where not identified.
+  /// Full-length 1σ of the geometric errors; 0 where not identified.
   Eigen::VectorXd sigma() const;
   const std::vector<int>& identified() const { return identified_; }
-  const kinematics::KinematicModel& model() const { return model_; }
+  const kinematics::KinematicModel& model() const { return ext_.base(); }
+  /// The model with its effects (none for a geometric identifier).
+  const kinematics::ExtendedModel& extended_model() const { return ext_; }
+  int num_effect_params() const { return ext_.num_effect_params(); }
   int accepted() const { return accepted_; }
   int rejected() const { return rejected_; }
   const std::string& last_rejection() const { return last_rejection_; }
@@ -109,18 +153,24 @@ class EkfIdentifier {
 
  private:
   int Relinearize(int max_passes);
+  /// The measurement function: r = z − h and H = ∂h/∂state at `state`.
+  void Measure(const kinematics::PoseMeasurement& z, const kinematics::EffectContext& context,
+               const Eigen::VectorXd& state, Eigen::VectorXd& r, Eigen::MatrixXd& H) const;
+  void Reject(EkfUpdateResult& result, std::string reason);
 
-  kinematics::KinematicModel model_;
+  kinematics::ExtendedModel ext_;
   std::vector<int> identified_;
   EkfSettings settings_;
   Eigen::VectorXd x_fixed_;  // full length: values of the parameters not identified
-  Eigen::VectorXd x_;
+  Eigen::VectorXd x_;        // the state: x_identified, then e
   Eigen::MatrixXd P_;
-  Eigen::VectorXd q_diag_;  // process noise per update
-  Eigen::VectorXd x0_;      // prior of the relinearisation passes
+  Eigen::VectorXd prior_sigma_;  // per state entry
+  Eigen::VectorXd q_diag_;       // process noise per update
+  Eigen::VectorXd x0_;           // prior of the relinearisation passes
   Eigen::MatrixXd P0_;
   Eigen::VectorXd x_lin_;  // estimate at the last pass
   std::vector<kinematics::PoseMeasurement> history_;
+  std::vector<kinematics::EffectContext> contexts_;  // one per history entry
   int relinearizations_ = 0;
   int accepted_ = 0;
   int rejected_ = 0;
