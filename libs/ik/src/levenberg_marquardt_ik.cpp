@@ -71,6 +71,14 @@ IkResult LevenbergMarquardtIk::SolvePosition(const Eigen::Vector3d& p_WT_W,
   return Run(T, true, q_seed);
 }
 
+void LevenbergMarquardtIk::Evaluate(const Eigen::VectorXd& q, Eigen::Isometry3d& T_WT,
+                                    kinematics::CompiledChain::Jacobian* J) const {
+  if (J)
+    chain_.JointJacobian(q, *J, &T_WT);
+  else
+    T_WT = chain_.ToolFrame(q);
+}
+
 void LevenbergMarquardtIk::Project(Eigen::VectorXd& q) const {
   if (settings_.respect_joint_limits) q = q.cwiseMax(lower_).cwiseMin(upper_);
 }
@@ -124,7 +132,7 @@ IkResult LevenbergMarquardtIk::Run(const Eigen::Isometry3d& T_WT_target, bool po
   q_ = q_seed;
   Project(q_);
   Eigen::Isometry3d T_WT, T_trial;
-  chain_.JointJacobian(q_, J_, &T_WT);
+  Evaluate(q_, T_WT, &J_);
   Eigen::Matrix<double, 6, 1> r, r_trial;
   Eigen::Vector3d e_R, e_R_trial;
   double pos_err = 0, ori_err = 0, pos_trial = 0, ori_trial = 0;
@@ -186,7 +194,7 @@ IkResult LevenbergMarquardtIk::Run(const Eigen::Isometry3d& T_WT_target, bool po
     }
     q_trial_ = q_ + dq_;
     Project(q_trial_);
-    T_trial = chain_.ToolFrame(q_trial_);
+    Evaluate(q_trial_, T_trial, nullptr);
     const double cost_trial =
         Residual(T_WT_target, T_trial, position_only, r_trial, pos_trial, ori_trial, e_R_trial);
     if (cost_trial < cost) {
@@ -199,7 +207,7 @@ IkResult LevenbergMarquardtIk::Run(const Eigen::Isometry3d& T_WT_target, bool po
       e_R = e_R_trial;
       pos_err = pos_trial;
       ori_err = ori_trial;
-      chain_.JointJacobian(q_, J_, &T_WT);
+      Evaluate(q_, T_WT, &J_);
       need_normal_equations = true;
       lambda *= std::max(1.0 / 3.0, 1.0 - std::pow(2.0 * rho - 1.0, 3));
       nu = 2.0;

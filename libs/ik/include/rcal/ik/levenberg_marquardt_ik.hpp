@@ -67,6 +67,12 @@ class LevenbergMarquardtIk {
   LevenbergMarquardtIk(const kinematics::KinematicModel& model, const Eigen::VectorXd& x,
                        IkSettings settings = {});
 
+  virtual ~LevenbergMarquardtIk() = default;
+  LevenbergMarquardtIk(const LevenbergMarquardtIk&) = default;
+  LevenbergMarquardtIk(LevenbergMarquardtIk&&) = default;
+  LevenbergMarquardtIk& operator=(const LevenbergMarquardtIk&) = default;
+  LevenbergMarquardtIk& operator=(LevenbergMarquardtIk&&) = default;
+
   /// Recompiles the chain at new parameter errors (a new calibration), keeping the settings.
   void SetParameters(const Eigen::VectorXd& x);
 
@@ -82,6 +88,13 @@ class LevenbergMarquardtIk {
   /// Position-only mode: joints placing the tool-frame origin at p_WT_W [m, world frame];
   /// orientation is free (IkResult::orientation_error is reported as 0).
   IkResult SolvePosition(const Eigen::Vector3d& p_WT_W, const Eigen::VectorXd& q_seed);
+
+ protected:
+  /// The pose the solver drives to the target: the tool frame T_WT at joints q and, when J is
+  /// not null, the joint Jacobian J = [J_v; J_ω] of the file comment. Here the compiled chain; a
+  /// solver on another forward model (extended_ik.hpp) overrides it.
+  virtual void Evaluate(const Eigen::VectorXd& q, Eigen::Isometry3d& T_WT,
+                        kinematics::CompiledChain::Jacobian* J) const;
 
  private:
   IkResult Run(const Eigen::Isometry3d& T_WT_target, bool position_only,
