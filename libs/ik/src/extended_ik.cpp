@@ -50,28 +50,31 @@ std::string ExtendedIk::CheckContext(const kinematics::EffectContext& c) const {
   return "";
 }
 
+bool ExtendedIk::Prepare(const kinematics::EffectContext& context, const Eigen::VectorXd& q_seed,
+                         IkResult& refused) {
+  std::string why = CheckContext(context);
+  if (why.empty()) {
+    context_ = context;
+    return true;
+  }
+  refused.q = q_seed;
+  refused.status = IkStatus::kInvalidInput;
+  refused.reason = std::move(why);
+  return false;
+}
+
 IkResult ExtendedIk::Solve(const Eigen::Isometry3d& T_WT_target, const Eigen::VectorXd& q_seed,
                            const kinematics::EffectContext& context) {
-  if (std::string why = CheckContext(context); !why.empty()) {
-    IkResult r;
-    r.q = q_seed;
-    r.reason = std::move(why);
-    return r;
-  }
-  context_ = context;
-  return LevenbergMarquardtIk::Solve(T_WT_target, q_seed);
+  IkResult refused;
+  return Prepare(context, q_seed, refused) ? LevenbergMarquardtIk::Solve(T_WT_target, q_seed)
+                                           : refused;
 }
 
 IkResult ExtendedIk::SolvePosition(const Eigen::Vector3d& p_WT_W, const Eigen::VectorXd& q_seed,
                                    const kinematics::EffectContext& context) {
-  if (std::string why = CheckContext(context); !why.empty()) {
-    IkResult r;
-    r.q = q_seed;
-    r.reason = std::move(why);
-    return r;
-  }
-  context_ = context;
-  return LevenbergMarquardtIk::SolvePosition(p_WT_W, q_seed);
+  IkResult refused;
+  return Prepare(context, q_seed, refused) ? LevenbergMarquardtIk::SolvePosition(p_WT_W, q_seed)
+                                           : refused;
 }
 
 void ExtendedIk::Evaluate(const Eigen::VectorXd& q, Eigen::Isometry3d& T_WT,

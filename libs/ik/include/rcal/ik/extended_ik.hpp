@@ -58,6 +58,10 @@ class ExtendedIk : private LevenbergMarquardtIk {
                 kinematics::CompiledChain::Jacobian* J) const override;
   /// Empty when the context fits the model, else the reason naming the field.
   std::string CheckContext(const kinematics::EffectContext& context) const;
+  /// Takes the context for the solve to come, or fills `refused` (kInvalidInput) and returns
+  /// false.
+  bool Prepare(const kinematics::EffectContext& context, const Eigen::VectorXd& q_seed,
+               IkResult& refused);
   void Check(const Eigen::VectorXd& x, const Eigen::VectorXd& e) const;
 
   kinematics::ExtendedModel model_;
