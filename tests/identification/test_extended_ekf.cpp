@@ -7,6 +7,7 @@
 #include <cmath>
 
 #include "identification_fixture.hpp"
+#include "rcal/identification/calibration.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
 #include "rcal/identification/extended_lm.hpp"
 #include "rcal/identification/extended_measurement.hpp"
@@ -273,6 +274,28 @@ TEST(ExtendedEkf, CheckpointWithContextsResumesExactlyAndBadInputIsRefused) {
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("prior_sigma_effects"), std::string::npos) << e.what();
   }
+}
+
+TEST(ExtendedEkf, HeldOutExtendedJudgesOnTheFoldsOfHeldOut) {
+  // k-fold over the calibration poses: the geometric figures are HeldOut's, bit for bit; the
+  // extended model's held-out error is at the noise, the geometric one well above.
+  const ExtScenario s = MakeExtScenario(UrLikeUrdf(), kEffects, true, 6.0, 610, 80);
+  const kinematics::ExtendedModel ext(s.model, kEffects);
+  CalibrationSettings settings;
+  const CalibrationFit fit = Calibrate(s.model, s.cal, settings);
+  const HeldOutErrors held = HeldOut(s.model, s.cal, {}, fit, settings);
+  const ExtendedHeldOutErrors xh =
+      HeldOutExtended(ext, s.cal, s.cal_ctx, {}, fit, ext.NoEffects(), settings);
+  EXPECT_EQ(xh.scheme, held.scheme);
+  EXPECT_EQ(xh.nominal.position_m, held.nominal.position_m);
+  EXPECT_EQ(xh.geometric.position_m, held.calibrated.position_m);
+  ASSERT_EQ(xh.extended.position_m.size(), s.cal.size());
+  const double noise_rms = std::sqrt(3.0) * sim::PoseNoise{}.position_sigma;
+  std::printf("k-fold held-out RMS: geometric %.4f mm, extended %.4f mm (noise %.4f mm)\n",
+              xh.geometric.rms_position_m * 1e3, xh.extended.rms_position_m * 1e3, noise_rms * 1e3);
+  EXPECT_LT(xh.extended.rms_position_m, 1.25 * noise_rms);
+  EXPECT_GT(xh.geometric.rms_position_m, 2.0 * xh.extended.rms_position_m);
+  EXPECT_THROW(HeldOutExtended(ext, s.cal, {}, {}, fit, ext.NoEffects()), std::invalid_argument);
 }
 
 TEST(ExtendedEkf, WithoutEffectsItIsTheGeometricFilter) {

@@ -182,3 +182,171 @@ TEST(RcalCli, ExperimentPaperFromSensorStreams) {
   b.erase("time");
   EXPECT_EQ(a, b);
 }
+
+// --- rcal calibrate --effects (the model rcal analyze selected) and --log (calibrate-log) ---
+
+TEST(RcalCli, CalibrateFitsTheEffectsAnAnalysisFoundAndJudgesThemOnHeldOutPoses) {
+  const fs::path d = TempDir("calibrate_effects");
+  const std::string robot = " --robot config/robots/grb3016.yaml";
+  const std::string data = (d / "data.csv").string();
+  // A truth robot with a hidden compliance of j2, 0.05 mm noise, 30 % test poses.
+  Result r = RunRcal("simulate" + robot +
+                     " --effect joint_compliance:j2=4e-6 --poses 150 --seed 5 --test-fraction 0.3"
+                     " --out " +
+                     data + " --truth-json " + (d / "truth.json").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json truth = ReadJson(d / "truth.json");
+  const double c_true = truth["effects"][0]["values"][0]["value"].get<double>();
+  r = RunRcal("analyze " + data + robot + " --out " + (d / "analysis").string() + " --json " +
+              (d / "analysis.json").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json analysis = ReadJson(d / "analysis.json");
+  ASSERT_EQ(analysis["effects"].size(), 1u) << analysis["effects"].dump();
+  ASSERT_EQ(analysis["effects"][0]["cause"], "joint_compliance");
+
+  r = RunRcal("calibrate " + data + robot + " --effects " + (d / "analysis.json").string() +
+              " --out " + (d / "cal").string() + " --json " + (d / "cal.json").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json j = ReadJson(d / "cal.json");
+  ASSERT_EQ(j["effects"].size(), 1u);
+  const json& f = j["effects"][0];
+  EXPECT_EQ(f["cause"], "joint_compliance");
+  EXPECT_EQ(f["joints"], json::array({"j2"}));
+  const double c = f["values"][0]["value"].get<double>(), sigma = f["values"][0]["sigma"];
+  EXPECT_EQ(f["values"][0]["unit"], "rad/(N*m)");
+  EXPECT_GT(sigma, 0.0);
+  EXPECT_LT(std::abs(c - c_true), 3 * sigma) << c << " ± " << sigma << ", truth " << c_true;
+  EXPECT_LT(sigma, 0.1 * std::abs(c_true));
+  // Held-out on the test poses: the extended model at the noise (√3 · 0.05 mm RMS distance),
+  // the geometric model well above it; the geometric figure is the plain calibration's.
+  const double geo = j["test_geometric_rms_position_error_m"],
+               ext = j["test_extended_rms_position_error_m"];
+  EXPECT_EQ(j["validation"], "cal/test split");
+  EXPECT_DOUBLE_EQ(geo, j["test_rms_position_error_m"].get<double>());
+  EXPECT_LT(ext, 1.3 * std::sqrt(3.0) * 5e-5);
+  EXPECT_GT(geo, 2.0 * ext);
+  EXPECT_NEAR(j["test_extended_relative_gain"].get<double>(), 1.0 - ext / geo, 1e-12);
+  EXPECT_EQ(j["extended_parameters"].size(), j["num_identified"].get<size_t>());
+  EXPECT_TRUE(fs::exists(d / "cal" / "robot_calibrated_extended.yaml"));
+  std::ifstream md(d / "cal" / "report.md");
+  const std::string report((std::istreambuf_iterator<char>(md)), std::istreambuf_iterator<char>());
+  EXPECT_NE(report.find("## Extended model"), std::string::npos);
+
+  // An analysis that found nothing: the extended model is the geometric one.
+  json none = analysis;
+  none["effects"] = json::array();
+  std::ofstream(d / "none.json") << none.dump();
+  r = RunRcal("calibrate " + data + robot + " --effects " + (d / "none.json").string() + " --out " +
+              (d / "cal0").string() + " --json " + (d / "cal0.json").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json j0 = ReadJson(d / "cal0.json");
+  EXPECT_TRUE(j0["effects"].empty());
+  EXPECT_NEAR(j0["test_extended_rms_position_error_m"].get<double>(),
+              j0["test_geometric_rms_position_error_m"].get<double>(), 1e-3 * geo);
+}
+
+TEST(RcalCli, CalibrateRefusesEffectFilesItCannotUseNamingTheKey) {
+  const fs::path d = TempDir("calibrate_effects_bad");
+  const std::string robot = " --robot config/robots/grb3016.yaml";
+  const std::string data = (d / "data.csv").string();
+  Result r = RunRcal("simulate" + robot + " --poses 40 --seed 6 --out " + data);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  struct Case {
+    std::string name, text, expected;
+  };
+  const std::vector<Case> cases = {
+      {"joint", R"({"effects":[{"cause":"joint_scale","joints":["j9"],"values":[{"value":0}]}]})",
+       "effects[0].joints: no joint 'j9'"},
+      {"imu", R"({"effects":[{"cause":"gyro_bias","joints":[],"values":[]}]})",
+       "effects[0].cause: 'gyro_bias' is not a pose-level effect"},
+      {"values",
+       R"({"effects":[{"cause":"joint_periodic","joints":["j3"],"harmonic":1,"values":[{"value":1e-4}]}]})",
+       "effects[0].values: expected 2 entries"},
+      {"thermal",
+       R"({"effects":[{"cause":"thermal","joints":[],"source":"temperature","reference":20,"values":[{"value":1e-5}]}]})",
+       "thermal needs a temperature column"},
+      {"nolist", R"({"gain":{}})", "effects: missing"},
+      {"json", "{not json", "not JSON"},
+  };
+  for (const Case& c : cases) {
+    const fs::path f = d / (c.name + ".json");
+    std::ofstream(f) << c.text;
+    r = RunRcal("calibrate " + data + robot + " --effects " + f.string() + " --out " +
+                (d / "out").string());
+    EXPECT_NE(r.exit_code, 0) << c.name;
+    EXPECT_NE(r.output.find(c.expected), std::string::npos) << c.name << ": " << r.output;
+  }
+  r = RunRcal("calibrate " + data + robot + " --effects " + (d / "missing.json").string());
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("--effects: cannot read"), std::string::npos) << r.output;
+}
+
+TEST(RcalCli, CalibrateLogIsAnAliasOfCalibrateLog) {
+  const fs::path d = TempDir("calibrate_log_alias");
+  const Result help = RunRcal("calibrate --help");
+  ASSERT_EQ(help.exit_code, 0);
+  EXPECT_NE(help.output.find("--log"), std::string::npos);
+  EXPECT_NE(help.output.find("calibrate-log"), std::string::npos);
+  // The same code path: the same figures from the same (here empty) log, and the same error.
+  std::ofstream(d / "empty.lcmlog").close();
+  const std::string log = (d / "empty.lcmlog").string();
+  Result a = RunRcal("calibrate-log " + log + " --json " + (d / "a.json").string());
+  Result b = RunRcal("calibrate --log " + log + " --json " + (d / "b.json").string());
+  ASSERT_EQ(a.exit_code, b.exit_code) << a.output << "\n" << b.output;
+  if (a.exit_code == 0) {
+    EXPECT_EQ(ReadJson(d / "a.json"), ReadJson(d / "b.json"));
+    EXPECT_EQ(a.output, b.output);
+  }
+  a = RunRcal("calibrate-log " + (d / "missing.lcmlog").string());
+  b = RunRcal("calibrate --log " + (d / "missing.lcmlog").string());
+  EXPECT_NE(a.exit_code, 0);
+  EXPECT_EQ(a.exit_code, b.exit_code);
+  const std::string error = "calibrate-log: cannot read " + (d / "missing.lcmlog").string();
+  EXPECT_NE(a.output.find(error), std::string::npos) << a.output;
+  EXPECT_NE(b.output.find(error), std::string::npos) << b.output;
+  // DATA and --log together, or neither: refused with the reason.
+  b = RunRcal("calibrate data.csv --log " + log);
+  EXPECT_NE(b.exit_code, 0);
+  EXPECT_NE(b.output.find("not both"), std::string::npos) << b.output;
+  b = RunRcal("calibrate --robot config/robots/grb3016.yaml");
+  EXPECT_NE(b.exit_code, 0);
+  EXPECT_NE(b.output.find("DATA is required"), std::string::npos) << b.output;
+}
+
+// --- rcal analyze on an IMU stream (BROAD layout, no robot) ---
+
+TEST(RcalCli, AnalyzeImuStreamNamesTheMagneticDisturbanceAndMeasuresItsGain) {
+  const fs::path d = TempDir("analyze_imu");
+  const std::string csv = (d / "stream.csv").string();
+  const Result sim = RunRcal("simulate-imu --out " + csv +
+                             " --seed 3 --mag-disturbance 15 --mag-start 25 --mag-end 33");
+  ASSERT_EQ(sim.exit_code, 0) << sim.output;
+  const Result r = RunRcal("analyze " + csv + " --out " + (d / "sim").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json j = ReadJson(d / "sim" / "analysis.json");
+  EXPECT_EQ(j["kind"], "imu_stream");
+  ASSERT_EQ(j["effects"].size(), 1u) << j["effects"].dump();
+  EXPECT_EQ(j["effects"][0]["cause"], "magnetic_disturbance");
+  EXPECT_EQ(j["effects"][0]["axes"][0], "magnetometer");
+  EXPECT_EQ(j["gain"]["metric"], "heading_rmse");
+  EXPECT_GT(j["gain"]["relative_gain"].get<double>(), 0.0);
+  EXPECT_LT(j["gain"]["heldout_rms_after_rad"].get<double>(),
+            j["gain"]["heldout_rms_before_rad"].get<double>());
+  EXPECT_TRUE(fs::exists(d / "sim" / "report.md"));
+
+  // Real data: BROAD trial 30 (a magnet near the path) names the disturbance.
+  const Result b = RunRcal("analyze ../shared/data/broad/broad_30_100hz.csv --out " +
+                           (d / "broad30").string());
+  ASSERT_EQ(b.exit_code, 0) << b.output;
+  const json jb = ReadJson(d / "broad30" / "analysis.json");
+  bool named = false;
+  for (const auto& e : jb["effects"]) named |= e["cause"] == "magnetic_disturbance";
+  EXPECT_TRUE(named) << jb["effects"].dump();
+  EXPECT_TRUE(jb["gain"]["measured"].get<bool>());
+
+  // A stream with a missing column is refused, naming it.
+  std::ofstream(d / "bad.csv") << "t_s,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z,mag_x,mag_y\n0,0,0,0,0,0,9.8,1,2\n";
+  const Result bad2 = RunRcal("analyze " + (d / "bad.csv").string());
+  EXPECT_NE(bad2.exit_code, 0);
+  EXPECT_NE(bad2.output.find("mag_z"), std::string::npos) << bad2.output;
+}

@@ -1,14 +1,25 @@
 // rcal calibrate DATA.csv --robot ROBOT: identify a robot from a pose dataset, write the
 // calibrated robot (YAML, and URDF when it came from URDF), a report and the figures.
+// With --effects analysis.json (from `rcal analyze`): also fit the effects the analysis selected
+// together with the geometry (identification::FitExtended, weights from the geometric fit's noise,
+// the analysis' values as the start), judge geometric and extended models on the same held-out
+// poses, and write the calibrated effects (values, σ) to the JSON.
+// `rcal calibrate --log LOG` is `rcal calibrate-log LOG` (the same code, calibrate_log.hpp).
 #include <spdlog/spdlog.h>
 
+#include <cmath>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
 
+#include "calibrate_log.hpp"
 #include "command.hpp"
+#include "effects_json.hpp"
 #include "rcal/geometry/so3.hpp"
 #include "rcal/identification/calibration.hpp"
+#include "rcal/identification/extended_lm.hpp"
+#include "rcal/identification/extended_measurement.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/plot.hpp"
 #include "rcal/io/pose_dataset.hpp"
@@ -36,6 +47,9 @@ struct Options {
   double position_sigma_mm = 0.1;
   double orientation_sigma_deg = 0.1;
   bool fixed_noise = false;
+  std::string effects_path;
+  double link_density = 10.0;
+  CalibrateLogOptions log;  ///< --log LOG: the calibrate-log command
 };
 
 json StatsJson(const identification::PoseErrorStats& s, const std::string& prefix) {
@@ -57,7 +71,90 @@ std::vector<std::string> Row(const std::string& name, const identification::Pose
           o ? Fmt(s.max_orientation_rad * kDeg) : "–"};
 }
 
+// The extended fit of --effects and its figures.
+struct ExtendedResult {
+  kinematics::ExtendedModel model;
+  identification::ExtendedFit fit;
+  identification::PoseErrorStats fit_stats;
+  identification::ExtendedHeldOutErrors held;
+};
+
+// Every pose must carry what the effects depend on: temperature or time for thermal, the approach
+// direction for backlash.
+void CheckContexts(const kinematics::ExtendedModel& ext,
+                   const std::vector<kinematics::EffectContext>& contexts,
+                   const std::string& data) {
+  for (const kinematics::Effect& f : ext.effects()) {
+    const bool thermal = f.cause == kinematics::EffectCause::kThermal;
+    for (size_t i = 0; i < contexts.size(); ++i) {
+      const auto& c = contexts[i];
+      if (thermal && !std::isfinite(kinematics::ThermalRegressor(f, c)))
+        throw std::runtime_error(
+            "--effects: thermal needs a " +
+            std::string(f.thermal_source == kinematics::Effect::ThermalSource::kTime
+                            ? "time"
+                            : "temperature") +
+            " column in " + data + " (row " + std::to_string(i + 1) + " has none)");
+      if (f.cause == kinematics::EffectCause::kBacklash && c.dq_sign.size() == 0)
+        throw std::runtime_error("--effects: backlash needs the dq1..dqN columns in " + data +
+                                 " (row " + std::to_string(i + 1) + " has none)");
+      const std::string why = identification::ValidateContext(ext, c);
+      if (!why.empty())
+        throw std::runtime_error(data + ": row " + std::to_string(i + 1) + ": " + why);
+    }
+  }
+}
+
+ExtendedResult FitEffects(const Options& o, const kinematics::KinematicModel& model,
+                          const io::PoseDataset& data,
+                          const std::vector<kinematics::PoseMeasurement>& ms,
+                          const std::vector<bool>& is_test,
+                          const identification::CalibrationFit& fit,
+                          const identification::CalibrationSettings& settings) {
+  const AnalysisEffects ae = ReadAnalysisEffects(ResolvePath(o.effects_path), model);
+  kinematics::GravityModel gravity;
+  gravity.link_density_kg_per_m = o.link_density;
+  kinematics::ExtendedModel ext(model, ae.effects, gravity);
+  const std::vector<kinematics::EffectContext> contexts = ToContexts(data);
+  CheckContexts(ext, contexts, o.data);
+  std::vector<kinematics::PoseMeasurement> fit_ms;
+  std::vector<kinematics::EffectContext> fit_ctx;
+  for (size_t i = 0; i < ms.size(); ++i)
+    if (!is_test[i]) {
+      fit_ms.push_back(ms[i]);
+      fit_ctx.push_back(contexts[i]);
+    }
+  identification::SetNoise(fit_ms, fit.position_sigma_m, fit.orientation_sigma_rad);
+  spdlog::info("fitting geometry and {} effect(s) ({} parameters) from {}", ae.effects.size(),
+               ext.num_effect_params(), o.effects_path);
+  identification::ExtendedFit ef = identification::FitExtended(ext, fit.identified, fit_ms, fit_ctx,
+                                                               fit.x, ae.values, !o.fixed_noise);
+  std::vector<double> p, r_o;
+  Eigen::VectorXd r;
+  for (size_t i = 0; i < fit_ms.size(); ++i) {
+    identification::ExtendedResidualAndJacobian(ext, fit_ms[i], fit_ctx[i], ef.x, ef.e, {}, r,
+                                                nullptr);
+    p.push_back(r.head<3>().norm());
+    if (r.size() == 6) r_o.push_back(r.tail<3>().norm());
+  }
+  spdlog::info("judging geometric and extended models on poses not fitted...");
+  identification::ExtendedHeldOutErrors held =
+      identification::HeldOutExtended(ext, ms, contexts, is_test, fit, ae.values, settings);
+  return {std::move(ext), std::move(ef), identification::Summarize(p, r_o), std::move(held)};
+}
+
 int Run(const Options& o) {
+  if (!o.log.log.empty()) {
+    if (!o.data.empty()) throw std::runtime_error("rcal calibrate: give DATA or --log, not both");
+    if (!o.effects_path.empty())
+      throw std::runtime_error("rcal calibrate: --effects needs DATA, not --log");
+    CalibrateLogOptions lo = o.log;
+    if (!o.robot.empty()) lo.robot = o.robot;
+    lo.json_path = o.json_path;
+    return RunCalibrateLog(lo);
+  }
+  if (o.data.empty()) throw std::runtime_error("rcal calibrate: DATA is required (or --log LOG)");
+  if (o.robot.empty()) throw std::runtime_error("rcal calibrate: --robot is required");
   // The robot with the set-up frames a real cell has (URDF chains get them; YAML files get what
   // they lack), and the IMU/marker rotation when the data measures orientation.
   io::LoadedRobot robot = LoadRobotForCell(o.robot, o.tip_link, o.base_link, o.frames);
@@ -88,9 +185,15 @@ int Run(const Options& o) {
   spdlog::info("fitted {} parameters ({} set-up); noise σ {:.3f} mm, {:.3f}°",
                fit.identified.size(), fit.setup.size(), fit.position_sigma_m * kMm,
                fit.orientation_sigma_rad * kDeg);
-  spdlog::info("judging on poses not fitted...");
-  const identification::HeldOutErrors held =
-      identification::HeldOut(model, ms, is_test, fit, settings);
+  std::optional<ExtendedResult> ext;
+  identification::HeldOutErrors held;
+  if (!o.effects_path.empty()) {
+    ext = FitEffects(o, model, data, ms, is_test, fit, settings);
+    held = {ext->held.scheme, ext->held.nominal, ext->held.geometric};
+  } else {
+    spdlog::info("judging on poses not fitted...");
+    held = identification::HeldOut(model, ms, is_test, fit, settings);
+  }
 
   const fs::path out(o.out);
   fs::create_directories(out);
@@ -102,6 +205,11 @@ int Run(const Options& o) {
   io::SaveCalibratedRobotYaml(out / "robot_calibrated.yaml", robot.spec, model, fit.x, header);
   if (robot.from_urdf)
     io::SaveCalibratedUrdf(robot.source, out / "robot_calibrated.urdf", model, fit.x);
+  if (ext)  // the geometry that goes with the calibrated effects
+    io::SaveCalibratedRobotYaml(
+        out / "robot_calibrated_extended.yaml", robot.spec, model, ext->fit.x,
+        {" calibrated by rcal calibrate --effects " + o.effects_path + " from " + o.data,
+         " geometric part of the extended model; its effects are in results.json"});
 
   std::vector<double> idx, before, after;
   for (size_t i = 0; i < fit.nominal_fit.position_m.size(); ++i) {
@@ -148,6 +256,22 @@ int Run(const Options& o) {
      << MdTable({"parameter", "group", "unit", "error", "σ"}, prows)
      << "\nCalibrated robot: `robot_calibrated.yaml`"
      << (robot.from_urdf ? " and `robot_calibrated.urdf`" : "") << ".\n";
+  if (ext) {
+    const auto params = ext->model.EffectParameters();
+    std::vector<std::vector<std::string>> erows;
+    for (size_t i = 0; i < params.size(); ++i)
+      erows.push_back(
+          {params[i].name, params[i].unit, Fmt(ext->fit.e(i), 4), Fmt(ext->fit.sigma_e(i), 2)});
+    md << "\n## Extended model (effects from `" << o.effects_path << "`)\n\n"
+       << MdTable({"", "position mean [mm]", "position max [mm]", "orientation mean [deg]",
+                   "orientation max [deg]"},
+                  {Row("fitted poses, extended", ext->fit_stats),
+                   Row("held-out (" + held.scheme + "), geometric", ext->held.geometric),
+                   Row("held-out (" + held.scheme + "), extended", ext->held.extended)})
+       << "\n"
+       << MdTable({"effect parameter", "unit", "value", "σ"}, erows)
+       << "\nGeometry of the extended model: `robot_calibrated_extended.yaml`.\n";
+  }
   io::AtomicWriteFile(out / "report.md", md.str());
 
   json j = {{"data", o.data},
@@ -163,6 +287,24 @@ int Run(const Options& o) {
   j.update(StatsJson(fit.calibrated_fit, "fit_"));
   j.update(StatsJson(held.nominal, "test_nominal_"));
   j.update(StatsJson(held.calibrated, "test_"));
+  if (ext) {
+    json jx = json::array();
+    for (int i : fit.identified)
+      jx.push_back({{"name", model.parameters()[i].name},
+                    {"unit", model.parameters()[i].is_angle ? "rad" : "m"},
+                    {"value", ext->fit.x(i)}});
+    j["effects_file"] = o.effects_path;
+    j["link_density_kg_per_m"] = o.link_density;
+    j["effects"] = EffectsJson(ext->model, ext->fit.e, ext->fit.sigma_e);
+    j["extended_parameters"] = jx;
+    j["extended_position_noise_m"] = ext->fit.position_sigma_m;
+    j.update(StatsJson(ext->fit_stats, "fit_extended_"));
+    j.update(StatsJson(ext->held.geometric, "test_geometric_"));
+    j.update(StatsJson(ext->held.extended, "test_extended_"));
+    const double before = ext->held.geometric.rms_position_m;
+    j["test_extended_relative_gain"] =
+        before > 0 ? 1.0 - ext->held.extended.rms_position_m / before : 0.0;
+  }
   io::AtomicWriteFile(out / "results.json", j.dump(2));
   if (!o.json_path.empty()) io::AtomicWriteFile(o.json_path, j.dump(2));
 
@@ -179,16 +321,28 @@ int Run(const Options& o) {
   std::printf("  held-out: %s\n", held.scheme.c_str());
   line("held-out, nominal", held.nominal);
   line("held-out, calibrated", held.calibrated);
+  if (ext) {
+    line("fit, extended", ext->fit_stats);
+    line("held-out, extended", ext->held.extended);
+    const auto params = ext->model.EffectParameters();
+    for (size_t i = 0; i < params.size(); ++i)
+      std::printf("  effect %-34s %+.4e ± %.2e %s\n", params[i].name.c_str(), ext->fit.e(i),
+                  ext->fit.sigma_e(i), params[i].unit.c_str());
+  }
   std::printf("  wrote %s\n", (out / "report.md").c_str());
   return 0;
 }
 
 const RegisterCommand kCalibrate(
-    "calibrate", "Identify a robot from a pose dataset (CSV)",
+    "calibrate",
+    "Identify a robot from a pose dataset (CSV), optionally with the effects an analysis found "
+    "(--effects), or from an LCM log (--log: the same as calibrate-log)",
     [](CLI::App& sub) -> std::function<int()> {
       auto o = std::make_shared<Options>();
-      sub.add_option("data", o->data, "pose dataset CSV (rcal or FIGAROH layout)")->required();
-      sub.add_option("--robot", o->robot, "robot file (YAML or URDF)")->required();
+      sub.add_option("data", o->data, "pose dataset CSV (rcal or FIGAROH layout)");
+      sub.add_option("--robot", o->robot,
+                     "robot file (YAML or URDF); required with DATA, with --log default "
+                     "config/robots/grb3016.yaml");
       sub.add_option("--tip", o->tip_link, "URDF: last link of the chain (the flange)");
       sub.add_option("--base-link", o->base_link, "URDF: first link of the chain");
       sub.add_option("--out", o->out, "output folder")->capture_default_str();
@@ -206,6 +360,17 @@ const RegisterCommand kCalibrate(
                      "starting orientation noise [deg]")
           ->capture_default_str();
       sub.add_flag("--fixed-noise", o->fixed_noise, "use the given noise, do not estimate it");
+      sub.add_option("--effects", o->effects_path,
+                     "analysis.json of `rcal analyze`: fit its effects with the geometry, write "
+                     "the calibrated effects (values, sigma) to the JSON");
+      sub.add_option("--link-density", o->link_density,
+                     "[kg/m] gravity model of joint_compliance (as rcal analyze --link-density)")
+          ->capture_default_str();
+      sub.add_option("--log", o->log.log,
+                     "LCM event log: identify from its POSE_MEASUREMENT events instead of DATA, "
+                     "exactly as `rcal calibrate-log LOG` (alias; --robot, --json and the options "
+                     "marked [--log] apply)");
+      AddCalibrateLogOptions(sub, o->log, " [--log]");
       return [o]() { return Run(*o); };
     });
 

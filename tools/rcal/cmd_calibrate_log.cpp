@@ -4,11 +4,12 @@
 // identifiable base set (--ident-seed), as the ekf_identifier process: a log replayed through
 // the pipeline with lcm-logplayer and this command give the same parameters (a tested property).
 // Events that fail to decode or to validate, and poses not after the last accepted one, are
-// skipped and counted, as the process rejects them.
+// skipped and counted, as the process rejects them. `rcal calibrate --log LOG` runs this same code.
 #include <lcm/lcm-cpp.hpp>
 #include <memory>
 #include <nlohmann/json.hpp>
 
+#include "calibrate_log.hpp"
 #include "command.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
 #include "rcal/io/atomic_file.hpp"
@@ -20,18 +21,21 @@
 #include "rcal/transport/channels.hpp"
 
 namespace rcal::tool {
-namespace {
 
-struct Options {
-  std::string log;
-  std::string robot = "config/robots/grb3016.yaml";
-  std::string channel = transport::channels::kPoseMeasurement;
-  unsigned ident_seed = 1;
-  bool position_only = false;
-  std::string json_path;
-};
+void AddCalibrateLogOptions(CLI::App& sub, CalibrateLogOptions& o, const std::string& suffix) {
+  o.channel = transport::channels::kPoseMeasurement;
+  sub.add_option("--channel", o.channel, "channel of the pose measurements" + suffix)
+      ->capture_default_str();
+  sub.add_option(
+         "--ident-seed", o.ident_seed,
+         "seed of the joint sample that selects the identifiable set (ekf_identifier's)" + suffix)
+      ->capture_default_str();
+  sub.add_flag("--position-only", o.position_only, "identify from positions only" + suffix);
+}
 
-int Run(const Options& o) {
+int RunCalibrateLog(const CalibrateLogOptions& o_in) {
+  CalibrateLogOptions o = o_in;
+  if (o.channel.empty()) o.channel = transport::channels::kPoseMeasurement;
   const auto robot = io::LoadRobot(ResolvePath(o.robot));
   const auto& model = robot.model;
   // The identifiable base set exactly as ekf_identifier selects it.
@@ -102,22 +106,18 @@ int Run(const Options& o) {
   return 0;
 }
 
+namespace {
+
 const RegisterCommand kCalibrateLog(
     "calibrate-log",
     "Identify the robot offline from the POSE_MEASUREMENT events of an LCM log (as ekf_identifier)",
     [](CLI::App& sub) -> std::function<int()> {
-      auto o = std::make_shared<Options>();
+      auto o = std::make_shared<CalibrateLogOptions>();
       sub.add_option("log", o->log, "LCM event log (lcm-logger, logger service)")->required();
       sub.add_option("--robot", o->robot, "robot YAML or URDF")->capture_default_str();
-      sub.add_option("--channel", o->channel, "channel of the pose measurements")
-          ->capture_default_str();
-      sub.add_option(
-             "--ident-seed", o->ident_seed,
-             "seed of the joint sample that selects the identifiable set (ekf_identifier's)")
-          ->capture_default_str();
-      sub.add_flag("--position-only", o->position_only, "identify from positions only");
+      AddCalibrateLogOptions(sub, *o, "");
       sub.add_option("--json", o->json_path, "write the parameters here (SI units)");
-      return [o]() { return Run(*o); };
+      return [o]() { return RunCalibrateLog(*o); };
     });
 
 }  // namespace

@@ -9,6 +9,8 @@
 
 #include "rcal/geometry/so3.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
+#include "rcal/identification/extended_lm.hpp"
+#include "rcal/identification/extended_measurement.hpp"
 #include "rcal/kinematics/identifiability.hpp"
 
 namespace rcal::identification {
@@ -285,48 +287,100 @@ CalibrationFit Calibrate(const kinematics::KinematicModel& model,
   return fit;
 }
 
-HeldOutErrors HeldOut(const kinematics::KinematicModel& model,
-                      const std::vector<kinematics::PoseMeasurement>& all,
-                      const std::vector<bool>& is_test, const CalibrationFit& fit,
-                      const CalibrationSettings& settings) {
-  std::vector<kinematics::PoseMeasurement> ms = all;
-  SetNoise(ms, fit.position_sigma_m, fit.orientation_sigma_rad);
-  const int n = static_cast<int>(ms.size());
-  std::vector<int> fold(n);
-  int folds = 0;
-  HeldOutErrors out;
+HeldOutFolds MakeHeldOutFolds(int n, const std::vector<bool>& is_test,
+                              const CalibrationSettings& settings) {
+  HeldOutFolds out;
+  out.fold.assign(n, -1);
   const bool split = std::any_of(is_test.begin(), is_test.end(), [](bool b) { return b; });
   if (split) {
-    for (int i = 0; i < n; ++i) fold[i] = is_test[i] ? 0 : -1;
-    folds = 1;
+    for (int i = 0; i < n && i < static_cast<int>(is_test.size()); ++i)
+      out.fold[i] = is_test[i] ? 0 : -1;
+    out.folds = 1;
     out.scheme = "cal/test split";
   } else {
-    folds = std::min(settings.folds, n);
+    out.folds = std::min(settings.folds, n);
     std::vector<int> order(n);
     std::iota(order.begin(), order.end(), 0);
     std::mt19937_64 rng(settings.seed);
     std::shuffle(order.begin(), order.end(), rng);
-    for (int k = 0; k < n; ++k) fold[order[k]] = k % folds;
-    out.scheme = folds == n ? "leave-one-out" : std::to_string(folds) + "-fold";
+    for (int k = 0; k < n; ++k) out.fold[order[k]] = k % out.folds;
+    out.scheme = out.folds == n ? "leave-one-out" : std::to_string(out.folds) + "-fold";
   }
-  std::vector<double> nom_p, nom_o, cal_p, cal_o;
-  for (int f = 0; f < folds; ++f) {
+  return out;
+}
+
+namespace {
+
+// HeldOut and HeldOutExtended: with `ext`, each round also fits the extended model.
+ExtendedHeldOutErrors HeldOutRounds(const kinematics::KinematicModel& model,
+                                    const std::vector<kinematics::PoseMeasurement>& all,
+                                    const std::vector<bool>& is_test, const CalibrationFit& fit,
+                                    const CalibrationSettings& settings,
+                                    const kinematics::ExtendedModel* ext,
+                                    const std::vector<kinematics::EffectContext>* contexts,
+                                    const Eigen::VectorXd& e0) {
+  std::vector<kinematics::PoseMeasurement> ms = all;
+  SetNoise(ms, fit.position_sigma_m, fit.orientation_sigma_rad);
+  const int n = static_cast<int>(ms.size());
+  const HeldOutFolds folds = MakeHeldOutFolds(n, is_test, settings);
+  ExtendedHeldOutErrors out;
+  out.scheme = folds.scheme;
+  std::vector<double> nom_p, nom_o, cal_p, cal_o, ext_p, ext_o;
+  const auto append = [](const PoseErrorStats& s, std::vector<double>& p, std::vector<double>& o) {
+    p.insert(p.end(), s.position_m.begin(), s.position_m.end());
+    o.insert(o.end(), s.orientation_rad.begin(), s.orientation_rad.end());
+  };
+  for (int f = 0; f < folds.folds; ++f) {
     std::vector<kinematics::PoseMeasurement> train, held;
-    for (int i = 0; i < n; ++i) (fold[i] == f ? held : train).push_back(ms[i]);
+    std::vector<kinematics::EffectContext> train_ctx, held_ctx;
+    for (int i = 0; i < n; ++i) {
+      (folds.fold[i] == f ? held : train).push_back(ms[i]);
+      if (contexts) (folds.fold[i] == f ? held_ctx : train_ctx).push_back((*contexts)[i]);
+    }
     if (train.size() < 3 || held.empty()) continue;
     CalibrationSettings s = settings;
     s.estimate_noise = false;  // weights from the full fit; each fold refits its parameters
     const CalibrationFit ff = Calibrate(model, train, s);
-    const auto nom = ErrorsAgainstMeasurements(model, ff.x_nominal, held);
-    const auto cal = ErrorsAgainstMeasurements(model, ff.x, held);
-    nom_p.insert(nom_p.end(), nom.position_m.begin(), nom.position_m.end());
-    nom_o.insert(nom_o.end(), nom.orientation_rad.begin(), nom.orientation_rad.end());
-    cal_p.insert(cal_p.end(), cal.position_m.begin(), cal.position_m.end());
-    cal_o.insert(cal_o.end(), cal.orientation_rad.begin(), cal.orientation_rad.end());
+    append(ErrorsAgainstMeasurements(model, ff.x_nominal, held), nom_p, nom_o);
+    append(ErrorsAgainstMeasurements(model, ff.x, held), cal_p, cal_o);
+    if (!ext) continue;
+    const ExtendedFit ef = FitExtended(*ext, ff.identified, train, train_ctx, ff.x, e0, false);
+    Eigen::VectorXd r;
+    for (size_t i = 0; i < held.size(); ++i) {
+      ExtendedResidualAndJacobian(*ext, held[i], held_ctx[i], ef.x, ef.e, {}, r, nullptr);
+      ext_p.push_back(r.head<3>().norm());
+      if (r.size() == 6) ext_o.push_back(r.tail<3>().norm());
+    }
   }
   out.nominal = Summarize(nom_p, nom_o);
-  out.calibrated = Summarize(cal_p, cal_o);
+  out.geometric = Summarize(cal_p, cal_o);
+  out.extended = Summarize(ext_p, ext_o);
   return out;
+}
+
+}  // namespace
+
+HeldOutErrors HeldOut(const kinematics::KinematicModel& model,
+                      const std::vector<kinematics::PoseMeasurement>& ms,
+                      const std::vector<bool>& is_test, const CalibrationFit& fit,
+                      const CalibrationSettings& settings) {
+  const ExtendedHeldOutErrors e =
+      HeldOutRounds(model, ms, is_test, fit, settings, nullptr, nullptr, {});
+  return {e.scheme, e.nominal, e.geometric};
+}
+
+ExtendedHeldOutErrors HeldOutExtended(const kinematics::ExtendedModel& model,
+                                      const std::vector<kinematics::PoseMeasurement>& ms,
+                                      const std::vector<kinematics::EffectContext>& contexts,
+                                      const std::vector<bool>& is_test, const CalibrationFit& fit,
+                                      const Eigen::VectorXd& e0,
+                                      const CalibrationSettings& settings) {
+  if (contexts.size() != ms.size())
+    throw std::invalid_argument("HeldOutExtended: one context per measurement");
+  if (e0.size() != model.num_effect_params())
+    throw std::invalid_argument("HeldOutExtended: e0 has " + std::to_string(e0.size()) +
+                                " values, expected " + std::to_string(model.num_effect_params()));
+  return HeldOutRounds(model.base(), ms, is_test, fit, settings, &model, &contexts, e0);
 }
 
 }  // namespace rcal::identification

@@ -22,6 +22,7 @@
 #include "rcal/identification/batch_lm.hpp"
 #include "rcal/identification/metrics.hpp"
 #include "rcal/kinematics/identifiability.hpp"
+#include "rcal/kinematics/joint_effects.hpp"
 #include "rcal/kinematics/measurement.hpp"
 #include "rcal/kinematics/model.hpp"
 
@@ -92,12 +93,39 @@ struct HeldOutErrors {
   PoseErrorStats nominal, calibrated;  ///< on poses not fitted
 };
 
-/// Errors on poses not fitted: a split when `is_test` marks some poses (fit on the others), else
-/// k-fold. Noise levels from `fit` are used as weights.
+/// Which poses each held-out round judges: fold[i] = the round that holds pose i out (−1: always
+/// fitted). The `set` split when `is_test` marks some poses (one round: the test poses), else
+/// k-fold, k = min(settings.folds, n), poses shuffled with settings.seed.
+struct HeldOutFolds {
+  std::vector<int> fold;
+  int folds = 0;
+  std::string scheme;  ///< "cal/test split", "5-fold", "leave-one-out"
+};
+HeldOutFolds MakeHeldOutFolds(int num_poses, const std::vector<bool>& is_test,
+                              const CalibrationSettings& settings);
+
+/// Errors on poses not fitted (MakeHeldOutFolds): a split when `is_test` marks some poses (fit on
+/// the others), else k-fold. Noise levels from `fit` are used as weights.
 HeldOutErrors HeldOut(const kinematics::KinematicModel& model,
                       const std::vector<kinematics::PoseMeasurement>& ms,
                       const std::vector<bool>& is_test, const CalibrationFit& fit,
                       const CalibrationSettings& settings = {});
+
+/// Held-out errors of an extended model (geometry + effects) next to the geometric calibration,
+/// on the same folds as HeldOut (MakeHeldOutFolds). Each round calibrates the training poses as
+/// HeldOut does (weights from `fit`), then fits the extended model (FitExtended, extended_lm.hpp)
+/// over that round's identified parameters from its geometric fit and the effects from e0.
+/// One context per measurement.
+struct ExtendedHeldOutErrors {
+  std::string scheme;
+  PoseErrorStats nominal, geometric, extended;  ///< on poses not fitted
+};
+ExtendedHeldOutErrors HeldOutExtended(const kinematics::ExtendedModel& model,
+                                      const std::vector<kinematics::PoseMeasurement>& ms,
+                                      const std::vector<kinematics::EffectContext>& contexts,
+                                      const std::vector<bool>& is_test, const CalibrationFit& fit,
+                                      const Eigen::VectorXd& e0,
+                                      const CalibrationSettings& settings = {});
 
 /// Sets every measurement's covariance to diag(σ_p², σ_p², σ_p², σ_o², σ_o², σ_o²).
 void SetNoise(std::vector<kinematics::PoseMeasurement>& ms, double position_sigma_m,

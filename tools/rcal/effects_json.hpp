@@ -1,0 +1,43 @@
+// The effect list of an `rcal analyze` analysis.json (cmd_analyze.cpp writes it), read back so
+// that `rcal calibrate --effects` fits the model the analysis selected, and the calibrated
+// effects written as the same JSON entries. Keys of one entry of "effects" (SI units):
+//   cause      "joint_compliance" | "joint_periodic" | "joint_scale" | "backlash" | "thermal"
+//   joints     [joint name]          one name for the joint causes, [] for thermal
+//   harmonic   1 | 2                 joint_periodic only
+//   source     "temperature" | "time", reference [°C | s]     thermal only
+//   values     [{name, unit, value, sigma}]   one per effect parameter (periodic: sin, cos)
+// Other keys (selection_z, ...) are ignored. Causes of streamed or IMU data (time_offset,
+// gyro_bias, magnetic_disturbance, accel_motion) are refused: they are not pose-level effects.
+#pragma once
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "rcal/io/pose_dataset.hpp"
+#include "rcal/kinematics/joint_effects.hpp"
+
+namespace rcal::tool {
+
+struct AnalysisEffects {
+  std::vector<kinematics::Effect> effects;
+  Eigen::VectorXd values;  ///< the analysis' fitted values, in ExtendedModel order [SI]
+};
+
+/// Parses the "effects" list of an analysis.json document against `model` (joint names).
+/// Throws std::runtime_error naming the key ("effects[1].joints: no joint 'elbow2' in robot ...").
+AnalysisEffects ParseAnalysisEffects(const nlohmann::json& analysis,
+                                     const kinematics::KinematicModel& model);
+/// Reads the file and parses it; errors name the file too.
+AnalysisEffects ReadAnalysisEffects(const std::string& path,
+                                    const kinematics::KinematicModel& model);
+
+/// The effects of `model` with values e and 1σ sigma as analysis.json entries (the keys above).
+nlohmann::json EffectsJson(const kinematics::ExtendedModel& model, const Eigen::VectorXd& e,
+                           const Eigen::VectorXd& sigma);
+
+/// The context of each sample of a pose dataset (temperature, payload (absent: 0), time, dq).
+std::vector<kinematics::EffectContext> ToContexts(const io::PoseDataset& data);
+
+}  // namespace rcal::tool
