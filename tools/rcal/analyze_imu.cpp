@@ -82,7 +82,6 @@ bool IsImuStreamCsv(const std::string& path) {
 disc::ImuStreamData LoadImuStreamCsv(const std::string& path) {
   const io::CsvTable table = io::CsvTable::Load(path);
   const int n = table.rows();
-  if (n < 10) throw std::runtime_error(path + ": fewer than 10 rows");
   disc::ImuStreamData d;
   auto col = [&](const char* name) {
     const Eigen::VectorXd c = table.Column(name);  // throws naming a missing column
@@ -96,6 +95,7 @@ disc::ImuStreamData LoadImuStreamCsv(const std::string& path) {
   const Eigen::VectorXd gx = col("gyr_x"), gy = col("gyr_y"), gz = col("gyr_z");
   const Eigen::VectorXd ax = col("acc_x"), ay = col("acc_y"), az = col("acc_z");
   const Eigen::VectorXd mx = col("mag_x"), my = col("mag_y"), mz = col("mag_z");
+  if (n < 10) throw std::runtime_error(path + ": fewer than 10 rows");
   for (int k = 0; k < n; ++k) {
     if (k > 0 && !(t(k) > t(k - 1)))
       throw std::runtime_error(path + ": column 't_s' does not increase at row " +
@@ -151,10 +151,10 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
   auto cand_json = [&](const disc::ImuCandidate& c) {
     json values = json::object();
     for (const auto& v : c.values) values[v.name] = {{"value", v.value}, {"sigma", v.sigma}};
-    json j = {{"cause", c.cause},       {"axes", c.axes},
-              {"values", values},       {"statistic_z", c.statistic},
+    json j = {{"cause", c.cause},         {"axes", c.axes},
+              {"values", values},         {"statistic_z", c.statistic},
               {"critical_z", c.critical}, {"significant", c.significant},
-              {"tested", c.tested},     {"note", c.note}};
+              {"tested", c.tested},       {"note", c.note}};
     if (a.has_truth) {
       j["before"] = ScoreJson(c.before);
       j["after"] = ScoreJson(c.after);
@@ -172,7 +172,8 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
   }
   json gain;
   if (a.has_truth) {
-    const double b = Metric(a.base_score, a.gain_metric), e = Metric(a.extended_score, a.gain_metric);
+    const double b = Metric(a.base_score, a.gain_metric),
+                 e = Metric(a.extended_score, a.gain_metric);
     gain = {{"metric", a.gain_metric + "_rmse"},
             {"heldout_rms_before_rad", b},
             {"heldout_rms_after_rad", e},
@@ -224,7 +225,11 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
   const int every = std::max(1, a.samples / 4000);
   {
     io::PlotSpec p{"Gyro Allan deviation over the rests, with the white-noise line",
-                   "tau [s]", "Allan deviation [deg/s]", {}, true, true};
+                   "tau [s]",
+                   "Allan deviation [deg/s]",
+                   {},
+                   true,
+                   true};
     for (int i = 0; i < 3; ++i) {
       io::Series s{std::string("gyro ") + "xyz"[i], a.allan.tau_s, {}, "linespoints"};
       for (double v : a.allan.adev_rad_s[i]) s.y.push_back(v * kDeg);
@@ -234,16 +239,16 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
       p.series.push_back(w);
     }
     io::Series stated{"stated density (simulator)", a.allan.tau_s, {}, "lines"};
-    for (double t : a.allan.tau_s) stated.y.push_back(settings.gyro_noise_density / std::sqrt(t) * kDeg);
+    for (double t : a.allan.tau_s)
+      stated.y.push_back(settings.gyro_noise_density / std::sqrt(t) * kDeg);
     p.series.push_back(stated);
     io::PlotPng(p, out / "allan.png");
   }
   {
-    io::PlotSpec p{"Magnetic field norm with the reference and the gate band", "time [s]",
-                   "|m| [uT]", {}};
+    io::PlotSpec p{
+        "Magnetic field norm with the reference and the gate band", "time [s]", "|m| [uT]", {}};
     p.series.push_back(Decimated("|m|", data.t, a.mag_norm_uT, 1.0, every));
-    const double gate = std::max(settings.band_z * a.sigma_mag_norm_uT,
-                                 settings.filter.mag_norm_tolerance * a.mag_ref_norm_uT);
+    const double gate = a.mag_gate_norm_uT;
     for (double off : {-gate, 0.0, gate})
       p.series.push_back({off == 0 ? "reference" : (off > 0 ? "gate +" : "gate -"),
                           {data.t.front(), data.t.back()},
@@ -251,9 +256,11 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
                           "lines"});
     io::PlotPng(p, out / "mag_norm.png");
     io::PlotSpec q{"Magnetic dip (base filter attitude) with the reference and the gate band",
-                   "time [s]", "dip [deg]", {}};
+                   "time [s]",
+                   "dip [deg]",
+                   {}};
     q.series.push_back(Decimated("dip", data.t, a.mag_dip_rad, kDeg, every));
-    const double gd = std::max(settings.band_z * a.sigma_dip_rad, settings.filter.mag_dip_tolerance);
+    const double gd = a.mag_gate_dip_rad;
     for (double off : {-gd, 0.0, gd})
       q.series.push_back({off == 0 ? "reference" : (off > 0 ? "gate +" : "gate -"),
                           {data.t.front(), data.t.back()},
@@ -262,8 +269,10 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
     io::PlotPng(q, out / "mag_dip.png");
   }
   if (a.has_truth) {
-    io::PlotSpec p{"Heading error against the truth: base vs extended model", "time [s]",
-                   "heading error [deg]", {}};
+    io::PlotSpec p{"Heading error against the truth: base vs extended model",
+                   "time [s]",
+                   "heading error [deg]",
+                   {}};
     p.series.push_back(Decimated("base model", data.t, a.heading_err_base_rad, kDeg, every));
     p.series.push_back(Decimated("extended model", data.t, a.heading_err_ext_rad, kDeg, every));
     io::PlotPng(p, out / "heading_error.png");
@@ -277,13 +286,14 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
 
   // --- report.md ---
   std::ostringstream md;
-  md << "# rcal analyze (IMU stream)\n\n- Data: `" << o.data << "`, " << a.samples
-     << " samples at " << Fmt(a.rate_hz, 1) << " Hz, " << a.rests.size() << " rest segments ("
+  md << "# rcal analyze (IMU stream)\n\n- Data: `" << o.data << "`, " << a.samples << " samples at "
+     << Fmt(a.rate_hz, 1) << " Hz, " << a.rests.size() << " rest segments ("
      << (a.has_movement ? "movement column" : "detected still") << "), truth orientation "
-     << (a.has_truth ? "present" : "absent") << "\n- Reference (first rest): |m| = "
-     << Fmt(a.mag_ref_norm_uT, 2) << " µT (σ " << Fmt(a.sigma_mag_norm_uT, 2) << "), dip "
-     << Fmt(a.mag_ref_dip_rad * kDeg, 2) << "° (σ " << Fmt(a.sigma_dip_rad * kDeg, 2)
-     << "°), |f| = " << Fmt(a.gravity_ref, 3) << " m/s² (σ " << Fmt(a.sigma_accel_norm, 3)
+     << (a.has_truth ? "present" : "absent")
+     << "\n- Reference (first rest): |m| = " << Fmt(a.mag_ref_norm_uT, 2) << " µT (σ "
+     << Fmt(a.sigma_mag_norm_uT, 2) << "), dip " << Fmt(a.mag_ref_dip_rad * kDeg, 2) << "° (σ "
+     << Fmt(a.sigma_dip_rad * kDeg, 2) << "°), |f| = " << Fmt(a.gravity_ref, 3) << " m/s² (σ "
+     << Fmt(a.sigma_accel_norm, 3)
      << ")\n- Base model: white noise at the stated densities, constant gyro bias, constant "
         "field, accelerometer = gravity; base filter trusts every sample.\n\n## Finding\n\n";
   const auto effects = a.effects();
@@ -302,7 +312,9 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
   md << "## Candidates\n\n";
   for (const auto& c : a.candidates) {
     md << "### " << c.cause << " — "
-       << (!c.tested ? "not tested" : c.significant ? "**found**" : "not significant")
+       << (!c.tested       ? "not tested"
+           : c.significant ? "**found**"
+                           : "not significant")
        << "\n\nTest statistic z = " << Fmt(c.statistic, 2) << " (critical " << Fmt(c.critical, 2)
        << ")." << (c.note.empty() ? "" : " " + c.note + ".") << "\n\n";
     std::vector<std::vector<std::string>> rows;
@@ -368,7 +380,8 @@ const RegisterCommand kRegisterSimulateImu(
           ->capture_default_str();
       sub.add_option("--rest", o->settings.rest_s, "rest length [s]")->capture_default_str();
       sub.add_option("--motion", o->settings.motion_s, "motion length [s]")->capture_default_str();
-      sub.add_option("--gyro-bias-rw", o->gyro_bias_rw, "gyro bias random walk, all axes [rad/s/√s]");
+      sub.add_option("--gyro-bias-rw", o->gyro_bias_rw,
+                     "gyro bias random walk, all axes [rad/s/√s]");
       sub.add_option("--mag-disturbance", o->mag_uT, "magnetic disturbance along east [µT]");
       sub.add_option("--mag-start", o->effects.mag_disturbance_start_s, "disturbance start [s]");
       sub.add_option("--mag-end", o->effects.mag_disturbance_end_s, "disturbance end [s]");

@@ -124,7 +124,8 @@ void ValidateImuStream(const ImuStreamData& d) {
     throw std::invalid_argument("IMU stream: movement must be empty or one row per t_s");
   auto row = [](size_t k) { return " at row " + std::to_string(k + 1); };
   for (size_t k = 0; k < n; ++k) {
-    if (!std::isfinite(d.t[k])) throw std::invalid_argument("IMU stream: t_s is not finite" + row(k));
+    if (!std::isfinite(d.t[k]))
+      throw std::invalid_argument("IMU stream: t_s is not finite" + row(k));
     if (k > 0 && !(d.t[k] > d.t[k - 1]))
       throw std::invalid_argument("IMU stream: t_s does not increase" + row(k));
     if (!d.gyro[k].allFinite())
@@ -418,8 +419,8 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
       }
       for (int j : test_idx) {
         const double line = A.white_level[i] / std::sqrt(A.tau_s[j]);
-        const double z = (A.adev_rad_s[i][j] / line - 1.0) /
-                         std::hypot(A.rel_sigma[j], white_rel[i]);
+        const double z =
+            (A.adev_rad_s[i][j] / line - 1.0) / std::hypot(A.rel_sigma[j], white_rel[i]);
         best_z = std::max(best_z, z);
         if (z > gb.critical) axis_hit[i] = true;
       }
@@ -451,7 +452,8 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
       gb.values.push_back({"white_noise_density" + ax + "_rad_s_sqrt_hz", N[i], Ns[i]});
       gb.values.push_back({"bias_instability" + ax + "_rad_s", B[i], Bs[i]});
       gb.values.push_back({"rate_random_walk" + ax + "_rad_s_sqrt_s", K[i], Ks[i]});
-      if (a.rests.size() >= 2) gb.values.push_back({"bias_drift" + ax + "_rad_s", drift[i], drift_sigma[i]});
+      if (a.rests.size() >= 2)
+        gb.values.push_back({"bias_drift" + ax + "_rad_s", drift[i], drift_sigma[i]});
     }
     gb.significant = !gb.axes.empty();
     gb.note = "white line from the data's short-τ level (stated " +
@@ -473,59 +475,78 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
   md.axes = {"magnetometer"};
   a.mag_norm_uT.assign(c.n, kNaN);
   a.mag_dip_rad.assign(c.n, kNaN);
+  double ext_norm_tol = s.filter.mag_norm_tolerance, ext_dip_tol = s.filter.mag_dip_tolerance;
   {
-    const double gate_n = std::max(s.band_z * a.sigma_mag_norm_uT,
-                                   s.filter.mag_norm_tolerance * a.mag_ref_norm_uT);
-    const double gate_d = std::max(s.band_z * a.sigma_dip_rad, s.filter.mag_dip_tolerance);
-    long n_all = 0, out_noise = 0, out_gate = 0, out_gate_norm = 0, out_gate_dip = 0;
-    double max_dn = 0.0, max_dd = 0.0;
+    // Per-sample deviations from the reference (dip from the base filter's attitude).
+    std::vector<double> dn, dd, dd_test;
     for (int k = 0; k < c.n; ++k) {
       const double m = data.mag_uT[k].norm();
       a.mag_norm_uT[k] = m;
-      if (q_base[k].allFinite()) {
-        const Eigen::Vector3d down_B = -geometry::QuatToMatrix(q_base[k]).transpose() * up;
-        a.mag_dip_rad[k] = std::asin(std::clamp(data.mag_uT[k].dot(down_B) / m, -1.0, 1.0));
-      }
+      if (!q_base[k].allFinite()) continue;
+      const Eigen::Vector3d down_B = -geometry::QuatToMatrix(q_base[k]).transpose() * up;
+      a.mag_dip_rad[k] = std::asin(std::clamp(data.mag_uT[k].dot(down_B) / m, -1.0, 1.0));
       if (k >= rb && k < re) continue;  // the reference itself
-      ++n_all;
-      const double dn = std::abs(m - a.mag_ref_norm_uT);
-      // Dip tested where the accelerometer measures gravity alone (rests).
-      double dd = 0.0;
-      if (c.rest_mask[k]) {
-        const double f = data.accel[k].norm();
-        dd = std::abs(std::asin(std::clamp(-data.mag_uT[k].dot(data.accel[k]) / (m * f), -1.0, 1.0)) -
-                      a.mag_ref_dip_rad);
-      }
-      max_dn = std::max(max_dn, dn);
-      max_dd = std::max(max_dd, dd);
-      if (dn > s.band_z * a.sigma_mag_norm_uT || dd > s.band_z * a.sigma_dip_rad) ++out_noise;
-      const bool gn = dn > gate_n, gd = dd > gate_d;
+      dn.push_back(m - a.mag_ref_norm_uT);
+      dd.push_back(a.mag_dip_rad[k] - a.mag_ref_dip_rad);
+      // The test's dip: at rests from the accelerometer (gravity alone there); in motion the
+      // filter's tilt may carry the accelerometer's own error, so only the norm is tested.
+      const double f = data.accel[k].norm();
+      dd_test.push_back(
+          c.rest_mask[k]
+              ? std::asin(std::clamp(-data.mag_uT[k].dot(data.accel[k]) / (m * f), -1.0, 1.0)) -
+                    a.mag_ref_dip_rad
+              : 0.0);
+    }
+    // Robust spread about the reference (1.4826 MAD): the field the data shows most of the time,
+    // never below the noise of the reference rest. A disturbance is what falls outside it.
+    auto robust = [](const std::vector<double>& v, double floor) {
+      std::vector<double> abs_v;
+      for (double x : v) abs_v.push_back(std::abs(x));
+      return std::max(1.4826 * Median(abs_v), floor);
+    };
+    const double sig_n = robust(dn, a.sigma_mag_norm_uT), sig_d = robust(dd, a.sigma_dip_rad);
+    const double gate_n = s.band_z * sig_n, gate_d = s.band_z * sig_d;
+    const long n_all = static_cast<long>(dn.size());
+    long out_noise = 0, out_gate = 0, out_gate_norm = 0, out_gate_dip = 0;
+    double max_dn = 0.0, max_dd = 0.0;
+    for (size_t i = 0; i < dn.size(); ++i) {
+      max_dn = std::max(max_dn, std::abs(dn[i]));
+      max_dd = std::max(max_dd, std::abs(dd_test[i]));
+      if (std::abs(dn[i]) > s.band_z * a.sigma_mag_norm_uT ||
+          std::abs(dd_test[i]) > s.band_z * a.sigma_dip_rad)
+        ++out_noise;
+      const bool gn = std::abs(dn[i]) > gate_n, gd = std::abs(dd_test[i]) > gate_d;
       out_gate += gn || gd;
       out_gate_norm += gn;
       out_gate_dip += gd;
     }
-    const double p_band = 2.0 * NormalUpper(s.band_z);
-    const double p0 = std::max(2.0 * NormalUpper(gate_n / a.sigma_mag_norm_uT) +
-                                   2.0 * NormalUpper(gate_d / a.sigma_dip_rad),
-                               s.outlier_rate);
-    const double p_noise = BinomialUpper(out_noise, n_all, std::max(2.0 * p_band, s.outlier_rate));
-    const double p_gate = BinomialUpper(out_gate, n_all, p0);
+    const double p_band = std::max(4.0 * NormalUpper(s.band_z), s.outlier_rate);
+    const double p_noise = BinomialUpper(out_noise, n_all, p_band);
+    const double p_gate = BinomialUpper(out_gate, n_all, p_band);
     md.statistic = ZOf(p_gate);
     md.critical = NormalQuantileUpper(alpha_c);
-    md.significant = p_gate < alpha_c;
+    md.significant = n_all > 0 && p_gate < alpha_c;
+    ext_norm_tol = gate_n / a.mag_ref_norm_uT;
+    a.mag_gate_norm_uT = gate_n;
+    a.mag_gate_dip_rad = gate_d;
+    ext_dip_tol = gate_d;
     const double frac_noise = n_all ? static_cast<double>(out_noise) / n_all : 0.0;
     const double frac_gate = n_all ? static_cast<double>(out_gate) / n_all : 0.0;
     auto binom_sigma = [&](double f) { return n_all ? std::sqrt(f * (1 - f) / n_all) : 0.0; };
     md.values = {{"reference_norm_uT", a.mag_ref_norm_uT, a.sigma_mag_norm_uT},
                  {"reference_dip_rad", a.mag_ref_dip_rad, a.sigma_dip_rad},
-                 {"max_norm_deviation_uT", max_dn, a.sigma_mag_norm_uT},
-                 {"max_dip_deviation_at_rest_rad", max_dd, a.sigma_dip_rad},
-                 {"fraction_outside_noise_band", frac_noise, binom_sigma(frac_noise)},
+                 {"robust_sigma_norm_uT", sig_n, sig_n / std::sqrt(2.0 * std::max(1L, n_all))},
+                 {"robust_sigma_dip_rad", sig_d, sig_d / std::sqrt(2.0 * std::max(1L, n_all))},
+                 {"max_norm_deviation_uT", max_dn, sig_n},
+                 {"max_dip_deviation_at_rest_rad", max_dd, sig_d},
+                 {"fraction_outside_reference_noise_band", frac_noise, binom_sigma(frac_noise)},
                  {"fraction_outside_gate", frac_gate, binom_sigma(frac_gate)},
                  {"samples_outside_gate_norm", static_cast<double>(out_gate_norm), 0.0},
                  {"samples_outside_gate_dip", static_cast<double>(out_gate_dip), 0.0},
-                 {"p_value_noise_band", p_noise, 0.0},
-                 {"p_value_gate", p_gate, 0.0}};
+                 {"p_value_reference_noise_band", p_noise, 0.0},
+                 {"p_value_gate", p_gate, 0.0},
+                 {"extension_mag_norm_tolerance", ext_norm_tol, 0.0},
+                 {"extension_mag_dip_tolerance_rad", ext_dip_tol, 0.0}};
   }
 
   // ===== accel_motion =====
@@ -554,11 +575,12 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
     am.critical = NormalQuantileUpper(alpha_c);
     am.significant = n_mov > 0 && p < alpha_c;
     const double frac = n_mov ? static_cast<double>(out) / n_mov : 0.0;
-    am.values = {{"gravity_reference_m_s2", a.gravity_ref, a.sigma_accel_norm},
-                 {"rms_norm_minus_g_in_motion_m_s2", norm_err.value(), a.sigma_accel_norm},
-                 {"rms_gravity_disagreement_rad", angle.value(), a.sigma_accel_norm / a.gravity_ref},
-                 {"fraction_outside_noise_band", frac, n_mov ? std::sqrt(frac * (1 - frac) / n_mov) : 0.0},
-                 {"p_value", p, 0.0}};
+    am.values = {
+        {"gravity_reference_m_s2", a.gravity_ref, a.sigma_accel_norm},
+        {"rms_norm_minus_g_in_motion_m_s2", norm_err.value(), a.sigma_accel_norm},
+        {"rms_gravity_disagreement_rad", angle.value(), a.sigma_accel_norm / a.gravity_ref},
+        {"fraction_outside_noise_band", frac, n_mov ? std::sqrt(frac * (1 - frac) / n_mov) : 0.0},
+        {"p_value", p, 0.0}};
     if (n_mov == 0) {
       am.tested = false;
       am.note = "no motion samples";
@@ -593,8 +615,10 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
       const double sigma = taus.size() >= 2 ? Sd(taus) / std::sqrt(taus.size()) : kNaN;
       const size_t h = motion_idx.size() / 2;
       split = motion_idx[h];
-      tau_first = EstimateLag(c, w_truth, {motion_idx.begin(), motion_idx.begin() + static_cast<long>(h)});
-      tau_second = EstimateLag(c, w_truth, {motion_idx.begin() + static_cast<long>(h), motion_idx.end()});
+      tau_first =
+          EstimateLag(c, w_truth, {motion_idx.begin(), motion_idx.begin() + static_cast<long>(h)});
+      tau_second =
+          EstimateLag(c, w_truth, {motion_idx.begin() + static_cast<long>(h), motion_idx.end()});
       to.statistic = std::isfinite(sigma) && sigma > 0 ? std::abs(tau) / sigma : 0.0;
       to.critical = NormalQuantileUpper(alpha_c / 2.0);
       to.significant = to.statistic > to.critical && std::abs(tau) >= s.min_offset_periods * c.dt;
@@ -624,6 +648,8 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
       f.reject_mag = true;
       f.mag_ref_norm = a.mag_ref_norm_uT;
       f.mag_ref_dip = a.mag_ref_dip_rad;
+      f.mag_norm_tolerance = ext_norm_tol;
+      f.mag_dip_tolerance = ext_dip_tol;
     }
     if (acc) f.reject_accel = true;
     return f;
@@ -683,7 +709,9 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
   }
   for (const auto& cnd : a.candidates)
     spdlog::info("imu analysis: {} {} (statistic {:.2f}, critical {:.2f})", cnd.cause,
-                 !cnd.tested ? "not tested" : cnd.significant ? "FOUND" : "not significant",
+                 !cnd.tested       ? "not tested"
+                 : cnd.significant ? "FOUND"
+                                   : "not significant",
                  cnd.statistic, cnd.critical);
   return a;
 }

@@ -28,8 +28,7 @@ struct Harmonics {
 };
 
 Harmonics Draw(double total_amplitude, std::mt19937_64& rng) {
-  std::uniform_real_distribution<double> f(0.2, 1.2), ph(0.0, 2.0 * std::numbers::pi),
-      a(0.3, 1.0);
+  std::uniform_real_distribution<double> f(0.2, 1.2), ph(0.0, 2.0 * std::numbers::pi), a(0.3, 1.0);
   Harmonics h;
   for (int i = 0; i < 3; ++i) {
     double sum = 0.0;
@@ -46,7 +45,8 @@ Harmonics Draw(double total_amplitude, std::mt19937_64& rng) {
 
 Eigen::Vector4d QuatExp(const Eigen::Vector3d& phi) {
   const double a = phi.norm();
-  if (a < 1e-12) return Eigen::Vector4d(1.0, 0.5 * phi.x(), 0.5 * phi.y(), 0.5 * phi.z()).normalized();
+  if (a < 1e-12)
+    return Eigen::Vector4d(1.0, 0.5 * phi.x(), 0.5 * phi.y(), 0.5 * phi.z()).normalized();
   const Eigen::Vector3d v = std::sin(0.5 * a) / a * phi;
   return Eigen::Vector4d(std::cos(0.5 * a), v.x(), v.y(), v.z());
 }

@@ -72,17 +72,17 @@ struct ImuAnalysisSettings {
   double mag_noise_density_uT = sim::ImuModelSettings{}.mag_noise_density;   ///< [µT/√Hz]
   double alpha = 0.01;  ///< false-positive rate of the whole selection [-]
   // Rest segments.
-  double min_rest_s = 3.0;     ///< shorter rests are not used [s]
-  double still_gyro = 0.05;    ///< detected still: |ω_m − median| below [rad/s]
-  double still_accel = 0.3;    ///< and ||f| − g| below [m/s²]
-  double gravity = 9.81;       ///< [m/s²], for still detection only
+  double min_rest_s = 3.0;        ///< shorter rests are not used [s]
+  double still_gyro = 0.05;       ///< detected still: |ω_m − median| below [rad/s]
+  double still_accel = 0.3;       ///< and ||f| − g| below [m/s²]
+  double gravity = 9.81;          ///< [m/s²], for still detection only
   double reference_max_s = 30.0;  ///< the reference uses at most this much of the first rest [s]
   // Allan deviation.
   double allan_white_tau_min_s = 0.05;  ///< white level read over [min, max] [s]
   double allan_white_tau_max_s = 0.5;
-  double allan_test_tau_min_s = 1.0;  ///< long-τ test from here [s]
-  double allan_max_rel_sigma = 0.4;   ///< τ with a larger relative confidence are not used [-]
-  double earth_rate = 7.292e-5;       ///< [rad/s]
+  double allan_test_tau_min_s = 1.0;    ///< long-τ test from here [s]
+  double allan_max_rel_sigma = 0.4;     ///< τ with a larger relative confidence are not used [-]
+  double earth_rate = 7.292e-5;         ///< [rad/s]
   double bias_time_constant_s = 100.0;  ///< turns B into a random walk for the extension [s]
   double base_bias_random_walk = 1e-7;  ///< the base filter's "constant" bias [rad/s/√s]
   // Field and accelerometer bands.
@@ -90,9 +90,9 @@ struct ImuAnalysisSettings {
   /// Outlier fraction the base model tolerates: the binomial tests' p₀ never goes below it [-].
   double outlier_rate = 1e-3;
   // Time offset.
-  double max_lag_s = 0.2;            ///< lag grid ± [s]
-  int offset_blocks = 8;             ///< blocks for the offset's σ [-]
-  double min_offset_periods = 0.5;   ///< smallest reported offset [sample periods]
+  double max_lag_s = 0.2;           ///< lag grid ± [s]
+  int offset_blocks = 8;            ///< blocks for the offset's σ [-]
+  double min_offset_periods = 0.5;  ///< smallest reported offset [sample periods]
   /// The filter (base and extensions differ only in the fields named above). ENU.
   estimation::OrientationKfSettings filter = [] {
     estimation::OrientationKfSettings s;
@@ -109,13 +109,13 @@ struct ImuValue {
 
 /// One candidate: its test, and (with truth) its gain.
 struct ImuCandidate {
-  std::string cause;               ///< gyro_bias | magnetic_disturbance | accel_motion | time_offset
-  std::vector<std::string> axes;   ///< axes found ("x","y","z") or the sensor
-  std::vector<ImuValue> values;    ///< fitted figures with σ (SI, unit in the name)
-  double statistic = 0.0;          ///< z (or −Φ⁻¹(p) for a binomial test)
-  double critical = 0.0;           ///< its critical value after Bonferroni
+  std::string cause;              ///< gyro_bias | magnetic_disturbance | accel_motion | time_offset
+  std::vector<std::string> axes;  ///< axes found ("x","y","z") or the sensor
+  std::vector<ImuValue> values;   ///< fitted figures with σ (SI, unit in the name)
+  double statistic = 0.0;         ///< z (or −Φ⁻¹(p) for a binomial test)
+  double critical = 0.0;          ///< its critical value after Bonferroni
   bool significant = false;
-  bool tested = false;             ///< false: not testable on this stream (reason in note)
+  bool tested = false;  ///< false: not testable on this stream (reason in note)
   std::string note;
   OrientationScore before, after;  ///< base filter vs base + this extension (movement samples)
 };
@@ -135,6 +135,7 @@ struct ImuAnalysis {
   // Reference fitted on the first rest.
   double mag_ref_norm_uT = 0.0, mag_ref_dip_rad = 0.0, gravity_ref = 0.0;
   double sigma_mag_norm_uT = 0.0, sigma_dip_rad = 0.0, sigma_accel_norm = 0.0;
+  double mag_gate_norm_uT = 0.0, mag_gate_dip_rad = 0.0;  ///< the fitted gate half-widths
   AllanCurve allan;
   std::vector<ImuCandidate> candidates;  ///< all four, tested or not
   std::vector<const ImuCandidate*> effects() const;

@@ -34,13 +34,13 @@
 namespace rcal::sim {
 
 struct ImuStreamSettings {
-  double rate_hz = 100.0;     ///< sample rate [Hz]
-  int motion_segments = 3;    ///< number of motion segments (a rest before, between, after)
-  double rest_s = 20.0;       ///< length of each rest segment [s]
-  double motion_s = 20.0;     ///< length of each motion segment [s]
-  double max_rate = 2.0;      ///< peak |ω| per axis in motion [rad/s]
-  int substeps = 10;          ///< integration steps per sample [-]
-  double gravity = 9.81;      ///< [m/s²]
+  double rate_hz = 100.0;   ///< sample rate [Hz]
+  int motion_segments = 3;  ///< number of motion segments (a rest before, between, after)
+  double rest_s = 20.0;     ///< length of each rest segment [s]
+  double motion_s = 20.0;   ///< length of each motion segment [s]
+  double max_rate = 2.0;    ///< peak |ω| per axis in motion [rad/s]
+  int substeps = 10;        ///< integration steps per sample [-]
+  double gravity = 9.81;    ///< [m/s²]
   /// Earth field in ENU [µT] (|m| ≈ 48 µT, dip ≈ 65°).
   Eigen::Vector3d m_W_uT = Eigen::Vector3d(0.0, 20.0, -44.0);
   /// Initial orientation IMU → ENU [w, x, y, z].
@@ -58,19 +58,19 @@ struct ImuStreamEffects {
   double mag_disturbance_end_s = 0.0;    ///< [s]
   /// Disturbance field added in the earth frame [µT].
   Eigen::Vector3d mag_disturbance_uT = Eigen::Vector3d(10.0, 0.0, 0.0);
-  double linear_accel = 0.0;  ///< Σ of harmonic amplitudes per axis during motion [m/s²]
+  double linear_accel = 0.0;   ///< Σ of harmonic amplitudes per axis during motion [m/s²]
   double time_offset_s = 0.0;  ///< τ [s], see the header comment
 };
 
 /// One row of the BROAD layout.
 struct ImuStreamSample {
-  double t = 0.0;                                         ///< [s]
-  Eigen::Vector3d gyro = Eigen::Vector3d::Zero();         ///< [rad/s]
-  Eigen::Vector3d accel = Eigen::Vector3d::Zero();        ///< specific force [m/s²]
-  Eigen::Vector3d mag_uT = Eigen::Vector3d::Zero();       ///< [µT]
+  double t = 0.0;                                        ///< [s]
+  Eigen::Vector3d gyro = Eigen::Vector3d::Zero();        ///< [rad/s]
+  Eigen::Vector3d accel = Eigen::Vector3d::Zero();       ///< specific force [m/s²]
+  Eigen::Vector3d mag_uT = Eigen::Vector3d::Zero();      ///< [µT]
   Eigen::Vector4d q_WI = Eigen::Vector4d(1.0, 0, 0, 0);  ///< truth IMU → ENU [w,x,y,z]
-  int movement = 0;                                       ///< 1 in motion segments
-  Eigen::Vector3d gyro_bias = Eigen::Vector3d::Zero();    ///< truth total gyro bias [rad/s]
+  int movement = 0;                                      ///< 1 in motion segments
+  Eigen::Vector3d gyro_bias = Eigen::Vector3d::Zero();   ///< truth total gyro bias [rad/s]
 };
 
 /// Simulates the stream; see the header comment.

@@ -1,0 +1,120 @@
+// Simulated IMU streams (sim/imu_stream.hpp): the truth is self-consistent and every switchable
+// effect is there with the size asked for, checked against independent computations.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "rcal/geometry/so3.hpp"
+#include "rcal/sim/imu_stream.hpp"
+
+namespace {
+
+using rcal::geometry::Log;
+using rcal::geometry::QuatToMatrix;
+namespace sim = rcal::sim;
+
+sim::ImuStreamSettings Quiet() {
+  sim::ImuStreamSettings s;
+  s.motion_segments = 2;
+  s.rest_s = 5.0;
+  s.motion_s = 6.0;
+  s.imu.white_noise = false;
+  return s;
+}
+
+TEST(ImuStream, LayoutAndTruthAreConsistent) {
+  std::mt19937_64 rng(1);
+  const auto s = sim::SimulateImuStream(Quiet(), {}, rng);
+  ASSERT_EQ(s.size(), 2700u);  // (5 + 2·(6 + 5)) s at 100 Hz
+  EXPECT_EQ(s[0].movement, 0);
+  EXPECT_EQ(s[600].movement, 1);   // 6 s: first motion segment
+  EXPECT_EQ(s[1200].movement, 0);  // 12 s: second rest
+  double max_rate_err = 0.0, max_f_err = 0.0, max_m_err = 0.0;
+  for (size_t k = 1; k + 1 < s.size(); ++k) {
+    // Gyro (noise off) = body rate of the truth quaternion by central differences.
+    const Eigen::Vector3d w =
+        Log(QuatToMatrix(s[k - 1].q_WI).transpose() * QuatToMatrix(s[k + 1].q_WI)) / 0.02;
+    max_rate_err = std::max(max_rate_err, (w - s[k].gyro).norm());
+    // Specific force = gravity (up in ENU) in the body; field of constant norm and dip.
+    const Eigen::Matrix3d R = QuatToMatrix(s[k].q_WI);
+    max_f_err = std::max(max_f_err, (R * s[k].accel - Eigen::Vector3d(0, 0, 9.81)).norm());
+    max_m_err = std::max(max_m_err, (R * s[k].mag_uT - Quiet().m_W_uT).norm());
+  }
+  EXPECT_LT(max_rate_err, 2e-3);  // O(dt²) of the central difference at ≤ 2 rad/s
+  EXPECT_LT(max_f_err, 1e-9);
+  EXPECT_LT(max_m_err, 1e-9);
+  EXPECT_LT(s[300].gyro.norm(), 1e-12);  // at rest
+}
+
+TEST(ImuStream, SameSeedSameStream) {
+  std::mt19937_64 a(7), b(7), c(8);
+  const auto sa = sim::SimulateImuStream(sim::ImuStreamSettings{}, {}, a);
+  const auto sb = sim::SimulateImuStream(sim::ImuStreamSettings{}, {}, b);
+  const auto sc = sim::SimulateImuStream(sim::ImuStreamSettings{}, {}, c);
+  ASSERT_EQ(sa.size(), sb.size());
+  for (size_t k = 0; k < sa.size(); k += 97) EXPECT_EQ(sa[k].gyro, sb[k].gyro);
+  EXPECT_NE(sa[5000].gyro, sc[5000].gyro);
+}
+
+TEST(ImuStream, EffectsHaveTheirSize) {
+  // Magnetic disturbance: the field changes by exactly d_W over its interval.
+  sim::ImuStreamEffects e;
+  e.mag_disturbance = true;
+  e.mag_disturbance_start_s = 7.0;
+  e.mag_disturbance_end_s = 9.0;
+  e.mag_disturbance_uT = Eigen::Vector3d(3.0, -4.0, 0.0);
+  std::mt19937_64 rng(2);
+  const auto s = sim::SimulateImuStream(Quiet(), e, rng);
+  for (size_t k : {650u, 850u, 950u}) {
+    const Eigen::Vector3d m_W = QuatToMatrix(s[k].q_WI) * s[k].mag_uT;
+    const bool in = s[k].t >= 7.0 && s[k].t < 9.0;
+    EXPECT_NEAR((m_W - Quiet().m_W_uT).norm(), in ? 5.0 : 0.0, 1e-9) << s[k].t;
+  }
+  // Linear acceleration only during motion, bounded by its amplitude.
+  sim::ImuStreamEffects la;
+  la.linear_accel = 2.0;
+  std::mt19937_64 rng2(3);
+  const auto s2 = sim::SimulateImuStream(Quiet(), la, rng2);
+  double max_rest = 0.0, max_motion = 0.0;
+  for (const auto& r : s2) {
+    const double a = (QuatToMatrix(r.q_WI) * r.accel - Eigen::Vector3d(0, 0, 9.81)).norm();
+    (r.movement ? max_motion : max_rest) = std::max(r.movement ? max_motion : max_rest, a);
+  }
+  EXPECT_LT(max_rest, 1e-9);
+  EXPECT_GT(max_motion, 0.5);
+  EXPECT_LE(max_motion, 2.0 * std::sqrt(3.0) + 1e-9);
+  // Time offset: the gyro at t equals the offset-free gyro at t − τ (τ = 3 samples).
+  sim::ImuStreamEffects to;
+  to.time_offset_s = 0.03;
+  std::mt19937_64 r3(4), r4(4);
+  const auto shifted = sim::SimulateImuStream(Quiet(), to, r3);
+  const auto plain = sim::SimulateImuStream(Quiet(), {}, r4);
+  for (size_t k = 600; k < 1100; k += 37) {
+    EXPECT_LT((shifted[k].gyro - plain[k - 3].gyro).norm(), 1e-9);
+    EXPECT_LT((shifted[k].q_WI - plain[k].q_WI).norm(), 1e-12);  // truth is not shifted
+  }
+}
+
+TEST(ImuStream, GyroBiasRandomWalkHasItsRate) {
+  // Increments of the walk over 1 s have σ = K·√1 s, on the chosen axis only.
+  sim::ImuStreamSettings st;
+  st.motion_segments = 0;
+  st.rest_s = 400.0;
+  sim::ImuStreamEffects e;
+  e.gyro_bias_random_walk = Eigen::Vector3d(0.0, 2e-4, 0.0);
+  std::mt19937_64 rng(5);
+  const auto s = sim::SimulateImuStream(st, e, rng);
+  double sum = 0.0;
+  int n = 0;
+  for (size_t k = 100; k < s.size(); k += 100, ++n) {
+    const Eigen::Vector3d d = s[k].gyro_bias - s[k - 100].gyro_bias;
+    EXPECT_EQ(d.x(), 0.0);
+    EXPECT_EQ(d.z(), 0.0);
+    sum += d.y() * d.y();
+  }
+  const double sigma = std::sqrt(sum / n);
+  EXPECT_NEAR(sigma, 2e-4, 2e-4 * 4.0 / std::sqrt(2.0 * n));  // ±4σ of a σ estimate from n
+}
+
+}  // namespace
