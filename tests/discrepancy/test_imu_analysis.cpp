@@ -235,6 +235,8 @@ TEST(ImuAnalysis, BroadTrial30NamesTheMagneticDisturbanceAndGatingGainsHeading) 
   const auto& c = Cand(a, "magnetic_disturbance");
   EXPECT_TRUE(c.significant) << Join(Causes(a));
   EXPECT_LT(c.after.heading.value(), c.before.heading.value());
+  EXPECT_EQ(a.gain_metric, "heading");
+  EXPECT_LT(a.extended_score.heading.value(), a.base_score.heading.value());
 }
 
 }  // namespace

@@ -475,10 +475,12 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
   md.axes = {"magnetometer"};
   a.mag_norm_uT.assign(c.n, kNaN);
   a.mag_dip_rad.assign(c.n, kNaN);
+  a.mag_disturbed.assign(c.n, 0);
   double ext_norm_tol = s.filter.mag_norm_tolerance, ext_dip_tol = s.filter.mag_dip_tolerance;
   {
     // Per-sample deviations from the reference (dip from the base filter's attitude).
     std::vector<double> dn, dd, dd_test;
+    std::vector<int> dk;  // sample index of each deviation
     for (int k = 0; k < c.n; ++k) {
       const double m = data.mag_uT[k].norm();
       a.mag_norm_uT[k] = m;
@@ -487,6 +489,7 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
       a.mag_dip_rad[k] = std::asin(std::clamp(data.mag_uT[k].dot(down_B) / m, -1.0, 1.0));
       if (k >= rb && k < re) continue;  // the reference itself
       dn.push_back(m - a.mag_ref_norm_uT);
+      dk.push_back(k);
       dd.push_back(a.mag_dip_rad[k] - a.mag_ref_dip_rad);
       // The test's dip: at rests from the accelerometer (gravity alone there); in motion the
       // filter's tilt may carry the accelerometer's own error, so only the norm is tested.
@@ -517,6 +520,12 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
         ++out_noise;
       const bool gn = std::abs(dn[i]) > gate_n, gd = std::abs(dd_test[i]) > gate_d;
       out_gate += gn || gd;
+      if (gn || gd) {
+        // Disturbed window: ±disturbed_window_s around each sample outside the gate.
+        const int w = static_cast<int>(std::round(s.disturbed_window_s * c.rate));
+        for (int j = std::max(0, dk[i] - w); j < std::min(c.n, dk[i] + w + 1); ++j)
+          a.mag_disturbed[j] = 1;
+      }
       out_gate_norm += gn;
       out_gate_dip += gd;
     }
@@ -674,7 +683,20 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
     const OrientationScore base_score = ScoreAgainstTruth(data, q_base);
     gb.before = md.before = am.before = to.before = base_score;
     gb.after = ScoreAgainstTruth(data, run(key(true, false, false), with(true, false, false)));
-    md.after = ScoreAgainstTruth(data, run(key(false, true, false), with(false, true, false)));
+    const auto& q_mag = run(key(false, true, false), with(false, true, false));
+    md.after = ScoreAgainstTruth(data, q_mag);
+    // Heading over the disturbed windows alone (movement samples), where the gate acts.
+    Rms hb, he;
+    for (int k = 0; k < c.n; ++k) {
+      if (!a.mag_disturbed[k] || !Moving(data, c.rest_mask, k) || !data.q_truth[k].allFinite() ||
+          !q_base[k].allFinite() || !q_mag[k].allFinite())
+        continue;
+      hb.Add(BroadErrors(q_base[k], data.q_truth[k]).heading);
+      he.Add(BroadErrors(q_mag[k], data.q_truth[k]).heading);
+    }
+    md.values.push_back({"disturbed_window_samples", static_cast<double>(hb.n), 0.0});
+    md.values.push_back({"heading_rmse_disturbed_windows_base_rad", hb.value(), 0.0});
+    md.values.push_back({"heading_rmse_disturbed_windows_extended_rad", he.value(), 0.0});
     am.after = ScoreAgainstTruth(data, run(key(false, false, true), with(false, false, true)));
     if (to.tested && std::isfinite(tau_first) && std::isfinite(tau_second))
       to.after = score_shifted(q_base);
@@ -682,7 +704,7 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
   a.candidates = {gb, md, am, to};
 
   const bool sb = gb.significant, sm = md.significant, sa = am.significant, st = to.significant;
-  a.gain_metric = (sm && !sb && !sa && !st) ? "heading" : "total";
+  a.gain_metric = sm ? "heading" : "total";  // the gate acts on heading only
   if (a.has_truth) {
     const auto& q_ext = run(key(sb, sm, sa), with(sb, sm, sa));
     a.base_score = ScoreAgainstTruth(data, q_base);
