@@ -1,13 +1,17 @@
 // ik_corrector: answers IK_REQUEST with IK_COMMAND, solved by rcal::ik::LevenbergMarquardtIk on
 // the latest calibrated parameters (KINEMATIC_PARAMS; the nominal model until the first), and
 // reports the nominal model's answer and how far it would put the tool (nominal_tool_error).
-// The node (checks, conversions, HEALTH) is rcal::transport::IkCorrectorNode.
+// With --effects (an `rcal analyze` analysis.json or an `rcal calibrate --effects` result) the
+// calibrated answer is solved on the extended model: joint compliance, gear errors, backlash,
+// thermal growth as identified. The node (checks, conversions, HEALTH) is
+// rcal::transport::IkCorrectorNode.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
 #include <cerrno>
 #include <cstring>
 
+#include "rcal/io/effects_json.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/services/common.hpp"
 #include "rcal/transport/ik_corrector_node.hpp"
@@ -15,7 +19,7 @@
 
 int main(int argc, char** argv) {
   using namespace rcal;
-  std::string robot_path = "config/robots/grb3016.yaml", lcm_url;
+  std::string robot_path = "config/robots/grb3016.yaml", lcm_url, effects_path;
   transport::IkCorrectorNode::Options options;
   CLI::App app{
       "ik_corrector: IK_REQUEST -> IK_COMMAND on the calibrated model (latest KINEMATIC_PARAMS).\n"
@@ -23,13 +27,30 @@ int main(int argc, char** argv) {
   app.add_option("--robot", robot_path, "robot YAML or URDF")->capture_default_str();
   app.add_option("--name", options.name, "process name in HEALTH")->capture_default_str();
   app.add_option("--lcm-url", lcm_url, "LCM URL");
+  app.add_option("--effects", effects_path,
+                 "non-geometric effects and their values (analysis.json of rcal analyze, or the "
+                 "JSON of rcal calibrate --effects)");
+  app.add_option("--payload", options.payload_kg, "payload at the tool for every command [kg]")
+      ->capture_default_str();
+  app.add_option("--temperature", options.temperature_c,
+                 "arm temperature for thermal growth [degC] (default: unknown, no growth)");
+  app.add_option("--link-density", options.gravity.link_density_kg_per_m,
+                 "gravity model of joint compliance [kg/m]")
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   try {
     services::InstallStopHandlers();
     transport::LcmTransport t(lcm_url);
     const auto robot = io::LoadRobot(services::RepoPath(robot_path));
+    if (!effects_path.empty()) {
+      const io::AnalysisEffects ae =
+          io::ReadAnalysisEffects(services::RepoPath(effects_path), robot.model);
+      options.effects = ae.effects;
+      options.effect_values = ae.values;
+    }
     transport::IkCorrectorNode node(t, robot.model, options);
-    spdlog::info("ik_corrector on {} ({})", t.url(), robot.model.name());
+    spdlog::info("ik_corrector on {} ({}, {} non-geometric effects)", t.url(), robot.model.name(),
+                 options.effects.size());
     if (const int rc =
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
         rc != 0)

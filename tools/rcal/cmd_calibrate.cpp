@@ -15,12 +15,12 @@
 
 #include "calibrate_log.hpp"
 #include "command.hpp"
-#include "effects_json.hpp"
 #include "rcal/geometry/so3.hpp"
 #include "rcal/identification/calibration.hpp"
 #include "rcal/identification/extended_lm.hpp"
 #include "rcal/identification/extended_measurement.hpp"
 #include "rcal/io/atomic_file.hpp"
+#include "rcal/io/effects_json.hpp"
 #include "rcal/io/plot.hpp"
 #include "rcal/io/pose_dataset.hpp"
 #include "rcal/io/robot_urdf.hpp"
@@ -111,11 +111,11 @@ ExtendedResult FitEffects(const Options& o, const kinematics::KinematicModel& mo
                           const std::vector<bool>& is_test,
                           const identification::CalibrationFit& fit,
                           const identification::CalibrationSettings& settings) {
-  const AnalysisEffects ae = ReadAnalysisEffects(ResolvePath(o.effects_path), model);
+  const io::AnalysisEffects ae = io::ReadAnalysisEffects(ResolvePath(o.effects_path), model);
   kinematics::GravityModel gravity;
   gravity.link_density_kg_per_m = o.link_density;
   kinematics::ExtendedModel ext(model, ae.effects, gravity);
-  const std::vector<kinematics::EffectContext> contexts = ToContexts(data);
+  const std::vector<kinematics::EffectContext> contexts = io::ToContexts(data);
   CheckContexts(ext, contexts, o.data);
   std::vector<kinematics::PoseMeasurement> fit_ms;
   std::vector<kinematics::EffectContext> fit_ctx;
@@ -295,7 +295,7 @@ int Run(const Options& o) {
                     {"value", ext->fit.x(i)}});
     j["effects_file"] = o.effects_path;
     j["link_density_kg_per_m"] = o.link_density;
-    j["effects"] = EffectsJson(ext->model, ext->fit.e, ext->fit.sigma_e);
+    j["effects"] = io::EffectsJson(ext->model, ext->fit.e, ext->fit.sigma_e);
     j["extended_parameters"] = jx;
     j["extended_position_noise_m"] = ext->fit.position_sigma_m;
     j.update(StatsJson(ext->fit_stats, "fit_extended_"));

@@ -1,10 +1,10 @@
-#include "effects_json.hpp"
+#include "rcal/io/effects_json.hpp"
 
 #include <cmath>
 #include <fstream>
 #include <stdexcept>
 
-namespace rcal::tool {
+namespace rcal::io {
 namespace {
 
 using nlohmann::json;
@@ -124,10 +124,10 @@ json EffectsJson(const kinematics::ExtendedModel& model, const Eigen::VectorXd& 
   return list;
 }
 
-std::vector<kinematics::EffectContext> ToContexts(const io::PoseDataset& data) {
+std::vector<kinematics::EffectContext> ToContexts(const PoseDataset& data) {
   std::vector<kinematics::EffectContext> out(data.samples.size());
   for (size_t i = 0; i < out.size(); ++i) {
-    const io::PoseSample& s = data.samples[i];
+    const PoseSample& s = data.samples[i];
     out[i].temperature_c = s.temperature;
     out[i].payload_kg = std::isnan(s.payload) ? 0.0 : s.payload;
     out[i].time_s = s.time;
@@ -136,4 +136,4 @@ std::vector<kinematics::EffectContext> ToContexts(const io::PoseDataset& data) {
   return out;
 }
 
-}  // namespace rcal::tool
+}  // namespace rcal::io

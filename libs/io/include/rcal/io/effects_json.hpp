@@ -1,6 +1,7 @@
 // The effect list of an `rcal analyze` analysis.json (cmd_analyze.cpp writes it), read back so
-// that `rcal calibrate --effects` fits the model the analysis selected, and the calibrated
-// effects written as the same JSON entries. Keys of one entry of "effects" (SI units):
+// that `rcal calibrate --effects` fits the model the analysis selected and ik_corrector commands
+// the arm with it, and the calibrated effects written as the same JSON entries. Keys of one entry
+// of "effects" (SI units):
 //   cause      "joint_compliance" | "joint_periodic" | "joint_scale" | "backlash" | "thermal"
 //   joints     [joint name]          one name for the joint causes, [] for thermal
 //   harmonic   1 | 2                 joint_periodic only
@@ -18,7 +19,7 @@
 #include "rcal/io/pose_dataset.hpp"
 #include "rcal/kinematics/joint_effects.hpp"
 
-namespace rcal::tool {
+namespace rcal::io {
 
 struct AnalysisEffects {
   std::vector<kinematics::Effect> effects;
@@ -38,6 +39,6 @@ nlohmann::json EffectsJson(const kinematics::ExtendedModel& model, const Eigen::
                            const Eigen::VectorXd& sigma);
 
 /// The context of each sample of a pose dataset (temperature, payload (absent: 0), time, dq).
-std::vector<kinematics::EffectContext> ToContexts(const io::PoseDataset& data);
+std::vector<kinematics::EffectContext> ToContexts(const PoseDataset& data);
 
-}  // namespace rcal::tool
+}  // namespace rcal::io

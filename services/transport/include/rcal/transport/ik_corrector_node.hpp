@@ -2,17 +2,26 @@
 // IK_COMMAND out, HEALTH at 1 Hz of the messages' utime. Each request is solved by
 // rcal::ik::LevenbergMarquardtIk on the calibrated model (the nominal one until the first
 // KINEMATIC_PARAMS) and on the nominal model; the command also says how far the nominal answer
-// would put the tool on the calibrated model (nominal_tool_error). Parameters for another model
-// (model id, names, sizes), non-finite values, malformed requests and undecodable bytes are
+// would put the tool on the calibrated model (nominal_tool_error). With non-geometric effects in
+// the options (an `rcal analyze` / `rcal calibrate --effects` result), the calibrated answer is
+// solved by rcal::ik::ExtendedIk on the extended model (geometric errors from KINEMATIC_PARAMS,
+// effect values from the options) under the options' context; backlash takes the direction of
+// the commanded motion (sign of the geometric answer − q_seed per joint). Parameters for another
+// model (model id, names, sizes), non-finite values, malformed requests and undecodable bytes are
 // rejected, counted in HEALTH, and change nothing.
 #pragma once
 
 #include <Eigen/Core>
+#include <limits>
+#include <optional>
 #include <string>
+#include <vector>
 
+#include "rcal/ik/extended_ik.hpp"
 #include "rcal/ik/levenberg_marquardt_ik.hpp"
 #include "rcal/ik_request_t.hpp"
 #include "rcal/kinematic_params_t.hpp"
+#include "rcal/kinematics/joint_effects.hpp"
 #include "rcal/kinematics/model.hpp"
 #include "rcal/transport/health.hpp"
 #include "rcal/transport/transport.hpp"
@@ -27,6 +36,14 @@ class IkCorrectorNode {
     std::string request_channel = "IK_REQUEST";
     std::string command_channel = "IK_COMMAND";
     std::string health_channel = "HEALTH";
+    /// The arm's non-geometric effects and their values [SI, joint_effects.hpp]; empty: the
+    /// geometric model alone.
+    std::vector<kinematics::Effect> effects;
+    Eigen::VectorXd effect_values;
+    kinematics::GravityModel gravity;
+    /// Context of every command: payload at the tool [kg], temperature [°C] (NaN: unknown).
+    double payload_kg = 0.0;
+    double temperature_c = std::numeric_limits<double>::quiet_NaN();
   };
   IkCorrectorNode(Transport& t, const kinematics::KinematicModel& model, Options options);
   IkCorrectorNode(Transport& t, const kinematics::KinematicModel& model)
@@ -38,6 +55,8 @@ class IkCorrectorNode {
 
   /// Parameter errors in use [m | rad] (the nominal model's until the first KINEMATIC_PARAMS).
   const Eigen::VectorXd& x() const { return x_; }
+  /// Effect values in use [SI] (empty without effects).
+  Eigen::VectorXd e() const { return extended_ ? extended_->e() : Eigen::VectorXd(); }
   /// utime of the KINEMATIC_PARAMS in use (0: nominal).
   int64_t params_utime() const { return params_utime_; }
   const Health& health() const { return health_; }
@@ -48,6 +67,7 @@ class IkCorrectorNode {
   const kinematics::KinematicModel& model_;
   Options o_;
   ik::LevenbergMarquardtIk calibrated_, nominal_;
+  std::optional<ik::ExtendedIk> extended_;  // with effects: the calibrated answer
   Eigen::VectorXd x_;
   int64_t params_utime_ = 0, latest_ = 0;
   Health health_;
