@@ -109,8 +109,13 @@ TEST(Discrepancy, NamesTheHiddenCauseAndJoint) {
     std::printf("%-32s found %-40s gain %.3f (true model: rms %.2f µm vs %.2f µm), z %.1f\n",
                 what.c_str(), Found(c, a).c_str(), a.gain.relative_gain,
                 a.gain.heldout_rms_after_m * 1e6, HeldOutRms(c.model, c.data, c.truth) * 1e6, f.z);
+    // The gain is nested-cross-validated: the selection is redone in each outer fold, so a
+    // marginal detection (z near the critical value) that some outer folds miss honestly gains
+    // less than the true model structure would. Clear detections gain what the truth gains.
     const double rms_true = HeldOutRms(c.model, c.data, c.truth);
-    EXPECT_NEAR(a.gain.heldout_rms_after_m, rms_true, 0.1 * rms_true) << what;
+    EXPECT_EQ(a.gain.scheme, "nested 5-fold (selection redone in each outer fold)");
+    EXPECT_NEAR(a.gain.heldout_rms_after_m, rms_true, (f.z >= 4.0 ? 0.1 : 0.25) * rms_true)
+        << what;
   }
 }
 

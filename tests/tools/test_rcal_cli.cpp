@@ -335,8 +335,8 @@ TEST(RcalCli, AnalyzeImuStreamNamesTheMagneticDisturbanceAndMeasuresItsGain) {
   EXPECT_TRUE(fs::exists(d / "sim" / "report.md"));
 
   // Real data: BROAD trial 30 (a magnet near the path) names the disturbance.
-  const Result b = RunRcal("analyze ../shared/data/broad/broad_30_100hz.csv --out " +
-                           (d / "broad30").string());
+  const Result b =
+      RunRcal("analyze ../shared/data/broad/broad_30_100hz.csv --out " + (d / "broad30").string());
   ASSERT_EQ(b.exit_code, 0) << b.output;
   const json jb = ReadJson(d / "broad30" / "analysis.json");
   bool named = false;
@@ -345,8 +345,24 @@ TEST(RcalCli, AnalyzeImuStreamNamesTheMagneticDisturbanceAndMeasuresItsGain) {
   EXPECT_TRUE(jb["gain"]["measured"].get<bool>());
 
   // A stream with a missing column is refused, naming it.
-  std::ofstream(d / "bad.csv") << "t_s,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z,mag_x,mag_y\n0,0,0,0,0,0,9.8,1,2\n";
+  std::ofstream(d / "bad.csv")
+      << "t_s,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z,mag_x,mag_y\n0,0,0,0,0,0,9.8,1,2\n";
   const Result bad2 = RunRcal("analyze " + (d / "bad.csv").string());
   EXPECT_NE(bad2.exit_code, 0);
   EXPECT_NE(bad2.output.find("mag_z"), std::string::npos) << bad2.output;
+}
+
+// The real UR10 (23 poses, ~2 mm of noise): an honest "no significant effect beyond geometry",
+// gain exactly 0 (geometry is the selected model).
+TEST(RcalCli, AnalyzeTheRealUr10FindsNoEffectBeyondGeometry) {
+  const fs::path d = TempDir("analyze_ur10");
+  const Result r = RunRcal(std::string("analyze ") + RCAL_SHARED_DIR +
+                           "/data/figaroh_ur10/calibration.csv --robot " + RCAL_SHARED_DIR +
+                           "/data/figaroh_ur10/robot.urdf --out " + (d / "out").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json j = ReadJson(d / "out" / "analysis.json");
+  EXPECT_TRUE(j.at("effects").empty()) << j.at("effects").dump();
+  EXPECT_EQ(j.at("gain").at("relative_gain").get<double>(), 0.0);
+  EXPECT_NEAR(j.at("gain").at("heldout_rms_before_m").get<double>(), 4.3e-3, 0.5e-3);
+  EXPECT_TRUE(fs::exists(d / "out" / "report.md"));
 }

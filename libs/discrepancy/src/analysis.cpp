@@ -138,6 +138,22 @@ struct Linearized {
   std::vector<std::vector<int>> fold_sets;  // per repeat: fold id per fit pose (index in fit)
   int folds = 0;
 
+  // Seeded fold assignments over the fit poses (k-fold, repeated; leave-one-out when k ≥ n).
+  void AssignFolds(int k, int repeats, unsigned seed) {
+    const int nf = static_cast<int>(fit.size());
+    folds = std::min(std::max(2, k), nf);
+    fold_sets.clear();
+    std::mt19937_64 rng(seed);
+    for (int rep = 0; rep < std::max(1, repeats); ++rep) {
+      std::vector<int> order(nf), fold(nf);
+      std::iota(order.begin(), order.end(), 0);
+      std::shuffle(order.begin(), order.end(), rng);
+      for (int i = 0; i < nf; ++i) fold[order[i]] = i % folds;
+      fold_sets.push_back(fold);
+      if (folds == nf) break;  // leave-one-out: one assignment is all there is
+    }
+  }
+
   std::vector<int> Columns(const std::vector<int>& effects) const {
     std::vector<int> c(num_geo);
     std::iota(c.begin(), c.end(), 0);
@@ -281,18 +297,7 @@ Prepared Prepare(const kinematics::KinematicModel& model, const PoseData& data,
     L.rp.push_back(r.head<3>());
     L.Jp.push_back(Jfull.topRows(3));
   }
-  // Fold assignments over the fit poses, seeded.
-  const int nf = static_cast<int>(L.fit.size());
-  L.folds = std::min(std::max(2, s.folds), nf);
-  std::mt19937_64 rng(s.seed);
-  for (int rep = 0; rep < std::max(1, s.repeats); ++rep) {
-    std::vector<int> order(nf), fold(nf);
-    std::iota(order.begin(), order.end(), 0);
-    std::shuffle(order.begin(), order.end(), rng);
-    for (int k = 0; k < nf; ++k) fold[order[k]] = k % L.folds;
-    L.fold_sets.push_back(fold);
-    if (L.folds == nf) break;  // leave-one-out: one assignment is all there is
-  }
+  L.AssignFolds(s.folds, s.repeats, s.seed);
   return p;
 }
 
@@ -330,6 +335,87 @@ std::vector<bool> Identifiable(const Linearized& L, double min_novelty,
                         ": not separable from the geometric parameters at these poses");
   }
   return ok;
+}
+
+// Greedy forward selection among `pool` (indices into L.ext.effects()) on L's k-fold held-out
+// residuals: each round adds the candidate with the lowest mean held-out whitened squared
+// residual if its paired z against the current model exceeds Φ⁻¹(1 − α/m).
+struct Selection {
+  std::vector<int> selected;
+  std::vector<double> z;
+  Linearized::Eval eval;  // k-fold evaluation of the selected model
+};
+Selection SelectGreedy(const Linearized& L, const std::vector<int>& pool, const AnalysisSettings& s,
+                       std::vector<SelectionRound>* rounds) {
+  const auto& effects = L.ext.effects();
+  Selection out;
+  std::vector<int>& selected = out.selected;
+  Linearized::Eval& current = out.eval;
+  current = L.CrossValidate({});
+  while (static_cast<int>(selected.size()) < s.max_effects) {
+    SelectionRound round;
+    round.heldout_rms_current_m = Rms(current.position);
+    std::vector<Linearized::Eval> evals;
+    std::vector<int> ids;
+    for (int k : pool) {
+      if (std::find(selected.begin(), selected.end(), k) != selected.end()) continue;
+      std::vector<int> trial = selected;
+      trial.push_back(k);
+      evals.push_back(L.CrossValidate(trial));
+      ids.push_back(k);
+      round.tried.push_back(effects[k]);
+      round.z.push_back(PairedZ(current.score, evals.back().score));
+    }
+    if (ids.empty()) break;
+    int best = 0;
+    for (size_t c = 1; c < ids.size(); ++c)
+      if (Mean(evals[c].score) < Mean(evals[best].score)) best = c;
+    round.best = best;
+    round.z_critical = NormalQuantile(1.0 - s.alpha / ids.size());
+    round.heldout_rms_best_m = Rms(evals[best].position);
+    round.accepted = round.z[best] > round.z_critical;
+    if (rounds) rounds->push_back(round);
+    if (!round.accepted) break;
+    selected.push_back(ids[best]);
+    out.z.push_back(round.z[best]);
+    current = evals[best];
+  }
+  return out;
+}
+
+// Nested cross-validation of "geometry" against "geometry + what selection picks": outer k-fold
+// over the fit poses (the first assignment); in each outer fold the whole greedy selection runs
+// again on the outer training poses alone (their own inner k-fold), and both models are fitted
+// there and judged on the outer held-out poses. So the gain is not flattered by having chosen
+// the effects on the poses it is measured on.
+std::pair<Linearized::Eval, Linearized::Eval> NestedCrossValidate(const Linearized& L,
+                                                                  const std::vector<int>& pool,
+                                                                  const AnalysisSettings& s) {
+  const size_t n = L.fit.size();
+  Linearized::Eval before{std::vector<double>(n), std::vector<double>(n)};
+  Linearized::Eval after = before;
+  const std::vector<int>& outer = L.fold_sets.front();
+  for (int f = 0; f < L.folds; ++f) {
+    std::vector<int> train, held;  // indices into L.fit
+    for (size_t k = 0; k < n; ++k) (outer[k] == f ? held : train).push_back(k);
+    if (held.empty()) continue;
+    Linearized inner = L;
+    inner.fit.clear();
+    for (int k : train) inner.fit.push_back(L.fit[k]);
+    inner.AssignFolds(s.folds, s.repeats, s.seed + 7919u * (f + 1));
+    const std::vector<int> chosen = SelectGreedy(inner, pool, s, nullptr).selected;
+    const std::vector<int> cols0 = L.Columns({}), cols1 = L.Columns(chosen);
+    const Eigen::VectorXd d0 = L.Solve(inner.fit, cols0), d1 = L.Solve(inner.fit, cols1);
+    for (int k : held) {
+      const auto [s0, p0] = L.Score(L.fit[k], cols0, d0);
+      const auto [s1, p1] = L.Score(L.fit[k], cols1, d1);
+      before.score[k] = s0;
+      before.position[k] = std::sqrt(p0);
+      after.score[k] = s1;
+      after.position[k] = std::sqrt(p1);
+    }
+  }
+  return {before, after};
 }
 
 double FisherP(double r, int n) {
@@ -449,39 +535,10 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
     }
 
   // --- Greedy forward selection on k-fold held-out residuals.
-  std::vector<int> selected;
-  std::vector<double> selected_z;
-  Linearized::Eval current = L.CrossValidate({});
-  while (static_cast<int>(selected.size()) < s.max_effects) {
-    SelectionRound round;
-    round.heldout_rms_current_m = Rms(current.position);
-    std::vector<Linearized::Eval> evals;
-    std::vector<int> ids;
-    for (int k : pool) {
-      if (std::find(selected.begin(), selected.end(), k) != selected.end()) continue;
-      std::vector<int> trial = selected;
-      trial.push_back(k);
-      evals.push_back(L.CrossValidate(trial));
-      ids.push_back(k);
-      round.tried.push_back(effects[k]);
-      round.z.push_back(PairedZ(current.score, evals.back().score));
-    }
-    if (ids.empty()) break;
-    int best = 0;
-    for (size_t c = 1; c < ids.size(); ++c)
-      if (Mean(evals[c].score) < Mean(evals[best].score)) best = c;
-    round.best = best;
-    round.z_critical = NormalQuantile(1.0 - s.alpha / ids.size());
-    round.heldout_rms_best_m = Rms(evals[best].position);
-    round.accepted = round.z[best] > round.z_critical;
-    spdlog::debug("selection round {}: best {} z {:.2f} (critical {:.2f})", a.rounds.size() + 1,
-                  Describe(model, effects[ids[best]]), round.z[best], round.z_critical);
-    a.rounds.push_back(round);
-    if (!round.accepted) break;
-    selected.push_back(ids[best]);
-    selected_z.push_back(round.z[best]);
-    current = evals[best];
-  }
+  Selection sel = SelectGreedy(L, pool, s, &a.rounds);
+  const std::vector<int>& selected = sel.selected;
+  const std::vector<double>& selected_z = sel.z;
+  const Linearized::Eval& current = sel.eval;
 
   // --- Final nonlinear fit of the selected model on the fit poses.
   std::vector<Effect> chosen;
@@ -519,14 +576,25 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
   }
 
   // --- Gain on data the selection never fitted (the split) or by the same k-fold.
-  const Linearized::Eval before = L.test.empty() ? L.CrossValidate({}) : L.Split({});
-  const Linearized::Eval after = L.test.empty() ? current : L.Split(selected);
-  if (!L.test.empty())
+  // Without a split: nested cross-validation when something was selected (the selection is redone
+  // inside every outer fold); with nothing selected both models are the geometry, gain 0.
+  Linearized::Eval before, after;
+  if (!L.test.empty()) {
+    before = L.Split({});
+    after = L.Split(selected);
     a.gain.scheme = "cal/test split";
-  else if (L.folds == static_cast<int>(L.fit.size()))
-    a.gain.scheme = "leave-one-out";
-  else
-    a.gain.scheme = std::to_string(L.folds) + "-fold ×" + std::to_string(L.fold_sets.size());
+  } else if (selected.empty()) {
+    before = after = current;
+    a.gain.scheme = L.folds == static_cast<int>(L.fit.size())
+                        ? "leave-one-out"
+                        : std::to_string(L.folds) + "-fold ×" + std::to_string(L.fold_sets.size());
+  } else {
+    std::tie(before, after) = NestedCrossValidate(L, pool, s);
+    a.gain.scheme =
+        L.folds == static_cast<int>(L.fit.size())
+            ? "nested leave-one-out (selection redone per fold)"
+            : "nested " + std::to_string(L.folds) + "-fold (selection redone in each outer fold)";
+  }
   a.gain.heldout_rms_before_m = Rms(before.position);
   a.gain.heldout_rms_after_m = Rms(after.position);
   a.gain.relative_gain = a.gain.heldout_rms_before_m > 0
