@@ -9,6 +9,7 @@
 
 #include <CLI/CLI.hpp>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 
 #include "rcal/io/effects_json.hpp"
@@ -47,6 +48,9 @@ int main(int argc, char** argv) {
           io::ReadAnalysisEffects(services::RepoPath(effects_path), robot.model);
       options.effects = ae.effects;
       options.effect_values = ae.values;
+      // The gravity model the compliance was fitted with, unless given here.
+      if (std::isfinite(ae.link_density_kg_per_m) && app.count("--link-density") == 0)
+        options.gravity.link_density_kg_per_m = ae.link_density_kg_per_m;
     }
     transport::IkCorrectorNode node(t, robot.model, options);
     spdlog::info("ik_corrector on {} ({}, {} non-geometric effects)", t.url(), robot.model.name(),

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <fstream>
 
 #include "io_test_util.hpp"
@@ -49,6 +50,10 @@ TEST(EffectsJson, WrittenEffectsReadBackExactly) {
     EXPECT_EQ(back.effects[k].reference, ext.effects()[k].reference) << k;
   }
   EXPECT_EQ(back.values, e);
+  EXPECT_TRUE(std::isnan(back.link_density_kg_per_m));  // not said: the caller's default
+  json with_density = doc;
+  with_density["link_density_kg_per_m"] = 12.5;
+  EXPECT_EQ(ParseAnalysisEffects(with_density, Grb()).link_density_kg_per_m, 12.5);
   EXPECT_EQ(doc["effects"][0]["joints"][0], Grb().joints()[1].name);
   EXPECT_EQ(doc["effects"][1]["values"][1]["unit"], "rad");
 }

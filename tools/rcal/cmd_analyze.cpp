@@ -210,6 +210,7 @@ int Run(const Options& o) {
                   {"num_fit_poses", a.num_fit_poses},
                   {"num_test_poses", a.num_test_poses},
                   {"num_identified", a.base_fit.identified.size()},
+                  {"link_density_kg_per_m", o.link_density},
                   {"position_noise_m", a.base_fit.position_sigma_m},
                   {"orientation_noise_rad", a.base_fit.orientation_sigma_rad},
                   {"position_noise_after_m", a.position_sigma_after_m},

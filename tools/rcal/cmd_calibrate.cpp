@@ -9,6 +9,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <sstream>
@@ -48,7 +49,7 @@ struct Options {
   double orientation_sigma_deg = 0.1;
   bool fixed_noise = false;
   std::string effects_path;
-  double link_density = 10.0;
+  double link_density = std::numeric_limits<double>::quiet_NaN();  // NaN: the file's, else 10
   CalibrateLogOptions log;  ///< --log LOG: the calibrate-log command
 };
 
@@ -112,8 +113,11 @@ ExtendedResult FitEffects(const Options& o, const kinematics::KinematicModel& mo
                           const identification::CalibrationFit& fit,
                           const identification::CalibrationSettings& settings) {
   const io::AnalysisEffects ae = io::ReadAnalysisEffects(ResolvePath(o.effects_path), model);
-  kinematics::GravityModel gravity;
-  gravity.link_density_kg_per_m = o.link_density;
+  kinematics::GravityModel gravity;  // --link-density, else the analysis', else 10 kg/m
+  gravity.link_density_kg_per_m = std::isfinite(o.link_density) ? o.link_density
+                                  : std::isfinite(ae.link_density_kg_per_m)
+                                      ? ae.link_density_kg_per_m
+                                      : 10.0;
   kinematics::ExtendedModel ext(model, ae.effects, gravity);
   const std::vector<kinematics::EffectContext> contexts = io::ToContexts(data);
   CheckContexts(ext, contexts, o.data);
@@ -294,7 +298,7 @@ int Run(const Options& o) {
                     {"unit", model.parameters()[i].is_angle ? "rad" : "m"},
                     {"value", ext->fit.x(i)}});
     j["effects_file"] = o.effects_path;
-    j["link_density_kg_per_m"] = o.link_density;
+    j["link_density_kg_per_m"] = ext->model.gravity().link_density_kg_per_m;
     j["effects"] = io::EffectsJson(ext->model, ext->fit.e, ext->fit.sigma_e);
     j["extended_parameters"] = jx;
     j["extended_position_noise_m"] = ext->fit.position_sigma_m;
@@ -364,8 +368,8 @@ const RegisterCommand kCalibrate(
                      "analysis.json of `rcal analyze`: fit its effects with the geometry, write "
                      "the calibrated effects (values, sigma) to the JSON");
       sub.add_option("--link-density", o->link_density,
-                     "[kg/m] gravity model of joint_compliance (as rcal analyze --link-density)")
-          ->capture_default_str();
+                     "[kg/m] gravity model of joint_compliance (default: the analysis.json's "
+                     "link_density_kg_per_m, else 10)");
       sub.add_option("--log", o->log.log,
                      "LCM event log: identify from its POSE_MEASUREMENT events instead of DATA, "
                      "exactly as `rcal calibrate-log LOG` (alias; --robot, --json and the options "

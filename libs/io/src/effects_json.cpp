@@ -81,6 +81,10 @@ AnalysisEffects ParseAnalysisEffects(const json& analysis,
     out.effects.push_back(f);
   }
   out.values = Eigen::Map<const Eigen::VectorXd>(values.data(), values.size());
+  if (analysis.contains("link_density_kg_per_m")) {
+    out.link_density_kg_per_m = Number(analysis, "link_density_kg_per_m", "");
+    if (out.link_density_kg_per_m < 0) throw std::runtime_error("link_density_kg_per_m: negative");
+  }
   return out;
 }
 

@@ -12,6 +12,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -24,6 +25,9 @@ namespace rcal::io {
 struct AnalysisEffects {
   std::vector<kinematics::Effect> effects;
   Eigen::VectorXd values;  ///< the analysis' fitted values, in ExtendedModel order [SI]
+  /// The gravity model joint_compliance was fitted with (top-level `link_density_kg_per_m`)
+  /// [kg/m]; NaN when the file does not say.
+  double link_density_kg_per_m = std::numeric_limits<double>::quiet_NaN();
 };
 
 /// Parses the "effects" list of an analysis.json document against `model` (joint names).
