@@ -144,5 +144,43 @@ TEST(PoseLog, RcalAnalyzeFindsAnEffectHiddenInALog) {
   EXPECT_GT(j.at("gain").at("relative_gain").get<double>(), 0.2);
 }
 
+// Full poses from the pipeline: positions in the position sensor's frame, orientations in the
+// IMU's earth frame (magnetic north 50° from the sensor's x axis, an IMU mounted turned by 20°).
+// `rcal analyze LOG` adds the earth ← world and flange → IMU rotations for a log, so a clean log
+// shows no effect and the noise it estimates is the simulated noise.
+TEST(PoseLog, RcalAnalyzeIdentifiesTheEarthFrameOfALogsOrientations) {
+  io::RobotSpec spec = io::LoadRobot(RCAL_SOURCE_DIR "/config/robots/grb3016.yaml").spec;
+  spec.base = io::FrameSpec{};
+  spec.marker = io::FrameSpec{};
+  spec.imu = io::FrameSpec{};
+  spec.earth = io::FrameSpec{};
+  const auto model = io::BuildModel(spec);
+  sim::Rng rng(5);
+  sim::PoseNoise noise;
+  noise.position_sigma = 5e-5;
+  noise.orientation_sigma = 2e-4;
+  noise.orientation = true;
+  Eigen::VectorXd x = sim::Table3Errors(model);
+  x(model.FindParameter("base_x")) = 1.2;
+  x(model.FindParameter("earth_rz")) = 0.87;
+  x(model.FindParameter("imu_rz")) = 0.35;
+  const int n = 60;
+  const auto ms = sim::MeasurePoses(model, x, sim::SampleJoints(model, n, rng), noise, rng);
+  const fs::path dir = TempDir("earth");
+  {
+    lcm::LogFile log((dir / "run.lcmlog").string(), "w");
+    for (int k = 0; k < n; ++k) WritePose(log, transport::ToMessage(ms[k], 1'000'000 * (k + 1), k));
+  }
+  const std::string cmd = std::string(RCAL_EXE) + " analyze " + (dir / "run.lcmlog").string() +
+                          " --robot " + RCAL_SOURCE_DIR "/config/robots/grb3016.yaml --out " +
+                          (dir / "out").string() + " > " + (dir / "stdout.txt").string() + " 2>&1";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  std::ifstream in(dir / "out" / "analysis.json");
+  const auto j = nlohmann::json::parse(in);
+  EXPECT_TRUE(j.at("effects").empty()) << j.at("effects").dump();
+  EXPECT_NEAR(j.at("position_noise_m").get<double>(), 5e-5, 1.5e-5);
+  EXPECT_NEAR(j.at("orientation_noise_rad").get<double>(), 2e-4, 0.6e-4);
+}
+
 }  // namespace
 }  // namespace rcal::tool

@@ -11,6 +11,7 @@
 
 #include "analyze_imu.hpp"
 #include "command.hpp"
+#include "pose_log.hpp"
 #include "rcal/discrepancy/analysis.hpp"
 #include "rcal/geometry/so3.hpp"
 #include "rcal/identification/calibration.hpp"
@@ -79,7 +80,8 @@ int Run(const Options& o) {
   if (o.robot.empty()) throw std::runtime_error("rcal analyze: --robot is required for pose data");
   io::LoadedRobot robot = LoadRobotForCell(o.robot, o.tip_link, o.base_link, o.frames);
   const io::PoseDataset data = LoadPoseDataFor(robot, o.data, "rcal analyze");
-  if (o.frames == "auto" && data.has_orientation) AddOrientationFrame(robot);
+  if (o.frames == "auto" && data.has_orientation)
+    AddOrientationFrame(robot, IsLcmLog(ResolvePath(o.data)));
   const kinematics::KinematicModel& model = robot.model;
 
   discrepancy::PoseData pd;

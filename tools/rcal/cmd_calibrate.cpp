@@ -16,6 +16,7 @@
 
 #include "calibrate_log.hpp"
 #include "command.hpp"
+#include "pose_log.hpp"
 #include "rcal/geometry/so3.hpp"
 #include "rcal/identification/calibration.hpp"
 #include "rcal/identification/extended_lm.hpp"
@@ -163,7 +164,8 @@ int Run(const Options& o) {
   // they lack), and the IMU/marker rotation when the data measures orientation.
   io::LoadedRobot robot = LoadRobotForCell(o.robot, o.tip_link, o.base_link, o.frames);
   const io::PoseDataset data = LoadPoseDataFor(robot, o.data, "rcal calibrate");
-  if (o.frames == "auto" && data.has_orientation) AddOrientationFrame(robot);
+  if (o.frames == "auto" && data.has_orientation)
+    AddOrientationFrame(robot, IsLcmLog(ResolvePath(o.data)));
   const auto& model = robot.model;
 
   std::vector<kinematics::PoseMeasurement> ms = ToMeasurements(data);

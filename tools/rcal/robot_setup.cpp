@@ -32,9 +32,11 @@ io::LoadedRobot LoadRobotForCell(const std::string& robot_path, const std::strin
   return robot;
 }
 
-void AddOrientationFrame(io::LoadedRobot& robot) {
-  if (robot.spec.imu) return;
-  robot.spec.imu = io::FrameSpec{};
+void AddOrientationFrame(io::LoadedRobot& robot, bool earth_frame) {
+  const bool add_imu = !robot.spec.imu, add_earth = earth_frame && !robot.spec.earth;
+  if (!add_imu && !add_earth) return;
+  if (add_imu) robot.spec.imu = io::FrameSpec{};
+  if (add_earth) robot.spec.earth = io::FrameSpec{};
   robot.model = io::BuildModel(robot.spec);
 }
 

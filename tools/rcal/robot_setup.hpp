@@ -17,8 +17,10 @@ io::LoadedRobot LoadRobotForCell(const std::string& robot_path, const std::strin
                                  const std::string& base_link, const std::string& frames);
 
 /// Adds the flange → IMU (measured marker) rotation when the robot lacks one: data with
-/// orientation measure it.
-void AddOrientationFrame(io::LoadedRobot& robot);
+/// orientation measure it. With `earth_frame` also the earth ← world rotation: orientation from
+/// an IMU (the pipeline's POSE_MEASUREMENT) is in the IMU's own earth frame (gravity and magnetic
+/// north), not in the position sensor's frame.
+void AddOrientationFrame(io::LoadedRobot& robot, bool earth_frame = false);
 
 /// The pose dataset at `data_path` with the joint columns named after `robot`'s joints (FIGAROH
 /// layout) and its joint count checked. Refuses an empty file, and several markers per tool,
