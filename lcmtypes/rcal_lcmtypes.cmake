@@ -30,6 +30,11 @@ if(NOT TARGET rcal_lcm)
     target_include_directories(rcal_lcm INTERFACE ${LCM_INCLUDE_DIR})
     target_link_libraries(rcal_lcm INTERFACE ${LCM_LIBRARY})
   endif()
+  # LCM 1.3's generated decoders store doubles through int64_t pointers (lcm_coretypes.h,
+  # __double_decode_array): with strict aliasing GCC may read the fields back before the inlined
+  # decode wrote them (seen: imu_sample_t.gyro read as 0 after decode at -O2). Every translation
+  # unit that includes an LCM type gets -fno-strict-aliasing.
+  target_compile_options(rcal_lcm INTERFACE -fno-strict-aliasing)
 endif()
 
 find_program(RCAL_JAVAC javac)

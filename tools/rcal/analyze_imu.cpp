@@ -8,11 +8,15 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <lcm/lcm-cpp.hpp>
+#include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "command.hpp"
+#include "pose_log.hpp"
+#include "rcal/imu_sample_t.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/csv_table.hpp"
 #include "rcal/io/plot.hpp"
@@ -79,6 +83,53 @@ bool IsImuStreamCsv(const std::string& path) {
   return false;
 }
 
+disc::ImuStreamData LoadImuStreamLog(const std::string& path, const std::string& channel) {
+  lcm::LogFile log(path, "r");
+  if (!log.good()) throw std::runtime_error(path + ": cannot read the LCM log");
+  disc::ImuStreamData d;
+  int64_t last = std::numeric_limits<int64_t>::min(), events = 0, skipped = 0;
+  std::string first_reason;
+  const auto skip = [&](const std::string& why) {
+    if (skipped++ == 0) first_reason = "event " + std::to_string(events) + ": " + why;
+  };
+  while (const lcm::LogEvent* e = log.readNextEvent()) {
+    if (e->channel != channel) continue;
+    ++events;
+    imu_sample_t m{};
+    if (m.decode(e->data, 0, e->datalen) < 0) {
+      skip("does not decode as imu_sample_t");
+      continue;
+    }
+    const Eigen::Vector3d g = Eigen::Map<const Eigen::Vector3d>(m.gyro),
+                          a = Eigen::Map<const Eigen::Vector3d>(m.accel),
+                          b = Eigen::Map<const Eigen::Vector3d>(m.mag);
+    if (!g.allFinite() || !a.allFinite() || (m.has_mag && !b.allFinite())) {
+      skip("imu_sample.gyro/accel/mag: not finite");
+      continue;
+    }
+    if (!m.has_mag) {
+      skip("imu_sample.has_mag: false (the analysis needs the field)");
+      continue;
+    }
+    if (m.utime <= last) {
+      skip("imu_sample.utime: " + std::to_string(m.utime) + " not after the previous sample");
+      continue;
+    }
+    last = m.utime;
+    d.t.push_back(static_cast<double>(m.utime) * 1e-6);
+    d.gyro.push_back(g);
+    d.accel.push_back(a);
+    d.mag_uT.push_back(b * 1e6);  // the message carries tesla
+  }
+  if (skipped > 0)
+    spdlog::warn("{}: {} of {} {} events skipped (first: {})", path, skipped, events, channel,
+                 first_reason);
+  if (d.t.empty())
+    throw std::runtime_error(path + ": no usable " + channel +
+                             " samples (imu_sample_t) in the log");
+  return d;
+}
+
 disc::ImuStreamData LoadImuStreamCsv(const std::string& path) {
   const io::CsvTable table = io::CsvTable::Load(path);
   const int n = table.rows();
@@ -139,8 +190,9 @@ void WriteImuStreamCsv(const fs::path& path, const std::vector<sim::ImuStreamSam
 
 int RunAnalyzeImu(const AnalyzeImuOptions& o) {
   const std::string path = ResolvePath(o.data);
-  spdlog::info("rcal analyze: {} is an IMU stream (BROAD layout); no robot needed", path);
-  const disc::ImuStreamData data = LoadImuStreamCsv(path);
+  spdlog::info("rcal analyze: the IMU stream of {}; no robot needed", path);
+  const disc::ImuStreamData data =
+      IsLcmLog(path) ? LoadImuStreamLog(path, o.channel) : LoadImuStreamCsv(path);
   disc::ImuAnalysisSettings settings;
   settings.alpha = o.alpha;
   const disc::ImuAnalysis a = disc::AnalyzeImuStream(data, settings);

@@ -18,6 +18,12 @@ bool IsImuStreamCsv(const std::string& path);
 /// Throws std::runtime_error naming the file, the column and the row for bad input.
 discrepancy::ImuStreamData LoadImuStreamCsv(const std::string& path);
 
+/// The IMU channel of an LCM log of the pipeline (imu_sample_t, field in T → µT): samples that
+/// fail to decode, are not finite, lack the magnetometer, or are not after the previous one are
+/// skipped and counted (a warning names the first reason). No truth orientation, no movement flag
+/// (rests are detected). Throws std::runtime_error when the log cannot be read or has no samples.
+discrepancy::ImuStreamData LoadImuStreamLog(const std::string& path, const std::string& channel);
+
 /// Writes the stream in the BROAD layout (atomically).
 void WriteImuStreamCsv(const std::filesystem::path& path,
                        const std::vector<sim::ImuStreamSample>& stream);
@@ -27,6 +33,7 @@ struct AnalyzeImuOptions {
   std::string out = "out/analyze";
   std::string json_path;
   double alpha = 0.01;
+  std::string channel = "IMU";  ///< for an LCM log: the imu_sample_t channel
 };
 
 /// `rcal analyze` on an IMU stream: DIR/report.md with plots and DIR/analysis.json.

@@ -45,6 +45,7 @@ struct Options {
   double stated_position_sigma_mm = 0.0;
   double stated_orientation_sigma_deg = 0.0;
   double link_density = 10.0;
+  bool imu = false;  // an LCM log: analyse its IMU channel instead of its poses
 };
 
 // Human units for a regressor: joint angles in degrees, the rest as they are.
@@ -75,8 +76,13 @@ io::Series Histogram(const std::string& title, const std::vector<double>& v_mm, 
 }
 
 int Run(const Options& o) {
-  if (IsImuStreamCsv(ResolvePath(o.data)))  // BROAD layout: the IMU-stream analysis, no robot
-    return RunAnalyzeImu({o.data, o.out, o.json_path, o.alpha});
+  // BROAD layout, or a log's IMU channel: the IMU-stream analysis, no robot.
+  if (o.imu || IsImuStreamCsv(ResolvePath(o.data))) {
+    AnalyzeImuOptions imu_options{o.data, o.out, o.json_path, o.alpha};
+    if (o.imu && !IsLcmLog(ResolvePath(o.data)))
+      throw std::runtime_error("rcal analyze --imu: " + o.data + " is not an LCM log");
+    return RunAnalyzeImu(imu_options);
+  }
   if (o.robot.empty()) throw std::runtime_error("rcal analyze: --robot is required for pose data");
   io::LoadedRobot robot = LoadRobotForCell(o.robot, o.tip_link, o.base_link, o.frames);
   const io::PoseDataset data = LoadPoseDataFor(robot, o.data, "rcal analyze");
@@ -328,6 +334,9 @@ const RegisterCommand kAnalyze(
       sub.add_option("data", o->data, "pose dataset CSV (rcal or FIGAROH layout) or IMU stream CSV")
           ->required();
       sub.add_option("--robot", o->robot, "robot file (YAML or URDF); not for IMU streams");
+      sub.add_flag("--imu", o->imu,
+                   "DATA is an LCM log: analyse its IMU channel (the sensor model) instead of "
+                   "its POSE_MEASUREMENT events");
       sub.add_option("--tip", o->tip_link, "URDF: last link of the chain (the flange)");
       sub.add_option("--base-link", o->base_link, "URDF: first link of the chain");
       sub.add_option("--out", o->out, "output folder")->capture_default_str();
