@@ -60,6 +60,20 @@ void WritePose(lcm::LogFile& log, const pose_measurement_t& msg) {
   WriteEvent(log, msg.utime, buf.data(), static_cast<int>(buf.size()));
 }
 
+// `rcal analyze DIR/run.lcmlog ARGS --out DIR/out` (output in DIR/stdout.txt); its analysis.json.
+nlohmann::json RunAnalyze(const fs::path& dir, const std::string& args) {
+  const std::string cmd = std::string(RCAL_EXE) + " analyze " + (dir / "run.lcmlog").string() +
+                          " " + args + " --out " + (dir / "out").string() + " > " +
+                          (dir / "stdout.txt").string() + " 2>&1";
+  EXPECT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  std::ifstream in(dir / "out" / "analysis.json");
+  if (!in.good()) {
+    ADD_FAILURE() << "no analysis.json from " << cmd;
+    return {};
+  }
+  return nlohmann::json::parse(in);
+}
+
 TEST(PoseLog, ReadsValidPosesBitExactAndCountsEveryBadEvent) {
   const auto model = CellModel();
   sim::Rng rng(7);
@@ -134,13 +148,9 @@ TEST(PoseLog, RcalAnalyzeFindsAnEffectHiddenInALog) {
     lcm::LogFile log((dir / "run.lcmlog").string(), "w");
     for (int k = 0; k < n; ++k) WritePose(log, transport::ToMessage(ms[k], 1'000'000 * (k + 1), k));
   }
-  const std::string cmd = std::string(RCAL_EXE) + " analyze " + (dir / "run.lcmlog").string() +
-                          " --robot " + RCAL_SOURCE_DIR "/config/robots/grb3016.yaml --out " +
-                          (dir / "out").string() + " > " + (dir / "stdout.txt").string() + " 2>&1";
-  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
-  std::ifstream in(dir / "out" / "analysis.json");
-  ASSERT_TRUE(in.good());
-  const auto j = nlohmann::json::parse(in);
+  const nlohmann::json j =
+      RunAnalyze(dir, " --robot " RCAL_SOURCE_DIR "/config/robots/grb3016.yaml");
+  ASSERT_FALSE(j.is_null());
   ASSERT_EQ(j.at("effects").size(), 1u) << j.at("effects").dump();
   const auto& e = j.at("effects")[0];
   EXPECT_EQ(e.at("cause"), "joint_periodic");
@@ -175,12 +185,9 @@ TEST(PoseLog, RcalAnalyzeIdentifiesTheEarthFrameOfALogsOrientations) {
     lcm::LogFile log((dir / "run.lcmlog").string(), "w");
     for (int k = 0; k < n; ++k) WritePose(log, transport::ToMessage(ms[k], 1'000'000 * (k + 1), k));
   }
-  const std::string cmd = std::string(RCAL_EXE) + " analyze " + (dir / "run.lcmlog").string() +
-                          " --robot " + RCAL_SOURCE_DIR "/config/robots/grb3016.yaml --out " +
-                          (dir / "out").string() + " > " + (dir / "stdout.txt").string() + " 2>&1";
-  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
-  std::ifstream in(dir / "out" / "analysis.json");
-  const auto j = nlohmann::json::parse(in);
+  const nlohmann::json j =
+      RunAnalyze(dir, " --robot " RCAL_SOURCE_DIR "/config/robots/grb3016.yaml");
+  ASSERT_FALSE(j.is_null());
   EXPECT_TRUE(j.at("effects").empty()) << j.at("effects").dump();
   EXPECT_NEAR(j.at("position_noise_m").get<double>(), 5e-5, 1.5e-5);
   EXPECT_NEAR(j.at("orientation_noise_rad").get<double>(), 2e-4, 0.6e-4);
@@ -233,12 +240,8 @@ TEST(PoseLog, RcalAnalyzeImuNamesAMagneticDisturbanceInALog) {
       }
     }
   }
-  const std::string cmd = std::string(RCAL_EXE) + " analyze " + (dir / "run.lcmlog").string() +
-                          " --imu --out " + (dir / "out").string() + " > " +
-                          (dir / "stdout.txt").string() + " 2>&1";
-  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
-  std::ifstream in(dir / "out" / "analysis.json");
-  const auto j = nlohmann::json::parse(in);
+  const nlohmann::json j = RunAnalyze(dir, " --imu");
+  ASSERT_FALSE(j.is_null());
   EXPECT_EQ(j.at("kind"), "imu_stream");
   bool magnetic = false;
   for (const auto& e : j.at("effects")) magnetic |= e.at("cause") == "magnetic_disturbance";
