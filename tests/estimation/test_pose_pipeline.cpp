@@ -79,6 +79,13 @@ TEST(PosePipeline, OnePosePerStopWithAConsistentCovariance) {
     EXPECT_LT(r.head<3>().norm(), 5e-4);              // far below one sample's 0.5 mm
     EXPECT_LT(r.tail<3>().norm(), 0.2 * M_PI / 180);  // 0.2°
     nees += r.dot(p.covariance.ldlt().solve(r));
+    // The identifier's measurement carries the window unchanged.
+    const kinematics::PoseMeasurement z = p.ToMeasurement();
+    EXPECT_EQ(z.q, p.q);
+    EXPECT_EQ(z.p_WM_W, p.p_WM_W);
+    EXPECT_EQ(z.R_EI, p.R_EI);
+    EXPECT_EQ(z.covariance, p.covariance);
+    EXPECT_EQ(z.dimension(), 6);
   }
   nees /= o.poses.size();
   // χ²₆ mean 6; over 40 windows the mean has σ ≈ 0.55. Neither over- nor under-confident.

@@ -140,12 +140,7 @@ Windows SimulateWindows(const Cell& cell, const RunSettings& s) {
     const int k = truth.trajectory().StillAt(0.5 * (p.t_begin + p.t_end));
     if (k <= 0 || seen[k]) continue;  // home (filters starting) or a second window
     seen[k] = true;
-    kinematics::PoseMeasurement m;
-    m.q = p.q;
-    m.p_WM_W = p.p_WM_W;
-    m.has_orientation = p.has_orientation;
-    m.R_EI = p.R_EI;
-    m.covariance = p.covariance;
+    const kinematics::PoseMeasurement m = p.ToMeasurement();
     const Eigen::VectorXd r = kinematics::Residual(model, m, cell.x_true);
     sum_p += r.head<3>().norm();
     if (m.has_orientation) sum_o += r.tail<3>().norm();

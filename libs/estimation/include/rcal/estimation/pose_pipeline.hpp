@@ -39,6 +39,7 @@
 #include "rcal/estimation/position_kf.hpp"
 #include "rcal/estimation/result.hpp"
 #include "rcal/estimation/still_window.hpp"
+#include "rcal/kinematics/measurement.hpp"
 
 namespace rcal::estimation {
 
@@ -87,6 +88,18 @@ struct StillPose {
   int imu_samples = 0;                ///< filter outputs averaged
   int position_samples = 0;           ///< raw position samples accepted in the window
   int orientation_samples = 0;        ///< raw FQA samples in the orientation scatter
+
+  /// The identifier's measurement of this window (kinematics::PoseMeasurement: q, p_WM_W, R_EI,
+  /// covariance), what the still_window process publishes as POSE_MEASUREMENT.
+  kinematics::PoseMeasurement ToMeasurement() const {
+    kinematics::PoseMeasurement m;
+    m.q = q;
+    m.p_WM_W = p_WM_W;
+    m.has_orientation = has_orientation;
+    m.R_EI = R_EI;
+    m.covariance = covariance;
+    return m;
+  }
 };
 
 class PosePipeline {
