@@ -12,7 +12,8 @@
 // `rcal experiment paper --sensors --seed S` (rcal::cell::MakeCell: the arm plus the set-up
 // frames base/earth/marker/IMU). The first --guess-poses poses are held back, the set-up guess is
 // fitted to them (SetupGuess), the EKF is started there (MakeEkf) and then updated with them and
-// every later pose, exactly as the offline RunOnline.
+// every later pose, exactly as the offline RunOnline. The held poses are checkpointed too
+// (schema rcal.ekf_checkpoint/2, `held`), so a restart during the guess phase keeps them.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -112,11 +113,17 @@ class Identifier {
       const auto f = transport::LoadCheckpoint(o_.checkpoint);
       if (f.model_id != model_id_)
         throw std::runtime_error("model_id " + f.model_id + " is not " + model_id_);
+      if (!f.held.empty() && (!cell_ || f.checkpoint.accepted > 0))
+        throw std::runtime_error("held: " + std::to_string(f.held.size()) +
+                                 " poses held for a set-up guess, but " +
+                                 (cell_ ? "the EKF has started" : "there is no --cell-seed"));
       ekf_->Restore(f.checkpoint);
+      held_ = f.held;
       last_utime_ = f.utime;
       last_pose_index_ = f.last_pose_index;
-      spdlog::info("resumed from {}: {} poses accepted, last utime {}", o_.checkpoint,
-                   ekf_->accepted(), last_utime_);
+      spdlog::info(
+          "resumed from {}: {} poses accepted, {} held for the set-up guess, last utime {}",
+          o_.checkpoint, ekf_->accepted(), held_.size(), last_utime_);
     } catch (const std::exception& e) {
       // A checkpoint that does not fit is reported and kept aside, never silently overwritten.
       const std::string aside = o_.checkpoint + ".rejected";
@@ -147,10 +154,13 @@ class Identifier {
     if (!started_) {
       // Held back for the set-up guess (time order checked against the held poses too).
       last_utime_ = msg.utime;
+      last_pose_index_ = msg.pose_index;
       held_.push_back({*z, msg.utime, msg.pose_index});
+      const bool guess = static_cast<int>(held_.size()) >= std::max(o_.guess_poses, 1);
+      if (!guess) SaveState();  // before the log line: a logged held pose survives a kill
       spdlog::info("pose {}: held for the set-up guess ({} of {})", msg.pose_index, held_.size(),
                    o_.guess_poses);
-      if (static_cast<int>(held_.size()) < std::max(o_.guess_poses, 1)) {
+      if (!guess) {
         health_.Tick(msg.utime, t_);
         return;
       }
@@ -177,15 +187,7 @@ class Identifier {
     } else {
       last_utime_ = utime;
       last_pose_index_ = pose_index;
-      if (!o_.checkpoint.empty()) {
-        try {
-          transport::SaveCheckpoint(o_.checkpoint,
-                                    {model_id_, last_utime_, last_pose_index_, ekf_->Checkpoint()});
-        } catch (const std::exception& e) {
-          health_.Error(e.what());
-          spdlog::error("{}", e.what());
-        }
-      }
+      SaveState();
     }
     transport::StatusFigures fig;
     fig.last_nis = r.nis;
@@ -200,6 +202,18 @@ class Identifier {
     health_.Tick(utime, t_);
     spdlog::info("pose {}: {} (accepted {}, rejected {}, NIS {:.2f})", pose_index,
                  r.accepted ? "accepted" : "rejected", ekf_->accepted(), ekf_->rejected(), r.nis);
+  }
+
+  // The EKF state and the poses held for the set-up guess, atomically (--checkpoint).
+  void SaveState() {
+    if (o_.checkpoint.empty()) return;
+    try {
+      transport::SaveCheckpoint(
+          o_.checkpoint, {model_id_, last_utime_, last_pose_index_, ekf_->Checkpoint(), held_});
+    } catch (const std::exception& e) {
+      health_.Error(e.what());
+      spdlog::error("{}", e.what());
+    }
   }
 
   void Publish(int64_t utime, transport::StatusFigures fig) {
@@ -230,12 +244,7 @@ class Identifier {
   kinematics::KinematicModel model_;
   std::vector<int> base_;
   std::unique_ptr<identification::EkfIdentifier> ekf_;
-  struct Held {
-    kinematics::PoseMeasurement z;
-    int64_t utime;
-    int64_t pose_index;
-  };
-  std::vector<Held> held_;
+  std::vector<transport::HeldPose> held_;
   bool started_ = true;
   std::string model_id_;
   transport::Health health_;

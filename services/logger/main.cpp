@@ -2,21 +2,103 @@
 // tools), starting a new file when one reaches --max-bytes, and appends every KINEMATIC_PARAMS
 // to a readable CSV history (utime, poses_used, then value and σ of each parameter).
 // Event timestamps are the receive time (as lcm-logger's); the messages keep their sensor utime.
+//
+// Restarts (the supervisor runs the same command line after a crash or SIGKILL): earlier files
+// are never reopened for writing. The new process starts the file after the highest-numbered
+// `<prefix>.NNNN.lcmlog` in --dir, so the earlier file keeps every event written before the kill
+// (each event is flushed to the file as it is written, so at most the event being written when
+// the process died is cut short; lcm-logplayer and lcm::LogFile readers stop at it). The CSV is
+// appended to; a row cut short by a kill (no final newline) is removed before the first new row
+// (it is the only part of the file ever rewritten), and each row goes to the file in one write.
 #include <spdlog/spdlog.h>
+
+#include <fcntl.h>
+#include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <cerrno>
 #include <chrono>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <lcm/lcm-cpp.hpp>
 #include <memory>
+#include <regex>
+#include <sstream>
+#include <string>
 
 #include "rcal/kinematic_params_t.hpp"
 #include "rcal/services/common.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/health.hpp"
 #include "rcal/transport/lcm_transport.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// One past the highest NNNN of the existing <prefix>.NNNN.lcmlog files in `dir` (0: none).
+int NextFileIndex(const fs::path& dir, const std::string& prefix) {
+  int next = 0;
+  const std::regex name("\\.([0-9]+)\\.lcmlog");
+  for (const auto& entry : fs::directory_iterator(dir)) {
+    const std::string f = entry.path().filename().string();
+    if (f.size() <= prefix.size() || f.compare(0, prefix.size(), prefix) != 0) continue;
+    std::smatch m;
+    const std::string rest = f.substr(prefix.size());
+    if (std::regex_match(rest, m, name)) next = std::max(next, std::stoi(m[1].str()) + 1);
+  }
+  return next;
+}
+
+// The CSV history, appended one whole row per write(2). A row cut short by a kill (the file does
+// not end in a newline) is cut off at start.
+class CsvHistory {
+ public:
+  explicit CsvHistory(const fs::path& path) : path_(path) {
+    if (fs::exists(path)) {
+      const auto size = fs::file_size(path);
+      std::ifstream in(path, std::ios::binary);
+      std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+      if (text.size() != size) throw std::runtime_error(path.string() + ": cannot read");
+      if (!text.empty() && text.back() != '\n') {
+        const auto keep = text.rfind('\n') == std::string::npos ? 0 : text.rfind('\n') + 1;
+        spdlog::warn("{}: removing a row cut short by a kill ({} bytes)", path.string(),
+                     text.size() - keep);
+        fs::resize_file(path, keep);
+        text.resize(keep);
+      }
+      has_header_ = !text.empty();
+    }
+    fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+    if (fd_ < 0) throw std::runtime_error(path.string() + ": " + std::strerror(errno));
+  }
+  ~CsvHistory() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  CsvHistory(const CsvHistory&) = delete;
+  CsvHistory& operator=(const CsvHistory&) = delete;
+  bool has_header() const { return has_header_; }
+  /// Appends `text` (whole lines). False on a write error.
+  bool Append(const std::string& text, bool header) {
+    size_t done = 0;
+    while (done < text.size()) {
+      const ssize_t n = ::write(fd_, text.data() + done, text.size() - done);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) return false;
+      done += static_cast<size_t>(n);
+    }
+    if (header) has_header_ = true;
+    return true;
+  }
+
+ private:
+  fs::path path_;
+  int fd_ = -1;
+  bool has_header_ = false;
+};
+
+}  // namespace
 
 int main(int argc, char** argv) {
   using namespace rcal;
@@ -38,7 +120,7 @@ int main(int argc, char** argv) {
     std::filesystem::create_directories(dir);
     transport::LcmTransport t(lcm_url);
     transport::Health health("logger");
-    int file_index = 0;
+    int file_index = NextFileIndex(dir, prefix);
     long long bytes = 0;
     int64_t event = 0;
     std::unique_ptr<lcm::LogFile> log;
@@ -52,9 +134,7 @@ int main(int argc, char** argv) {
       spdlog::info("logging to {}", path.string());
     };
     open_next();
-    std::ofstream csv(std::filesystem::path(dir) / "kinematic_params.csv", std::ios::app);
-    bool csv_header =
-        std::filesystem::file_size(std::filesystem::path(dir) / "kinematic_params.csv") > 0;
+    CsvHistory csv(std::filesystem::path(dir) / "kinematic_params.csv");
     t.SubscribeRaw(".*", [&](const std::string& channel, const void* data, int size) {
       health.Received();
       if (bytes > 0 && bytes + size > max_bytes) open_next();
@@ -66,24 +146,24 @@ int main(int argc, char** argv) {
       ev.channel = channel;
       ev.datalen = size;
       ev.data = const_cast<void*>(data);
-      if (log->writeEvent(&ev) != 0) health.Error("log write failed");
+      if (log->writeEvent(&ev) != 0 || std::fflush(log->getFilePtr()) != 0)
+        health.Error("log write failed");
       bytes += size + static_cast<long long>(channel.size()) + 28;
     });
     t.Subscribe<kinematic_params_t>(
         transport::channels::kKinematicParams,
         [&](const kinematic_params_t& m) {
-          if (!csv_header) {
-            csv << "utime,poses_used";
-            for (const auto& n : m.names)
-              csv << "," << n << ","
-                  << "sigma_" << n;
-            csv << "\n";
-            csv_header = true;
+          if (!csv.has_header()) {
+            std::string header = "utime,poses_used";
+            for (const auto& n : m.names) header += "," + n + ",sigma_" + n;
+            if (!csv.Append(header + "\n", true)) health.Error("CSV write failed");
           }
-          csv << m.utime << "," << m.poses_used;
-          csv.precision(17);
-          for (int i = 0; i < m.num_params; ++i) csv << "," << m.values[i] << "," << m.sigmas[i];
-          csv << "\n" << std::flush;
+          std::ostringstream row;
+          row.precision(17);
+          row << m.utime << "," << m.poses_used;
+          for (int i = 0; i < m.num_params; ++i) row << "," << m.values[i] << "," << m.sigmas[i];
+          row << "\n";
+          if (!csv.Append(row.str(), false)) health.Error("CSV write failed");
           health.Tick(m.utime, t);
         },
         [&](const std::string& e) { health.Rejected(e); });

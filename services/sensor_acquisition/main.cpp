@@ -25,10 +25,23 @@
 // Paced by --speed (1: real time, 0: as fast as possible; over udpm a burst larger than the
 // receivers' socket buffers is dropped: use a finite speed or recv_buf_size=N in the LCM URL).
 // A real sensor driver implements rcal::sensors::SensorSource.
+//
+// Restarts (--checkpoint FILE, sim sources): a killed simulator must not replay from t = 0 (the
+// pipeline rejects sensor time going backwards, and a real sensor just continues). Before
+// publishing, the process writes atomically the first tick it may not yet publish (a lease of
+// --checkpoint-interval of sensor time, one pose at pose level); a restart with the same command
+// line fast-forwards the deterministic programme (same random draws, nothing published) to that
+// tick and continues from there, sensor time continuing. A kill loses at most one lease of
+// ticks (shorter than the pose pipeline's max_gap, so a still window around it keeps its pose
+// or is dropped, never averaged across a move); SIGINT loses nothing. A finished programme stays
+// finished (with --linger the restarted process just lingers). A checkpoint of another
+// programme (seed, stop counts, start time, rate) is an error naming the key (exit 1).
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <functional>
+#include <limits>
 #include <optional>
 #include <thread>
 
@@ -103,9 +116,60 @@ void Pace(int64_t utime, int64_t utime0, long long wall0, double speed) {
   }
 }
 
+// --checkpoint: where a restarted simulated source resumes (sensors::SimCheckpoint, a lease
+// written before the ticks it covers are published).
+struct Resume {
+  std::string path;         // empty: no checkpoint, every start begins the programme
+  double interval_s = 0.1;  // sensors level: sensor time per lease [s]
+};
+
+class Lease {
+ public:
+  Lease(const Resume& r, const rcal::sensors::SimProgramme& programme, int64_t ticks,
+        std::function<int64_t(int64_t)> utime_of)
+      : path_(r.path),
+        programme_(programme),
+        ticks_(std::max<int64_t>(ticks, 1)),
+        utime_of_(std::move(utime_of)) {
+    if (path_.empty()) return;
+    if (const auto c = rcal::sensors::LoadSimCheckpoint(path_, programme_)) {
+      first_ = c->next_tick;
+      finished_ = c->finished;
+      spdlog::info("{}: resuming at tick {} (sensor time {} µs){}", path_, c->next_tick,
+                   c->next_utime, c->finished ? ", the programme is finished" : "");
+    }
+    end_ = first_;
+  }
+  /// First tick to publish (the programme's end when it was finished).
+  int64_t first() const { return finished_ ? std::numeric_limits<int64_t>::max() : first_; }
+  /// Before publishing tick k: extends the lease when k is outside it.
+  void Before(int64_t k) {
+    if (path_.empty() || k < end_) return;
+    end_ = k + ticks_;
+    Save(end_, false);
+  }
+  /// Stopped before tick k (SIGINT) or at the programme's end: nothing published is lost.
+  void Stopped(int64_t k, bool finished) {
+    if (path_.empty() || finished_) return;
+    Save(k, finished);
+  }
+
+ private:
+  void Save(int64_t next, bool finished) {
+    rcal::sensors::SaveSimCheckpoint(path_, {programme_, next, utime_of_(next), finished});
+  }
+  std::string path_;
+  rcal::sensors::SimProgramme programme_;
+  int64_t ticks_;
+  std::function<int64_t(int64_t)> utime_of_;
+  int64_t first_ = 0, end_ = 0;
+  bool finished_ = false;
+};
+
 // The sensor-level simulation of the offline experiment's cell (see the file comment).
 int RunSensorSim(const rcal::io::LoadedRobot& robot, unsigned seed, int num_cal, int num_test,
-                 bool linger, int64_t start_utime, double speed, rcal::transport::LcmTransport& t) {
+                 bool linger, int64_t start_utime, double speed, const Resume& resume,
+                 rcal::transport::LcmTransport& t) {
   using namespace rcal;
   namespace ch = transport::channels;
   const cell::Cell cell = cell::MakeCell(robot.spec, seed);
@@ -128,8 +192,24 @@ int RunSensorSim(const rcal::io::LoadedRobot& robot, unsigned seed, int num_cal,
       "sensor_acquisition sim sensors on {}: seed {}, {} calibration stops, {} ticks "
       "({:.1f} s of sensor time), speed {}",
       t.url(), seed, num_cal, sensors.num_ticks(), truth.trajectory().duration(), speed);
+  const sensors::SimProgramme programme{"sensors", seed,        num_cal,
+                                        num_test,  start_utime, ss.rate_hz};
+  auto tick_utime = [&](int64_t k) {
+    return start_utime + std::llround(static_cast<double>(k) / ss.rate_hz * 1e6);
+  };
+  Lease lease(resume, programme, std::llround(resume.interval_s * ss.rate_hz), tick_utime);
+  // Fast-forward: the skipped ticks draw the same random numbers, so the rest of the programme
+  // is exactly the uninterrupted one's.
+  const int64_t first = std::min(lease.first(), sensors.num_ticks());
+  for (int64_t k = 0; k < first; ++k) sensors.Next();
+  if (first >= sensors.num_ticks())
+    spdlog::info("the programme is finished: nothing to publish");
+  else if (first > 0)
+    spdlog::info("resumed at tick {} of {} (sensor time {} µs)", first, sensors.num_ticks(),
+                 tick_utime(first));
   const long long wall0 = services::MonotonicMicros();
-  int64_t published = 0;
+  const int64_t utime0 = tick_utime(first);
+  int64_t published = 0, k = first;
   auto count = [&](bool ok) {
     if (ok) {
       health.Published();
@@ -140,7 +220,9 @@ int RunSensorSim(const rcal::io::LoadedRobot& robot, unsigned seed, int num_cal,
     const auto f = sensors.Next();
     if (!f) break;
     const int64_t utime = start_utime + std::llround(f->t * 1e6);
-    Pace(utime, start_utime, wall0, speed);
+    Pace(utime, utime0, wall0, speed);
+    if (services::StopRequested()) break;
+    lease.Before(k++);
     count(t.Publish(ch::kJoints, transport::ToJointState(model, f->q, utime)));
     transport::ImuSample imu;
     imu.utime = utime;
@@ -159,9 +241,11 @@ int RunSensorSim(const rcal::io::LoadedRobot& robot, unsigned seed, int num_cal,
     health.Tick(utime, t);
     t.HandleTimeout(0);  // keeps LCM's receive queue empty
   }
+  lease.Stopped(k, k >= sensors.num_ticks());
   spdlog::info("done: {} samples published", published);
   if (linger) {
-    // Under a supervisor: stay up (an exit would be restarted and replay the programme).
+    // Under a supervisor: stay up (an exit would be restarted, and without --checkpoint replay
+    // the programme).
     spdlog::info("lingering until stopped");
     while (!services::StopRequested()) t.HandleTimeout(100);
   }
@@ -235,6 +319,16 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--utime-offset", replay.utime_offset, "replay: added to every utime [µs]")
       ->capture_default_str();
+  Resume resume;
+  app.add_option("--checkpoint", resume.path,
+                 "sim: resume file, written atomically (JSON): a restart with the same command "
+                 "line continues the programme where it stopped, sensor time continuing (at most "
+                 "--checkpoint-interval of sensor time is lost by a kill), never from t = 0; a "
+                 "file of another programme is an error (exit 1)");
+  app.add_option("--checkpoint-interval", resume.interval_s,
+                 "sim sensors: sensor time covered by one checkpoint write [s]")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   bool include_test = false;
   app.add_flag("--include-test", include_test,
                "replay of a pose dataset: also the rows of the test set");
@@ -265,7 +359,7 @@ int main(int argc, char** argv) {
     const auto robot = io::LoadRobot(services::RepoPath(robot_path));
     if (level == "sensors")
       return RunSensorSim(robot, seed, poses > 0 ? poses : 50, test_poses, linger, start_utime,
-                          speed, t);
+                          speed, resume, t);
     const auto& model = robot.model;
     const Eigen::VectorXd x_true = sim::Table3Errors(model);
     sim::PoseNoise noise;
@@ -280,29 +374,46 @@ int main(int argc, char** argv) {
     const int block = poses > 0 ? poses : 1000;
     std::vector<Eigen::VectorXd> qs;
     size_t next = 0;
-    const long long wall0 = services::MonotonicMicros();
     const double period_us = 1e6 / rate;
-    for (int k = 0; (poses == 0 || k < poses) && !services::StopRequested(); ++k) {
+    auto pose_utime = [&](int64_t k) {
+      return start_utime + static_cast<int64_t>(std::llround(static_cast<double>(k) * period_us));
+    };
+    // One pose per lease: a restart resumes at the first pose not yet published.
+    Lease lease(resume, {"poses", seed, poses, 0, start_utime, rate}, 1, pose_utime);
+    const int64_t first = lease.first();
+    if (first > 0 && first < std::numeric_limits<int64_t>::max())
+      spdlog::info("resumed at pose {} (sensor time {} µs)", first, pose_utime(first));
+    const long long wall0 = services::MonotonicMicros();
+    int64_t k = 0;
+    for (; (poses == 0 || k < poses) && !services::StopRequested(); ++k) {
       if (next == qs.size()) {
         qs = sim::SampleJoints(model, block, rng);
         next = 0;
       }
       const Eigen::VectorXd& q = qs[next++];
-      const int64_t utime = start_utime + static_cast<int64_t>(std::llround(k * period_us));
+      const int64_t utime = pose_utime(k);
+      if (k < first) {
+        // Fast-forward: the same random numbers as the uninterrupted programme.
+        sim::MeasurePose(model, x_true, q, noise, rng);
+        continue;
+      }
       if (speed > 0) {
-        const long long due = wall0 + static_cast<long long>((utime - start_utime) / speed);
+        const long long due = wall0 + static_cast<long long>((utime - pose_utime(first)) / speed);
         while (!services::StopRequested()) {
           const long long now = services::MonotonicMicros();
           if (now >= due) break;
           std::this_thread::sleep_for(std::chrono::microseconds(std::min(due - now, 50'000LL)));
         }
       }
+      if (services::StopRequested()) break;
+      lease.Before(k);
       const auto z = sim::MeasurePose(model, x_true, q, noise, rng);
       if (t.Publish(ch::kJoints, transport::ToJointState(model, q, utime))) health.Published();
       if (t.Publish(ch::kPoseMeasurement, transport::ToMessage(z, utime, k))) health.Published();
       health.Tick(utime, t);
       t.HandleTimeout(0);  // keeps LCM's receive queue empty
     }
+    lease.Stopped(k, poses > 0 && k >= poses);
     spdlog::info("done");
     return 0;
   } catch (const std::exception& e) {

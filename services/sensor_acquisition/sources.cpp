@@ -2,7 +2,10 @@
 
 #include <cmath>
 #include <limits>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
 
+#include "rcal/io/atomic_file.hpp"
 #include "rcal/io/csv_table.hpp"
 #include "rcal/io/pose_dataset.hpp"
 #include "rcal/transport/adapters.hpp"
@@ -127,6 +130,100 @@ std::string PoseDatasetReplaySource::Describe() const {
 std::optional<SensorEvent> PoseDatasetReplaySource::Next(int /*timeout_ms*/) {
   if (Finished()) return std::nullopt;
   return events_[next_++];
+}
+
+namespace {
+
+constexpr const char* kSimCheckpointSchema = "rcal.sensor_acquisition_checkpoint/1";
+
+const nlohmann::json& Key(const nlohmann::json& j, const std::string& key) {
+  if (!j.is_object() || !j.contains(key))
+    throw std::runtime_error("sensor_acquisition checkpoint: " + key + ": missing");
+  return j.at(key);
+}
+
+}  // namespace
+
+std::string SimCheckpointText(const SimCheckpoint& c) {
+  const auto& p = c.programme;
+  const nlohmann::json j = {{"schema", kSimCheckpointSchema},
+                            {"level", p.level},
+                            {"seed", p.seed},
+                            {"poses", p.poses},
+                            {"test_poses", p.test_poses},
+                            {"start_utime", p.start_utime},
+                            {"rate", p.rate},
+                            {"next_tick", c.next_tick},
+                            {"next_utime", c.next_utime},
+                            {"finished", c.finished}};
+  return j.dump() + "\n";
+}
+
+SimCheckpoint ParseSimCheckpoint(const std::string& text) {
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(text);
+  } catch (const std::exception& e) {
+    throw std::runtime_error(std::string("sensor_acquisition checkpoint: not JSON: ") + e.what());
+  }
+  if (!j.is_object() || j.value("schema", "") != kSimCheckpointSchema)
+    throw std::runtime_error(std::string("sensor_acquisition checkpoint: schema: expected ") +
+                             kSimCheckpointSchema);
+  SimCheckpoint c;
+  std::string key;
+  try {
+    auto get = [&](const char* k) -> const nlohmann::json& {
+      key = k;
+      return Key(j, k);
+    };
+    c.programme.level = get("level").get<std::string>();
+    c.programme.seed = get("seed").get<uint64_t>();
+    c.programme.poses = get("poses").get<int64_t>();
+    c.programme.test_poses = get("test_poses").get<int64_t>();
+    c.programme.start_utime = get("start_utime").get<int64_t>();
+    c.programme.rate = get("rate").get<double>();
+    c.next_tick = get("next_tick").get<int64_t>();
+    c.next_utime = get("next_utime").get<int64_t>();
+    c.finished = get("finished").get<bool>();
+  } catch (const nlohmann::json::exception& e) {
+    throw std::runtime_error("sensor_acquisition checkpoint: " + key + ": wrong type (" + e.what() +
+                             ")");
+  }
+  if (c.next_tick < 0)
+    throw std::runtime_error("sensor_acquisition checkpoint: next_tick: negative");
+  return c;
+}
+
+void SaveSimCheckpoint(const std::filesystem::path& path, const SimCheckpoint& c) {
+  io::AtomicWriteFile(path, SimCheckpointText(c));
+}
+
+std::optional<SimCheckpoint> LoadSimCheckpoint(const std::filesystem::path& path,
+                                               const SimProgramme& programme) {
+  if (!std::filesystem::exists(path)) return std::nullopt;
+  try {
+    SimCheckpoint c = ParseSimCheckpoint(io::ReadFile(path));
+    const auto& p = c.programme;
+    auto differs = [&](const std::string& key, const std::string& has, const std::string& want) {
+      throw std::runtime_error("sensor_acquisition checkpoint: " + key + ": " + has +
+                               " is not this programme's " + want +
+                               " (remove the file to start the programme afresh)");
+    };
+    if (p.level != programme.level) differs("level", p.level, programme.level);
+    if (p.seed != programme.seed)
+      differs("seed", std::to_string(p.seed), std::to_string(programme.seed));
+    if (p.poses != programme.poses)
+      differs("poses", std::to_string(p.poses), std::to_string(programme.poses));
+    if (p.test_poses != programme.test_poses)
+      differs("test_poses", std::to_string(p.test_poses), std::to_string(programme.test_poses));
+    if (p.start_utime != programme.start_utime)
+      differs("start_utime", std::to_string(p.start_utime), std::to_string(programme.start_utime));
+    if (p.rate != programme.rate)
+      differs("rate", std::to_string(p.rate), std::to_string(programme.rate));
+    return c;
+  } catch (const std::runtime_error& e) {
+    throw std::runtime_error(path.string() + ": " + e.what());
+  }
 }
 
 }  // namespace rcal::sensors

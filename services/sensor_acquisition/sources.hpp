@@ -8,6 +8,7 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
 #include <memory>
 #include <optional>
 #include <string>
@@ -104,5 +105,42 @@ class PoseDatasetReplaySource final : public SensorSource {
   size_t next_ = 0;
   int poses_ = 0;
 };
+
+/// The simulated programme a sensor_acquisition checkpoint belongs to: a restart resumes only the
+/// same programme (same level, seed, stop counts, start time and rate).
+struct SimProgramme {
+  std::string level;  ///< "poses" | "sensors"
+  uint64_t seed = 1;
+  int64_t poses = 0;        ///< calibration stops (pose level: 0 = unlimited)
+  int64_t test_poses = 0;   ///< sensors level: test stops drawn after them
+  int64_t start_utime = 0;  ///< [µs] sensor time of tick (pose) 0
+  double rate = 0.0;        ///< [Hz] ticks (sensors level) or poses (pose level) per second
+};
+
+/// Where a restarted simulated source resumes (`--checkpoint FILE`, JSON, schema
+/// `rcal.sensor_acquisition_checkpoint/1`, written atomically). It is a lease, written *before*
+/// the ticks it covers are published: `next_tick` is the first tick the process has not yet
+/// been allowed to publish, so a process killed anywhere inside the lease resumes at `next_tick`
+/// and never publishes a tick (a sensor time) twice; at most one lease of ticks is lost.
+/// `next_utime` is that tick's sensor time (for people; the programme defines it).
+struct SimCheckpoint {
+  SimProgramme programme;
+  int64_t next_tick = 0;
+  int64_t next_utime = 0;
+  bool finished = false;  ///< the programme was published to its end
+};
+
+/// JSON text of a checkpoint.
+std::string SimCheckpointText(const SimCheckpoint& c);
+/// Parses SimCheckpointText output. Throws std::runtime_error naming the key on a malformed text.
+SimCheckpoint ParseSimCheckpoint(const std::string& text);
+/// Writes atomically (temporary file + rename). Throws std::runtime_error naming the path.
+void SaveSimCheckpoint(const std::filesystem::path& path, const SimCheckpoint& c);
+/// The checkpoint at `path` for `programme`: nullopt when there is no file; throws
+/// std::runtime_error naming the path and the key when it cannot be parsed or belongs to another
+/// programme (a different seed, stop count, ...: resuming it would publish another programme's
+/// sensor time).
+std::optional<SimCheckpoint> LoadSimCheckpoint(const std::filesystem::path& path,
+                                               const SimProgramme& programme);
 
 }  // namespace rcal::sensors

@@ -68,6 +68,10 @@ class StillWindowNode {
       spdlog::warn("rejected: {}", s.error());
     }
     if (!t_first_) t_first_ = Seconds(utime);
+    if (const auto& c = pipeline_.counters(); c.windows_dropped > dropped_) {
+      dropped_ = c.windows_dropped;
+      spdlog::warn("window dropped ({} so far): {}", dropped_, c.last_error);
+    }
     for (const auto& p : pipeline_.TakePoses()) Emit(p);
     health_.Tick(utime, t_);
   }
@@ -122,6 +126,7 @@ class StillWindowNode {
   transport::Health health_;
   std::optional<double> t_first_;
   int emitted_ = 0;
+  std::int64_t dropped_ = 0;
 };
 
 }  // namespace

@@ -136,5 +136,72 @@ TEST(PoseDatasetReplaySource, TheBroadTrialIsARawStream) {
   EXPECT_TRUE(IsRawStreamCsv(RCAL_SHARED_DIR "/data/broad/broad_02_100hz.csv"));
 }
 
+// sensor_acquisition --checkpoint: the sim source's resume point survives a save and load; a
+// missing file means "start the programme"; another programme's file is an error naming the key;
+// a malformed one names the key.
+TEST(SimCheckpoint, RoundTripAndProgrammeCheck) {
+  const fs::path dir = fs::temp_directory_path() / ("sim_ckpt_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  const SimProgramme prog{"sensors", 1, 20, 20, 1'000'000, 100.0};
+  EXPECT_FALSE(LoadSimCheckpoint(dir / "sa.json", prog).has_value());
+  SaveSimCheckpoint(dir / "sa.json", {prog, 1234, 13'340'000, false});
+  const auto back = LoadSimCheckpoint(dir / "sa.json", prog);
+  ASSERT_TRUE(back.has_value());
+  EXPECT_EQ(back->next_tick, 1234);
+  EXPECT_EQ(back->next_utime, 13'340'000);
+  EXPECT_FALSE(back->finished);
+  EXPECT_EQ(back->programme.level, "sensors");
+  EXPECT_EQ(back->programme.rate, 100.0);
+  auto error_of = [&](const SimProgramme& other) -> std::string {
+    try {
+      LoadSimCheckpoint(dir / "sa.json", other);
+    } catch (const std::runtime_error& e) {
+      return e.what();
+    }
+    return "";
+  };
+  SimProgramme other = prog;
+  other.seed = 2;
+  EXPECT_NE(error_of(other).find("seed"), std::string::npos) << error_of(other);
+  other = prog;
+  other.poses = 50;
+  EXPECT_NE(error_of(other).find("poses"), std::string::npos) << error_of(other);
+  other = prog;
+  other.level = "poses";
+  EXPECT_NE(error_of(other).find("level"), std::string::npos) << error_of(other);
+  other = prog;
+  other.start_utime = 0;
+  EXPECT_NE(error_of(other).find("start_utime"), std::string::npos) << error_of(other);
+  // Written atomically: no temporary file is left beside it.
+  int files = 0;
+  for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir)) ++files;
+  EXPECT_EQ(files, 1);
+  fs::remove_all(dir);
+}
+
+TEST(SimCheckpoint, MalformedTextNamesTheKey) {
+  EXPECT_THROW(ParseSimCheckpoint("not json"), std::runtime_error);
+  try {
+    ParseSimCheckpoint(R"({"schema": "rcal.sensor_acquisition_checkpoint/1", "level": "sensors",
+                          "seed": 1, "poses": 20, "test_poses": 20, "start_utime": 0,
+                          "rate": 100, "next_utime": 0, "finished": false})");
+    FAIL() << "no exception";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("next_tick"), std::string::npos) << e.what();
+  }
+  try {
+    ParseSimCheckpoint(R"({"schema": "rcal.sensor_acquisition_checkpoint/1", "level": 3})");
+    FAIL() << "no exception";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("level"), std::string::npos) << e.what();
+  }
+  try {
+    ParseSimCheckpoint(R"({"schema": "other/1"})");
+    FAIL() << "no exception";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("schema"), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace rcal::sensors

@@ -9,7 +9,8 @@ namespace rcal::transport {
 namespace {
 
 using nlohmann::json;
-constexpr const char* kSchema = "rcal.ekf_checkpoint/1";
+constexpr const char* kSchema = "rcal.ekf_checkpoint/2";
+constexpr const char* kSchemaV1 = "rcal.ekf_checkpoint/1";  // no `held`; still loads
 
 json Vec(const Eigen::VectorXd& v) {
   return std::vector<double>(v.data(), v.data() + v.size());
@@ -53,25 +54,46 @@ Eigen::MatrixXd ToMat(const json& j, const std::string& key) {
   return m;
 }
 
+json MeasurementJson(const kinematics::PoseMeasurement& m) {
+  return {{"q", Vec(m.q)},
+          {"p_WM_W", Vec(m.p_WM_W)},
+          {"has_orientation", m.has_orientation},
+          {"R_EI", Mat(m.R_EI)},
+          {"covariance", Mat(m.covariance)}};
+}
+
+kinematics::PoseMeasurement MeasurementFromJson(const json& h, const std::string& path) {
+  kinematics::PoseMeasurement m;
+  m.q = ToVec(At(h, "q", path), path + "q");
+  const Eigen::VectorXd p = ToVec(At(h, "p_WM_W", path), path + "p_WM_W");
+  if (p.size() != 3) throw std::runtime_error("checkpoint: " + path + "p_WM_W: not 3 values");
+  m.p_WM_W = p;
+  m.has_orientation = At(h, "has_orientation", path).get<bool>();
+  const Eigen::MatrixXd R = ToMat(At(h, "R_EI", path), path + "R_EI");
+  if (R.rows() != 3 || R.cols() != 3)
+    throw std::runtime_error("checkpoint: " + path + "R_EI: not 3×3");
+  m.R_EI = R;
+  m.covariance = ToMat(At(h, "covariance", path), path + "covariance");
+  return m;
+}
+
 }  // namespace
 
 std::string CheckpointText(const CheckpointFile& f) {
   const auto& c = f.checkpoint;
   json history = json::array();
-  for (const auto& m : c.history) {
-    history.push_back({{"q", Vec(m.q)},
-                       {"p_WM_W", Vec(m.p_WM_W)},
-                       {"has_orientation", m.has_orientation},
-                       {"R_EI", Mat(m.R_EI)},
-                       {"covariance", Mat(m.covariance)}});
-  }
+  for (const auto& m : c.history) history.push_back(MeasurementJson(m));
+  json held = json::array();
+  for (const auto& h : f.held)
+    held.push_back(
+        {{"utime", h.utime}, {"pose_index", h.pose_index}, {"measurement", MeasurementJson(h.z)}});
   json j = {{"schema", kSchema},      {"model_id", f.model_id},
             {"utime", f.utime},       {"last_pose_index", f.last_pose_index},
             {"x0", Vec(c.x0)},        {"x", Vec(c.x)},
             {"x_lin", Vec(c.x_lin)},  {"P0", Mat(c.P0)},
             {"P", Mat(c.P)},          {"accepted", c.accepted},
             {"rejected", c.rejected}, {"relinearizations", c.relinearizations},
-            {"history", history}};
+            {"history", history},     {"held", held}};
   return j.dump() + "\n";
 }
 
@@ -82,8 +104,10 @@ CheckpointFile ParseCheckpoint(const std::string& text) {
   } catch (const std::exception& e) {
     throw std::runtime_error(std::string("checkpoint: not JSON: ") + e.what());
   }
-  if (!j.is_object() || j.value("schema", "") != kSchema)
-    throw std::runtime_error(std::string("checkpoint: schema: expected ") + kSchema);
+  const std::string schema = j.is_object() ? j.value("schema", "") : "";
+  if (schema != kSchema && schema != kSchemaV1)
+    throw std::runtime_error(std::string("checkpoint: schema: expected ") + kSchema + " (or " +
+                             kSchemaV1 + ")");
   try {
     CheckpointFile f;
     f.model_id = At(j, "model_id", "").get<std::string>();
@@ -101,19 +125,19 @@ CheckpointFile ParseCheckpoint(const std::string& text) {
     const json& history = At(j, "history", "");
     for (size_t i = 0; i < history.size(); ++i) {
       const std::string path = "history[" + std::to_string(i) + "].";
-      const json& h = history[i];
-      kinematics::PoseMeasurement m;
-      m.q = ToVec(At(h, "q", path), path + "q");
-      const Eigen::VectorXd p = ToVec(At(h, "p_WM_W", path), path + "p_WM_W");
-      if (p.size() != 3) throw std::runtime_error("checkpoint: " + path + "p_WM_W: not 3 values");
-      m.p_WM_W = p;
-      m.has_orientation = At(h, "has_orientation", path).get<bool>();
-      const Eigen::MatrixXd R = ToMat(At(h, "R_EI", path), path + "R_EI");
-      if (R.rows() != 3 || R.cols() != 3)
-        throw std::runtime_error("checkpoint: " + path + "R_EI: not 3×3");
-      m.R_EI = R;
-      m.covariance = ToMat(At(h, "covariance", path), path + "covariance");
-      c.history.push_back(std::move(m));
+      c.history.push_back(MeasurementFromJson(history[i], path));
+    }
+    if (schema == kSchema) {
+      const json& held = At(j, "held", "");
+      if (!held.is_array()) throw std::runtime_error("checkpoint: held: not an array");
+      for (size_t i = 0; i < held.size(); ++i) {
+        const std::string path = "held[" + std::to_string(i) + "].";
+        HeldPose h;
+        h.utime = At(held[i], "utime", path).get<int64_t>();
+        h.pose_index = At(held[i], "pose_index", path).get<int64_t>();
+        h.z = MeasurementFromJson(At(held[i], "measurement", path), path + "measurement.");
+        f.held.push_back(std::move(h));
+      }
     }
     return f;
   } catch (const nlohmann::json::exception& e) {

@@ -1,15 +1,26 @@
-// The identifier's checkpoint as a JSON document (schema `rcal.ekf_checkpoint/1`), written
+// The identifier's checkpoint as a JSON document (schema `rcal.ekf_checkpoint/2`), written
 // atomically by the process so that a restart resumes where it stopped. Doubles are written in
 // their shortest exact form: Restore(Parse(Text(c))) reproduces the state bit for bit.
+// Schema 2 adds `held`: the poses held back for the set-up guess before the EKF starts
+// (ekf_identifier --cell-seed), so a restart during the guess phase keeps them. Files of schema
+// `rcal.ekf_checkpoint/1` (no `held`) still load, with no held poses.
 #pragma once
 
 #include <cstdint>
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include "rcal/identification/ekf_identifier.hpp"
 
 namespace rcal::transport {
+
+/// A pose measurement received but not yet given to the EKF (held for the set-up guess).
+struct HeldPose {
+  kinematics::PoseMeasurement z;
+  int64_t utime = 0;  ///< [µs]
+  int64_t pose_index = -1;
+};
 
 /// A checkpoint and what it belongs to.
 struct CheckpointFile {
@@ -17,6 +28,7 @@ struct CheckpointFile {
   int64_t utime = 0;             ///< sensor time of the last measurement it includes [µs]
   int64_t last_pose_index = -1;  ///< pose_index of that measurement (−1: none)
   identification::EkfCheckpoint checkpoint;
+  std::vector<HeldPose> held;  ///< held back for the set-up guess, oldest first (schema 2)
 };
 
 /// JSON text of a checkpoint.
