@@ -13,11 +13,14 @@ struct CalibrateLogOptions {
   std::string channel;  ///< empty: POSE_MEASUREMENT (transport::channels::kPoseMeasurement)
   unsigned ident_seed = 1;
   bool position_only = false;
+  unsigned cell_seed = 0;  ///< > 0: the simulated cell (ekf_identifier --cell-seed)
+  int guess_poses = 6;     ///< with a cell: poses held back for the set-up guess
   std::string json_path;
 };
 
 /// The options calibrate-log has besides LOG, --robot and --json (which `calibrate` shares):
-/// --channel, --ident-seed, --position-only. `suffix` is appended to each description.
+/// --channel, --ident-seed, --position-only, --cell-seed, --guess-poses. `suffix` is appended to
+/// each description.
 void AddCalibrateLogOptions(CLI::App& sub, CalibrateLogOptions& o, const std::string& suffix);
 
 /// Runs the identification over the log; returns the exit code. Throws std::runtime_error

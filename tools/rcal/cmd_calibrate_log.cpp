@@ -1,7 +1,8 @@
 // rcal calibrate-log LOG --robot R: the online identification run offline on a recorded LCM
 // event log (lcm-logger or the logger service). Reads the POSE_MEASUREMENT events in log order
 // with lcm::LogFile and runs them through the same checks and the same EKF, on the same
-// identifiable base set (--ident-seed), as the ekf_identifier process: a log replayed through
+// identifiable base set (--ident-seed), or the same simulated cell and set-up guess (--cell-seed),
+// as the ekf_identifier process (both run cell::OnlineIdentification): a log replayed through
 // the pipeline with lcm-logplayer and this command give the same parameters (a tested property).
 // Events that fail to decode or to validate, and poses not after the last accepted one, are
 // skipped and counted, as the process rejects them. `rcal calibrate --log LOG` runs this same code.
@@ -11,12 +12,10 @@
 
 #include "calibrate_log.hpp"
 #include "command.hpp"
-#include "rcal/identification/ekf_identifier.hpp"
+#include "rcal/cell/online_identification.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/robot_urdf.hpp"
-#include "rcal/kinematics/identifiability.hpp"
 #include "rcal/pose_measurement_t.hpp"
-#include "rcal/sim/pose_sim.hpp"
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
 
@@ -31,26 +30,31 @@ void AddCalibrateLogOptions(CLI::App& sub, CalibrateLogOptions& o, const std::st
          "seed of the joint sample that selects the identifiable set (ekf_identifier's)" + suffix)
       ->capture_default_str();
   sub.add_flag("--position-only", o.position_only, "identify from positions only" + suffix);
+  sub.add_option(
+         "--cell-seed", o.cell_seed,
+         "> 0: the simulated cell of that seed, as `ekf_identifier --cell-seed` (the demo's "
+         "log: 1)" +
+             suffix)
+      ->capture_default_str();
+  sub.add_option("--guess-poses", o.guess_poses,
+                 "with --cell-seed: poses held back for the set-up guess" + suffix)
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
 }
 
 int RunCalibrateLog(const CalibrateLogOptions& o_in) {
   CalibrateLogOptions o = o_in;
   if (o.channel.empty()) o.channel = transport::channels::kPoseMeasurement;
   const auto robot = io::LoadRobot(ResolvePath(o.robot));
-  const auto& model = robot.model;
-  // The identifiable base set exactly as ekf_identifier selects it.
-  sim::Rng rng_id(o.ident_seed * 1000 + 1);
-  const auto base = kinematics::AnalyzeIdentifiability(
-                        model, sim::SampleJoints(model, 200, rng_id), model.Nominal(),
-                        o.position_only ? kinematics::MeasurementKind::kPositionOnly
-                                        : kinematics::MeasurementKind::kFullPose)
-                        .identifiable;
-  identification::EkfIdentifier ekf(model, base);
+  // The identification exactly as ekf_identifier runs it (same base set, set-up guess, checks).
+  cell::OnlineIdentification id(robot.spec, robot.model,
+                                {o.ident_seed, o.cell_seed, o.guess_poses, o.position_only});
+  const auto& model = id.model();
+  const auto& base = id.base();
 
   lcm::LogFile log(o.log, "r");
   if (!log.good()) throw std::runtime_error("calibrate-log: cannot read " + o.log);
-  int64_t last_utime = std::numeric_limits<int64_t>::min(), events = 0, skipped = 0;
-  int64_t last_pose_index = -1;
+  int64_t events = 0, skipped = 0;
   while (const lcm::LogEvent* e = log.readNextEvent()) {
     if (e->channel != o.channel) continue;
     ++events;
@@ -61,16 +65,10 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
     }
     std::string error;
     auto z = transport::FromMessage(msg, &error);
-    if (z) error = kinematics::Validate(model, *z);
-    if (!error.empty() || msg.utime <= last_utime) {
-      ++skipped;
-      continue;
-    }
-    if (ekf.Update(*z).accepted) {
-      last_utime = msg.utime;
-      last_pose_index = msg.pose_index;
-    }
+    if (!z || !id.Add({std::move(*z), msg.utime, msg.pose_index}).rejected.empty()) ++skipped;
   }
+  const auto& ekf = id.ekf();
+  const int64_t last_utime = id.last_utime(), last_pose_index = id.last_pose_index();
   const Eigen::VectorXd x = ekf.x(), sigma = ekf.sigma();
   std::printf(
       "rcal calibrate-log %s: %lld %s events, %d poses accepted, %d rejected by the EKF, "

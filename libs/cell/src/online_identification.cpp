@@ -21,8 +21,8 @@ std::vector<int> GenericBaseSet(const kinematics::KinematicModel& model,
       model, sim::SampleJoints(model, 200, rng_id), model.Nominal(),
       s.position_only ? kinematics::MeasurementKind::kPositionOnly
                       : kinematics::MeasurementKind::kFullPose);
-  spdlog::info("identifiable: rank {} of {} (condition number {:.1f})", report.rank,
-               model.num_params(), report.condition_number);
+  spdlog::debug("identifiable: rank {} of {} (condition number {:.1f})", report.rank,
+                model.num_params(), report.condition_number);
   return report.identifiable;
 }
 
@@ -44,7 +44,7 @@ OnlineIdentification::OnlineIdentification(const io::RobotSpec& robot,
     throw std::invalid_argument("guess_poses: " + std::to_string(settings.guess_poses) +
                                 ", at least 1");
   if (cell_)
-    spdlog::info(
+    spdlog::debug(
         "cell of seed {}: {} parameters, base set of {}; set-up guess from the first {} "
         "poses",
         settings.cell_seed, model_.num_params(), base_.size(), settings.guess_poses);
