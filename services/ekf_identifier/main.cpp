@@ -12,8 +12,10 @@
 // `rcal experiment paper --sensors --seed S` (rcal::cell::MakeCell: the arm plus the set-up
 // frames base/earth/marker/IMU). The first --guess-poses poses are held back, the set-up guess is
 // fitted to them (SetupGuess), the EKF is started there (MakeEkf) and then updated with them and
-// every later pose, exactly as the offline RunOnline. The held poses are checkpointed too
-// (schema rcal.ekf_checkpoint/2, `held`), so a restart during the guess phase keeps them.
+// every later pose, exactly as the offline RunOnline. The pose-by-pose logic is
+// rcal::cell::OnlineIdentification, which `rcal calibrate --log` runs offline on a recorded log.
+// The held poses are checkpointed too (schema rcal.ekf_checkpoint/2, `held`), so a restart during
+// the guess phase keeps them.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -24,13 +26,12 @@
 #include <memory>
 #include <optional>
 
-#include "rcal/cell/sim_cell.hpp"
+#include "rcal/cell/online_identification.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
 #include "rcal/identification/metrics.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/kinematics/identifiability.hpp"
 #include "rcal/services/common.hpp"
-#include "rcal/sim/pose_sim.hpp"
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/checkpoint_json.hpp"
@@ -59,23 +60,17 @@ class Identifier {
       : o_(o),
         t_(t),
         robot_(io::LoadRobot(services::RepoPath(o.robot))),
-        cell_(o.cell_seed > 0 ? std::optional<cell::Cell>(cell::MakeCell(robot_.spec, o.cell_seed))
-                              : std::nullopt),
-        model_(cell_ ? cell_->model : robot_.model),
-        base_(cell_ ? cell_->base : BaseSet(model_, o)),
-        ekf_(cell_ ? std::make_unique<identification::EkfIdentifier>(
-                         cell::MakeEkf(*cell_, model_.Nominal()))
-                   : std::make_unique<identification::EkfIdentifier>(model_, base_)),
-        model_id_(transport::ModelId(model_)),
+        id_(robot_.spec, robot_.model, {o.ident_seed, o.cell_seed, o.guess_poses, o.position_only}),
+        model_id_(transport::ModelId(id_.model())),
         health_(o.name) {
-    started_ = !cell_;
-    if (cell_)
+    if (id_.cell())
       spdlog::info(
-          "cell of seed {}: {} parameters, base set of {}; set-up guess from the first {} "
-          "poses",
-          o.cell_seed, model_.num_params(), base_.size(), o.guess_poses);
+          "cell of seed {}: {} parameters, base set of {}; set-up guess from the first {} poses",
+          o.cell_seed, id_.model().num_params(), id_.base().size(), o.guess_poses);
+    else
+      spdlog::info("{}: {} of {} parameters identifiable", id_.model().name(), id_.base().size(),
+                   id_.model().num_params());
     if (!o.checkpoint.empty() && std::filesystem::exists(o.checkpoint)) Resume();
-    if (ekf_->accepted() > 0) started_ = true;
     t_.Subscribe<pose_measurement_t>(
         ch::kPoseMeasurement, [this](const pose_measurement_t& m) { OnPose(m); },
         [this](const std::string& e) {
@@ -87,43 +82,25 @@ class Identifier {
   /// At start: the restored estimate (if any) and a CALIBRATION_STATUS that tells listeners the
   /// process is up and how many poses it resumed with.
   void PublishCurrent() {
-    const int64_t utime = ekf_->accepted() > 0 ? last_utime_ : 0;
-    if (ekf_->accepted() > 0 &&
-        t_.Publish(ch::kKinematicParams, transport::ToKinematicParams(*ekf_, model_.name(), utime)))
+    const auto& ekf = id_.ekf();
+    const int64_t utime = ekf.accepted() > 0 ? id_.last_utime() : 0;
+    if (ekf.accepted() > 0 && t_.Publish(ch::kKinematicParams, transport::ToKinematicParams(
+                                                                   ekf, id_.model().name(), utime)))
       health_.Published();
-    if (t_.Publish(ch::kCalibrationStatus, transport::ToCalibrationStatus(*ekf_, {}, utime)))
+    if (t_.Publish(ch::kCalibrationStatus, transport::ToCalibrationStatus(ekf, {}, utime)))
       health_.Published();
   }
 
  private:
-  // The identifiable base set, exactly as the offline `rcal experiment paper` finds it.
-  static std::vector<int> BaseSet(const kinematics::KinematicModel& model, const Options& o) {
-    sim::Rng rng_id(o.ident_seed * 1000 + 1);
-    const auto report = kinematics::AnalyzeIdentifiability(
-        model, sim::SampleJoints(model, 200, rng_id), model.Nominal(),
-        o.position_only ? kinematics::MeasurementKind::kPositionOnly
-                        : kinematics::MeasurementKind::kFullPose);
-    spdlog::info("identifiable: rank {} of {} (condition number {:.1f})", report.rank,
-                 model.num_params(), report.condition_number);
-    return report.identifiable;
-  }
-
   void Resume() {
     try {
       const auto f = transport::LoadCheckpoint(o_.checkpoint);
       if (f.model_id != model_id_)
         throw std::runtime_error("model_id " + f.model_id + " is not " + model_id_);
-      if (!f.held.empty() && (!cell_ || f.checkpoint.accepted > 0))
-        throw std::runtime_error("held: " + std::to_string(f.held.size()) +
-                                 " poses held for a set-up guess, but " +
-                                 (cell_ ? "the EKF has started" : "there is no --cell-seed"));
-      ekf_->Restore(f.checkpoint);
-      held_ = f.held;
-      last_utime_ = f.utime;
-      last_pose_index_ = f.last_pose_index;
+      id_.Restore(f.checkpoint, f.held, f.utime, f.last_pose_index);
       spdlog::info(
           "resumed from {}: {} poses accepted, {} held for the set-up guess, last utime {}",
-          o_.checkpoint, ekf_->accepted(), held_.size(), last_utime_);
+          o_.checkpoint, id_.ekf().accepted(), id_.held().size(), id_.last_utime());
     } catch (const std::exception& e) {
       // A checkpoint that does not fit is reported and kept aside, never silently overwritten.
       const std::string aside = o_.checkpoint + ".rejected";
@@ -142,74 +119,54 @@ class Identifier {
     health_.Received();
     std::string error;
     auto z = transport::FromMessage(msg, &error);
-    if (z) error = kinematics::Validate(model_, *z);
-    if (error.empty() && msg.utime <= last_utime_)
-      error = "pose_measurement.utime: " + std::to_string(msg.utime) +
-              " is not after the last pose (" + std::to_string(last_utime_) + ")";
-    if (!error.empty()) {
+    if (!z) {
       Reject(error);
-      health_.Tick(std::max(msg.utime, last_utime_), t_);
+      health_.Tick(std::max(msg.utime, id_.last_utime()), t_);
       return;
     }
-    if (!started_) {
-      // Held back for the set-up guess (time order checked against the held poses too).
-      last_utime_ = msg.utime;
-      last_pose_index_ = msg.pose_index;
-      held_.push_back({*z, msg.utime, msg.pose_index});
-      const bool guess = static_cast<int>(held_.size()) >= std::max(o_.guess_poses, 1);
-      if (!guess) SaveState();  // before the log line: a logged held pose survives a kill
-      spdlog::info("pose {}: held for the set-up guess ({} of {})", msg.pose_index, held_.size(),
+    const auto out = id_.Add({std::move(*z), msg.utime, msg.pose_index},
+                             [this](const cell::OnlineIdentification::Update& u) { Applied(u); });
+    if (!out.rejected.empty()) {
+      Reject(out.rejected);
+      health_.Tick(std::max(msg.utime, id_.last_utime()), t_);
+      return;
+    }
+    if (out.held) {
+      if (!out.started) SaveState();  // before the log line: a logged held pose survives a kill
+      spdlog::info("pose {}: held for the set-up guess ({} of {})", msg.pose_index,
+                   out.started ? o_.guess_poses : static_cast<int>(id_.held().size()),
                    o_.guess_poses);
-      if (!guess) {
-        health_.Tick(msg.utime, t_);
-        return;
-      }
-      std::vector<kinematics::PoseMeasurement> ms;
-      for (const auto& h : held_) ms.push_back(h.z);
-      const Eigen::VectorXd x0 = cell::SetupGuess(*cell_, ms);
-      ekf_ = std::make_unique<identification::EkfIdentifier>(cell::MakeEkf(*cell_, x0));
-      started_ = true;
-      spdlog::info("set-up guess from {} poses; EKF started", ms.size());
-      const auto held = std::move(held_);
-      held_.clear();
-      for (const auto& h : held) Apply(h.z, h.utime, h.pose_index);
-      return;
+      if (out.started) spdlog::info("set-up guess from {} poses; EKF started", o_.guess_poses);
+      if (!out.started) health_.Tick(msg.utime, t_);
     }
-    Apply(*z, msg.utime, msg.pose_index);
   }
 
-  void Apply(const kinematics::PoseMeasurement& zz, int64_t utime, int64_t pose_index) {
-    const auto* z = &zz;
-    const Eigen::VectorXd x_before = ekf_->x();
-    const auto r = ekf_->Update(*z);
-    if (!r.accepted) {
-      Reject("pose " + std::to_string(pose_index) + ": " + r.reason);
-    } else {
-      last_utime_ = utime;
-      last_pose_index_ = pose_index;
+  // After each EKF update (also each held pose applied when the guess completes).
+  void Applied(const cell::OnlineIdentification::Update& u) {
+    const auto& ekf = id_.ekf();
+    if (!u.result.accepted)
+      Reject("pose " + std::to_string(u.pose_index) + ": " + u.result.reason);
+    else
       SaveState();
-    }
     transport::StatusFigures fig;
-    fig.last_nis = r.nis;
-    const Eigen::VectorXd dx = ekf_->x() - x_before, sigma = ekf_->sigma();
-    double max_step = 0;
-    for (int i : base_) max_step = std::max(max_step, std::abs(dx(i)) / std::max(sigma(i), 1e-300));
+    fig.last_nis = u.result.nis;
     // Converged: enough equations for the unknowns, and the last pose moved no parameter by more
     // than a tenth of its σ.
-    fig.converged =
-        ekf_->accepted() * z->dimension() >= 2 * static_cast<int>(base_.size()) && max_step < 0.1;
-    Publish(utime, fig);
-    health_.Tick(utime, t_);
-    spdlog::info("pose {}: {} (accepted {}, rejected {}, NIS {:.2f})", pose_index,
-                 r.accepted ? "accepted" : "rejected", ekf_->accepted(), ekf_->rejected(), r.nis);
+    fig.converged = ekf.accepted() * u.dimension >= 2 * static_cast<int>(id_.base().size()) &&
+                    u.max_step_sigma < 0.1;
+    Publish(u.utime, fig);
+    health_.Tick(u.utime, t_);
+    spdlog::info("pose {}: {} (accepted {}, rejected {}, NIS {:.2f})", u.pose_index,
+                 u.result.accepted ? "accepted" : "rejected", ekf.accepted(), ekf.rejected(),
+                 u.result.nis);
   }
 
   // The EKF state and the poses held for the set-up guess, atomically (--checkpoint).
   void SaveState() {
     if (o_.checkpoint.empty()) return;
     try {
-      transport::SaveCheckpoint(
-          o_.checkpoint, {model_id_, last_utime_, last_pose_index_, ekf_->Checkpoint(), held_});
+      transport::SaveCheckpoint(o_.checkpoint, {model_id_, id_.last_utime(), id_.last_pose_index(),
+                                                id_.ekf().Checkpoint(), id_.held()});
     } catch (const std::exception& e) {
       health_.Error(e.what());
       spdlog::error("{}", e.what());
@@ -217,39 +174,34 @@ class Identifier {
   }
 
   void Publish(int64_t utime, transport::StatusFigures fig) {
-    if (t_.Publish(ch::kKinematicParams, transport::ToKinematicParams(*ekf_, model_.name(), utime)))
+    const auto& ekf = id_.ekf();
+    const auto& model = id_.model();
+    if (t_.Publish(ch::kKinematicParams, transport::ToKinematicParams(ekf, model.name(), utime)))
       health_.Published();
-    const auto history = ekf_->Checkpoint().history;
+    const auto history = ekf.Checkpoint().history;
     if (!history.empty()) {
-      const auto stats = identification::ErrorsAgainstMeasurements(model_, ekf_->x(), history);
+      const auto stats = identification::ErrorsAgainstMeasurements(model, ekf.x(), history);
       fig.rms_position_residual = stats.rms_position_m;
       fig.rms_orientation_residual = stats.rms_orientation_rad;
       std::vector<Eigen::VectorXd> qs;
       for (const auto& m : history) qs.push_back(m.q);
       fig.condition_number =
-          kinematics::AnalyzeIdentifiability(model_, qs, ekf_->x(),
+          kinematics::AnalyzeIdentifiability(model, qs, ekf.x(),
                                              history.front().has_orientation
                                                  ? kinematics::MeasurementKind::kFullPose
                                                  : kinematics::MeasurementKind::kPositionOnly)
               .condition_number;
     }
-    if (t_.Publish(ch::kCalibrationStatus, transport::ToCalibrationStatus(*ekf_, fig, utime)))
+    if (t_.Publish(ch::kCalibrationStatus, transport::ToCalibrationStatus(ekf, fig, utime)))
       health_.Published();
   }
 
   Options o_;
   transport::Transport& t_;
   io::LoadedRobot robot_;
-  std::optional<cell::Cell> cell_;
-  kinematics::KinematicModel model_;
-  std::vector<int> base_;
-  std::unique_ptr<identification::EkfIdentifier> ekf_;
-  std::vector<transport::HeldPose> held_;
-  bool started_ = true;
+  cell::OnlineIdentification id_;
   std::string model_id_;
   transport::Health health_;
-  int64_t last_utime_ = std::numeric_limits<int64_t>::min();
-  int64_t last_pose_index_ = -1;
 };
 
 }  // namespace

@@ -96,11 +96,13 @@ int main(int argc, char** argv) {
       spdlog::info("{}: magnetic reference norm {:.6g}, dip {:.4f} rad (not learned again)",
                    state_path, settings.mag_ref_norm, settings.mag_ref_dip);
     }
+    // Declared before the transport: the rest-wait subscription below stays registered for the
+    // process's life, so what it writes must outlive the transport.
+    std::optional<int64_t> rest_since;
+    bool at_rest = false;
     transport::LcmTransport t(lcm_url);
     if (settings.mag_ref_norm > 0) {
       // A restart: wait for the sensor to be at rest (see the file comment).
-      std::optional<int64_t> rest_since;
-      bool at_rest = false;
       t.Subscribe<imu_sample_t>(transport::channels::kImu, [&](const imu_sample_t& m) {
         std::string error;
         const auto s = transport::ImuFromMessage(m, &error);

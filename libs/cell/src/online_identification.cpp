@@ -50,7 +50,8 @@ OnlineIdentification::OnlineIdentification(const io::RobotSpec& robot,
         settings.cell_seed, model_.num_params(), base_.size(), settings.guess_poses);
 }
 
-OnlineIdentification::Outcome OnlineIdentification::Add(const TimedPose& pose) {
+OnlineIdentification::Outcome OnlineIdentification::Add(
+    const TimedPose& pose, const std::function<void(const Update&)>& on_update) {
   Outcome out;
   std::string error = kinematics::Validate(model_, pose.z);
   if (error.empty() && pose.utime <= last_utime_)
@@ -60,8 +61,12 @@ OnlineIdentification::Outcome OnlineIdentification::Add(const TimedPose& pose) {
     out.rejected = error;
     return out;
   }
+  const auto apply = [&](const TimedPose& p) {
+    out.updates.push_back(Apply(p));
+    if (on_update) on_update(out.updates.back());
+  };
   if (started_) {
-    out.updates.push_back(Apply(pose));
+    apply(pose);
     return out;
   }
   // Held back for the set-up guess (time order checked against the held poses too).
@@ -77,7 +82,7 @@ OnlineIdentification::Outcome OnlineIdentification::Add(const TimedPose& pose) {
   out.started = true;
   const std::vector<TimedPose> held = std::move(held_);
   held_.clear();
-  for (const auto& h : held) out.updates.push_back(Apply(h));
+  for (const auto& h : held) apply(h);
   return out;
 }
 
@@ -85,6 +90,7 @@ OnlineIdentification::Update OnlineIdentification::Apply(const TimedPose& pose) 
   Update u;
   u.utime = pose.utime;
   u.pose_index = pose.pose_index;
+  u.dimension = pose.z.dimension();
   const Eigen::VectorXd x_before = ekf_->x();
   u.result = ekf_->Update(pose.z);
   if (!u.result.accepted) return u;

@@ -17,6 +17,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <optional>
@@ -49,6 +50,7 @@ class OnlineIdentification {
   /// Update per pose applied, in order).
   struct Update {
     int64_t utime = 0, pose_index = -1;
+    int dimension = 0;  ///< of the pose's measurement: 3 (position) or 6
     identification::EkfUpdateResult result;
     /// Largest |Δx_i| / σ_i over the base set by this update (0 when rejected).
     double max_step_sigma = 0;
@@ -64,8 +66,10 @@ class OnlineIdentification {
   OnlineIdentification(const io::RobotSpec& robot, const kinematics::KinematicModel& robot_model,
                        const OnlineIdentificationSettings& settings);
 
-  /// One pose in arrival order.
-  Outcome Add(const TimedPose& pose);
+  /// One pose in arrival order. `on_update`, when given, is called after each EKF update with the
+  /// identification in its state right after that update (to publish the estimate pose by pose,
+  /// also within the burst of held poses).
+  Outcome Add(const TimedPose& pose, const std::function<void(const Update&)>& on_update = {});
 
   /// Resume: the EKF state, the poses held for the guess and the last pose's time and index.
   /// Throws std::runtime_error when they do not fit (held poses with the EKF started, or without

@@ -11,16 +11,13 @@
 #include <string>
 #include <vector>
 
+#include "rcal/cell/online_identification.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
 
 namespace rcal::transport {
 
 /// A pose measurement received but not yet given to the EKF (held for the set-up guess).
-struct HeldPose {
-  kinematics::PoseMeasurement z;
-  int64_t utime = 0;  ///< [µs]
-  int64_t pose_index = -1;
-};
+using HeldPose = cell::TimedPose;
 
 /// A checkpoint and what it belongs to.
 struct CheckpointFile {
