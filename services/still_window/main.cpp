@@ -103,12 +103,7 @@ class StillWindowNode {
       spdlog::info("window {:.3f}–{:.3f} s dropped: warm-up", p.t_begin, p.t_end);
       return;
     }
-    kinematics::PoseMeasurement z;
-    z.q = p.q;
-    z.p_WM_W = p.p_WM_W;
-    z.has_orientation = p.has_orientation;
-    z.R_EI = p.R_EI;
-    z.covariance = p.covariance;
+    const kinematics::PoseMeasurement z = p.ToMeasurement();
     const int64_t utime = std::llround(p.t_end * 1e6);
     if (t_.Publish(ch::kPoseMeasurement, transport::ToMessage(z, utime, emitted_))) {
       health_.Published();
