@@ -366,3 +366,22 @@ TEST(RcalCli, AnalyzeTheRealUr10FindsNoEffectBeyondGeometry) {
   EXPECT_NEAR(j.at("gain").at("heldout_rms_before_m").get<double>(), 4.3e-3, 0.5e-3);
   EXPECT_TRUE(fs::exists(d / "out" / "report.md"));
 }
+
+// The IMU detection sweep, one stream per cell: every cell runs, the clean stream reports
+// nothing, and clearly visible effects (8 µT magnet, 0.3 m/s², 10 ms) are named.
+TEST(RcalCli, DetectionSweepImuRunsEveryCell) {
+  const fs::path d = TempDir("sweep_imu");
+  const Result r = RunRcal("detection-sweep-imu --seeds 1 --json " + (d / "s.json").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json j = ReadJson(d / "s.json");
+  ASSERT_EQ(j.at("rows").size(), 13u);
+  for (const auto& row : j.at("rows")) {
+    EXPECT_EQ(row.at("other_cause"), 0) << row.dump();
+    const std::string label = row.at("label");
+    if (label == "magnet 8 µT for 8 s" || label == "linear acceleration 0.30 m/s²" ||
+        label == "time offset 10 ms") {
+      EXPECT_EQ(row.at("found"), 1) << label;
+    }
+  }
+  EXPECT_EQ(j.at("rows")[0].at("cause"), "");
+}
