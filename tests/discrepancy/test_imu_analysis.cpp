@@ -17,19 +17,6 @@ namespace {
 namespace disc = rcal::discrepancy;
 namespace sim = rcal::sim;
 
-disc::ImuStreamData ToData(const std::vector<sim::ImuStreamSample>& s) {
-  disc::ImuStreamData d;
-  for (const auto& r : s) {
-    d.t.push_back(r.t);
-    d.gyro.push_back(r.gyro);
-    d.accel.push_back(r.accel);
-    d.mag_uT.push_back(r.mag_uT);
-    d.q_truth.push_back(r.q_WI);
-    d.movement.push_back(r.movement);
-  }
-  return d;
-}
-
 sim::ImuStreamSettings Short() {
   sim::ImuStreamSettings s;
   s.motion_segments = 3;
@@ -61,7 +48,8 @@ std::string Join(const std::vector<std::string>& v) {
 TEST(ImuAnalysis, CleanStreamsGiveNoEffect) {
   for (std::uint64_t seed : {1u, 2u, 3u, 4u}) {
     std::mt19937_64 rng(seed);
-    const auto a = disc::AnalyzeImuStream(ToData(sim::SimulateImuStream(Short(), {}, rng)));
+    const auto a =
+        disc::AnalyzeImuStream(disc::FromSimulatedStream(sim::SimulateImuStream(Short(), {}, rng)));
     EXPECT_TRUE(a.effects().empty()) << "seed " << seed << ": " << Join(Causes(a));
     EXPECT_TRUE(a.has_truth);
     // With nothing selected the extended model is the base model.
@@ -80,7 +68,8 @@ TEST(ImuAnalysis, FindsAGyroBiasRandomWalkOnItsAxis) {
       sim::ImuStreamEffects e;
       e.gyro_bias_random_walk = Eigen::Vector3d(0.0, 0.0, K);
       std::mt19937_64 rng(seed);
-      const auto a = disc::AnalyzeImuStream(ToData(sim::SimulateImuStream(Short(), e, rng)));
+      const auto a = disc::AnalyzeImuStream(
+          disc::FromSimulatedStream(sim::SimulateImuStream(Short(), e, rng)));
       const auto& c = Cand(a, "gyro_bias");
       ++runs;
       if (!c.significant) continue;
@@ -100,7 +89,7 @@ TEST(ImuAnalysis, GyroBiasGainIsPositiveAndCloseToTheTrueModel) {
     sim::ImuStreamEffects e;
     e.gyro_bias_random_walk = Eigen::Vector3d(0.0, 0.0, 1e-3);
     std::mt19937_64 rng(seed);
-    const auto d = ToData(sim::SimulateImuStream(Short(), e, rng));
+    const auto d = disc::FromSimulatedStream(sim::SimulateImuStream(Short(), e, rng));
     const auto a = disc::AnalyzeImuStream(d);
     ASSERT_EQ(Causes(a), std::vector<std::string>{"gyro_bias"});
     EXPECT_LT(a.extended_score.total.value(), 0.9 * a.base_score.total.value()) << seed;
@@ -125,7 +114,7 @@ TEST(ImuAnalysis, FindsAMagneticDisturbanceAndGainsHeading) {
       e.mag_disturbance_uT = Eigen::Vector3d(uT, 0.0, 0.0);
       std::mt19937_64 rng(seed);
       const auto stream = sim::SimulateImuStream(Short(), e, rng);
-      const auto d = ToData(stream);
+      const auto d = disc::FromSimulatedStream(stream);
       const auto a = disc::AnalyzeImuStream(d);
       ++runs;
       const auto& c = Cand(a, "magnetic_disturbance");
@@ -137,7 +126,7 @@ TEST(ImuAnalysis, FindsAMagneticDisturbanceAndGainsHeading) {
       EXPECT_LT(c.after.heading.value(), c.before.heading.value()) << uT << " " << seed;
       // The true model: the same stream without the disturbance, base filter.
       std::mt19937_64 rng2(seed);
-      const auto clean = ToData(sim::SimulateImuStream(Short(), {}, rng2));
+      const auto clean = disc::FromSimulatedStream(sim::SimulateImuStream(Short(), {}, rng2));
       const auto ideal = disc::AnalyzeImuStream(clean);
       EXPECT_LT(c.after.heading.value(), 2.0 * ideal.base_score.heading.value() + 2e-3)
           << uT << " " << seed;
@@ -151,7 +140,8 @@ TEST(ImuAnalysis, FindsLinearAccelerationTheAccelModelIgnores) {
     sim::ImuStreamEffects e;
     e.linear_accel = acc;
     std::mt19937_64 rng(41);
-    const auto a = disc::AnalyzeImuStream(ToData(sim::SimulateImuStream(Short(), e, rng)));
+    const auto a =
+        disc::AnalyzeImuStream(disc::FromSimulatedStream(sim::SimulateImuStream(Short(), e, rng)));
     const auto& c = Cand(a, "accel_motion");
     EXPECT_TRUE(c.significant) << acc;
     EXPECT_EQ(c.axes, std::vector<std::string>{"accelerometer"});
@@ -167,7 +157,8 @@ TEST(ImuAnalysis, FindsATimeOffsetAndItsValue) {
     sim::ImuStreamEffects e;
     e.time_offset_s = tau;
     std::mt19937_64 rng(51);
-    const auto a = disc::AnalyzeImuStream(ToData(sim::SimulateImuStream(Short(), e, rng)));
+    const auto a =
+        disc::AnalyzeImuStream(disc::FromSimulatedStream(sim::SimulateImuStream(Short(), e, rng)));
     const auto& c = Cand(a, "time_offset");
     ASSERT_TRUE(c.significant) << tau;
     EXPECT_EQ(Causes(a), std::vector<std::string>{"time_offset"}) << tau;
@@ -185,7 +176,7 @@ TEST(ImuAnalysis, FindsATimeOffsetAndItsValue) {
 
 TEST(ImuAnalysis, NoTruthMeansNoGainAndNoTimeOffset) {
   std::mt19937_64 rng(61);
-  auto d = ToData(sim::SimulateImuStream(Short(), {}, rng));
+  auto d = disc::FromSimulatedStream(sim::SimulateImuStream(Short(), {}, rng));
   d.q_truth.clear();
   const auto a = disc::AnalyzeImuStream(d);
   EXPECT_FALSE(a.has_truth);
@@ -195,7 +186,7 @@ TEST(ImuAnalysis, NoTruthMeansNoGainAndNoTimeOffset) {
 
 TEST(ImuAnalysis, BadInputNamesTheRow) {
   std::mt19937_64 rng(71);
-  auto d = ToData(sim::SimulateImuStream(Short(), {}, rng));
+  auto d = disc::FromSimulatedStream(sim::SimulateImuStream(Short(), {}, rng));
   d.mag_uT[41].y() = std::nan("");
   try {
     disc::AnalyzeImuStream(d);

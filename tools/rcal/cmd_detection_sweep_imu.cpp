@@ -85,16 +85,7 @@ int Run(const Options& o) {
     for (int s = 0; s < o.seeds; ++s) {
       std::mt19937_64 rng(o.first_seed + 1000 * k + s);
       const auto stream = sim::SimulateImuStream(ss, cell.effects, rng);
-      disc::ImuStreamData d;
-      for (const auto& r : stream) {
-        d.t.push_back(r.t);
-        d.gyro.push_back(r.gyro);
-        d.accel.push_back(r.accel);
-        d.mag_uT.push_back(r.mag_uT);
-        d.q_truth.push_back(r.q_WI);
-        d.movement.push_back(r.movement);
-      }
-      const auto a = disc::AnalyzeImuStream(d, as);
+      const auto a = disc::AnalyzeImuStream(disc::FromSimulatedStream(stream), as);
       bool hit = false, other = false;
       for (const auto* e : a.effects()) (e->cause == cell.cause ? hit : other) = true;
       found += hit;

@@ -113,6 +113,19 @@ std::vector<const ImuCandidate*> ImuAnalysis::effects() const {
   return out;
 }
 
+ImuStreamData FromSimulatedStream(const std::vector<sim::ImuStreamSample>& stream) {
+  ImuStreamData d;
+  for (const auto& r : stream) {
+    d.t.push_back(r.t);
+    d.gyro.push_back(r.gyro);
+    d.accel.push_back(r.accel);
+    d.mag_uT.push_back(r.mag_uT);
+    d.q_truth.push_back(r.q_WI);
+    d.movement.push_back(r.movement);
+  }
+  return d;
+}
+
 void ValidateImuStream(const ImuStreamData& d) {
   const size_t n = d.t.size();
   if (n < 10) throw std::invalid_argument("IMU stream: fewer than 10 samples");

@@ -58,6 +58,7 @@
 #include "rcal/discrepancy/imu_scoring.hpp"
 #include "rcal/estimation/orientation_kf.hpp"
 #include "rcal/sim/imu_model.hpp"
+#include "rcal/sim/imu_stream.hpp"
 
 namespace rcal::discrepancy {
 
@@ -161,6 +162,10 @@ struct ImuAnalysis {
 /// Checks the stream (equal lengths, finite IMU values, increasing time) and throws
 /// std::invalid_argument naming the field and the row otherwise.
 void ValidateImuStream(const ImuStreamData& data);
+
+/// A simulated stream (sim/imu_stream.hpp) as the analysis takes it, truth and movement flag
+/// included.
+ImuStreamData FromSimulatedStream(const std::vector<sim::ImuStreamSample>& stream);
 
 /// The analysis described in the header comment. Progress lines go to spdlog.
 ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSettings& settings = {});
