@@ -1,33 +1,75 @@
 #include "rcal/io/plot.hpp"
 
+#include <spawn.h>
 #include <spdlog/spdlog.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
+#include <fcntl.h>
+#include <cerrno>
 #include <cstdio>
-#include <cstdlib>
 #include <fstream>
 #include <sstream>
+
+extern char** environ;
 
 namespace rcal::io {
 namespace {
 
+// A gnuplot string expression for `s`, built of single-quoted strings (no escapes and no
+// `command` substitution inside them; gnuplot runs backquoted commands in double-quoted strings)
+// joined with "'" for each quote: 'it' . "'" . 's'. (A doubled quote is not used: a string that
+// starts with one reads as gnuplot's '' "previous file".) Line breaks end a gnuplot command, so
+// they become spaces (paths with one are refused before).
 std::string Quote(const std::string& s) {
-  std::string out = "\"";
+  std::string out, piece;
+  const auto flush = [&] {
+    if (piece.empty()) return;
+    out += (out.empty() ? "'" : " . '") + piece + "'";
+    piece.clear();
+  };
   for (char c : s) {
-    if (c == '"' || c == '\\') out += '\\';
-    out += c;
+    if (c != '\'') {
+      piece += c == '\n' || c == '\r' ? ' ' : c;
+      continue;
+    }
+    flush();
+    out += out.empty() ? "\"'\"" : " . \"'\"";
   }
-  return out + "\"";
+  flush();
+  return out.empty() ? "''" : out;
+}
+
+// Runs `gnuplot SCRIPT` with no shell between (argv, PATH lookup as execvp), stderr to
+// /dev/null. Returns gnuplot's exit status, or -1 when it could not be started or did not exit.
+int RunGnuplot(const std::filesystem::path& script) {
+  posix_spawn_file_actions_t actions;
+  if (posix_spawn_file_actions_init(&actions) != 0) return -1;
+  posix_spawn_file_actions_addopen(&actions, STDERR_FILENO, "/dev/null", O_WRONLY, 0);
+  std::string program = "gnuplot", arg = script.string();
+  char* argv[] = {program.data(), arg.data(), nullptr};
+  pid_t pid = -1;
+  const int rc = posix_spawnp(&pid, "gnuplot", &actions, nullptr, argv, environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (rc != 0) return -1;
+  int status = 0;
+  while (::waitpid(pid, &status, 0) < 0)
+    if (errno != EINTR) return -1;
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
 }  // namespace
 
 bool PlotPng(const PlotSpec& spec, const std::filesystem::path& png) {
   namespace fs = std::filesystem;
+  if (png.string().find_first_of("\n\r") != std::string::npos) {
+    spdlog::warn("plot not drawn: a line break in the path {}", png.string());
+    return false;
+  }
   if (png.has_parent_path()) fs::create_directories(png.parent_path());
-  const fs::path tmp_png = png.string() + ".tmp." + std::to_string(::getpid()) + ".png";
-  const fs::path data = png.string() + ".tmp." + std::to_string(::getpid()) + ".dat";
-  const fs::path script = png.string() + ".tmp." + std::to_string(::getpid()) + ".gp";
+  // Absolute: gnuplot must not read a script path that starts with '-' as an option.
+  const std::string stem = fs::absolute(png).string() + ".tmp." + std::to_string(::getpid());
+  const fs::path tmp_png = stem + ".png", data = stem + ".dat", script = stem + ".gp";
   {
     std::ofstream d(data);
     d.precision(10);
@@ -55,8 +97,7 @@ bool PlotPng(const PlotSpec& spec, const std::filesystem::path& png) {
   }
   gp << "\n";
   std::ofstream(script) << gp.str();
-  const std::string cmd = "gnuplot " + script.string() + " 2>/dev/null";
-  const int rc = std::system(cmd.c_str());
+  const int rc = RunGnuplot(script);
   fs::remove(data);
   fs::remove(script);
   if (rc != 0 || !fs::exists(tmp_png)) {

@@ -1,5 +1,6 @@
-// Files are written atomically: a temporary file beside the target, flushed, then renamed over
-// it, so a reader (or a crash) never sees half a file.
+// Files are written atomically: a temporary file beside the target, written and fsynced, then
+// renamed over it and the directory fsynced, so a reader (or a crash) never sees half a file and
+// a completed write survives a power loss.
 #pragma once
 
 #include <filesystem>
