@@ -5,7 +5,8 @@
 //
 // Restarts (the supervisor runs the same command line after a crash or SIGKILL): earlier files
 // are never reopened for writing. The new process starts the file after the highest-numbered
-// `<prefix>.NNNN.lcmlog` in --dir, so the earlier file keeps every event written before the kill
+// `<prefix>.NNNN.lcmlog` in --dir (a name whose NNNN is not a number or too large is skipped with
+// a warning, log_files.hpp), so the earlier file keeps every event written before the kill
 // (each event is flushed to the file as it is written, so at most the event being written when
 // the process died is cut short; lcm-logplayer and lcm::LogFile readers stop at it). The CSV is
 // appended to; a row cut short by a kill (no final newline) is removed before the first new row
@@ -23,10 +24,10 @@
 #include <fstream>
 #include <lcm/lcm-cpp.hpp>
 #include <memory>
-#include <regex>
 #include <sstream>
 #include <string>
 
+#include "log_files.hpp"
 #include "rcal/kinematic_params_t.hpp"
 #include "rcal/services/common.hpp"
 #include "rcal/transport/channels.hpp"
@@ -36,20 +37,6 @@
 namespace {
 
 namespace fs = std::filesystem;
-
-// One past the highest NNNN of the existing <prefix>.NNNN.lcmlog files in `dir` (0: none).
-int NextFileIndex(const fs::path& dir, const std::string& prefix) {
-  int next = 0;
-  const std::regex name("\\.([0-9]+)\\.lcmlog");
-  for (const auto& entry : fs::directory_iterator(dir)) {
-    const std::string f = entry.path().filename().string();
-    if (f.size() <= prefix.size() || f.compare(0, prefix.size(), prefix) != 0) continue;
-    std::smatch m;
-    const std::string rest = f.substr(prefix.size());
-    if (std::regex_match(rest, m, name)) next = std::max(next, std::stoi(m[1].str()) + 1);
-  }
-  return next;
-}
 
 // The CSV history, appended one whole row per write(2). A row cut short by a kill (the file does
 // not end in a newline) is cut off at start.
@@ -120,7 +107,7 @@ int main(int argc, char** argv) {
     std::filesystem::create_directories(dir);
     transport::LcmTransport t(lcm_url);
     transport::Health health("logger");
-    int file_index = NextFileIndex(dir, prefix);
+    int file_index = logger::NextFileIndex(dir, prefix);
     long long bytes = 0;
     int64_t event = 0;
     std::unique_ptr<lcm::LogFile> log;
