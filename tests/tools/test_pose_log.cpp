@@ -281,10 +281,17 @@ TEST(PoseLog, RcalCalibrateLogWithTheCellReachesTheOfflineRun) {
   const cell::OnlineResult offline = cell::RunOnline(c, w.cal, {});
   EXPECT_EQ(j.at("poses_accepted").get<int>(), offline.accepted);
   EXPECT_EQ(j.at("model_id"), transport::ModelId(c.model));
-  const auto values = j.at("values_m_or_rad").get<std::vector<double>>();
-  ASSERT_EQ(values.size(), static_cast<size_t>(offline.x.size()));
-  for (int i = 0; i < offline.x.size(); ++i)
-    EXPECT_NEAR(values[i], offline.x(i), 1e-9) << c.model.parameters()[i].name;
+  // One entry per parameter in model order, the unit in the key (value_m / value_rad).
+  const auto& params = j.at("parameters");
+  ASSERT_EQ(params.size(), static_cast<size_t>(offline.x.size()));
+  for (int i = 0; i < offline.x.size(); ++i) {
+    const auto& P = c.model.parameters()[i];
+    const std::string unit = P.is_angle ? "rad" : "m";
+    EXPECT_EQ(params[i].at("name"), P.name);
+    EXPECT_EQ(params[i].size(), 3u) << params[i].dump();
+    EXPECT_NEAR(params[i].at("value_" + unit).get<double>(), offline.x(i), 1e-9) << P.name;
+    EXPECT_NEAR(params[i].at("sigma_" + unit).get<double>(), offline.sigma(i), 1e-9) << P.name;
+  }
 }
 
 }  // namespace

@@ -385,3 +385,46 @@ TEST(RcalCli, DetectionSweepImuRunsEveryCell) {
   }
   EXPECT_EQ(j.at("rows")[0].at("cause"), "");
 }
+
+// rcal fuse --set NAME=VALUE: the whole value must be one finite number (std::stod took "0.1abc"
+// as 0.1 and "nan" as NaN), refused naming the setting; the settings in the JSON carry their unit
+// in the key, and --set takes the name with or without it.
+TEST(RcalCli, FuseSetTakesOnlyWholeFiniteNumbersAndTheJsonNamesUnits) {
+  const fs::path d = TempDir("fuse_set");
+  {
+    // One second at rest, IMU aligned with ENU (truth identity), north on +y, field dipping down.
+    std::ofstream f(d / "trial.csv");
+    f << "t_s,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z,mag_x,mag_y,mag_z,q_w,q_x,q_y,q_z,pos_x,pos_y,"
+         "pos_z,movement\n";
+    for (int k = 0; k < 100; ++k)
+      f << k * 0.01 << ",0,0,0,0,0,9.81,0,20,-40,1,0,0,0,0.1,0.2,0.3," << (k >= 50) << "\n";
+  }
+  const std::string fuse = "fuse " + (d / "trial.csv").string() + " ";
+  for (const char* bad : {"0.1abc", "nan", "NaN", "inf", "-inf", "1e999", "", "abc", " 0.1", "0.1 ",
+                          "0x1p-3", "0.1.2"}) {
+    const Result r = RunRcal(fuse + "--set 'tilt_sigma=" + bad + "'");
+    EXPECT_NE(r.exit_code, 0) << "'" << bad << "': " << r.output;
+    EXPECT_NE(r.output.find("tilt_sigma"), std::string::npos) << "'" << bad << "': " << r.output;
+  }
+  const Result ok = RunRcal(fuse +
+                            "--set tilt_sigma=0.02 --set pos.accel_sigma_m_s2=2 --set "
+                            "heading_sigma_rad=5e-2 --json " +
+                            (d / "f.json").string());
+  ASSERT_EQ(ok.exit_code, 0) << ok.output;
+  const json j = ReadJson(d / "f.json");
+  const json& s = j.at("settings");
+  EXPECT_EQ(s.at("tilt_sigma_rad").get<double>(), 0.02);
+  EXPECT_EQ(s.at("heading_sigma_rad").get<double>(), 0.05);
+  EXPECT_EQ(s.at("pos.accel_sigma_m_s2").get<double>(), 2.0);
+  EXPECT_EQ(s.at("gravity_m_s2").get<double>(), 9.81);
+  // Every key ends in its unit; the dimensionless ones say what they are.
+  for (const auto& [key, value] : s.items()) {
+    bool named = false;
+    for (const char* end :
+         {"_m_s2", "_rad", "_s", "_rad_s", "_sqrt_hz", "_sqrt_s", "_chi2", "_fraction"})
+      named |= key.size() > std::string(end).size() &&
+               key.compare(key.size() - std::string(end).size(), std::string::npos, end) == 0;
+    EXPECT_TRUE(named) << key;
+  }
+  EXPECT_TRUE(j.at("mag_reference").contains("norm_uT")) << j.at("mag_reference").dump();
+}

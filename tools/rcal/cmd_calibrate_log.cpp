@@ -75,15 +75,17 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
       "%lld skipped (undecodable, invalid or out of order)\n",
       o.log.c_str(), static_cast<long long>(events), o.channel.c_str(), ekf.accepted(),
       ekf.rejected(), static_cast<long long>(skipped));
-  nlohmann::json names = nlohmann::json::array(), values = nlohmann::json::array(),
-                 sigmas = nlohmann::json::array();
+  // Every parameter in model order, its unit in the key: value_m and sigma_m, or value_rad and
+  // sigma_rad.
+  nlohmann::json names = nlohmann::json::array(), parameters = nlohmann::json::array();
   for (int i : base) {
     std::printf("  %-16s %+.6e ± %.2e\n", model.parameters()[i].name.c_str(), x(i), sigma(i));
   }
   for (int i = 0; i < x.size(); ++i) {
-    names.push_back(model.parameters()[i].name);
-    values.push_back(x(i));
-    sigmas.push_back(sigma(i));
+    const auto& P = model.parameters()[i];
+    const std::string unit = P.is_angle ? "rad" : "m";
+    names.push_back(P.name);
+    parameters.push_back({{"name", P.name}, {"value_" + unit, x(i)}, {"sigma_" + unit, sigma(i)}});
   }
   if (!o.json_path.empty()) {
     nlohmann::json j = {{"log", o.log},
@@ -97,8 +99,7 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
                         {"last_pose_index", last_pose_index},
                         {"identified", base},
                         {"names", names},
-                        {"values_m_or_rad", values},
-                        {"sigma_m_or_rad", sigmas}};
+                        {"parameters", parameters}};
     io::AtomicWriteFile(o.json_path, j.dump(2));
   }
   return 0;

@@ -8,11 +8,12 @@
 #include <spdlog/spdlog.h>
 
 #include <Eigen/Core>
+#include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <limits>
-#include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <numbers>
@@ -47,48 +48,73 @@ struct FuseOptions {
   std::vector<std::string> overrides;  // NAME=VALUE for the settings below
 };
 
-// Numeric settings that --set can override, by name (SI units as in the settings structs).
-std::map<std::string, double*> OrientationFields(est::OrientationKfSettings& s) {
-  return {{"gravity", &s.gravity},
-          {"angular_accel_noise", &s.angular_accel_noise},
-          {"gyro_bias_random_walk", &s.gyro_bias_random_walk},
-          {"attitude_process_noise", &s.attitude_process_noise},
-          {"rate_proportional_noise", &s.rate_proportional_noise},
-          {"gyro_noise_density", &s.gyro_noise_density},
-          {"tilt_sigma", &s.tilt_sigma},
-          {"heading_sigma", &s.heading_sigma},
-          {"accel_lowpass_tau", &s.accel_lowpass_tau},
-          {"mag_lowpass_tau", &s.mag_lowpass_tau},
-          {"accel_norm_tolerance", &s.accel_norm_tolerance},
-          {"tilt_gate_chi2", &s.tilt_gate_chi2},
-          {"mag_norm_tolerance", &s.mag_norm_tolerance},
-          {"mag_dip_tolerance", &s.mag_dip_tolerance},
-          {"heading_gate_chi2", &s.heading_gate_chi2},
-          {"mag_reference_tau", &s.mag_reference_tau},
-          {"mag_new_reference_time", &s.mag_new_reference_time},
-          {"still_gyro", &s.still_gyro},
-          {"still_accel", &s.still_accel},
-          {"zero_rate_sigma", &s.zero_rate_sigma},
-          {"initial_bias_sigma", &s.initial_bias_sigma}};
+// Numeric settings that --set can override: name, unit (the JSON key is name_unit; "" for the
+// dimensionless χ² gates, "fraction" for a relative tolerance) and the value, SI units as in the
+// settings structs.
+struct Field {
+  const char* name;
+  const char* unit;
+  double* value;
+  std::string key() const { return *unit ? std::string(name) + "_" + unit : std::string(name); }
+};
+std::vector<Field> OrientationFields(est::OrientationKfSettings& s) {
+  return {{"gravity", "m_s2", &s.gravity},
+          {"angular_accel_noise", "rad_s2_sqrt_hz", &s.angular_accel_noise},
+          {"gyro_bias_random_walk", "rad_s_sqrt_s", &s.gyro_bias_random_walk},
+          {"attitude_process_noise", "rad_sqrt_s", &s.attitude_process_noise},
+          {"rate_proportional_noise", "sqrt_s", &s.rate_proportional_noise},
+          {"gyro_noise_density", "rad_s_sqrt_hz", &s.gyro_noise_density},
+          {"tilt_sigma", "rad", &s.tilt_sigma},
+          {"heading_sigma", "rad", &s.heading_sigma},
+          {"accel_lowpass_tau", "s", &s.accel_lowpass_tau},
+          {"mag_lowpass_tau", "s", &s.mag_lowpass_tau},
+          {"accel_norm_tolerance", "m_s2", &s.accel_norm_tolerance},
+          {"tilt_gate_chi2", "", &s.tilt_gate_chi2},
+          {"mag_norm_tolerance", "fraction", &s.mag_norm_tolerance},
+          {"mag_dip_tolerance", "rad", &s.mag_dip_tolerance},
+          {"heading_gate_chi2", "", &s.heading_gate_chi2},
+          {"mag_reference_tau", "s", &s.mag_reference_tau},
+          {"mag_new_reference_time", "s", &s.mag_new_reference_time},
+          {"still_gyro", "rad_s", &s.still_gyro},
+          {"still_accel", "m_s2", &s.still_accel},
+          {"zero_rate_sigma", "rad_s", &s.zero_rate_sigma},
+          {"initial_bias_sigma", "rad_s", &s.initial_bias_sigma}};
 }
-std::map<std::string, double*> PositionFields(est::PositionKfSettings& s) {
-  return {{"pos.jerk_noise", &s.jerk_noise},
-          {"pos.accel_sigma", &s.accel_sigma},
-          {"pos.position_gate_chi2", &s.position_gate_chi2}};
+std::vector<Field> PositionFields(est::PositionKfSettings& s) {
+  return {{"pos.jerk_noise", "m_s3_sqrt_hz", &s.jerk_noise},
+          {"pos.accel_sigma", "m_s2", &s.accel_sigma},
+          {"pos.position_gate_chi2", "", &s.position_gate_chi2}};
+}
+
+// The whole of `text` as one finite number (no spaces, no trailing characters, no hex), else an
+// error naming the setting.
+double ParseSetting(const std::string& name, const std::string& text) {
+  double v = 0.0;
+  const char* end = text.data() + text.size();
+  const auto [ptr, ec] = std::from_chars(text.data(), end, v, std::chars_format::general);
+  if (ec == std::errc::result_out_of_range)
+    throw std::runtime_error("fuse: --set " + name + ": '" + text + "' is out of range");
+  if (ec != std::errc() || ptr != end)
+    throw std::runtime_error("fuse: --set " + name + ": '" + text + "' is not a number");
+  if (!std::isfinite(v))
+    throw std::runtime_error("fuse: --set " + name + ": '" + text + "' is not finite");
+  return v;
 }
 
 void ApplyOverrides(const std::vector<std::string>& overrides, est::OrientationKfSettings& o,
                     est::PositionKfSettings& p) {
   auto fields = OrientationFields(o);
-  fields.merge(PositionFields(p));
+  for (const Field& f : PositionFields(p)) fields.push_back(f);
   for (const auto& kv : overrides) {
     const auto eq = kv.find('=');
     if (eq == std::string::npos)
       throw std::runtime_error("fuse: --set expects NAME=VALUE, got " + kv);
     const std::string name = kv.substr(0, eq);
-    const auto it = fields.find(name);
+    // The name with or without its unit (tilt_sigma or tilt_sigma_rad).
+    const auto it = std::find_if(fields.begin(), fields.end(),
+                                 [&](const Field& f) { return name == f.name || name == f.key(); });
     if (it == fields.end()) throw std::runtime_error("fuse: --set: unknown setting '" + name + "'");
-    *it->second = std::stod(kv.substr(eq + 1));
+    *it->value = ParseSetting(name, kv.substr(eq + 1));
   }
 }
 
@@ -129,6 +155,10 @@ std::string Fixed(double v, int digits) {
 }
 
 int RunFuse(const FuseOptions& opt) {
+  // The settings first: a bad --set is refused before a trial is read.
+  est::OrientationKfSettings okf_settings = BroadOrientationSettings();
+  est::PositionKfSettings pkf_settings = BroadPositionSettings(opt.pos_noise_m);
+  ApplyOverrides(opt.overrides, okf_settings, pkf_settings);
   const std::string path = ResolvePath(opt.trial);
   const io::CsvTable table = io::CsvTable::Load(path);
   const int n = table.rows();
@@ -146,9 +176,6 @@ int RunFuse(const FuseOptions& opt) {
                         pz = table.Column("pos_z");
   const Eigen::VectorXd movement = table.Column("movement");
 
-  est::OrientationKfSettings okf_settings = BroadOrientationSettings();
-  est::PositionKfSettings pkf_settings = BroadPositionSettings(opt.pos_noise_m);
-  ApplyOverrides(opt.overrides, okf_settings, pkf_settings);
   est::OrientationKf okf(okf_settings);
   est::PositionKf pkf(pkf_settings);
   est::FqaSettings fqa_settings;
@@ -254,12 +281,12 @@ int RunFuse(const FuseOptions& opt) {
     auto o = okf_settings;
     auto p = pkf_settings;
     nlohmann::json js;
-    for (const auto& [k, v] : OrientationFields(o)) js[k] = *v;
-    for (const auto& [k, v] : PositionFields(p)) js[k] = *v;
+    for (const Field& f : OrientationFields(o)) js[f.key()] = *f.value;
+    for (const Field& f : PositionFields(p)) js[f.key()] = *f.value;
     j["settings"] = js;
   }
   j["gyro_bias_final_rad_s"] = {okf.bias_B().x(), okf.bias_B().y(), okf.bias_B().z()};
-  j["mag_reference"] = {{"norm", okf.mag_ref_norm()}, {"dip_rad", okf.mag_ref_dip()}};
+  j["mag_reference"] = {{"norm_uT", okf.mag_ref_norm()}, {"dip_rad", okf.mag_ref_dip()}};
   if (!opt.json.empty()) io::AtomicWriteFile(opt.json, j.dump(2) + "\n");
 
   if (!opt.out_dir.empty()) {
@@ -300,8 +327,10 @@ const RegisterCommand kRegisterFuse(
       sub.add_option("--seed", opt->seed, "seed of the simulated position-sensor noise");
       sub.add_option("--pos-rate", opt->pos_rate_hz, "position sensor rate [Hz]");
       sub.add_option("--pos-noise", opt->pos_noise_m, "position sensor noise per axis [m]");
-      sub.add_option("--set", opt->overrides,
-                     "override a filter setting, NAME=VALUE in SI units (repeatable)");
+      sub.add_option(
+          "--set", opt->overrides,
+          "override a filter setting, NAME=VALUE in SI units, NAME as in the JSON "
+          "settings with or without its unit (tilt_sigma_rad or tilt_sigma; repeatable)");
       return [opt] { return RunFuse(*opt); };
     });
 
