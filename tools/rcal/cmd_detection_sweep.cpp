@@ -68,7 +68,7 @@ int Run(const Options& o) {
     std::normal_distribution<double> n(0.0, 1.0);
     for (int i : identification::SetupParameters(model)) {
       const auto& P = model.parameters()[i];
-      x(i) = P.group == "base" ? (P.is_angle ? 0.05 : 0.05) * n(rng) : 0.0;
+      x(i) = P.group == "base" ? 0.05 * n(rng) : 0.0;  // σ 0.05 m or 0.05 rad
       if (P.name == "marker_x") x(i) = 0.05;
       if (P.name == "marker_z") x(i) = 0.1;
     }

@@ -511,7 +511,7 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
         }
       if (!placed) groups.push_back({i});
     }
-    double ssr = 0, sso_r = 0;
+    double ssr = 0;
     int dofr = 0;
     for (const auto& g : groups) {
       if (g.size() < 2) continue;
@@ -520,7 +520,6 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
       mean /= g.size();
       for (int i : g) ssr += (data.measurements[i].p_WM_W - mean).squaredNorm();
       dofr += 3 * (g.size() - 1);
-      (void)sso_r;
     }
     if (dofr >= 3) test("repeated poses", std::sqrt(ssr / dofr), 0.0);
   }

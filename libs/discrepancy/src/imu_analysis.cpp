@@ -683,7 +683,6 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
   auto score_shifted = [&](const std::vector<Eigen::Vector4d>& q) {
     OrientationScore s1 = ScoreAgainstTruth(data, q, tau_second, 0, split);
     const OrientationScore s2 = ScoreAgainstTruth(data, q, tau_first, split, c.n);
-    for (Rms* r : {&s1.total, &s1.heading, &s1.inclination}) (void)r;
     s1.total.sum += s2.total.sum;
     s1.total.n += s2.total.n;
     s1.heading.sum += s2.heading.sum;

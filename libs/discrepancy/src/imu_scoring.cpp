@@ -12,7 +12,8 @@ AngleErrors BroadErrors(const Eigen::Vector4d& q_est, const Eigen::Vector4d& q_t
   const double w = std::abs(e(0));
   AngleErrors a;
   a.total = 2.0 * std::acos(std::min(1.0, w));
-  a.heading = 2.0 * std::atan(std::abs(e(3) / e(0)));
+  // atan2: a half turn about a horizontal axis has e_w = e_z = 0 (heading 0, not 0/0).
+  a.heading = 2.0 * std::atan2(std::abs(e(3)), w);
   a.inclination = 2.0 * std::acos(std::min(1.0, std::sqrt(e(0) * e(0) + e(3) * e(3))));
   return a;
 }
