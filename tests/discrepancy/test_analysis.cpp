@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <cstdio>
 #include <optional>
 
 #include "rcal/identification/calibration.hpp"
@@ -22,7 +24,8 @@ struct Case {
   kinematics::KinematicModel model;
   PoseData data;
   std::vector<Effect> truth;
-  Eigen::VectorXd truth_values;  ///< of the hidden effect [SI]
+  Eigen::VectorXd truth_values;         ///< of the hidden effect [SI]
+  std::vector<Eigen::Vector3d> p_true;  ///< noise-free marker position of each pose [m]
 };
 
 // `num_poses` poses of the UR-like arm (random geometric errors, base and marker frames), a
@@ -50,6 +53,8 @@ Case MakeCase(unsigned seed, std::optional<Effect> hidden, double rms_over_noise
   const sim::EffectTruth truth = sim::MakeEffectTruth(c.model, effects);
   c.data.measurements = sim::MeasurePosesWithEffects(truth, x, qs, ctx, noise, rng);
   c.data.contexts = ctx;
+  for (int i = 0; i < num_poses; ++i)
+    c.p_true.push_back(truth.model.Forward(qs[i], ctx[i], x, truth.e).p_WM_W);
   return c;
 }
 
@@ -66,8 +71,14 @@ TEST(Discrepancy, CleanDataHasNoEffect) {
     EXPECT_TRUE(a.effects.empty()) << "seed " << seed << ": " << Found(c, a);
     EXPECT_NEAR(a.gain.relative_gain, 0.0, 1e-12);
     EXPECT_FALSE(a.candidates.empty());
-    // The base fit's noise estimate is the simulated one.
-    EXPECT_NEAR(a.base_fit.position_sigma_m, 5e-5, 1.5e-5);
+    // The base fit's noise estimate is the simulated one: σ̂² = SS/ν, ν = 3·60 position
+    // equations − the identified parameters, so SE(σ̂) ≈ σ/√(2ν) (≈ 2.9 µm); band 3 SE
+    // (two-sided false-alarm rate 0.27 %; was ± 15 µm).
+    const double nu = 3.0 * c.data.measurements.size() - a.base_fit.identified.size();
+    const double se = 5e-5 / std::sqrt(2 * nu);
+    std::printf("seed %u: base-fit sigma %.2f um, nu %.0f, band 50 +- %.2f um\n", seed,
+                a.base_fit.position_sigma_m * 1e6, nu, 3 * se * 1e6);
+    EXPECT_NEAR(a.base_fit.position_sigma_m, 5e-5, 3 * se);
   }
 }
 
@@ -106,16 +117,43 @@ TEST(Discrepancy, NamesTheHiddenCauseAndJoint) {
     for (int i = 0; i < f.values.size(); ++i)
       EXPECT_NEAR(f.values(i), c.truth_values(i), 4 * f.sigma(i) + 1e-12)
           << what << " " << f.parameters[i].name << " σ " << f.sigma(i);
-    std::printf("%-32s found %-40s gain %.3f (true model: rms %.2f µm vs %.2f µm), z %.1f\n",
-                what.c_str(), Found(c, a).c_str(), a.gain.relative_gain,
-                a.gain.heldout_rms_after_m * 1e6, HeldOutRms(c.model, c.data, c.truth) * 1e6, f.z);
     // The gain is nested-cross-validated: the selection is redone in each outer fold, so a
     // marginal detection (z near the critical value) that some outer folds miss honestly gains
-    // less than the true model structure would. Clear detections gain what the truth gains.
-    const double rms_true = HeldOutRms(c.model, c.data, c.truth);
+    // less than the true model structure would. Judged pose by pose against the true structure
+    // fitted on the same outer folds (repeats = 1 is Analyze's outer assignment): D_i = a_i² −
+    // t_i², a and t the selected and the true model's held-out position error of pose i.
+    // Clear detections (z ≥ 4): |mean D| ≤ 3.29 SE(D), SE = sd(D)/√n over the n = 60 held-out
+    // poses (paired; two-sided false-alarm rate 1e-3), + 1e-9 of mean t² for rounding; D ≡ 0
+    // when every outer fold selects the true effect (so here: after = truth to 1e-4 µm).
+    // Marginal ones (z < 4) only one-sided: not better than the truth. Thermal (temperature),
+    // seed 19, z 3.67 is marginal: after 102.5 µm against the true structure's 83.6 µm on the
+    // same folds (gain 1.8 % vs 19.9 %, mean D 3.5 SE); the outer folds, with 4/5 of
+    // the poses (z ≈ 3.67 √0.8 = 3.3), mostly miss it. Measured, not asserted. (Was |after −
+    // truth| ≤ 10 % / 25 % of the truth on other folds: the marginal case passed with no gain.)
     EXPECT_EQ(a.gain.scheme, "nested 5-fold (selection redone in each outer fold)");
-    EXPECT_NEAR(a.gain.heldout_rms_after_m, rms_true, (f.z >= 4.0 ? 0.1 : 0.25) * rms_true)
-        << what;
+    AnalysisSettings outer;
+    outer.repeats = 1;
+    const std::vector<double> t = HeldOutPositionErrors(c.model, c.data, c.truth, outer);
+    const std::vector<double>& af = a.gain.position_after_m;
+    ASSERT_EQ(t.size(), af.size());
+    const double n = static_cast<double>(t.size());
+    double mean_d = 0, mean_t2 = 0, var_d = 0;
+    for (size_t i = 0; i < t.size(); ++i) {
+      mean_d += (af[i] * af[i] - t[i] * t[i]) / n;
+      mean_t2 += t[i] * t[i] / n;
+    }
+    for (size_t i = 0; i < t.size(); ++i)
+      var_d += std::pow(af[i] * af[i] - t[i] * t[i] - mean_d, 2) / (n - 1);
+    const double se_d = std::sqrt(var_d / n), tol = 3.29 * se_d + 1e-9 * mean_t2;
+    std::printf(
+        "%-32s found %-40s gain %.3f; held-out rms %.2f µm, true model %.2f µm (same folds), "
+        "mean D %.3g (SE %.2g), z %.1f\n",
+        what.c_str(), Found(c, a).c_str(), a.gain.relative_gain, a.gain.heldout_rms_after_m * 1e6,
+        std::sqrt(mean_t2) * 1e6, mean_d, se_d, f.z);
+    if (f.z >= 4.0)
+      EXPECT_LE(std::abs(mean_d), tol) << what;
+    else
+      EXPECT_GE(mean_d, -tol) << what;
   }
 }
 
@@ -157,14 +195,14 @@ TEST(Discrepancy, LinearisedCrossValidationMatchesFullRecalibration) {
 TEST(Discrepancy, NoiseTests) {
   // Stated noise right: χ² consistent; stated noise too small: rejected. Repeated poses give
   // the noise without the model.
+  const double sigma = 5e-5;
   Case c = MakeCase(24, std::nullopt, 0, 40);
   sim::Rng rng(7);
-  std::normal_distribution<double> n(0.0, 5e-5);
-  for (int i = 0; i < 20; ++i) {  // re-measure 20 poses
+  std::normal_distribution<double> n(0.0, sigma);
+  const int repeats = 40;
+  for (int i = 0; i < repeats; ++i) {  // re-measure every pose: the truth plus fresh noise
     kinematics::PoseMeasurement m = c.data.measurements[i];
-    const Eigen::VectorXd r0 =
-        Eigen::Vector3d(n(rng), n(rng), n(rng));  // fresh noise around the same pose
-    m.p_WM_W += r0;
+    m.p_WM_W = c.p_true[i] + Eigen::Vector3d(n(rng), n(rng), n(rng));
     c.data.measurements.push_back(m);
     c.data.contexts.push_back(c.data.contexts[i]);
   }
@@ -175,8 +213,14 @@ TEST(Discrepancy, NoiseTests) {
   EXPECT_EQ(a.noise_tests[0].against, "stated noise");
   EXPECT_GT(a.noise_tests[0].p_value, 0.001);
   EXPECT_EQ(a.noise_tests[1].against, "repeated poses");
-  // Re-measured poses differ by two noise draws (σ√2 per axis) and the pair mean removes half.
-  EXPECT_NEAR(a.noise_tests[1].position_sigma_m, 5e-5, 2e-5);
+  // The pooled within-pair σ̂ from ν = 3 (axes) × 40 (pairs) × (2 − 1) = 120 dof; ν σ̂²/σ² ~
+  // χ²(ν), so SE(σ̂) ≈ σ/√(2ν) = 3.2 µm. Band: 3 SE (two-sided false-alarm rate 0.27 %),
+  // 50 ± 9.7 µm; an estimator 35 % low (32.5 µm) fails. (Was 50 ± 20 µm on 20 pairs built
+  // from the noisy pose plus fresh noise, whose spread is σ/√2: it read 32.8 µm and passed.)
+  const double nu = 3.0 * repeats, se = sigma / std::sqrt(2 * nu);
+  std::printf("repeated-pose sigma %.2f um, band %.1f +- %.2f um\n",
+              a.noise_tests[1].position_sigma_m * 1e6, sigma * 1e6, 3 * se * 1e6);
+  EXPECT_NEAR(a.noise_tests[1].position_sigma_m, sigma, 3 * se);
   s.stated_position_sigma_m = 2e-5;
   a = Analyze(c.model, c.data, s);
   EXPECT_LT(a.noise_tests[0].p_value, 1e-6);

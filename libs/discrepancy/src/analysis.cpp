@@ -448,6 +448,12 @@ std::string Describe(const kinematics::KinematicModel& model, const Effect& f) {
 
 double HeldOutRms(const kinematics::KinematicModel& model, const PoseData& data,
                   const std::vector<Effect>& effects, const AnalysisSettings& settings) {
+  return Rms(HeldOutPositionErrors(model, data, effects, settings));
+}
+
+std::vector<double> HeldOutPositionErrors(const kinematics::KinematicModel& model,
+                                          const PoseData& data, const std::vector<Effect>& effects,
+                                          const AnalysisSettings& settings) {
   std::vector<Effect> fx = effects;
   for (Effect& f : fx)  // thermal references at the data's mean, as Analyze chooses them
     if (f.cause == EffectCause::kThermal) {
@@ -458,8 +464,7 @@ double HeldOutRms(const kinematics::KinematicModel& model, const PoseData& data,
   const Prepared p = Prepare(model, data, settings, &fx);
   std::vector<int> all(fx.size());
   std::iota(all.begin(), all.end(), 0);
-  const auto ev = p.lin.test.empty() ? p.lin.CrossValidate(all) : p.lin.Split(all);
-  return Rms(ev.position);
+  return (p.lin.test.empty() ? p.lin.CrossValidate(all) : p.lin.Split(all)).position;
 }
 
 Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,

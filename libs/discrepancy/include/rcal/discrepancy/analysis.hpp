@@ -132,11 +132,19 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
                  const AnalysisSettings& settings = {});
 
 /// Held-out position RMS [m] of the geometric model extended by `effects` (fitted, not given),
-/// evaluated as Analyze evaluates its gain (split or repeated k-fold, linearised around the base
-/// fit). For tests: the gain the true model structure would get.
+/// on the `set` test poses when there are any, else by repeated k-fold (settings.folds ×
+/// settings.repeats), linearised around the base fit. For tests: the gain the true model
+/// structure would get.
 double HeldOutRms(const kinematics::KinematicModel& model, const PoseData& data,
                   const std::vector<kinematics::Effect>& effects,
                   const AnalysisSettings& settings = {});
+/// The per-pose held-out position errors [m] behind HeldOutRms (fit poses in order, or the test
+/// poses with a split). With settings.repeats = 1 the folds are the outer folds of Analyze's
+/// nested cross-validation, so they pair pose by pose with Gain::position_after_m.
+std::vector<double> HeldOutPositionErrors(const kinematics::KinematicModel& model,
+                                          const PoseData& data,
+                                          const std::vector<kinematics::Effect>& effects,
+                                          const AnalysisSettings& settings = {});
 
 /// Human-readable name of an effect: "joint_compliance shoulder_lift", "thermal (temperature)".
 std::string Describe(const kinematics::KinematicModel& model, const kinematics::Effect& effect);
