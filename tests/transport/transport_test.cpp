@@ -1,9 +1,13 @@
 // LcmTransport over memq://: typed round trips, and bytes that are not the subscribed type are
-// rejected through the error handler, never delivered.
+// rejected through the error handler, never delivered; over udpm:// in a private network
+// namespace: the subscription queue's capacity.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
+#include <algorithm>
 #include <cstdlib>
 
+#include "../integration/netns.hpp"
 #include "rcal/health_t.hpp"
 #include "rcal/pose_measurement_t.hpp"
 #include "rcal/transport/lcm_transport.hpp"
@@ -46,6 +50,31 @@ TEST(LcmTransport, TypedRoundTripOverMemq) {
   EXPECT_EQ(got[0].q, (std::vector<double>{0.1, -0.2}));
   EXPECT_EQ(got[0].p[2], 3.0);
   EXPECT_EQ(got[0].covariance[4], 1e-8);
+}
+
+// A burst that arrives before the subscriber handles any of it is delivered whole: LCM's own
+// per-subscription queue holds 30 and drops the rest silently (the control, with capacity 30).
+// Over udpm (memq:// has no such queue), inside a private network namespace.
+TEST(LcmTransport, ABurstOfAFewHundredMessagesIsQueuedNotDropped) {
+  RCAL_IN_NAMESPACE("LcmTransport.ABurstOfAFewHundredMessagesIsQueuedNotDropped");
+  constexpr int kBurst = 500;
+  for (const int capacity : {30, kDefaultQueueCapacity}) {
+    // A socket buffer that holds the whole burst (~1 kB of kernel memory per datagram), so that
+    // only LCM's queue can drop.
+    LcmTransport t("udpm://239.255.76.67:7751?ttl=0&recv_buf_size=2097152", capacity);
+    int got = 0;
+    t.Subscribe<pose_measurement_t>("POSE_MEASUREMENT", [&](const pose_measurement_t&) { ++got; });
+    for (int k = 0; k < kBurst; ++k) ASSERT_TRUE(t.Publish("POSE_MEASUREMENT", Sample()));
+    usleep(300'000);  // LCM's receive thread queues them meanwhile
+    while (t.HandleTimeout(50) > 0) {
+    }
+    if (capacity < kBurst) {
+      // LCM's own default: the queue's 30, and at most the one its receive thread had in hand.
+      EXPECT_LE(got, capacity + 1);
+    } else {
+      EXPECT_EQ(got, kBurst);
+    }
+  }
 }
 
 TEST(LcmTransport, WrongTypeAndTruncatedBytesAreRejectedNotDelivered) {

@@ -11,7 +11,8 @@ std::string ResolveLcmUrl(const std::string& url) {
   return kDefaultLcmUrl;
 }
 
-LcmTransport::LcmTransport(const std::string& url) : url_(ResolveLcmUrl(url)), lcm_(url_) {
+LcmTransport::LcmTransport(const std::string& url, int queue_capacity)
+    : url_(ResolveLcmUrl(url)), queue_capacity_(queue_capacity), lcm_(url_) {
   if (!lcm_.good()) throw std::runtime_error("LCM could not start on " + url_);
 }
 
@@ -23,7 +24,8 @@ bool LcmTransport::PublishRaw(const std::string& channel, const void* data, int 
 
 void LcmTransport::SubscribeRaw(const std::string& channel, RawHandler handler) {
   slots_.push_back(std::make_unique<Slot>(Slot{std::move(handler)}));
-  lcm_.subscribe(channel, &Slot::Handle, slots_.back().get());
+  lcm::Subscription* sub = lcm_.subscribe(channel, &Slot::Handle, slots_.back().get());
+  if (sub != nullptr) sub->setQueueCapacity(queue_capacity_);
 }
 
 int LcmTransport::HandleTimeout(int timeout_ms) {

@@ -13,6 +13,13 @@ namespace rcal::transport {
 /// The pipeline's default: multicast that never leaves the machine (ttl=0).
 inline constexpr const char* kDefaultLcmUrl = "udpm://239.255.76.67:7667?ttl=0";
 
+/// Messages LCM may hold per subscription between two HandleTimeout calls. LCM's own default is
+/// 30 and it drops the rest silently: at the fast replays' 2 kHz per sensor channel that is 15 ms
+/// of a process not being scheduled (a loaded machine), and one lost IMU or JOINTS sample changes
+/// a still window. 1000 holds half a second at 2 kHz (LCM 1.3's udpm provider has 2000 receive
+/// buffers in all).
+inline constexpr int kDefaultQueueCapacity = 1000;
+
 /// The LCM URL to use: `url` if not empty, else the environment variable RCAL_LCM_URL if set and
 /// not empty, else kDefaultLcmUrl.
 std::string ResolveLcmUrl(const std::string& url = "");
@@ -21,7 +28,8 @@ class LcmTransport final : public Transport {
  public:
   /// Opens LCM on ResolveLcmUrl(url). Throws std::runtime_error naming the URL if LCM cannot
   /// start (e.g. no multicast route).
-  explicit LcmTransport(const std::string& url = "");
+  /// `queue_capacity`: kDefaultQueueCapacity unless a test needs LCM's own behaviour.
+  explicit LcmTransport(const std::string& url = "", int queue_capacity = kDefaultQueueCapacity);
   ~LcmTransport() override;
   LcmTransport(const LcmTransport&) = delete;
   LcmTransport& operator=(const LcmTransport&) = delete;
@@ -42,6 +50,7 @@ class LcmTransport final : public Transport {
     }
   };
   std::string url_;
+  int queue_capacity_;
   lcm::LCM lcm_;
   std::vector<std::unique_ptr<Slot>> slots_;
 };
