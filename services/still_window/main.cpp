@@ -12,8 +12,11 @@
 // Input order: PosePipeline needs non-decreasing sensor time across the three streams (ties
 // allowed); a sample older than the last one is rejected and counted (HEALTH). Magnetic field:
 // IMU messages carry tesla; the pipeline is given µT (the unit its FQA noise is tuned for).
-// Warm-up: windows that begin within --warmup seconds of the first sample are dropped (the
-// filters are still converging on the start pose, as the offline experiment drops the home stop).
+// Warm-up: the pose pipeline starts its filters at the first stop (the joints standing still) and
+// drops that stop's window (estimation::PosePipelineSettings::rest_from_joints), so a process
+// started or restarted anywhere, in a move or inside a stop, publishes only windows of filters
+// that converged at rest (as the offline experiment drops the home stop). --warmup S drops, in
+// addition, the windows that begin within S seconds of the first sample (0: none).
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -131,7 +134,7 @@ int main(int argc, char** argv) {
   const sim::SensorSimSettings sim_defaults;
   double position_sigma = sim_defaults.position.sigma;
   double gyro_noise = sim_defaults.imu.gyro_noise_density;
-  double warmup = 1.0;
+  double warmup = 0.0;
   bool position_only = false;
   CLI::App app{
       "still_window: still-window pose measurements from the raw sensor streams.\n"

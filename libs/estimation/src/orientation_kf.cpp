@@ -73,6 +73,7 @@ void OrientationKf::Reset() {
   last_accel_used_ = false;
   last_mag_used_ = false;
   still_count_ = 0;
+  been_still_ = false;
   mag_ref_norm_ = settings_.mag_ref_norm > 0.0 ? settings_.mag_ref_norm : 0.0;
   mag_ref_dip_ = settings_.mag_ref_norm > 0.0 ? settings_.mag_ref_dip : 0.0;
   mag_ref_count_ = 0;
@@ -125,7 +126,10 @@ double OrientationKf::Correct(const Eigen::MatrixXd& H, const Eigen::VectorXd& y
   // P⁺ = (I − KH)P⁻(I − KH)ᵀ + KRKᵀ (Joseph form).
   const Eigen::MatrixXd S = H * P_ * H.transpose() + R;
   const Eigen::LDLT<Eigen::MatrixXd> S_ldlt(S);
-  const Eigen::MatrixXd K = S_ldlt.solve(H * P_).transpose();  // P Hᵀ S⁻¹ (S, P symmetric)
+  Eigen::MatrixXd K = S_ldlt.solve(H * P_).transpose();  // P Hᵀ S⁻¹ (S, P symmetric)
+  // Before the first rest the bias is a consider state: no correction (Joseph form keeps P
+  // right for any gain).
+  if (!settings_.learn_in_motion && !been_still_) K.bottomRows<3>().setZero();
   const Eigen::Matrix<double, 9, 1> dx = K * y;
   const Mat9 IKH = Mat9::Identity() - K * H;
   P_ = IKH * P_ * IKH.transpose() + K * R * K.transpose();
@@ -135,7 +139,7 @@ double OrientationKf::Correct(const Eigen::MatrixXd& H, const Eigen::VectorXd& y
 }
 
 Status OrientationKf::Update(double t, const Eigen::Vector3d& gyro_B, const Eigen::Vector3d& f_B,
-                             const Eigen::Vector3d& m_B) {
+                             const Eigen::Vector3d& m_B, std::optional<bool> at_rest) {
   auto refuse = [this](std::string why) {
     ++counters_.input_rejected;
     return Status::Error("orientation_kf: " + why);
@@ -172,7 +176,9 @@ Status OrientationKf::Update(double t, const Eigen::Vector3d& gyro_B, const Eige
     initialized_ = true;
     t_ = t;
     ++counters_.samples;
-    if (mag_ref_norm_ <= 0.0 && m_norm > 0.0 && f_norm > 0.0) {
+    // (The first sample counts towards the magnetic reference only when learning in motion:
+    // whether the sensor is at rest is not known yet.)
+    if (settings_.learn_in_motion && mag_ref_norm_ <= 0.0 && m_norm > 0.0 && f_norm > 0.0) {
       mag_norm_sum_ += m_norm;
       mag_dip_sum_ += std::asin(std::clamp(-m_B.dot(f_B) / (m_norm * f_norm), -1.0, 1.0));
       ++mag_ref_count_;
@@ -197,9 +203,14 @@ Status OrientationKf::Update(double t, const Eigen::Vector3d& gyro_B, const Eige
   PropagateAttitude(dt);
 
   // Rest: zero-rate pseudo-measurement makes the bias directly observable.
-  const bool still_now = (gyro_B - bias_B_).norm() < settings_.still_gyro &&
-                         std::abs(f_norm - settings_.gravity) < settings_.still_accel;
-  still_count_ = still_now ? still_count_ + 1 : 0;
+  if (at_rest) {
+    still_count_ = *at_rest ? std::max(still_count_ + 1, settings_.still_samples) : 0;
+  } else {
+    const bool still_now = (gyro_B - bias_B_).norm() < settings_.still_gyro &&
+                           std::abs(f_norm - settings_.gravity) < settings_.still_accel;
+    still_count_ = still_now ? still_count_ + 1 : 0;
+  }
+  been_still_ = been_still_ || still();
   if (settings_.zero_rate_update && still()) {
     Eigen::MatrixXd H = Eigen::MatrixXd::Zero(3, 9);
     H.block<3, 3>(0, 3).setIdentity();
@@ -224,7 +235,9 @@ Status OrientationKf::Update(double t, const Eigen::Vector3d& gyro_B, const Eige
     use_acc = false;
   bool use_mag = m_norm > 0.0;
   const bool learning = mag_ref_norm_ <= 0.0;
-  if (use_mag && learning) {
+  if (use_mag && learning && !settings_.learn_in_motion && !still()) {
+    // Moving, reference not learned yet: the field is used ungated, and not learned from.
+  } else if (use_mag && learning) {
     const Eigen::Vector3d d_B = f_norm > 0.0 ? Eigen::Vector3d(-f_B / f_norm) : down_B;
     mag_norm_sum_ += m_norm;
     mag_dip_sum_ += std::asin(std::clamp(m_B.dot(d_B) / m_norm, -1.0, 1.0));

@@ -31,6 +31,8 @@ void PosePipeline::Reset() {
   t_last_ = 0.0;
   num_joints_ = -1;
   still_ = open_ = gap_ = false;
+  filters_started_ = window_in_start_stop_ = false;
+  t_filters_started_ = 0.0;
   q_count_ = 0;
   raw_p_.clear();
   raw_R_.clear();
@@ -65,12 +67,14 @@ Status PosePipeline::AddJoints(double t, const Eigen::VectorXd& q) {
   t_last_ = t;
   ++counters_.joint_samples;
   still_ = *still;
+
   if (open_ && !still_) CloseWindow();
   if (!open_ && still_ &&
       t >= detector_.still_since() + settings_.still.min_duration + settings_.settle_time) {
     open_ = true;
     gap_ = false;
     t_open_ = t;
+    window_in_start_stop_ = filters_started_ && detector_.still_since() <= t_filters_started_;
     t_first_ = t_last_imu_ = t;
     window_.Reset();
     q_sum_ = Eigen::VectorXd::Zero(q.size());
@@ -91,7 +95,20 @@ Status PosePipeline::AddImu(double t, const Eigen::Vector3d& gyro_B, const Eigen
   if (!gyro_B.allFinite()) return Refuse("imu.gyro: not finite");
   if (!f_B.allFinite()) return Refuse("imu.accel: not finite");
   if (!m_B.allFinite()) return Refuse("imu.mag: not finite");
-  if (Status s = ori_.Update(t, gyro_B, f_B, m_B); !s) return Refuse("imu: " + s.error());
+  if (settings_.rest_from_joints && !filters_started_) {
+    if (!still_) {
+      has_t_ = true;
+      t_last_ = t;
+      ++counters_.imu_before_rest;
+      return Status::Ok();
+    }
+    filters_started_ = true;
+    t_filters_started_ = t;
+  }
+  const std::optional<bool> at_rest =
+      settings_.rest_from_joints ? std::optional<bool>(still_) : std::nullopt;
+  if (Status s = ori_.Update(t, gyro_B, f_B, m_B, at_rest); !s)
+    return Refuse("imu: " + s.error());
   has_t_ = true;
   t_last_ = t;
   ++counters_.imu_samples;
@@ -147,6 +164,7 @@ void PosePipeline::Drop(const std::string& reason) {
 void PosePipeline::CloseWindow() {
   open_ = false;
   const std::string when = "window at " + std::to_string(t_open_) + " s: ";
+  if (window_in_start_stop_) return Drop(when + "warm-up: the filters started in this stop");
   if (window_.size() < settings_.min_window_samples)
     return Drop(when + std::to_string(window_.size()) + " IMU samples, need " +
                 std::to_string(settings_.min_window_samples));

@@ -50,6 +50,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <optional>
 
 #include "rcal/estimation/fqa.hpp"
 #include "rcal/estimation/result.hpp"
@@ -80,6 +81,16 @@ struct OrientationKfSettings {
   double rate_proportional_noise = 0.0;
   /// Estimate the gyro bias (beyond the paper; on by default).
   bool estimate_gyro_bias = true;
+  /// Learn in motion: the gyro bias before the filter's first rest (still()), and the magnetic
+  /// reference from moving samples. Off by default: in motion linear accelerations bend the
+  /// accelerometer's gravity, so a filter started in a move mislearned its bias (by 0.05 rad/s,
+  /// with its wide initial bias covariance absorbing the bent FQA updates) and its dip (by 6°,
+  /// then rejecting the field): a pose pipeline restarted in a move gave still windows 2–340 σ
+  /// off in heading for the next ~20 s. Off, the bias is a consider state (Schmidt) until the
+  /// first rest: its covariance enters every gain, it is not corrected; and the reference is
+  /// learned from samples at rest only. On for data without rests and without linear
+  /// acceleration.
+  bool learn_in_motion = false;
 
   // --- Measurement noise ---
   /// Gyro white-noise density [rad/s/√Hz] (Xsens MTi-100: 0.01 °/s/√Hz).
@@ -113,8 +124,9 @@ struct OrientationKfSettings {
 
   // --- Magnetic reference ---
   /// Reference field norm [magnetometer unit] and dip angle [rad, positive down]. When the
-  /// norm is ≤ 0 both are learned as the mean over the first mag_reference_samples accepted
-  /// samples (the filter should start at rest, away from disturbances).
+  /// norm is ≤ 0 both are learned as the mean over the first mag_reference_samples samples at
+  /// rest (any samples with learn_in_motion), away from disturbances; until then the
+  /// magnetometer is used ungated.
   double mag_ref_norm = 0.0;
   double mag_ref_dip = 0.0;
   int mag_reference_samples = 100;
@@ -160,9 +172,14 @@ class OrientationKf {
   void Reset();
 
   /// One IMU sample at time t [s] (strictly increasing): gyro ω_meas [rad/s], specific force
-  /// f_B [m/s²] and magnetic field m_B [any fixed unit], all in the body frame.
+  /// f_B [m/s²] and magnetic field m_B [any fixed unit], all in the body frame. `at_rest`: the
+  /// caller's own knowledge that the sensor stands still (a robot's joints standing still);
+  /// given, it replaces the IMU's rest test (still_gyro, still_accel) for still(), the zero-rate
+  /// update, the bias's consider phase and the magnetic reference. (The IMU's test takes a slow
+  /// rotation below still_gyro for rest: at the start of a smooth move that is ~0.2 s of
+  /// zero-rate updates on a turning sensor.)
   Status Update(double t, const Eigen::Vector3d& gyro_B, const Eigen::Vector3d& f_B,
-                const Eigen::Vector3d& m_B);
+                const Eigen::Vector3d& m_B, std::optional<bool> at_rest = std::nullopt);
 
   bool initialized() const { return initialized_; }
   /// q_EB [w,x,y,z], body → earth; sign kept continuous from sample to sample.
@@ -213,6 +230,7 @@ class OrientationKf {
   bool last_accel_used_ = false;
   bool last_mag_used_ = false;
   int still_count_ = 0;
+  bool been_still_ = false;  // still() once since the start (the bias is then learned)
   double mag_ref_norm_ = 0.0;
   double mag_ref_dip_ = 0.0;
   int mag_ref_count_ = 0;

@@ -24,8 +24,11 @@
 //              each inflated by `covariance_scale` and floored by the `*_floor_sigma`s. With
 //              fewer than `min_raw_samples` raw samples the filters' mean covariance is used
 //              (StillWindow, conservative). The 6×6 covariance is block diagonal [m², rad²].
+// Rest (rest_from_joints, default): the filters take their first IMU sample once the joints have
+// stood still for still.min_duration, the window of that first stop is dropped, as a warm-up,
+// and the orientation KF's rest (zero-rate update, gyro bias, magnetic reference) is the joints'.
 // A window is dropped (counted, with the reason) when it has fewer than min_window_samples IMU
-// samples, no accepted position sample, or an IMU gap longer than max_gap.
+// samples, no accepted position sample, or an IMU gap longer than max_gap, or is the warm-up.
 // Bad input (non-finite values, wrong joint count, time going backwards) is refused with a
 // Status naming the field and counted; the state is unchanged.
 #pragma once
@@ -73,6 +76,15 @@ struct PosePipelineSettings {
   double covariance_scale = 1.0;         ///< multiplies the window covariance [-]
   double position_floor_sigma = 0.0;     ///< [m] per axis, added in quadrature
   double orientation_floor_sigma = 0.0;  ///< [rad] per axis, added in quadrature
+  /// Rest from the joints (the encoders see a stop exactly; the IMU's own test takes a slow
+  /// rotation below its still_gyro for rest): the filters start once the joints have stood
+  /// still for still.min_duration (the detector's still()), the window of that first stop is
+  /// dropped (the filters converge in it), and the orientation KF's zero-rate update, bias and
+  /// magnetic reference follow the joints' rest. A pipeline restarted in a move, or at the very
+  /// start of one, otherwise took the move's first 0.2 s for rest, learned a gyro bias of
+  /// 0.03 rad/s, and gave windows 3–6 σ off in heading for the next ~20 s. Off: the filters
+  /// start on the first IMU sample and judge rest from the IMU.
+  bool rest_from_joints = true;
 };
 
 /// One still-window pose measurement (the fields of kinematics::PoseMeasurement, plus where it
@@ -108,7 +120,8 @@ class PosePipeline {
     std::int64_t joint_samples = 0, imu_samples = 0, position_samples = 0;
     std::int64_t input_rejected = 0;   ///< refused calls (bad input, time order)
     std::int64_t windows_emitted = 0;  ///< poses produced
-    std::int64_t windows_dropped = 0;  ///< windows without a usable pose
+    std::int64_t windows_dropped = 0;  ///< windows without a usable pose (or the warm-up)
+    std::int64_t imu_before_rest = 0;  ///< IMU samples before the filters started (at rest)
     std::string last_error;            ///< last refusal or drop reason
   };
 
@@ -157,6 +170,11 @@ class PosePipeline {
   bool open_ = false;   // accumulating a window
   double t_open_ = 0.0, t_first_ = 0.0, t_last_imu_ = 0.0;
   bool gap_ = false;
+  // Start at rest: when the filters started [s], and whether the open window is in the stop
+  // they started in.
+  bool filters_started_ = false;
+  double t_filters_started_ = 0.0;
+  bool window_in_start_stop_ = false;
   Eigen::VectorXd q_sum_;
   int q_count_ = 0;
   std::vector<Eigen::Vector3d> raw_p_;
