@@ -3,13 +3,28 @@
 // still_window, sensor_acquisition --source sim --level sensors --checkpoint) as real processes
 // over real UDP multicast, inside a private network namespace on a non-default port. In each case
 // one process is SIGKILLed mid-run and started again with the same command line (what the
-// supervisor does), and the run goes on to the end of the programme. Against an uninterrupted
-// run of the same programme (run first, in the same test):
-//   - every final KINEMATIC_PARAMS value within kSigmas σ of the uninterrupted one (σ of the
-//     killed run, which saw the same or fewer poses, so its σ is the larger);
-//   - the final test-pose error against the simulator's truth within 1.5× the uninterrupted one;
-//   - no bad pose: every POSE_MEASUREMENT of the killed run is a window of one of the
-//     uninterrupted run's stops (same joints), within 4σ of that window, and nothing is rejected.
+// supervisor does), and the run goes on to the end of the programme. Where the kill lands depends
+// on timing (which window it cuts, which poses the identifier misses while it is down), so the
+// killed run is judged by exact comparisons that hold whatever the timing, never by a
+// statistical bound:
+//   - the identifier equals an uninterrupted identification of exactly the poses it used: its
+//     final KINEMATIC_PARAMS (values and σ) equal, to 1e-9, cell::OnlineIdentification (the
+//     process's own logic, from scratch, in this test) run on those poses as they came off the
+//     wire. Which poses it used is read from its final checkpoint (the accepted poses), each one
+//     bit-equal to a published POSE_MEASUREMENT; the same check holds for the uninterrupted run;
+//   - the identifier used every published pose (all but those published while it was down, a
+//     contiguous run, when it is the victim), and rejected none;
+//   - the windows: every window is one of the programme's stops; every window still_window
+//     computed from undisturbed filter state (any window when neither still_window nor
+//     sensor_acquisition was killed, else the windows that ended before the first kill) is
+//     bit-equal to the uninterrupted run's window of that stop; the windows after such a kill
+//     are the same stops, within a small fraction of their σ (the restarted filters converge
+//     from another state on the same samples; measured below); and the only windows missing are
+//     those the restarted processes say they dropped (still_window's warm-up; a window cut by
+//     sensor_acquisition's restart).
+// The kill therefore changes which poses the identifier sees, never what it makes of them. The
+// figures against the uninterrupted run (|Δx|/σ, test error) are printed, not asserted: with one
+// informative window fewer they differ by chance.
 // Cases: still_window and sensor_acquisition (each killed twice: in a move and inside a stop),
 // ekf_identifier after the set-up guess and during it (holding fewer than --guess-poses poses:
 // they are checkpointed and kept), the logger (the earlier event log stays readable up to the
@@ -19,19 +34,22 @@
 // the uninterrupted filters', within 1° / 1 mm). The uninterrupted and the killed run take
 // ~12 s each (20 + 20 stops at 20× real time; 10× in the filters case).
 //
-// Run outside a namespace, each case re-runs itself under deploy/netns-run (skipped when
-// `unshare -n` is not permitted). Guards only turn a hang into a failure; nothing asserts on time.
+// Run outside a namespace, each case re-runs itself under deploy/netns-run. Guards only turn a
+// hang into a failure; nothing asserts on time.
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <lcm/lcm-cpp.hpp>
+#include <limits>
 #include <map>
 #include <optional>
 #include <sstream>
 
 #include "netns.hpp"
+#include "offline_identification.hpp"
 #include "rcal/calibration_status_t.hpp"
 #include "rcal/cell/sim_cell.hpp"
 #include "rcal/identification/metrics.hpp"
@@ -62,8 +80,12 @@ constexpr const char* kSpeed = "20";  // sensor time per wall time
 // With the filters beside the pipeline every socket also carries ORIENTATION and TOOL_POSITION
 // at 100 Hz: half the speed, so that a loaded machine does not overflow the receive buffers.
 constexpr const char* kSpeedWithFilters = "10";
-constexpr double kSigmas = 3.0;  // |x_killed − x_ref| ≤ kSigmas σ_killed, every parameter
-constexpr int kGuessPoses = 6;   // ekf_identifier's default --guess-poses
+// A window after a kill of still_window or sensor_acquisition against the uninterrupted run's
+// window of the same stop, in units of the window's σ: the same samples through filters that
+// restarted from another state (and converged in the restarted still_window's 1 s warm-up). A
+// deterministic difference, not a draw: measured 0.00 σ (printed by each case).
+constexpr double kAfterKillSigmas = 0.25;
+constexpr int kGuessPoses = 6;  // ekf_identifier's default --guess-poses
 constexpr const char* kRobot = RCAL_SOURCE_DIR "/config/robots/grb3016.yaml";
 
 enum class Victim {
@@ -106,16 +128,57 @@ std::string ReadText(const path& p) {
 // The programme's stops, as sensor_acquisition draws them (its file comment): the home pose,
 // then kCal calibration and kTest test stops from mt19937_64(S·1000 + 3).
 struct Programme {
+  io::LoadedRobot robot = io::LoadRobot(kRobot);
   cell::Cell cell;
   std::vector<Eigen::VectorXd> cal_q, test_q;
-  Programme() : cell(cell::MakeCell(io::LoadRobot(kRobot).spec, kSeed)) {
+  Programme() : cell(cell::MakeCell(robot.spec, kSeed)) {
     sim::Rng rng(kSeed * 1000 + 3);
     sim::SampleJoints(cell.model, 1, rng);
     const auto stops = sim::SampleJoints(cell.model, kCal + kTest, rng);
     cal_q.assign(stops.begin(), stops.begin() + kCal);
     test_q.assign(stops.begin() + kCal, stops.end());
   }
+  /// The calibration stop whose joints `q` reads (a window's mean joints are the stop's to
+  /// ~1e-5 rad; stops lie radians apart), or −1.
+  int StopOf(const Eigen::VectorXd& q) const {
+    for (int k = 0; k < kCal; ++k)
+      if (q.size() == cal_q[k].size() && (q - cal_q[k]).norm() < 1e-3) return k;
+    return -1;
+  }
 };
+
+Eigen::VectorXd Joints(const pose_measurement_t& m) {
+  return Eigen::Map<const Eigen::VectorXd>(m.q.data(), m.num_joints);
+}
+
+// Bit-equal windows (the same samples through the same filters from the same state).
+bool SameWindow(const pose_measurement_t& a, const pose_measurement_t& b) {
+  return a.utime == b.utime && a.q == b.q && std::equal(a.p, a.p + 3, b.p) &&
+         a.has_orientation == b.has_orientation && std::equal(a.q_EI, a.q_EI + 4, b.q_EI) &&
+         a.covariance == b.covariance;
+}
+
+// Windows a restarted still_window's log says it dropped, as a time inside each [µs]: its warm-up
+// ("window 12.345–13.456 s dropped: warm-up": the end) and the pose pipeline's own drops ("window
+// dropped (1 so far): window at 118.630000 s: 11 IMU samples, need 20": the opening).
+struct Dropped {
+  int64_t utime;
+  bool opening;  // utime is the window's opening (else its end)
+};
+std::vector<Dropped> DroppedWindows(const std::string& log) {
+  std::vector<Dropped> out;
+  std::istringstream in(log);
+  for (std::string line; std::getline(in, line);) {
+    if (const auto at = line.find(" s dropped: warm-up"); at != std::string::npos) {
+      const auto dash = line.rfind("–", at);
+      if (dash == std::string::npos) continue;
+      out.push_back({std::llround(std::stod(line.substr(dash + 3, at - dash - 3)) * 1e6), false});
+    } else if (const auto w = line.find("): window at "); w != std::string::npos) {
+      out.push_back({std::llround(std::stod(line.substr(w + 13)) * 1e6), true});
+    }
+  }
+  return out;
+}
 
 struct RunResult {
   // Filters beside the pipeline: the angle between orientation_kf's estimate and the still
@@ -123,6 +186,15 @@ struct RunResult {
   std::map<int64_t, double> window_deg, window_mm;
   int64_t okf_killed_at = -1, pkf_killed_at = -1;  // last estimate before the kill [µs]
   std::vector<pose_measurement_t> poses;
+  // The poses the identifier used (its final checkpoint's accepted poses, as published), in the
+  // order it applied them.
+  std::vector<pose_measurement_t> used;
+  // Sensor time of the first kill of still_window or sensor_acquisition [µs] (windows ending
+  // before it come from undisturbed filter state), the stops in progress at a kill, and the
+  // windows the restarted still_window dropped.
+  int64_t first_kill_utime = std::numeric_limits<int64_t>::max();
+  std::vector<int> stops_cut;
+  std::vector<Dropped> dropped;
   std::optional<kinematic_params_t> params;
   std::optional<calibration_status_t> status;
   Eigen::VectorXd x, sigma;
@@ -225,6 +297,10 @@ class Kill : public integration::ProcessFixture, public ::testing::WithParamInte
     // SIGKILL, then the same command line again (the supervisor's restart).
     auto kill_restart = [&](pid_t& pid, const std::string& name,
                             const std::vector<std::string>& cmd) {
+      if (victim == Victim::kSensorAcquisition || victim == Victim::kStillWindow) {
+        run.first_kill_utime = std::min(run.first_kill_utime, joints_utime);
+        if (still_since >= 0) run.stops_cut.push_back(prog.StopOf(last_q));
+      }
       kill(-pid, SIGKILL);
       EXPECT_EQ(integration::Wait(pid), -SIGKILL) << name;
       Reaped(pid);
@@ -323,6 +399,13 @@ class Kill : public integration::ProcessFixture, public ::testing::WithParamInte
     EXPECT_EQ(Stop(sw), 0);
     EXPECT_EQ(Stop(ekf), 0);
     EXPECT_EQ(Stop(logger), 0);
+    // What the restarted still_window dropped (the first one drops the home stop, as in the
+    // uninterrupted run).
+    for (int n = 2; n <= starts["still_window"]; ++n)
+      for (const Dropped& w :
+           DroppedWindows(ReadText(d / ("still_window_" + std::to_string(n) + ".log"))))
+        run.dropped.push_back(w);
+    run.used = integration::UsedPoses(d / "ekf_identifier.checkpoint.json", run.poses);
 
     if (!run.params || !run.status) {
       ADD_FAILURE() << "no final KINEMATIC_PARAMS / CALIBRATION_STATUS";
@@ -479,67 +562,137 @@ TEST_P(Kill, SurvivedAndParametersMatchTheUninterruptedRun) {
       "Processes/Kill.SurvivedAndParametersMatchTheUninterruptedRun/" + Name(GetParam());
   RCAL_IN_NAMESPACE(filter.c_str());
   const Programme prog;
-  const bool filters = GetParam() == Victim::kFilters;
+  const Victim victim = GetParam();
+  const bool filters = victim == Victim::kFilters;
   const RunResult ref = Pipeline(prog, Victim::kNone, "uninterrupted", filters);
   ASSERT_FALSE(HasFailure()) << "the uninterrupted run failed";
-  // Every stop's window (one may be lost to UDP loss on a loaded machine: it is then missing,
-  // which the comparisons below allow for).
-  EXPECT_GE(ref.poses.size(), static_cast<size_t>(kCal - 1));
-  const RunResult run = Pipeline(prog, GetParam(), Name(GetParam()), filters);
+  integration::ExpectIdentifierEqualsOffline(prog.robot, {1, kSeed, kGuessPoses, false}, ref.used,
+                                             *ref.params, "uninterrupted");
+  const RunResult run = Pipeline(prog, victim, Name(victim), filters);
   ASSERT_FALSE(HasFailure());
   ASSERT_EQ(run.x.size(), ref.x.size());
   if (filters) CompareFilters(run, ref);
 
-  double worst_dq = 0;
-  // No bad pose: each window is one of the programme's stops (its joints, not a mean across a
-  // move), within 4σ of the uninterrupted run's window of that stop.
-  for (const auto& m : run.poses) {
-    std::string error;
-    const auto z = transport::FromMessage(m, &error);
-    ASSERT_TRUE(z) << error;
-    // (The window's mean joint reading is the stop's to the end of the move's settling, ~1e-5
-    // rad; stops lie radians apart.)
-    double dq = INFINITY;
-    for (const auto& q : prog.cal_q) dq = std::min(dq, (q - z->q).norm());
-    worst_dq = std::max(worst_dq, dq);
-    const bool a_stop = dq < 1e-3;
-    ASSERT_TRUE(a_stop) << "pose " << m.pose_index << " at " << m.utime << " is no stop's window";
-    std::optional<kinematics::PoseMeasurement> match;
-    for (const auto& r : ref.poses) {
-      const auto zr = transport::FromMessage(r, &error);
-      if (zr && (zr->q - z->q).norm() < 1e-3) match = zr;
+  // 1. The identifier: exactly what an uninterrupted identification of its poses gives.
+  ASSERT_TRUE(run.params);
+  integration::ExpectIdentifierEqualsOffline(prog.robot, {1, kSeed, kGuessPoses, false}, run.used,
+                                             *run.params, Name(victim) + " killed");
+
+  // 2. It used every published pose, in order; when it was the victim, all but a contiguous run
+  // (those published while it was down).
+  {
+    size_t k = 0, skipped = 0, gaps = 0;
+    for (const auto& u : run.used) {
+      size_t j = k;
+      while (j < run.poses.size() && !SameWindow(run.poses[j], u)) ++j;
+      ASSERT_LT(j, run.poses.size()) << "used pose at " << u.utime << " out of order";
+      if (j > k) ++gaps, skipped += j - k;
+      k = j + 1;
     }
-    if (!match) continue;  // the uninterrupted run lost this one
-    for (int a = 0; a < 3; ++a)
-      EXPECT_LT(std::abs(z->p_WM_W(a) - match->p_WM_W(a)),
-                4 * std::sqrt(z->covariance(a, a) + match->covariance(a, a)))
-          << "pose " << m.pose_index << " axis " << a;
-    const double angle = Eigen::AngleAxisd(z->R_EI * match->R_EI.transpose()).angle();
-    const double var = z->covariance.bottomRightCorner<3, 3>().trace() +
-                       match->covariance.bottomRightCorner<3, 3>().trace();
-    EXPECT_LT(angle, 4 * std::sqrt(var)) << "pose " << m.pose_index;
+    skipped += run.poses.size() - k;
+    if (k < run.poses.size()) ++gaps;
+    std::printf("identifier: used %zu of %zu published poses (%zu missed in %zu gaps)\n",
+                run.used.size(), run.poses.size(), skipped, gaps);
+    if (victim == Victim::kEkfIdentifier) {
+      EXPECT_LE(gaps, 1u);
+    } else {
+      EXPECT_EQ(skipped, 0u);
+    }
   }
 
-  std::printf("windows: largest |q − stop| %.3g rad\n", worst_dq);
+  // 3. The windows, stop by stop against the uninterrupted run.
+  std::map<int, const pose_measurement_t*> ref_window, run_window;
+  for (const auto* r : {&ref, &run})
+    for (const auto& m : r->poses) {
+      const int stop = prog.StopOf(Joints(m));
+      ASSERT_GE(stop, 0) << "pose " << m.pose_index << " at " << m.utime << " is no stop's window";
+      auto& w = r == &ref ? ref_window : run_window;
+      ASSERT_EQ(w.count(stop), 0u) << "two windows of stop " << stop;
+      w[stop] = &m;
+    }
+  // Every stop but those the uninterrupted run lost on a loaded machine (none expected).
+  EXPECT_GE(ref_window.size(), static_cast<size_t>(kCal - 1));
+  int equal = 0, after_kill = 0;
+  double worst_p_sigma = 0, worst_R_sigma = 0;
+  for (const auto& [stop, m] : run_window) {
+    const auto r = ref_window.find(stop);
+    if (r == ref_window.end()) {
+      std::printf("stop %d: the uninterrupted run lost its window\n", stop);
+      continue;
+    }
+    if (m->utime < run.first_kill_utime) {
+      EXPECT_TRUE(SameWindow(*m, *r->second)) << "stop " << stop << ": window differs before any "
+                                              << "kill of the sensor path";
+      equal += SameWindow(*m, *r->second);
+      continue;
+    }
+    // After a kill of still_window or sensor_acquisition: the same stop from the same samples
+    // (less at most the 0.1 s a sensor_acquisition restart skips), through filters restarted
+    // from another state. Differences in units of the window's own σ.
+    std::string error;
+    const auto z = transport::FromMessage(*m, &error);
+    const auto zr = transport::FromMessage(*r->second, &error);
+    ASSERT_TRUE(z && zr) << error;
+    double p_sigma = 0;
+    for (int a = 0; a < 3; ++a)
+      p_sigma = std::max(p_sigma,
+                         std::abs(z->p_WM_W(a) - zr->p_WM_W(a)) / std::sqrt(zr->covariance(a, a)));
+    const double R_sigma = Eigen::AngleAxisd(z->R_EI * zr->R_EI.transpose()).angle() /
+                           std::sqrt(zr->covariance.bottomRightCorner<3, 3>().trace() / 3);
+    if (std::count(run.stops_cut.begin(), run.stops_cut.end(), stop) > 0) {
+      // In progress at a sensor_acquisition kill: the window lacks the skipped samples (up to
+      // 0.1 s of ~1.2 s), so its mean is another draw, ~0.3 σ away; 4 σ of the window.
+      std::printf("stop %d (cut by the kill): %.3f σ in position, %.3f σ in orientation\n", stop,
+                  p_sigma, R_sigma);
+      EXPECT_LT(p_sigma, 4.0) << "stop " << stop;
+      EXPECT_LT(R_sigma, 4.0) << "stop " << stop;
+      continue;
+    }
+    ++after_kill;
+    std::printf("stop %d (after a kill): %.3f σ in position, %.3f σ in orientation\n", stop,
+                p_sigma, R_sigma);
+    worst_p_sigma = std::max(worst_p_sigma, p_sigma);
+    worst_R_sigma = std::max(worst_R_sigma, R_sigma);
+  }
+  std::printf(
+      "windows: %d bit-equal to the uninterrupted run, %d after a kill of the sensor path "
+      "(largest difference %.3f σ in position, %.3f σ in orientation)\n",
+      equal, after_kill, worst_p_sigma, worst_R_sigma);
+  EXPECT_LT(worst_p_sigma, kAfterKillSigmas);
+  EXPECT_LT(worst_R_sigma, kAfterKillSigmas);
+  // The only windows missing are those the kill cut: dropped by the restarted still_window (in
+  // its warm-up, or by its pose pipeline: too few samples left of the stop), or
+  // (sensor_acquisition) the stop in progress at a kill.
+  for (const auto& [stop, r] : ref_window) {
+    if (run_window.count(stop)) continue;
+    // The stop's window ends at r->utime and opens within the 1.5 s stop before it.
+    const bool dropped = std::any_of(run.dropped.begin(), run.dropped.end(), [&](const Dropped& w) {
+      return w.opening ? w.utime > r->utime - 2'000'000 && w.utime < r->utime
+                       : std::abs(w.utime - r->utime) <= 1000;
+    });
+    const bool cut = std::count(run.stops_cut.begin(), run.stops_cut.end(), stop) > 0;
+    std::printf("stop %d: window missing (%s)\n", stop,
+                dropped ? "dropped by the restarted still_window"
+                        : (cut ? "in progress at the kill" : "no reason"));
+    EXPECT_TRUE(dropped || (victim == Victim::kSensorAcquisition && cut))
+        << "stop " << stop << ": window missing, and no restarted process dropped it";
+  }
+
+  // For people: the killed run against the uninterrupted one (different poses: not asserted).
   double worst = 0;
   int worst_i = 0;
   for (int i = 0; i < run.x.size(); ++i) {
-    if (!run.params->identified[i]) {  // held at its nominal value (σ 0)
-      EXPECT_EQ(run.x(i), ref.x(i)) << run.params->names[i];
-      continue;
-    }
+    if (!run.params->identified[i]) continue;
     const double r = std::abs(run.x(i) - ref.x(i)) / run.sigma(i);
     if (r > worst) worst = r, worst_i = i;
-    EXPECT_LE(r, kSigmas) << run.params->names[i] << ": " << run.x(i) << " vs " << ref.x(i)
-                          << " (σ " << run.sigma(i) << ")";
   }
   std::printf(
-      "%s killed: %zu poses (uninterrupted %zu), max |dx|/sigma %.3f (%s), test error %.4f mm "
-      "(uninterrupted %.4f mm)\n",
-      Name(GetParam()).c_str(), run.poses.size(), ref.poses.size(), worst,
+      "%s killed: %zu poses used (uninterrupted %zu), max |dx|/sigma %.3f (%s), test error %.4f "
+      "mm (uninterrupted %.4f mm)\n",
+      Name(victim).c_str(), run.used.size(), ref.used.size(), worst,
       run.params->names[worst_i].c_str(), run.test_mm, ref.test_mm);
-  EXPECT_LE(run.test_mm, 1.5 * ref.test_mm);
   EXPECT_LT(ref.test_mm, 0.2);  // the set-up guess alone is ~20 mm off: the pipeline calibrated
+  EXPECT_LT(run.test_mm, 0.2);
 }
 
 INSTANTIATE_TEST_SUITE_P(Processes, Kill,

@@ -119,10 +119,14 @@ TEST_F(LogReplay, LogPlayerThroughIdentifierAndCalibrateLogEqualTheLiveRun) {
   ASSERT_EQ(std::system(cmd.c_str()), 0);
   const auto j = nlohmann::json::parse(std::ifstream(json));
   EXPECT_EQ(j["poses_accepted"].get<int>(), live.poses_used);
-  ASSERT_EQ(static_cast<int>(j["values_m_or_rad"].size()), live.num_params);
+  ASSERT_EQ(static_cast<int>(j["parameters"].size()), live.num_params);
   for (int i = 0; i < live.num_params; ++i) {
-    EXPECT_EQ(j["names"][i].get<std::string>(), live.names[i]);
-    EXPECT_NEAR(j["values_m_or_rad"][i].get<double>(), live.values[i], 1e-9) << live.names[i];
+    const auto& p = j["parameters"][i];
+    EXPECT_EQ(p["name"].get<std::string>(), live.names[i]);
+    const auto& value = p.contains("value_m") ? p["value_m"] : p["value_rad"];
+    const auto& sigma = p.contains("sigma_m") ? p["sigma_m"] : p["sigma_rad"];
+    EXPECT_NEAR(value.get<double>(), live.values[i], 1e-9) << live.names[i];
+    EXPECT_NEAR(sigma.get<double>(), live.sigmas[i], 1e-9) << live.names[i];
   }
 #endif
 }

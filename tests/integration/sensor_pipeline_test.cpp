@@ -4,7 +4,9 @@
 // --cell-seed (the offline experiment's cell, set-up guess and base set) → KINEMATIC_PARAMS.
 // The final test-pose error against the simulator's truth must be within 1.5× of the offline
 // `rcal experiment paper --sensors` figure for the same seed and pose count (computed here with
-// the same functions: SimulateWindows + RunOnline).
+// the same functions: SimulateWindows + RunOnline), and the identifier's estimate must equal, to
+// 1e-9, cell::OnlineIdentification run in the test on exactly the poses it used (read from its
+// checkpoint): an exact check, whatever the timing.
 //
 // Run outside a namespace, the test re-runs itself under deploy/netns-run (skipped when
 // `unshare -n` is not permitted). Guards only turn a hang into a failure; nothing asserts on time.
@@ -13,6 +15,7 @@
 #include <optional>
 
 #include "netns.hpp"
+#include "offline_identification.hpp"
 #include "rcal/calibration_status_t.hpp"
 #include "rcal/cell/sim_cell.hpp"
 #include "rcal/identification/metrics.hpp"
@@ -58,10 +61,11 @@ TEST_F(SensorPipeline, CalibratesToTheOfflineFigure) {
                                   [&](const kinematic_params_t& m) { params = m; });
   t.Subscribe<calibration_status_t>(transport::channels::kCalibrationStatus,
                                     [&](const calibration_status_t& s) { status = s; });
-  const pid_t ekf =
-      Start({RCAL_EKF_IDENTIFIER, "--lcm-url", kUrl, "--cell-seed", std::to_string(kSeed),
-             "--robot", RCAL_SOURCE_DIR "/config/robots/grb3016.yaml"},
-            "ekf_identifier.log");
+  const auto checkpoint = dir_ / "ekf_identifier.checkpoint.json";
+  const pid_t ekf = Start(
+      {RCAL_EKF_IDENTIFIER, "--lcm-url", kUrl, "--cell-seed", std::to_string(kSeed), "--robot",
+       RCAL_SOURCE_DIR "/config/robots/grb3016.yaml", "--checkpoint", checkpoint.string()},
+      "ekf_identifier.log");
   const pid_t sw = Start({RCAL_STILL_WINDOW, "--lcm-url", kUrl}, "still_window.log");
   // Both listening (the identifier announces itself with a CALIBRATION_STATUS).
   ASSERT_TRUE(
@@ -81,6 +85,11 @@ TEST_F(SensorPipeline, CalibratesToTheOfflineFigure) {
   EXPECT_EQ(Stop(ekf), 0);
 
   ASSERT_TRUE(status.has_value());
+  ASSERT_TRUE(params.has_value());
+  const auto used = integration::UsedPoses(checkpoint, poses);
+  EXPECT_EQ(used.size(), poses.size());
+  integration::ExpectIdentifierEqualsOffline(robot, {1, kSeed, 6, false}, used, *params,
+                                             "sensor pipeline");
   EXPECT_EQ(status->poses_accepted, kCal);
   EXPECT_EQ(status->poses_rejected, 0);
   std::string error;
