@@ -1,6 +1,7 @@
 // Shared by the integration tests: spawn real processes in their own process group with their
 // output in a file, and run a test body inside deploy/netns-run (a private network namespace
-// with multicast on loopback) unless already there.
+// with multicast on loopback) unless already there. Where that is not permitted the test skips,
+// or fails when every test must run (RCAL_REQUIRE_ALL_TESTS, CI).
 #pragma once
 
 #include <gtest/gtest.h>
@@ -81,14 +82,23 @@ inline Where InNamespaceOrDelegate(const char* filter) {
   return Where::kDelegated;
 }
 
-#define RCAL_IN_NAMESPACE(filter)                                                   \
-  switch (::rcal::integration::InNamespaceOrDelegate(filter)) {                     \
-    case ::rcal::integration::Where::kNotPermitted:                                 \
-      GTEST_SKIP() << "unshare -n is not permitted here (deploy/netns-run failed)"; \
-    case ::rcal::integration::Where::kDelegated:                                    \
-      return;                                                                       \
-    case ::rcal::integration::Where::kHere:                                         \
-      break;                                                                        \
+/// A test that cannot run here: skipped on a developer's machine, a failure where every test
+/// must run (RCAL_REQUIRE_ALL_TESTS, on in CI), so that CI never goes green without it.
+#if defined(RCAL_REQUIRE_ALL_TESTS) && RCAL_REQUIRE_ALL_TESTS
+#define RCAL_CANNOT_RUN_HERE(why) \
+  GTEST_FAIL() << "cannot run here, and every test must (RCAL_REQUIRE_ALL_TESTS): " << why
+#else
+#define RCAL_CANNOT_RUN_HERE(why) GTEST_SKIP() << why
+#endif
+
+#define RCAL_IN_NAMESPACE(filter)                                                            \
+  switch (::rcal::integration::InNamespaceOrDelegate(filter)) {                              \
+    case ::rcal::integration::Where::kNotPermitted:                                          \
+      RCAL_CANNOT_RUN_HERE("unshare -n is not permitted here (deploy/netns-run failed)");    \
+    case ::rcal::integration::Where::kDelegated:                                             \
+      return;                                                                                \
+    case ::rcal::integration::Where::kHere:                                                  \
+      break;                                                                                 \
   }
 
 /// A temporary directory and the processes started in it; kills what is left at the end and
