@@ -45,6 +45,30 @@ fs::path TempDir(const std::string& name) {
   return d;
 }
 
+// Every leaf of `golden` is in `got` with the same value (numbers to 1e-6 relative, 1e-15
+// absolute); keys `got` has beyond the golden file are allowed (new outputs).
+void ExpectGolden(const json& got, const json& golden, const std::string& path) {
+  if (golden.is_object()) {
+    for (const auto& [key, value] : golden.items()) {
+      if (!got.is_object() || !got.contains(key)) {
+        ADD_FAILURE() << path << "/" << key << ": missing from the output";
+        continue;
+      }
+      ExpectGolden(got[key], value, path + "/" + key);
+    }
+  } else if (golden.is_array()) {
+    ASSERT_TRUE(got.is_array() && got.size() == golden.size()) << path << ": array size";
+    for (size_t i = 0; i < golden.size(); ++i)
+      ExpectGolden(got[i], golden[i], path + "[" + std::to_string(i) + "]");
+  } else if (golden.is_number_float()) {
+    ASSERT_TRUE(got.is_number()) << path;
+    const double a = got.get<double>(), b = golden.get<double>();
+    EXPECT_NEAR(a, b, 1e-6 * std::abs(b) + 1e-15) << path;
+  } else {
+    EXPECT_EQ(got, golden) << path;
+  }
+}
+
 TEST(RcalCli, ExperimentPaperMeetsTheNoiseLimitAndEkfAgreesWithLm) {
   const fs::path d = TempDir("paper");
   const Result r = RunRcal("experiment paper --out " + (d / "out").string() + " --json " +
@@ -211,6 +235,15 @@ TEST(RcalCli, ExperimentPaperFromSensorStreams) {
   EXPECT_GT(j["window_mean_nees"].get<double>(), chi2_quantile(-3.2905, 6 * n_windows) / n_windows);
   EXPECT_LT(j["window_mean_nees"].get<double>(),
             79.0 / 75.0 * chi2_quantile(3.2905, 6 * n_windows) / n_windows);
+
+  // Golden output: every figure of seed 1 the README states (the tables of "From raw sensor
+  // streams", frames, windows, peg-in-hole) is this run's JSON, committed in
+  // tests/tools/golden/experiment_paper_sensors_seed1.json; every value in it must be reproduced
+  // (relative 1e-6: the run is deterministic, the tolerance only absorbs a compiler's rounding).
+  // A change that moves a figure must regenerate the file and the README with it:
+  //   rcal experiment paper --sensors --no-sweep --json F   (then drop F's "time" object)
+  ExpectGolden(
+      j, ReadJson(RCAL_SOURCE_DIR "/tests/tools/golden/experiment_paper_sensors_seed1.json"), "");
 
   const Result again = RunRcal("experiment paper --sensors --no-sweep --out " +
                                (d / "out2").string() + " --json " + (d / "b.json").string());
