@@ -105,7 +105,9 @@ int main(int argc, char** argv) {
   try {
     services::InstallStopHandlers();
     std::filesystem::create_directories(dir);
-    transport::LcmTransport t(lcm_url);
+    // One subscription to every channel: a queue for seconds of the whole bus (a logger that
+    // falls behind under load must catch up, not drop events).
+    transport::LcmTransport t(lcm_url, transport::kAllChannelsQueueCapacity);
     transport::Health health("logger");
     int file_index = logger::NextFileIndex(dir, prefix);
     long long bytes = 0;

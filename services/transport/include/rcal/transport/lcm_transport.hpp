@@ -16,9 +16,11 @@ inline constexpr const char* kDefaultLcmUrl = "udpm://239.255.76.67:7667?ttl=0";
 /// Messages LCM may hold per subscription between two HandleTimeout calls. LCM's own default is
 /// 30 and it drops the rest silently: at the fast replays' 2 kHz per sensor channel that is 15 ms
 /// of a process not being scheduled (a loaded machine), and one lost IMU or JOINTS sample changes
-/// a still window. 1000 holds half a second at 2 kHz (LCM 1.3's udpm provider has 2000 receive
-/// buffers in all).
-inline constexpr int kDefaultQueueCapacity = 1000;
+/// a still window. 5000 holds 2.5 s at 2 kHz (LCM grows its receive buffers as needed; a few MB
+/// at most). A subscriber of every channel (the logger) needs more: kAllChannelsQueueCapacity.
+inline constexpr int kDefaultQueueCapacity = 5000;
+/// For one subscription to every channel (~6.5 kHz in the fast replays): 15 s of them.
+inline constexpr int kAllChannelsQueueCapacity = 100000;
 
 /// The LCM URL to use: `url` if not empty, else the environment variable RCAL_LCM_URL if set and
 /// not empty, else kDefaultLcmUrl.
