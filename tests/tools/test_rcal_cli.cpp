@@ -254,6 +254,84 @@ TEST(RcalCli, ExperimentPaperFromSensorStreams) {
   EXPECT_EQ(a, b);
 }
 
+// The robustness sweep over seeds (issue 19): a reduced programme (20 + 20 stops), 2 seeds, two
+// configurations. Each run has its own seed 10000·k + i (k the configuration's number): a
+// configuration's runs are the same alone or beside others and with any number of jobs, and the
+// baseline's run i is `rcal experiment paper --sensors --seed i` with the same programme.
+TEST(RcalCli, ExperimentPaperSensorSweepOverSeeds) {
+  const fs::path d = TempDir("sensor_sweep");
+  const std::string programme = " --cal 20 --test 20";
+  const Result r = RunRcal("experiment paper --sensors --sweep-seeds 2 --seed 2 --jobs 2" +
+                           programme + " --sweep-configs poses-10,baseline --out " +
+                           (d / "out").string() + " --json " + (d / "s.json").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("10th–90th percentile [mm]"), std::string::npos) << r.output;
+  const json j = ReadJson(d / "s.json");
+  EXPECT_EQ(j["seeds"], 2);
+  ASSERT_EQ(j["configurations"].size(), 2u);
+  const json& base = j["configurations"][0];
+  const json& poses = j["configurations"][1];
+  EXPECT_EQ(base["id"], "baseline");
+  EXPECT_EQ(poses["id"], "poses-10");
+  EXPECT_EQ(poses["settings"]["num_cal_poses"], 10);
+  for (const json* c : {&base, &poses}) {
+    ASSERT_EQ((*c)["runs"].size(), 2u);
+    EXPECT_EQ((*c)["failed_runs"], 0);
+    for (size_t i = 0; i < 2; ++i) {
+      const json& run = (*c)["runs"][i];
+      EXPECT_EQ(run["seed_index"], 2 + i);
+      EXPECT_EQ(run["seed"], 10000 * (*c)["number"].get<int>() + 2 + i);
+    }
+    const json& e = (*c)["test_mean_position_error_m"];
+    EXPECT_EQ(e["runs"], 2);
+    EXPECT_LE(e["min"].get<double>(), e["p10"].get<double>());
+    EXPECT_LE(e["p10"].get<double>(), e["median"].get<double>());
+    EXPECT_LE(e["median"].get<double>(), e["p90"].get<double>());
+    EXPECT_LE(e["p90"].get<double>(), e["max"].get<double>());
+    const double a = (*c)["runs"][0]["test_mean_position_error_m"].get<double>(),
+                 b = (*c)["runs"][1]["test_mean_position_error_m"].get<double>();
+    EXPECT_DOUBLE_EQ(e["median"].get<double>(), 0.5 * (a + b));
+    EXPECT_GT((*c)["crb_test_mean_position_error_m"]["median"].get<double>(), 0.0);
+  }
+  // Fewer calibration poses, a larger Cramér–Rao figure.
+  EXPECT_GT(poses["crb_test_mean_position_error_m"]["median"].get<double>(),
+            base["crb_test_mean_position_error_m"]["median"].get<double>());
+  for (const char* f : {"report.md", "results.json", "sweep_seeds.png"})
+    EXPECT_TRUE(fs::exists(d / "out" / f)) << f;
+
+  const Result alone = RunRcal("experiment paper --sensors --sweep-seeds 2 --seed 2 --jobs 1" +
+                               programme + " --sweep-configs poses-10 --out " +
+                               (d / "alone").string() + " --json " + (d / "alone.json").string());
+  ASSERT_EQ(alone.exit_code, 0) << alone.output;
+  json runs_alone = ReadJson(d / "alone.json")["configurations"][0]["runs"],
+       runs_beside = poses["runs"];
+  for (auto* runs : {&runs_alone, &runs_beside})
+    for (auto& run : *runs) {
+      run.erase("wall_time_s");  // the only figures that may differ
+      run.erase("cpu_time_s");
+    }
+  EXPECT_EQ(runs_alone, runs_beside);
+
+  const Result single =
+      RunRcal("experiment paper --sensors --no-sweep --no-peg --seed 3" + programme + " --out " +
+              (d / "single").string() + " --json " + (d / "single.json").string());
+  ASSERT_EQ(single.exit_code, 0) << single.output;
+  const json js = ReadJson(d / "single.json");
+  const json& run3 = base["runs"][1];
+  EXPECT_EQ(run3["seed"], 3);
+  EXPECT_DOUBLE_EQ(run3["test_mean_position_error_m"].get<double>(),
+                   js["test_mean_position_error_m"].get<double>());
+  EXPECT_DOUBLE_EQ(run3["crb_test_mean_position_error_m"].get<double>(),
+                   js["crb_test_mean_position_error_m"].get<double>());
+
+  const Result unknown = RunRcal(
+      "experiment paper --sensors --sweep-seeds 1 --sweep-configs "
+      "noise-3 --out " +
+      (d / "bad").string());
+  EXPECT_NE(unknown.exit_code, 0);
+  EXPECT_NE(unknown.output.find("noise-3"), std::string::npos) << unknown.output;
+}
+
 // --- rcal calibrate --effects (the model rcal analyze selected) and --log (calibrate-log) ---
 
 TEST(RcalCli, CalibrateFitsTheEffectsAnAnalysisFoundAndJudgesThemOnHeldOutPoses) {
@@ -436,6 +514,58 @@ TEST(RcalCli, AnalyzeTheRealUr10FindsNoEffectBeyondGeometry) {
   EXPECT_EQ(j.at("gain").at("relative_gain").get<double>(), 0.0);
   EXPECT_NEAR(j.at("gain").at("heldout_rms_before_m").get<double>(), 4.3e-3, 0.5e-3);
   EXPECT_TRUE(fs::exists(d / "out" / "report.md"));
+}
+
+// The pose-level detection sweep: each (effect, magnitude, seed) cell draws its joint and its
+// dataset from its own seed, so a cell's result is the same run alone or inside a larger sweep
+// (and on any number of jobs);
+// the rates add up (a thermal effect named with the wrong source is a wrong cause, counted in
+// wrong_effect_rate and apart in wrong_thermal_source_rate; scoring in test_detection_sweep.cpp).
+TEST(RcalCli, DetectionSweepCellsDoNotDependOnTheOtherCells) {
+  const fs::path d = TempDir("detection_sweep");
+  const Result small =
+      RunRcal("detection-sweep --seeds 2 --magnitudes 2 --effects backlash,thermal_time --json " +
+              (d / "small.json").string());
+  ASSERT_EQ(small.exit_code, 0) << small.output;
+  const Result large = RunRcal(
+      "detection-sweep --seeds 2 --magnitudes 1,2 --jobs 2 --effects "
+      "joint_scale,backlash,thermal_temperature,thermal_time,clean --json " +
+      (d / "large.json").string());
+  ASSERT_EQ(large.exit_code, 0) << large.output;
+  const json a = ReadJson(d / "small.json"), b = ReadJson(d / "large.json");
+  const auto row = [](const json& j, const std::string& effect, double k) {
+    for (const auto& r : j["rows"])
+      if (r["effect"] == effect && r["rms_over_noise"].get<double>() == k) return r;
+    ADD_FAILURE() << effect << " " << k << " missing";
+    return json();
+  };
+  ASSERT_EQ(a["rows"].size(), 2u);
+  ASSERT_EQ(b["rows"].size(), 8u);
+  for (const std::string effect : {"backlash", "thermal (time)"}) {
+    const json ra = row(a, effect, 2), rb = row(b, effect, 2);
+    ASSERT_EQ(ra["cells"].size(), 2u);
+    EXPECT_EQ(ra["cells"], rb["cells"]) << effect;  // joint, seed, effects found, scoring
+    EXPECT_EQ(ra["detection_rate"], rb["detection_rate"]);
+  }
+  EXPECT_EQ(a["clean_runs"], 0);
+  EXPECT_EQ(b["clean_runs"], 2);
+  for (const auto& r : b["rows"]) {
+    const int runs = r["runs"].get<int>();
+    EXPECT_EQ(runs, 2);
+    EXPECT_LE(r["wrong_thermal_source"].get<int>(), r["wrong"].get<int>());
+    EXPECT_LE(r["detected"].get<int>() + r["wrong"].get<int>(), runs);
+    if (r["effect"] != "thermal (temperature)" && r["effect"] != "thermal (time)") {
+      EXPECT_EQ(r["wrong_thermal_source"], 0);
+    }
+    for (const auto& c : r["cells"]) {
+      // A thermal detection counts only with the hidden source.
+      bool right = false;
+      for (const auto& f : c["found"])
+        right |= f["cause"] == c["hidden"]["cause"] && f["joint"] == c["hidden"]["joint"] &&
+                 f.value("thermal_source", "") == c["hidden"].value("thermal_source", "");
+      EXPECT_EQ(c["detected"].get<bool>(), right) << c.dump();
+    }
+  }
 }
 
 // The IMU detection sweep, one stream per cell: every cell runs, the clean stream reports

@@ -1,14 +1,26 @@
 // rcal detection-sweep --seeds N --json FILE: how often rcal analyze names a hidden effect
-// (right cause and joint) and how often it reports an effect on clean data, over a seeded sweep
-// of simulated datasets (each pose-level cause, random joints, magnitudes near the noise floor).
-// Not a timed benchmark: the figures are rates.
+// (right cause and joint; thermal: with its source) and how often it reports an effect on clean
+// data, over a seeded sweep of simulated datasets (each pose-level cause, random joints,
+// magnitudes near the noise floor). Not a timed benchmark: the figures are rates.
+//
+// Every (effect, magnitude, seed index) cell run has its own seed (DetectionCellSeed), from which
+// the joint and the dataset are drawn: a cell's result does not depend on which other effects or
+// magnitudes the sweep runs.
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <filesystem>
+#include <future>
 #include <map>
+#include <mutex>
 #include <nlohmann/json.hpp>
+#include <set>
+#include <stdexcept>
 
 #include "command.hpp"
+#include "detection_sweep.hpp"
 #include "rcal/discrepancy/analysis.hpp"
 #include "rcal/identification/calibration.hpp"
 #include "rcal/io/atomic_file.hpp"
@@ -35,11 +47,22 @@ struct Options {
   double orientation_sigma_deg = 0.0;
   double alpha = 0.01;
   std::string size = "visible";
+  std::vector<std::string> effects;  ///< kind ids to run (and "clean"); empty: all
+  int jobs = 1;                      ///< worker threads (the figures do not depend on it)
 };
 
 struct Tally {
-  int runs = 0, detected = 0, exact = 0, wrong = 0, extra = 0;
+  int runs = 0, detected = 0, exact = 0, wrong = 0, wrong_source = 0, extra = 0;
+  nlohmann::json detail = nlohmann::json::array();  ///< one entry per run
 };
+
+nlohmann::json EffectJson(const Effect& e) {
+  nlohmann::json j = {{"cause", kinematics::ToString(e.cause)}, {"joint", e.joint}};
+  if (e.cause == EffectCause::kJointPeriodic) j["harmonic"] = e.harmonic;
+  if (e.cause == EffectCause::kThermal)
+    j["thermal_source"] = e.thermal_source == Effect::ThermalSource::kTime ? "time" : "temperature";
+  return j;
+}
 
 int Run(const Options& o) {
   io::UrdfOptions uo;
@@ -62,7 +85,7 @@ int Run(const Options& o) {
   settings.alpha = o.alpha;
 
   // One simulated dataset: geometric errors, set-up frames, session, optional hidden effect.
-  const auto simulate = [&](unsigned seed, const std::optional<Effect>& hidden, double k) {
+  const auto simulate = [&](std::uint64_t seed, const std::optional<Effect>& hidden, double k) {
     sim::Rng rng(seed);
     Eigen::VectorXd x = sim::RandomErrors(model, rng, 5e-4, 8.7e-4);
     std::normal_distribution<double> n(0.0, 1.0);
@@ -86,69 +109,148 @@ int Run(const Options& o) {
   };
 
   struct Kind {
-    std::string name;
+    std::string id, name;
     EffectCause cause;
     int harmonic;
     Effect::ThermalSource source;
   };
-  const std::vector<Kind> kinds = {
-      {"joint_compliance", EffectCause::kJointCompliance, 1, Effect::ThermalSource::kTemperature},
-      {"joint_periodic h1", EffectCause::kJointPeriodic, 1, Effect::ThermalSource::kTemperature},
-      {"joint_periodic h2", EffectCause::kJointPeriodic, 2, Effect::ThermalSource::kTemperature},
-      {"joint_scale", EffectCause::kJointScale, 1, Effect::ThermalSource::kTemperature},
-      {"backlash", EffectCause::kBacklash, 1, Effect::ThermalSource::kTemperature},
-      {"thermal (temperature)", EffectCause::kThermal, 1, Effect::ThermalSource::kTemperature},
-      {"thermal (time)", EffectCause::kThermal, 1, Effect::ThermalSource::kTime}};
+  const std::vector<Kind> all_kinds = {
+      {"joint_compliance", "joint_compliance", EffectCause::kJointCompliance, 1,
+       Effect::ThermalSource::kTemperature},
+      {"joint_periodic_h1", "joint_periodic h1", EffectCause::kJointPeriodic, 1,
+       Effect::ThermalSource::kTemperature},
+      {"joint_periodic_h2", "joint_periodic h2", EffectCause::kJointPeriodic, 2,
+       Effect::ThermalSource::kTemperature},
+      {"joint_scale", "joint_scale", EffectCause::kJointScale, 1,
+       Effect::ThermalSource::kTemperature},
+      {"backlash", "backlash", EffectCause::kBacklash, 1, Effect::ThermalSource::kTemperature},
+      {"thermal_temperature", "thermal (temperature)", EffectCause::kThermal, 1,
+       Effect::ThermalSource::kTemperature},
+      {"thermal_time", "thermal (time)", EffectCause::kThermal, 1, Effect::ThermalSource::kTime}};
+  const std::set<std::string> wanted(o.effects.begin(), o.effects.end());
+  for (const auto& id : wanted)
+    if (id != "clean" &&
+        std::none_of(all_kinds.begin(), all_kinds.end(), [&](const Kind& k) { return k.id == id; }))
+      throw std::invalid_argument(
+          "--effects: unknown '" + id +
+          "' (known: joint_compliance, joint_periodic_h1, joint_periodic_h2, joint_scale, "
+          "backlash, thermal_temperature, thermal_time, clean)");
+  std::vector<Kind> kinds;
+  for (const Kind& k : all_kinds)
+    if (wanted.empty() || wanted.count(k.id)) kinds.push_back(k);
+  const bool run_clean = wanted.empty() || wanted.count("clean");
+  // Every cell run is a task with its own seed; tasks run on --jobs threads and are tallied in
+  // their fixed order afterwards, so the figures do not depend on the number of jobs.
+  struct Task {
+    unsigned seed_index;
+    const Kind* kind;  // nullptr: clean data
+    double k;
+  };
+  struct Done {
+    DetectionOutcome r;
+    bool any = false;  // clean data: an effect was reported
+    json detail;
+  };
+  std::vector<Task> tasks;
+  for (int s = 0; s < o.seeds; ++s) {
+    const unsigned seed_index = o.first_seed + s;
+    if (run_clean) tasks.push_back({seed_index, nullptr, 0.0});
+    for (const Kind& kind : kinds)
+      for (double k : o.magnitudes) tasks.push_back({seed_index, &kind, k});
+  }
+  const auto run_task = [&](const Task& task) {
+    Done out;
+    if (!task.kind) {
+      const std::uint64_t cell_seed = DetectionCellSeed("clean", 0.0, task.seed_index);
+      const auto d = simulate(DetectionSubSeed(cell_seed, 2), std::nullopt, 0);
+      const auto a = discrepancy::Analyze(model, d, settings);
+      json found = json::array();
+      for (const auto& e : a.effects) found.push_back(EffectJson(e.effect));
+      out.any = !a.effects.empty();
+      out.detail = {{"seed_index", task.seed_index}, {"cell_seed", cell_seed}, {"found", found}};
+      return out;
+    }
+    const Kind& kind = *task.kind;
+    const std::uint64_t cell_seed = DetectionCellSeed(kind.id, task.k, task.seed_index);
+    Effect f{kind.cause};
+    f.harmonic = kind.harmonic;
+    f.thermal_source = kind.source;
+    if (kind.cause == EffectCause::kThermal) {
+      f.reference = kind.source == Effect::ThermalSource::kTime ? 0.0 : 20.0;
+    } else {
+      // Compliance on the joints that carry gravity torque (2–4 of a 6R arm); others anywhere.
+      std::uniform_int_distribution<int> j(
+          kind.cause == EffectCause::kJointCompliance ? 1 : 0,
+          kind.cause == EffectCause::kJointCompliance ? std::min(3, nj - 1) : nj - 1);
+      sim::Rng pick(DetectionSubSeed(cell_seed, 1));
+      f.joint = j(pick);
+    }
+    const auto d = simulate(DetectionSubSeed(cell_seed, 2), f, task.k);
+    const auto a = discrepancy::Analyze(model, d, settings);
+    // Detected: the cause and joint of the vocabulary, thermal with its source (the other source
+    // is a wrong cause, counted apart too); exact: the harmonic order too.
+    std::vector<Effect> found;
+    json found_json = json::array();
+    for (const auto& e : a.effects) {
+      found.push_back(e.effect);
+      found_json.push_back(EffectJson(e.effect));
+    }
+    out.r = ScoreDetection(f, found);
+    out.detail = {{"seed_index", task.seed_index}, {"cell_seed", cell_seed},
+                  {"hidden", EffectJson(f)},       {"found", found_json},
+                  {"detected", out.r.detected},    {"exact", out.r.exact},
+                  {"wrong", out.r.wrong},          {"wrong_source", out.r.wrong_source},
+                  {"extra", out.r.extra}};
+    return out;
+  };
+  std::vector<Done> results(tasks.size());
+  {
+    const auto t_start = std::chrono::steady_clock::now();
+    const size_t per_seed = tasks.size() / std::max(1, o.seeds);
+    std::atomic<size_t> next{0}, done{0};
+    std::mutex log_mutex;
+    const auto worker = [&] {
+      for (size_t i = next++; i < tasks.size(); i = next++) {
+        results[i] = run_task(tasks[i]);
+        const size_t n = ++done;
+        if (per_seed == 0 || n % per_seed != 0) continue;
+        const double elapsed =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+        std::lock_guard lock(log_mutex);
+        spdlog::info("{}/{} cell runs done: {:.0f} s elapsed, ~{:.0f} s left", n, tasks.size(),
+                     elapsed, elapsed / n * static_cast<double>(tasks.size() - n));
+      }
+    };
+    std::vector<std::future<void>> pool;
+    for (int k = 1; k < o.jobs; ++k) pool.push_back(std::async(std::launch::async, worker));
+    worker();
+    for (auto& f : pool) f.get();
+  }
   std::map<std::pair<std::string, double>, Tally> tallies;
   Tally clean;
-  sim::Rng pick(12345);
-  for (int s = 0; s < o.seeds; ++s) {
-    const unsigned seed = o.first_seed + s;
-    {
-      const auto d = simulate(seed, std::nullopt, 0);
-      const auto a = discrepancy::Analyze(model, d, settings);
+  for (size_t i = 0; i < tasks.size(); ++i) {
+    const Done& r = results[i];
+    if (!tasks[i].kind) {
       ++clean.runs;
-      clean.wrong += !a.effects.empty();
+      clean.wrong += r.any;
+      clean.detail.push_back(r.detail);
+      continue;
     }
-    for (const Kind& kind : kinds) {
-      for (double k : o.magnitudes) {
-        Effect f{kind.cause};
-        f.harmonic = kind.harmonic;
-        f.thermal_source = kind.source;
-        if (kind.cause == EffectCause::kThermal) {
-          f.reference = kind.source == Effect::ThermalSource::kTime ? 0.0 : 20.0;
-        } else {
-          // Compliance on the joints that carry gravity torque (2–4 of a 6R arm); others anywhere.
-          std::uniform_int_distribution<int> j(
-              kind.cause == EffectCause::kJointCompliance ? 1 : 0,
-              kind.cause == EffectCause::kJointCompliance ? std::min(3, nj - 1) : nj - 1);
-          f.joint = j(pick);
-        }
-        const auto d = simulate(seed, f, k);
-        const auto a = discrepancy::Analyze(model, d, settings);
-        Tally& t = tallies[{kind.name, k}];
-        ++t.runs;
-        // Detected: the cause and joint of the vocabulary (thermal: either source); exact: the
-        // harmonic order or thermal source too.
-        bool hit = false, exact = false;
-        for (const auto& e : a.effects) {
-          hit |= e.effect.cause == f.cause && e.effect.joint == f.joint;
-          exact |= e.effect.SameAs(f);
-        }
-        t.detected += hit;
-        t.exact += exact;
-        t.wrong += !a.effects.empty() && !hit;
-        t.extra += hit && a.effects.size() > 1;
-      }
-    }
-    spdlog::info("seed {}/{} done", s + 1, o.seeds);
+    Tally& t = tallies[{tasks[i].kind->name, tasks[i].k}];
+    ++t.runs;
+    t.detected += r.r.detected;
+    t.exact += r.r.exact;
+    t.wrong += r.r.wrong;
+    t.wrong_source += r.r.wrong_source;
+    t.extra += r.r.extra;
+    t.detail.push_back(r.detail);
   }
 
   json rows = json::array();
   std::printf(
-      "\n| hidden effect | size (RMS / σ) | runs | detected (cause + joint) | exact (harmonic, "
-      "source) | wrong effect only | extra effect too |\n| --- | --- | --- | --- | --- | --- | "
-      "--- |\n");
+      "\n| hidden effect | size (RMS / σ) | runs | detected (cause + joint, thermal: + source) | "
+      "exact (+ harmonic) | wrong effect only | of which thermal, wrong source | extra effect "
+      "too |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n");
   for (const Kind& kind : kinds)
     for (double k : o.magnitudes) {
       const Tally& t = tallies[{kind.name, k}];
@@ -158,13 +260,21 @@ int Run(const Options& o) {
                       {"detection_rate", double(t.detected) / t.runs},
                       {"exact_rate", double(t.exact) / t.runs},
                       {"wrong_effect_rate", double(t.wrong) / t.runs},
-                      {"extra_effect_rate", double(t.extra) / t.runs}});
-      std::printf("| %s | %g | %d | %.0f %% | %.0f %% | %.0f %% | %.0f %% |\n", kind.name.c_str(),
-                  k, t.runs, 100.0 * t.detected / t.runs, 100.0 * t.exact / t.runs,
-                  100.0 * t.wrong / t.runs, 100.0 * t.extra / t.runs);
+                      {"wrong_thermal_source_rate", double(t.wrong_source) / t.runs},
+                      {"extra_effect_rate", double(t.extra) / t.runs},
+                      {"detected", t.detected},
+                      {"wrong", t.wrong},
+                      {"wrong_thermal_source", t.wrong_source},
+                      {"extra", t.extra},
+                      {"cells", t.detail}});
+      std::printf("| %s | %g | %d | %.0f %% | %.0f %% | %.0f %% | %.0f %% | %.0f %% |\n",
+                  kind.name.c_str(), k, t.runs, 100.0 * t.detected / t.runs,
+                  100.0 * t.exact / t.runs, 100.0 * t.wrong / t.runs,
+                  100.0 * t.wrong_source / t.runs, 100.0 * t.extra / t.runs);
     }
-  std::printf("| none (clean data) | – | %d | false positive: %.0f %% | | | |\n", clean.runs,
-              100.0 * clean.wrong / clean.runs);
+  if (run_clean)
+    std::printf("| none (clean data) | – | %d | false positive: %d / %d | | | | |\n", clean.runs,
+                clean.wrong, clean.runs);
   const json j = {{"robot", model.name()},
                   {"poses", o.poses},
                   {"position_noise_m", noise.position_sigma},
@@ -173,9 +283,14 @@ int Run(const Options& o) {
                   {"size", o.size},
                   {"seeds", o.seeds},
                   {"first_seed", o.first_seed},
+                  {"seed_rule",
+                   "each (effect, magnitude, seed index) cell: its own seed, a hash of the three "
+                   "(cell_seed); the joint and the dataset are drawn from streams of it"},
                   {"rows", rows},
                   {"clean_runs", clean.runs},
-                  {"false_positive_rate", double(clean.wrong) / clean.runs}};
+                  {"false_positives", clean.wrong},
+                  {"false_positive_rate", clean.runs ? double(clean.wrong) / clean.runs : 0.0},
+                  {"clean_cells", clean.detail}};
   if (!o.json_path.empty()) io::AtomicWriteFile(o.json_path, j.dump(2));
   return 0;
 }
@@ -185,14 +300,22 @@ const RegisterCommand kSweep(
     [](CLI::App& sub) -> std::function<int()> {
       auto o = std::make_shared<Options>();
       sub.add_option("--seeds", o->seeds, "datasets per cell")->capture_default_str();
-      sub.add_option("--first-seed", o->first_seed, "seed of the first dataset")
+      sub.add_option("--first-seed", o->first_seed, "index of the first seed of each cell")
           ->capture_default_str();
+      sub.add_option("--effects", o->effects,
+                     "hidden effects to run: joint_compliance, joint_periodic_h1, "
+                     "joint_periodic_h2, joint_scale, backlash, thermal_temperature, "
+                     "thermal_time, clean (default: all)")
+          ->delimiter(',');
       sub.add_option("--json", o->json_path, "write the rates here");
       sub.add_option("--robot", o->robot, "robot file (YAML or URDF)")->capture_default_str();
       sub.add_option("--poses", o->poses, "poses per dataset")->capture_default_str();
       sub.add_option("--magnitudes", o->magnitudes,
                      "effect sizes as RMS marker displacement / position σ")
           ->delimiter(',');
+      sub.add_option("--jobs", o->jobs, "worker threads (the figures do not depend on it)")
+          ->capture_default_str()
+          ->check(CLI::Range(1, 64));
       sub.add_option("--position-sigma-mm", o->position_sigma_mm, "position noise σ per axis")
           ->capture_default_str();
       sub.add_option("--orientation-sigma-deg", o->orientation_sigma_deg,

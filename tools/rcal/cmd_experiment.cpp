@@ -23,6 +23,7 @@
 #include "rcal/kinematics/identifiability.hpp"
 #include "rcal/sim/pose_sim.hpp"
 #include "report.hpp"
+#include "sensor_seed_sweep.hpp"
 
 namespace rcal::tool {
 namespace {
@@ -44,6 +45,9 @@ struct PaperOptions {
   bool sensors = false;   // from raw sensor streams (experiment_sensors.hpp)
   bool no_sweep = false;  // sensors: skip the robustness sweep
   bool no_peg = false;    // sensors: skip peg-in-hole
+  int sweep_seeds = 0;    // sensors: > 0 runs the robustness sweep over this many seeds only
+  std::vector<std::string> sweep_configs;  // sensors sweep: configuration ids (empty: all)
+  int jobs = 2;                            // sensors sweep: worker threads
 };
 
 json StatsJson(const PoseErrorStats& s) {
@@ -396,7 +400,35 @@ const RegisterCommand kExperiment(
                       "still windows, online EKF, set-up frames, peg-in-hole, robustness sweep");
       paper->add_flag("--no-sweep", o->no_sweep, "with --sensors: skip the robustness sweep");
       paper->add_flag("--no-peg", o->no_peg, "with --sensors: skip peg-in-hole");
+      paper
+          ->add_option("--sweep-seeds", o->sweep_seeds,
+                       "with --sensors: only the robustness sweep, over this many seeds per "
+                       "configuration (seed indices from --seed): median and spread")
+          ->check(CLI::Range(1, 9999));
+      paper
+          ->add_option("--sweep-configs", o->sweep_configs,
+                       "with --sweep-seeds: configurations to run (baseline, noise-0.5, noise-2, "
+                       "noise-4, still-0.9, still-3, poses-10, poses-20, poses-30, dropout-10, "
+                       "dropout-50, gyro-bias, mag-disturbance); default all")
+          ->delimiter(',');
+      paper->add_option("--jobs", o->jobs, "with --sweep-seeds: worker threads")
+          ->capture_default_str()
+          ->check(CLI::Range(1, 64));
       return [o, paper]() {
+        if (o->sweep_seeds > 0 || !o->sweep_configs.empty()) {
+          if (!o->sensors) throw std::invalid_argument("--sweep-seeds needs --sensors");
+          exp::SeedSweepOptions s;
+          s.robot = o->robot;
+          s.out = paper->count("--out") ? o->out : "out/experiment_sensors_sweep";
+          s.json_path = o->json_path;
+          s.seeds = o->sweep_seeds > 0 ? o->sweep_seeds : 20;
+          s.first_seed = o->seed;
+          s.num_cal = o->num_cal;
+          s.num_test = o->num_test;
+          s.configs = o->sweep_configs;
+          s.jobs = o->jobs;
+          return exp::RunSensorsSeedSweep(s);
+        }
         if (!o->sensors) return RunPaper(*o);
         exp::ReportOptions r;
         r.robot = o->robot;
