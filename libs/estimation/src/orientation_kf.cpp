@@ -39,6 +39,12 @@ std::string Num(double v) {
   return o.str();
 }
 
+// Gain of a first-order low-pass with time constant tau [s] over a step dt [s]; 1 (no filtering)
+// for tau <= 0.
+double LowPassGain(double dt, double tau) {
+  return tau > 0.0 ? 1.0 - std::exp(-dt / tau) : 1.0;
+}
+
 }  // namespace
 
 Eigen::Matrix<double, 7, 7> PaperPhiOri(const Eigen::Vector4d& q, double dt) {
@@ -140,69 +146,104 @@ double OrientationKf::Correct(const Eigen::MatrixXd& H, const Eigen::VectorXd& y
 
 Status OrientationKf::Update(double t, const Eigen::Vector3d& gyro_B, const Eigen::Vector3d& f_B,
                              const Eigen::Vector3d& m_B, std::optional<bool> at_rest) {
-  auto refuse = [this](std::string why) {
-    ++counters_.input_rejected;
-    return Status::Error("orientation_kf: " + why);
-  };
-  if (!std::isfinite(t)) return refuse("time t is not finite");
-  if (!gyro_B.allFinite()) return refuse("gyro is not finite: " + Vec(gyro_B));
-  if (!f_B.allFinite()) return refuse("accelerometer is not finite: " + Vec(f_B));
-  if (!m_B.allFinite()) return refuse("magnetometer is not finite: " + Vec(m_B));
-  if (initialized_ && !(t > t_))
-    return refuse("time t = " + Num(t) + " s is not after the previous sample (" + Num(t_) + " s)");
-
-  const Eigen::Vector3d up_E = UpVector(settings_.earth);
-  const Eigen::Vector3d north_E = MagneticNorth(settings_.earth);
+  if (Status s = CheckInput(t, gyro_B, f_B, m_B); !s.ok()) return s;
   FqaSettings fqa;
   fqa.earth = settings_.earth;
-  fqa.m_ref_E = north_E;
-  const double f_norm = f_B.norm();
-  const double m_norm = m_B.norm();
-
-  if (!initialized_) {
-    const auto q0 = Fqa(f_B, m_B, fqa);
-    if (!q0.ok()) return refuse("cannot initialise: " + q0.error());
-    q_EB_ = *q0;
-    q_IB_ = *q0;
-    f_I_lp_ = QuatToMatrix(q_IB_) * f_B;
-    m_I_lp_ = QuatToMatrix(q_IB_) * m_B;
-    omega_B_ = gyro_B;
-    bias_B_.setZero();
-    P_.setZero();
-    P_.block<3, 3>(0, 0).diagonal().setConstant(std::pow(settings_.initial_attitude_sigma, 2));
-    P_.block<3, 3>(3, 3).diagonal().setConstant(std::pow(settings_.initial_rate_sigma, 2));
-    P_.block<3, 3>(6, 6).diagonal().setConstant(
-        settings_.estimate_gyro_bias ? std::pow(settings_.initial_bias_sigma, 2) : 0.0);
-    initialized_ = true;
-    t_ = t;
-    ++counters_.samples;
-    // (The first sample counts towards the magnetic reference only when learning in motion:
-    // whether the sensor is at rest is not known yet.)
-    if (settings_.learn_in_motion && mag_ref_norm_ <= 0.0 && m_norm > 0.0 && f_norm > 0.0) {
-      mag_norm_sum_ += m_norm;
-      mag_dip_sum_ += std::asin(std::clamp(-m_B.dot(f_B) / (m_norm * f_norm), -1.0, 1.0));
-      ++mag_ref_count_;
-    }
-    last_accel_used_ = last_mag_used_ = true;
-    return Status::Ok();
-  }
+  fqa.m_ref_E = MagneticNorth(settings_.earth);
+  if (!initialized_) return Initialize(t, gyro_B, f_B, m_B, fqa);
 
   const double dt = t - t_;
   t_ = t;
   ++counters_.samples;
   PredictRate(dt);
-
-  // Gyro: z = ω_meas, h = ω̂ + b̂ (Eq. 22 with the bias).
-  {
-    Eigen::MatrixXd H = Eigen::MatrixXd::Zero(3, 9);
-    H.block<3, 3>(0, 3).setIdentity();
-    if (settings_.estimate_gyro_bias) H.block<3, 3>(0, 6).setIdentity();
-    const double sg2 = settings_.gyro_noise_density * settings_.gyro_noise_density / dt;
-    Correct(H, gyro_B - omega_B_ - bias_B_, sg2 * Eigen::MatrixXd::Identity(3, 3));
-  }
+  UpdateGyro(gyro_B, dt);
   PropagateAttitude(dt);
+  DetectRest(gyro_B, f_B.norm(), at_rest);
+  if (settings_.zero_rate_update && still()) ZeroRateUpdate();
 
-  // Rest: zero-rate pseudo-measurement makes the bias directly observable.
+  // Strapdown frame I (gyro only, never corrected) and the sensors low-passed in it: in I,
+  // gravity and the earth field are nearly constant while linear accelerations average out.
+  const Eigen::Matrix3d R_IB = PropagateStrapdown(dt);
+  f_I_lp_ += LowPassGain(dt, settings_.accel_lowpass_tau) * (R_IB * f_B - f_I_lp_);
+  const Eigen::Vector3d f_meas_B = R_IB.transpose() * f_I_lp_;
+
+  // Accelerometer and magnetometer acceptance.
+  const Eigen::Vector3d down_B = -R_EB().transpose() * UpVector(settings_.earth);
+  SensorUse use{AccelAccepted(f_meas_B), MagAccepted(m_B, f_B, down_B, dt)};
+  if (use.mag) m_I_lp_ += LowPassGain(dt, settings_.mag_lowpass_tau) * (R_IB * m_B - m_I_lp_);
+  const Eigen::Vector3d m_meas_B = R_IB.transpose() * m_I_lp_;
+
+  last_tilt_nis_ = last_heading_nis_ = std::numeric_limits<double>::quiet_NaN();
+  if (settings_.decoupled_fqa)
+    use = DecoupledFqaUpdate(f_meas_B, m_meas_B, fqa, use);
+  else if (use.accel || use.mag)
+    use = PaperFqaUpdate(f_meas_B, m_meas_B, fqa, use);
+  if (!use.accel) ++counters_.accel_rejected;
+  if (!use.mag) ++counters_.mag_rejected;
+  last_accel_used_ = use.accel;
+  last_mag_used_ = use.mag;
+  return Status::Ok();
+}
+
+Status OrientationKf::Refuse(const std::string& why) {
+  ++counters_.input_rejected;
+  return Status::Error("orientation_kf: " + why);
+}
+
+Status OrientationKf::CheckInput(double t, const Eigen::Vector3d& gyro_B,
+                                 const Eigen::Vector3d& f_B, const Eigen::Vector3d& m_B) {
+  if (!std::isfinite(t)) return Refuse("time t is not finite");
+  if (!gyro_B.allFinite()) return Refuse("gyro is not finite: " + Vec(gyro_B));
+  if (!f_B.allFinite()) return Refuse("accelerometer is not finite: " + Vec(f_B));
+  if (!m_B.allFinite()) return Refuse("magnetometer is not finite: " + Vec(m_B));
+  if (initialized_ && !(t > t_))
+    return Refuse("time t = " + Num(t) + " s is not after the previous sample (" + Num(t_) + " s)");
+  return Status::Ok();
+}
+
+Status OrientationKf::Initialize(double t, const Eigen::Vector3d& gyro_B,
+                                 const Eigen::Vector3d& f_B, const Eigen::Vector3d& m_B,
+                                 const FqaSettings& fqa) {
+  const auto q0 = Fqa(f_B, m_B, fqa);
+  if (!q0.ok()) return Refuse("cannot initialise: " + q0.error());
+  q_EB_ = *q0;
+  q_IB_ = *q0;
+  f_I_lp_ = QuatToMatrix(q_IB_) * f_B;
+  m_I_lp_ = QuatToMatrix(q_IB_) * m_B;
+  omega_B_ = gyro_B;
+  bias_B_.setZero();
+  P_.setZero();
+  P_.block<3, 3>(0, 0).diagonal().setConstant(std::pow(settings_.initial_attitude_sigma, 2));
+  P_.block<3, 3>(3, 3).diagonal().setConstant(std::pow(settings_.initial_rate_sigma, 2));
+  P_.block<3, 3>(6, 6).diagonal().setConstant(
+      settings_.estimate_gyro_bias ? std::pow(settings_.initial_bias_sigma, 2) : 0.0);
+  initialized_ = true;
+  t_ = t;
+  ++counters_.samples;
+  // (The first sample counts towards the magnetic reference only when learning in motion:
+  // whether the sensor is at rest is not known yet.)
+  const double f_norm = f_B.norm();
+  const double m_norm = m_B.norm();
+  if (settings_.learn_in_motion && mag_ref_norm_ <= 0.0 && m_norm > 0.0 && f_norm > 0.0) {
+    mag_norm_sum_ += m_norm;
+    mag_dip_sum_ += std::asin(std::clamp(-m_B.dot(f_B) / (m_norm * f_norm), -1.0, 1.0));
+    ++mag_ref_count_;
+  }
+  last_accel_used_ = last_mag_used_ = true;
+  return Status::Ok();
+}
+
+void OrientationKf::UpdateGyro(const Eigen::Vector3d& gyro_B, double dt) {
+  // z = ω_meas, h = ω̂ + b̂ (Eq. 22 with the bias).
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(3, 9);
+  H.block<3, 3>(0, 3).setIdentity();
+  if (settings_.estimate_gyro_bias) H.block<3, 3>(0, 6).setIdentity();
+  const double sg2 = settings_.gyro_noise_density * settings_.gyro_noise_density / dt;
+  Correct(H, gyro_B - omega_B_ - bias_B_, sg2 * Eigen::MatrixXd::Identity(3, 3));
+}
+
+void OrientationKf::DetectRest(const Eigen::Vector3d& gyro_B, double f_norm,
+                               std::optional<bool> at_rest) {
   if (at_rest) {
     still_count_ = *at_rest ? std::max(still_count_ + 1, settings_.still_samples) : 0;
   } else {
@@ -211,148 +252,167 @@ Status OrientationKf::Update(double t, const Eigen::Vector3d& gyro_B, const Eige
     still_count_ = still_now ? still_count_ + 1 : 0;
   }
   been_still_ = been_still_ || still();
-  if (settings_.zero_rate_update && still()) {
-    Eigen::MatrixXd H = Eigen::MatrixXd::Zero(3, 9);
-    H.block<3, 3>(0, 3).setIdentity();
-    Correct(H, -omega_B_, std::pow(settings_.zero_rate_sigma, 2) * Eigen::MatrixXd::Identity(3, 3));
-    ++counters_.zero_rate_updates;
-  }
+}
 
-  // Strapdown frame I (gyro only, never corrected) and the sensors low-passed in it: in I,
-  // gravity and the earth field are nearly constant while linear accelerations average out.
+void OrientationKf::ZeroRateUpdate() {
+  // At rest: the zero-rate pseudo-measurement makes the bias directly observable.
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(3, 9);
+  H.block<3, 3>(0, 3).setIdentity();
+  Correct(H, -omega_B_, std::pow(settings_.zero_rate_sigma, 2) * Eigen::MatrixXd::Identity(3, 3));
+  ++counters_.zero_rate_updates;
+}
+
+Eigen::Matrix3d OrientationKf::PropagateStrapdown(double dt) {
   q_IB_ = QuatMultiply(q_IB_, QuatExp(omega_B_ * dt)).normalized();
-  const Eigen::Matrix3d R_IB = QuatToMatrix(q_IB_);
-  auto alpha = [dt](double tau) { return tau > 0.0 ? 1.0 - std::exp(-dt / tau) : 1.0; };
-  f_I_lp_ += alpha(settings_.accel_lowpass_tau) * (R_IB * f_B - f_I_lp_);
-  const Eigen::Vector3d f_meas_B = R_IB.transpose() * f_I_lp_;
+  return QuatToMatrix(q_IB_);
+}
 
-  // Accelerometer and magnetometer acceptance.
-  Eigen::Matrix3d R_hat = R_EB();
-  const Eigen::Vector3d down_B = -R_hat.transpose() * up_E;
-  bool use_acc = f_meas_B.norm() > 0.0;
-  if (settings_.reject_accel &&
-      std::abs(f_meas_B.norm() - settings_.gravity) > settings_.accel_norm_tolerance)
-    use_acc = false;
-  bool use_mag = m_norm > 0.0;
-  const bool learning = mag_ref_norm_ <= 0.0;
-  if (use_mag && learning && !settings_.learn_in_motion && !still()) {
-    // Moving, reference not learned yet: the field is used ungated, and not learned from.
-  } else if (use_mag && learning) {
-    const Eigen::Vector3d d_B = f_norm > 0.0 ? Eigen::Vector3d(-f_B / f_norm) : down_B;
-    mag_norm_sum_ += m_norm;
-    mag_dip_sum_ += std::asin(std::clamp(m_B.dot(d_B) / m_norm, -1.0, 1.0));
-    if (++mag_ref_count_ >= std::max(1, settings_.mag_reference_samples)) {
-      mag_ref_norm_ = mag_norm_sum_ / mag_ref_count_;
-      mag_ref_dip_ = mag_dip_sum_ / mag_ref_count_;
-    }
-  } else if (use_mag && settings_.reject_mag) {
-    const double dip = std::asin(std::clamp(m_B.dot(down_B) / m_norm, -1.0, 1.0));
-    if (std::abs(m_norm - mag_ref_norm_) > settings_.mag_norm_tolerance * mag_ref_norm_ ||
-        std::abs(dip - mag_ref_dip_) > settings_.mag_dip_tolerance)
-      use_mag = false;
-    if (use_mag) {
-      const double a = alpha(settings_.mag_reference_tau);
-      if (settings_.mag_reference_tau > 0.0) {
-        mag_ref_norm_ += a * (m_norm - mag_ref_norm_);
-        mag_ref_dip_ += a * (dip - mag_ref_dip_);
-      }
-      mag_rejected_time_ = 0.0;
-    } else {
-      // Candidate new reference: adopted after a long, steady rejection.
-      const double a = alpha(2.0);
-      if (mag_rejected_time_ == 0.0) {
-        mag_cand_norm_ = m_norm;
-        mag_cand_dip_ = dip;
-      } else {
-        mag_cand_norm_ += a * (m_norm - mag_cand_norm_);
-        mag_cand_dip_ += a * (dip - mag_cand_dip_);
-      }
-      const bool steady =
-          std::abs(m_norm - mag_cand_norm_) < settings_.mag_norm_tolerance * mag_cand_norm_ &&
-          std::abs(dip - mag_cand_dip_) < settings_.mag_dip_tolerance;
-      mag_rejected_time_ = steady ? mag_rejected_time_ + dt : dt;
-      if (settings_.mag_new_reference_time > 0.0 &&
-          mag_rejected_time_ >= settings_.mag_new_reference_time) {
-        mag_ref_norm_ = mag_cand_norm_;
-        mag_ref_dip_ = mag_cand_dip_;
-        mag_rejected_time_ = 0.0;
-        ++counters_.mag_reference_changes;
-      }
-    }
-  }
-  if (use_mag) m_I_lp_ += alpha(settings_.mag_lowpass_tau) * (R_IB * m_B - m_I_lp_);
-  const Eigen::Vector3d m_meas_B = R_IB.transpose() * m_I_lp_;
+bool OrientationKf::AccelAccepted(const Eigen::Vector3d& f_meas_B) const {
+  if (!(f_meas_B.norm() > 0.0)) return false;
+  return !settings_.reject_accel ||
+         std::abs(f_meas_B.norm() - settings_.gravity) <= settings_.accel_norm_tolerance;
+}
 
-  // FQA measurement rows.
-  last_tilt_nis_ = last_heading_nis_ = std::numeric_limits<double>::quiet_NaN();
-  const Eigen::Vector3d m_pred_B = R_hat.transpose() * north_E;
-  const Eigen::Vector3d f_pred_B = settings_.gravity * R_hat.transpose() * up_E;
-  auto gated_update = [&](int row0, int rows, const Eigen::Vector3d& y_full, double sigma,
-                          double gate) -> bool {
-    Eigen::MatrixXd H = Eigen::MatrixXd::Zero(rows, 9);
-    H.block(0, row0, rows, rows).setIdentity();
-    const Eigen::VectorXd y = y_full.segment(row0, rows);
-    const Eigen::MatrixXd R = sigma * sigma * Eigen::MatrixXd::Identity(rows, rows);
-    const Eigen::MatrixXd S = H * P_ * H.transpose() + R;
-    const double nis = y.dot(S.ldlt().solve(y));
-    (rows == 2 ? last_tilt_nis_ : last_heading_nis_) = nis;
-    if (gate > 0.0 && nis > gate) return false;
-    Correct(H, y, R);
+bool OrientationKf::MagAccepted(const Eigen::Vector3d& m_B, const Eigen::Vector3d& f_B,
+                                const Eigen::Vector3d& down_B, double dt) {
+  const double m_norm = m_B.norm();
+  if (!(m_norm > 0.0)) return false;
+  if (mag_ref_norm_ <= 0.0) {
+    // Reference not learned yet: the field is used ungated; learned from at rest only (or in
+    // motion too with learn_in_motion).
+    if (settings_.learn_in_motion || still()) LearnMagReference(m_B, f_B, down_B);
     return true;
-  };
-  if (settings_.decoupled_fqa) {
-    if (use_acc) {
-      const auto q_tilt = Fqa(f_meas_B, m_pred_B, fqa);
-      if (q_tilt.ok()) {
-        const Eigen::Vector3d y = geometry::Log(QuatToMatrix(*q_tilt) * R_hat.transpose());
-        if (!gated_update(0, 2, y, settings_.tilt_sigma, settings_.tilt_gate_chi2)) {
-          use_acc = false;
-          ++counters_.accel_gated;
-        }
-      } else {
-        use_acc = false;
-      }
-      R_hat = R_EB();
-    }
-    if (use_mag) {
-      const Eigen::Vector3d f_level_B = settings_.gravity * R_hat.transpose() * up_E;
-      const auto q_head = Fqa(f_level_B, m_meas_B, fqa);
-      if (q_head.ok()) {
-        const Eigen::Vector3d y = geometry::Log(QuatToMatrix(*q_head) * R_hat.transpose());
-        if (!gated_update(2, 1, y, settings_.heading_sigma, settings_.heading_gate_chi2)) {
-          use_mag = false;
-          ++counters_.mag_gated;
-        }
-      } else {
-        use_mag = false;
-      }
-    }
-  } else if (use_acc || use_mag) {
-    // The paper's measurement: one FQA quaternion; a rejected sensor is replaced by its
-    // prediction so that its rows carry no information and are dropped.
-    const auto q_meas = Fqa(use_acc ? f_meas_B : f_pred_B, use_mag ? m_meas_B : m_pred_B, fqa);
-    if (q_meas.ok()) {
-      const Eigen::Vector3d y = geometry::Log(QuatToMatrix(*q_meas) * R_hat.transpose());
-      if (use_acc && !gated_update(0, 2, y, settings_.tilt_sigma, settings_.tilt_gate_chi2)) {
-        use_acc = false;
+  }
+  if (!settings_.reject_mag) return true;
+  const double dip = std::asin(std::clamp(m_B.dot(down_B) / m_norm, -1.0, 1.0));
+  if (std::abs(m_norm - mag_ref_norm_) > settings_.mag_norm_tolerance * mag_ref_norm_ ||
+      std::abs(dip - mag_ref_dip_) > settings_.mag_dip_tolerance) {
+    FollowRejectedField(m_norm, dip, dt);
+    return false;
+  }
+  FollowAcceptedField(m_norm, dip, dt);
+  return true;
+}
+
+void OrientationKf::LearnMagReference(const Eigen::Vector3d& m_B, const Eigen::Vector3d& f_B,
+                                      const Eigen::Vector3d& down_B) {
+  const double m_norm = m_B.norm();
+  const double f_norm = f_B.norm();
+  const Eigen::Vector3d d_B = f_norm > 0.0 ? Eigen::Vector3d(-f_B / f_norm) : down_B;
+  mag_norm_sum_ += m_norm;
+  mag_dip_sum_ += std::asin(std::clamp(m_B.dot(d_B) / m_norm, -1.0, 1.0));
+  if (++mag_ref_count_ >= std::max(1, settings_.mag_reference_samples)) {
+    mag_ref_norm_ = mag_norm_sum_ / mag_ref_count_;
+    mag_ref_dip_ = mag_dip_sum_ / mag_ref_count_;
+  }
+}
+
+void OrientationKf::FollowAcceptedField(double m_norm, double dip, double dt) {
+  if (settings_.mag_reference_tau > 0.0) {
+    const double a = LowPassGain(dt, settings_.mag_reference_tau);
+    mag_ref_norm_ += a * (m_norm - mag_ref_norm_);
+    mag_ref_dip_ += a * (dip - mag_ref_dip_);
+  }
+  mag_rejected_time_ = 0.0;
+}
+
+void OrientationKf::FollowRejectedField(double m_norm, double dip, double dt) {
+  // Candidate new reference: adopted after a long, steady rejection.
+  const double a = LowPassGain(dt, 2.0);
+  if (mag_rejected_time_ == 0.0) {
+    mag_cand_norm_ = m_norm;
+    mag_cand_dip_ = dip;
+  } else {
+    mag_cand_norm_ += a * (m_norm - mag_cand_norm_);
+    mag_cand_dip_ += a * (dip - mag_cand_dip_);
+  }
+  const bool steady =
+      std::abs(m_norm - mag_cand_norm_) < settings_.mag_norm_tolerance * mag_cand_norm_ &&
+      std::abs(dip - mag_cand_dip_) < settings_.mag_dip_tolerance;
+  mag_rejected_time_ = steady ? mag_rejected_time_ + dt : dt;
+  if (settings_.mag_new_reference_time > 0.0 &&
+      mag_rejected_time_ >= settings_.mag_new_reference_time) {
+    mag_ref_norm_ = mag_cand_norm_;
+    mag_ref_dip_ = mag_cand_dip_;
+    mag_rejected_time_ = 0.0;
+    ++counters_.mag_reference_changes;
+  }
+}
+
+bool OrientationKf::GatedFqaUpdate(int row0, int rows, const Eigen::Vector3d& y_full, double sigma,
+                                   double gate) {
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(rows, 9);
+  H.block(0, row0, rows, rows).setIdentity();
+  const Eigen::VectorXd y = y_full.segment(row0, rows);
+  const Eigen::MatrixXd R = sigma * sigma * Eigen::MatrixXd::Identity(rows, rows);
+  const Eigen::MatrixXd S = H * P_ * H.transpose() + R;
+  const double nis = y.dot(S.ldlt().solve(y));
+  (rows == 2 ? last_tilt_nis_ : last_heading_nis_) = nis;
+  if (gate > 0.0 && nis > gate) return false;
+  Correct(H, y, R);
+  return true;
+}
+
+OrientationKf::SensorUse OrientationKf::DecoupledFqaUpdate(const Eigen::Vector3d& f_meas_B,
+                                                           const Eigen::Vector3d& m_meas_B,
+                                                           const FqaSettings& fqa, SensorUse use) {
+  Eigen::Matrix3d R_hat = R_EB();
+  if (use.accel) {
+    // Tilt rows: FQA(accelerometer, predicted magnetometer).
+    const Eigen::Vector3d m_pred_B = R_hat.transpose() * MagneticNorth(settings_.earth);
+    const auto q_tilt = Fqa(f_meas_B, m_pred_B, fqa);
+    if (q_tilt.ok()) {
+      const Eigen::Vector3d y = geometry::Log(QuatToMatrix(*q_tilt) * R_hat.transpose());
+      if (!GatedFqaUpdate(0, 2, y, settings_.tilt_sigma, settings_.tilt_gate_chi2)) {
+        use.accel = false;
         ++counters_.accel_gated;
       }
-      // Sequential rows: the heading innovation is taken against the tilt-corrected state.
-      const Eigen::Vector3d y2 = geometry::Log(QuatToMatrix(*q_meas) * R_EB().transpose());
-      if (use_mag &&
-          !gated_update(2, 1, y2, settings_.heading_sigma, settings_.heading_gate_chi2)) {
-        use_mag = false;
+    } else {
+      use.accel = false;
+    }
+    R_hat = R_EB();
+  }
+  if (use.mag) {
+    // Heading row: FQA(predicted gravity, magnetometer).
+    const Eigen::Vector3d f_level_B =
+        settings_.gravity * R_hat.transpose() * UpVector(settings_.earth);
+    const auto q_head = Fqa(f_level_B, m_meas_B, fqa);
+    if (q_head.ok()) {
+      const Eigen::Vector3d y = geometry::Log(QuatToMatrix(*q_head) * R_hat.transpose());
+      if (!GatedFqaUpdate(2, 1, y, settings_.heading_sigma, settings_.heading_gate_chi2)) {
+        use.mag = false;
         ++counters_.mag_gated;
       }
     } else {
-      use_acc = use_mag = false;
+      use.mag = false;
     }
   }
-  if (!use_acc) ++counters_.accel_rejected;
-  if (!use_mag) ++counters_.mag_rejected;
-  last_accel_used_ = use_acc;
-  last_mag_used_ = use_mag;
-  return Status::Ok();
+  return use;
+}
+
+OrientationKf::SensorUse OrientationKf::PaperFqaUpdate(const Eigen::Vector3d& f_meas_B,
+                                                       const Eigen::Vector3d& m_meas_B,
+                                                       const FqaSettings& fqa, SensorUse use) {
+  // The paper's measurement: one FQA quaternion; a rejected sensor is replaced by its
+  // prediction so that its rows carry no information and are dropped.
+  const Eigen::Matrix3d R_hat = R_EB();
+  const Eigen::Vector3d m_pred_B = R_hat.transpose() * MagneticNorth(settings_.earth);
+  const Eigen::Vector3d f_pred_B =
+      settings_.gravity * R_hat.transpose() * UpVector(settings_.earth);
+  const auto q_meas = Fqa(use.accel ? f_meas_B : f_pred_B, use.mag ? m_meas_B : m_pred_B, fqa);
+  if (!q_meas.ok()) return {false, false};
+  const Eigen::Vector3d y = geometry::Log(QuatToMatrix(*q_meas) * R_hat.transpose());
+  if (use.accel && !GatedFqaUpdate(0, 2, y, settings_.tilt_sigma, settings_.tilt_gate_chi2)) {
+    use.accel = false;
+    ++counters_.accel_gated;
+  }
+  // Sequential rows: the heading innovation is taken against the tilt-corrected state.
+  const Eigen::Vector3d y2 = geometry::Log(QuatToMatrix(*q_meas) * R_EB().transpose());
+  if (use.mag && !GatedFqaUpdate(2, 1, y2, settings_.heading_sigma, settings_.heading_gate_chi2)) {
+    use.mag = false;
+    ++counters_.mag_gated;
+  }
+  return use;
 }
 
 }  // namespace rcal::estimation

@@ -51,6 +51,7 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <optional>
+#include <string>
 
 #include "rcal/estimation/fqa.hpp"
 #include "rcal/estimation/result.hpp"
@@ -208,8 +209,37 @@ class OrientationKf {
 
  private:
   using Mat9 = Eigen::Matrix<double, 9, 9>;
+  // Whether this sample's accelerometer and magnetometer are used.
+  struct SensorUse {
+    bool accel = false, mag = false;
+  };
+  // The steps of Update, in order (see the header comment).
+  Status Refuse(const std::string& why);
+  Status CheckInput(double t, const Eigen::Vector3d& gyro_B, const Eigen::Vector3d& f_B,
+                    const Eigen::Vector3d& m_B);
+  Status Initialize(double t, const Eigen::Vector3d& gyro_B, const Eigen::Vector3d& f_B,
+                    const Eigen::Vector3d& m_B, const FqaSettings& fqa);
   void PredictRate(double dt);
+  void UpdateGyro(const Eigen::Vector3d& gyro_B, double dt);
   void PropagateAttitude(double dt);
+  void DetectRest(const Eigen::Vector3d& gyro_B, double f_norm, std::optional<bool> at_rest);
+  void ZeroRateUpdate();
+  // Integrates the strapdown attitude q_IB; returns R_IB.
+  Eigen::Matrix3d PropagateStrapdown(double dt);
+  bool AccelAccepted(const Eigen::Vector3d& f_meas_B) const;
+  // Learns, gates and follows the magnetic reference; whether m_B is used.
+  bool MagAccepted(const Eigen::Vector3d& m_B, const Eigen::Vector3d& f_B,
+                   const Eigen::Vector3d& down_B, double dt);
+  void LearnMagReference(const Eigen::Vector3d& m_B, const Eigen::Vector3d& f_B,
+                         const Eigen::Vector3d& down_B);
+  void FollowAcceptedField(double m_norm, double dip, double dt);
+  void FollowRejectedField(double m_norm, double dip, double dt);
+  // FQA rows row0 .. row0 + rows − 1 of y_full behind a χ² gate (0 = off); false when gated.
+  bool GatedFqaUpdate(int row0, int rows, const Eigen::Vector3d& y_full, double sigma, double gate);
+  SensorUse DecoupledFqaUpdate(const Eigen::Vector3d& f_meas_B, const Eigen::Vector3d& m_meas_B,
+                               const FqaSettings& fqa, SensorUse use);
+  SensorUse PaperFqaUpdate(const Eigen::Vector3d& f_meas_B, const Eigen::Vector3d& m_meas_B,
+                           const FqaSettings& fqa, SensorUse use);
   // Generic KF update on the error state; returns the NIS. Applies the correction.
   double Correct(const Eigen::MatrixXd& H, const Eigen::VectorXd& y, const Eigen::MatrixXd& R);
   void ApplyCorrection(const Eigen::Matrix<double, 9, 1>& dx);
