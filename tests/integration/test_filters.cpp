@@ -24,7 +24,10 @@ namespace {
 
 using namespace integration;
 namespace ch = transport::channels;
-constexpr const char* kUrl = "udpm://239.255.76.67:7713?ttl=0";  // not the default port
+// Not the default port. Socket buffers for 16× real time: every socket on the group receives
+// every channel (~5 000 datagrams/s), and the kernel's default 212 kB held ~40 ms of them (one
+// TOOL_POSITION of 3599 lost on a loaded machine).
+constexpr const char* kUrl = "udpm://239.255.76.67:7713?ttl=0&recv_buf_size=8388608";
 constexpr const char* kTrial = RCAL_SHARED_DIR "/data/broad/broad_02_100hz.csv";
 constexpr int kRows = 3000;  // 30 s of the trial: rest, then the first rotations
 

@@ -45,6 +45,11 @@ std::vector<std::string> Identifier() {
           "--lcm-url", kUrl};
 }
 
+std::string ReadText(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
 class LogReplay : public ProcessFixture {};
 
 TEST_F(LogReplay, LogPlayerThroughIdentifierAndCalibrateLogEqualTheLiveRun) {
@@ -58,13 +63,20 @@ TEST_F(LogReplay, LogPlayerThroughIdentifierAndCalibrateLogEqualTheLiveRun) {
     const pid_t logger =
         Start({RCAL_LCM_LOGGER_PATH, "-f", "--lcm-url=" + std::string(kUrl), log.string()},
               "lcm-logger.log");
-    // lcm-logger is recording once a probe shows up in its file (flushed every 100 ms).
-    ASSERT_TRUE(Until([&] { return fs::exists(log) && fs::file_size(log) > 0; },
-                      [&] {
-                        const char probe[] = "probe";
-                        l.t.PublishRaw("PROBE", probe, sizeof probe);
-                        l.t.HandleTimeout(50);
-                      }));
+    // lcm-logger is recording once a probe shows up in its file (flushed every 100 ms). Events
+    // are written in order, so once a probe published after some message is in the file, that
+    // message is too. (Waiting for the file to grow was not enough: on a loaded machine
+    // lcm-logger wrote the first 21 of 40 poses by then and lost the rest at SIGINT.)
+    auto probe_in_log = [&](const std::string& channel) {
+      return Until(
+          [&] { return fs::exists(log) && ReadText(log).find(channel) != std::string::npos; },
+          [&] {
+            const char probe[] = "probe";
+            l.t.PublishRaw(channel, probe, sizeof probe);
+            l.t.HandleTimeout(50);
+          });
+    };
+    ASSERT_TRUE(probe_in_log("PROBE_START"));
     const pid_t src = Start({RCAL_SENSOR_ACQUISITION, "--source", "sim", "--robot",
                              RCAL_SOURCE_DIR "/config/robots/grb3016.yaml", "--poses",
                              std::to_string(kPoses), "--rate", std::to_string(kRate), "--speed",
@@ -76,14 +88,8 @@ TEST_F(LogReplay, LogPlayerThroughIdentifierAndCalibrateLogEqualTheLiveRun) {
     Reaped(src);
     live = l.params.at(kLastUtime);
     EXPECT_EQ(live.poses_used, kPoses);
-    // lcm-logger has the last messages once a later probe is in the file.
-    const auto size = fs::file_size(log);
-    ASSERT_TRUE(Until([&] { return fs::file_size(log) > size; },
-                      [&] {
-                        const char probe[] = "probe";
-                        l.t.PublishRaw("PROBE", probe, sizeof probe);
-                        l.t.HandleTimeout(50);
-                      }));
+    // lcm-logger has the last messages once a probe published after them is in the file.
+    ASSERT_TRUE(probe_in_log("PROBE_END"));
     EXPECT_EQ(Stop(logger), 0);
     EXPECT_EQ(Stop(id), 0);
   }
