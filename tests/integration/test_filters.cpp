@@ -185,6 +185,9 @@ TEST_F(Filters, PositionKfSurvivesASigkilledOrientationKf) {
   kill(-okf, SIGKILL);
   EXPECT_EQ(Wait(okf), -SIGKILL);
   Reaped(okf);
+  // What the killed process had published before it died is still in flight: take it in, so
+  // that every estimate after `killed_after` is the restarted process's.
+  for (int i = 0; i < 10; ++i) l.t.HandleTimeout(20);
   const int64_t killed_after = l.orientation.rbegin()->first;
   l.health.erase("orientation_kf");
   okf = Start(OrientationKfCmd(), "orientation_kf_2.log");
