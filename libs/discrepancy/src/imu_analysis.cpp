@@ -283,14 +283,592 @@ est::OrientationKfSettings BaseFilter(const ImuAnalysisSettings& s) {
   return f;
 }
 
+Context MakeContext(const ImuStreamData& data, const ImuAnalysisSettings& settings) {
+  const int n = static_cast<int>(data.t.size());
+  const double dt = (data.t.back() - data.t.front()) / (n - 1);
+  return Context{data, settings, n, dt, 1.0 / dt, {}};
+}
+
+// The reference field (norm, dip), gravity and their noise levels on [rb, re) of the first rest.
+void FitReference(const Context& c, int rb, int re, ImuAnalysis& a) {
+  const auto& data = c.d;
+  const auto& s = c.s;
+  std::vector<double> nm, dip, fn;
+  for (int k = rb; k < re; ++k) {
+    const double m = data.mag_uT[k].norm(), f = data.accel[k].norm();
+    nm.push_back(m);
+    fn.push_back(f);
+    dip.push_back(std::asin(std::clamp(-data.mag_uT[k].dot(data.accel[k]) / (m * f), -1.0, 1.0)));
+  }
+  a.mag_ref_norm_uT = Mean(nm);
+  a.mag_ref_dip_rad = Mean(dip);
+  a.gravity_ref = Mean(fn);
+  const double sm = s.mag_noise_density_uT * std::sqrt(c.rate);
+  const double sa = s.accel_noise_density * std::sqrt(c.rate);
+  a.sigma_mag_norm_uT = std::max(Sd(nm), sm);
+  a.sigma_accel_norm = std::max(Sd(fn), sa);
+  a.sigma_dip_rad = std::max(Sd(dip), std::hypot(sm / a.mag_ref_norm_uT, sa / a.gravity_ref));
+}
+
+// ----- gyro_bias -----
+
+// Overlapping Allan deviation per axis, pooled over the rests, at cluster sizes spaced by 0.1
+// decade up to half the longest rest, where the relative confidence is allan_max_rel_sigma or
+// better.
+void ComputeAllanCurve(const Context& c, const std::vector<std::pair<int, int>>& rests,
+                       AllanCurve& A) {
+  std::array<std::vector<double>, 3> cum;
+  for (int i = 0; i < 3; ++i) {
+    cum[i].assign(c.n + 1, 0.0);
+    for (int k = 0; k < c.n; ++k) cum[i][k + 1] = cum[i][k] + c.d.gyro[k](i);
+  }
+  int longest = 0;
+  for (auto [b, e] : rests) longest = std::max(longest, e - b);
+  std::vector<int> ms;
+  for (double lm = 0.0; std::pow(10.0, lm) <= longest / 2.0; lm += 0.1) {
+    const int m = static_cast<int>(std::round(std::pow(10.0, lm)));
+    if (ms.empty() || m != ms.back()) ms.push_back(m);
+  }
+  for (int m : ms) {
+    double clusters = 0.0;
+    for (auto [b, e] : rests) clusters += std::max(0.0, (e - b) / static_cast<double>(m) - 1.0);
+    const double rel = clusters > 0 ? 1.0 / std::sqrt(2.0 * clusters) : kNaN;
+    if (!(rel <= c.s.allan_max_rel_sigma)) continue;
+    std::array<double, 3> av{};
+    for (int i = 0; i < 3; ++i) {
+      double sum = 0.0;
+      long cnt = 0;
+      for (auto [b, e] : rests) {
+        const auto [ss, cc] = AllanTerms(cum[i], b, e, m, c.dt);
+        sum += ss;
+        cnt += cc;
+      }
+      av[i] = cnt > 0 ? std::sqrt(0.5 * sum / cnt) : kNaN;
+    }
+    A.tau_s.push_back(m * c.dt);
+    A.rel_sigma.push_back(rel);
+    for (int i = 0; i < 3; ++i) A.adev_rad_s[i].push_back(av[i]);
+  }
+}
+
+// White level N_w per axis into A.white_level: median of σ_A √τ over the short-τ range (never
+// below the stated density). Returns the relative σ of each.
+std::array<double, 3> FitWhiteLevels(const ImuAnalysisSettings& s, AllanCurve& A) {
+  std::array<double, 3> white_rel{};
+  for (int i = 0; i < 3; ++i) {
+    std::vector<double> v;
+    double rel = kNaN;
+    for (size_t j = 0; j < A.tau_s.size(); ++j)
+      if (A.tau_s[j] >= s.allan_white_tau_min_s - 1e-12 &&
+          A.tau_s[j] <= s.allan_white_tau_max_s + 1e-12) {
+        v.push_back(A.adev_rad_s[i][j] * std::sqrt(A.tau_s[j]));
+        rel = A.rel_sigma[j];
+      }
+    if (v.empty() && !A.tau_s.empty()) {
+      v.push_back(A.adev_rad_s[i][0] * std::sqrt(A.tau_s[0]));
+      rel = A.rel_sigma[0];
+    }
+    const double w = v.empty() ? s.gyro_noise_density : Median(v);
+    A.white_level[i] = std::max(w, s.gyro_noise_density);
+    white_rel[i] = std::isfinite(rel) ? rel / std::sqrt(std::max<size_t>(1, v.size())) : 0.0;
+  }
+  return white_rel;
+}
+
+// White density N, bias instability B and rate random walk K per axis, with their σ.
+struct AllanNoiseTerms {
+  std::array<double, 3> N{}, Ns{}, B{}, Bs{}, K{}, Ks{};
+};
+
+// Fit AVAR = c0/τ + c1 + c2 τ (weighted LS) per axis: N = √c0, B = √(c1 π / 2ln2), K = √(3c2).
+// Zero on an axis with fewer than 3 points.
+AllanNoiseTerms FitAllanNoiseTerms(const AllanCurve& A) {
+  AllanNoiseTerms t;
+  const int m = static_cast<int>(A.tau_s.size());
+  if (m < 3) return t;
+  for (int i = 0; i < 3; ++i) {
+    Eigen::MatrixXd H(m, 3);
+    Eigen::VectorXd y(m);
+    for (int j = 0; j < m; ++j) {
+      const double av = A.adev_rad_s[i][j] * A.adev_rad_s[i][j];
+      const double sd = 2.0 * A.rel_sigma[j] * av;  // σ of AVAR
+      H(j, 0) = 1.0 / A.tau_s[j] / sd;
+      H(j, 1) = 1.0 / sd;
+      H(j, 2) = A.tau_s[j] / sd;
+      y(j) = av / sd;
+    }
+    const Eigen::Matrix3d HtH = H.transpose() * H;
+    const Eigen::Vector3d coef = HtH.ldlt().solve(H.transpose() * y);
+    const Eigen::Matrix3d cov = HtH.inverse();
+    auto root = [](double v, double var, double scale, double* sig) {
+      const double x = std::sqrt(std::max(v, 0.0) * scale);
+      // σ of √(v·scale) by the delta method; at v ≤ 0 the one-σ upper value.
+      *sig = v > 0 ? 0.5 * scale * std::sqrt(var) / x
+                   : std::sqrt(std::max(0.0, (v + std::sqrt(var)) * scale));
+      return x;
+    };
+    t.N[i] = root(coef(0), cov(0, 0), 1.0, &t.Ns[i]);
+    t.B[i] = root(coef(1), cov(1, 1), std::numbers::pi / (2.0 * std::log(2.0)), &t.Bs[i]);
+    t.K[i] = root(coef(2), cov(2, 2), 3.0, &t.Ks[i]);
+  }
+  return t;
+}
+
+// The z statistics of the gyro_bias tests: the largest, and the axes above the critical value.
+struct AxisZTests {
+  double critical = 0.0;
+  double best_z = -1e300;
+  std::array<bool, 3> axis_hit{};
+  void Add(int axis, double z) {
+    best_z = std::max(best_z, z);
+    if (z > critical) axis_hit[axis] = true;
+  }
+};
+
+// Long-τ test: z(τ) of the Allan deviation above the white line at the τ of test_idx.
+void TestAllanAboveWhite(const AllanCurve& A, const std::array<double, 3>& white_rel,
+                         const std::vector<int>& test_idx, AxisZTests& z) {
+  for (int i = 0; i < 3; ++i)
+    for (int j : test_idx) {
+      const double line = A.white_level[i] / std::sqrt(A.tau_s[j]);
+      z.Add(i, (A.adev_rad_s[i][j] / line - 1.0) / std::hypot(A.rel_sigma[j], white_rel[i]));
+    }
+}
+
+struct BiasDrift {
+  std::array<double, 3> value{}, sigma{};  // mean of the last rest − mean of the first [rad/s]
+};
+
+// Drift: mean of the first rest vs the last, against the white noise and the earth rate.
+BiasDrift TestBiasDrift(const Context& c, const std::vector<std::pair<int, int>>& rests,
+                        const AllanCurve& A, AxisZTests& z) {
+  BiasDrift drift;
+  const auto [b1, e1] = rests.front();
+  const auto [b2, e2] = rests.back();
+  for (int i = 0; i < 3; ++i) {
+    double m1 = 0, m2 = 0;
+    for (int k = b1; k < e1; ++k) m1 += c.d.gyro[k](i);
+    for (int k = b2; k < e2; ++k) m2 += c.d.gyro[k](i);
+    m1 /= (e1 - b1);
+    m2 /= (e2 - b2);
+    const double w = A.white_level[i];
+    drift.value[i] = m2 - m1;
+    drift.sigma[i] = std::sqrt(w * w / ((e1 - b1) * c.dt) + w * w / ((e2 - b2) * c.dt) +
+                               c.s.earth_rate * c.s.earth_rate);
+    z.Add(i, std::abs(drift.value[i]) / drift.sigma[i]);
+  }
+  return drift;
+}
+
+// gyro_bias: the Allan curve into a.allan, the long-τ and drift tests, the fitted noise terms and
+// the extension's bias random walk (the last value).
+ImuCandidate TestGyroBias(const Context& c, double alpha_c, ImuAnalysis& a) {
+  const auto& s = c.s;
+  ImuCandidate gb;
+  gb.cause = "gyro_bias";
+  gb.tested = true;
+  spdlog::info("imu analysis: Allan deviation over {} rests", a.rests.size());
+  auto& A = a.allan;
+  ComputeAllanCurve(c, a.rests, A);
+  const std::array<double, 3> white_rel = FitWhiteLevels(s, A);
+  std::vector<int> test_idx;
+  for (size_t j = 0; j < A.tau_s.size(); ++j)
+    if (A.tau_s[j] >= s.allan_test_tau_min_s - 1e-12) test_idx.push_back(static_cast<int>(j));
+  const int tests = 3 * (static_cast<int>(test_idx.size()) + 1);
+  gb.critical = NormalQuantileUpper(alpha_c / std::max(1, tests));
+  const AllanNoiseTerms t = FitAllanNoiseTerms(A);
+  AxisZTests z{gb.critical};
+  TestAllanAboveWhite(A, white_rel, test_idx, z);
+  BiasDrift drift;
+  if (a.rests.size() >= 2) drift = TestBiasDrift(c, a.rests, A, z);
+  gb.statistic = z.best_z;
+  for (int i = 0; i < 3; ++i) {
+    if (z.axis_hit[i]) gb.axes.push_back(kAxis[i]);
+    const std::string ax = std::string("_") + kAxis[i];
+    gb.values.push_back({"white_noise_density" + ax + "_rad_s_sqrt_hz", t.N[i], t.Ns[i]});
+    gb.values.push_back({"bias_instability" + ax + "_rad_s", t.B[i], t.Bs[i]});
+    gb.values.push_back({"rate_random_walk" + ax + "_rad_s_sqrt_s", t.K[i], t.Ks[i]});
+    if (a.rests.size() >= 2)
+      gb.values.push_back({"bias_drift" + ax + "_rad_s", drift.value[i], drift.sigma[i]});
+  }
+  gb.significant = !gb.axes.empty();
+  gb.note = "white line from the data's short-τ level (stated " +
+            std::to_string(s.gyro_noise_density) + " rad/s/√Hz)";
+  if (A.tau_s.empty() || test_idx.empty()) {
+    gb.note = "rests too short for the long-τ Allan test";
+  }
+  double k_ext = s.base_bias_random_walk;
+  for (int i = 0; i < 3; ++i)
+    k_ext = std::max({k_ext, t.K[i], t.B[i] / std::sqrt(s.bias_time_constant_s)});
+  gb.values.push_back({"extension_bias_random_walk_rad_s_sqrt_s", k_ext, 0.0});
+  return gb;
+}
+
+// ----- magnetic_disturbance -----
+
+// Per-sample deviations of the field from the reference, outside the reference rest [rb, re).
+struct FieldDeviations {
+  std::vector<double> dn;       // |m| − m₀ [µT]
+  std::vector<double> dd;       // dip (base filter's attitude) − δ₀ [rad]
+  std::vector<double> dd_test;  // the test's dip − δ₀: at rests from the accelerometer, else 0
+  std::vector<int> dk;          // sample index of each deviation
+};
+
+// The deviations; a.mag_norm_uT and a.mag_dip_rad (dip from the base filter's attitude) on every
+// sample.
+FieldDeviations DeviationsFromReference(const Context& c,
+                                        const std::vector<Eigen::Vector4d>& q_base, int rb, int re,
+                                        ImuAnalysis& a) {
+  const auto& data = c.d;
+  const Eigen::Vector3d up(0, 0, 1);
+  FieldDeviations f;
+  for (int k = 0; k < c.n; ++k) {
+    const double m = data.mag_uT[k].norm();
+    a.mag_norm_uT[k] = m;
+    if (!q_base[k].allFinite()) continue;
+    const Eigen::Vector3d down_B = -geometry::QuatToMatrix(q_base[k]).transpose() * up;
+    a.mag_dip_rad[k] = std::asin(std::clamp(data.mag_uT[k].dot(down_B) / m, -1.0, 1.0));
+    if (k >= rb && k < re) continue;  // the reference itself
+    f.dn.push_back(m - a.mag_ref_norm_uT);
+    f.dk.push_back(k);
+    f.dd.push_back(a.mag_dip_rad[k] - a.mag_ref_dip_rad);
+    // The test's dip: at rests from the accelerometer (gravity alone there); in motion the
+    // filter's tilt may carry the accelerometer's own error, so only the norm is tested.
+    const double fn = data.accel[k].norm();
+    f.dd_test.push_back(
+        c.rest_mask[k]
+            ? std::asin(std::clamp(-data.mag_uT[k].dot(data.accel[k]) / (m * fn), -1.0, 1.0)) -
+                  a.mag_ref_dip_rad
+            : 0.0);
+  }
+  return f;
+}
+
+// Robust spread about the reference (1.4826 MAD): the field the data shows most of the time,
+// never below the noise of the reference rest. A disturbance is what falls outside it.
+double RobustSpread(const std::vector<double>& v, double floor) {
+  std::vector<double> abs_v;
+  for (double x : v) abs_v.push_back(std::abs(x));
+  return std::max(1.4826 * Median(abs_v), floor);
+}
+
+struct GateCounts {
+  long out_noise = 0;  // outside the reference rest's noise band
+  long out_gate = 0, out_gate_norm = 0, out_gate_dip = 0;
+  double max_dn = 0.0, max_dd = 0.0;
+};
+
+// Counts the deviations outside the noise band and the gate; marks a.mag_disturbed within
+// ±disturbed_window_s of every sample outside the gate.
+GateCounts CountOutsideGate(const Context& c, const FieldDeviations& f, double gate_n,
+                            double gate_d, ImuAnalysis& a) {
+  const auto& s = c.s;
+  GateCounts g;
+  for (size_t i = 0; i < f.dn.size(); ++i) {
+    g.max_dn = std::max(g.max_dn, std::abs(f.dn[i]));
+    g.max_dd = std::max(g.max_dd, std::abs(f.dd_test[i]));
+    if (std::abs(f.dn[i]) > s.band_z * a.sigma_mag_norm_uT ||
+        std::abs(f.dd_test[i]) > s.band_z * a.sigma_dip_rad)
+      ++g.out_noise;
+    const bool gn = std::abs(f.dn[i]) > gate_n, gd = std::abs(f.dd_test[i]) > gate_d;
+    g.out_gate += gn || gd;
+    if (gn || gd) {
+      // Disturbed window: ±disturbed_window_s around each sample outside the gate.
+      const int w = static_cast<int>(std::round(s.disturbed_window_s * c.rate));
+      for (int j = std::max(0, f.dk[i] - w); j < std::min(c.n, f.dk[i] + w + 1); ++j)
+        a.mag_disturbed[j] = 1;
+    }
+    g.out_gate_norm += gn;
+    g.out_gate_dip += gd;
+  }
+  return g;
+}
+
+// magnetic_disturbance: the binomial test of the samples outside the fitted gate; the gate into
+// a.mag_gate_*; the per-sample field series into a.
+ImuCandidate TestMagneticDisturbance(const Context& c, const std::vector<Eigen::Vector4d>& q_base,
+                                     int rb, int re, double alpha_c, ImuAnalysis& a) {
+  const auto& s = c.s;
+  ImuCandidate md;
+  md.cause = "magnetic_disturbance";
+  md.tested = true;
+  md.axes = {"magnetometer"};
+  a.mag_norm_uT.assign(c.n, kNaN);
+  a.mag_dip_rad.assign(c.n, kNaN);
+  a.mag_disturbed.assign(c.n, 0);
+  const FieldDeviations f = DeviationsFromReference(c, q_base, rb, re, a);
+  const double sig_n = RobustSpread(f.dn, a.sigma_mag_norm_uT),
+               sig_d = RobustSpread(f.dd, a.sigma_dip_rad);
+  const double gate_n = s.band_z * sig_n, gate_d = s.band_z * sig_d;
+  const long n_all = static_cast<long>(f.dn.size());
+  const GateCounts g = CountOutsideGate(c, f, gate_n, gate_d, a);
+  const double p_band = std::max(4.0 * NormalUpper(s.band_z), s.outlier_rate);
+  const double p_noise = BinomialUpper(g.out_noise, n_all, p_band);
+  const double p_gate = BinomialUpper(g.out_gate, n_all, p_band);
+  md.statistic = ZOf(p_gate);
+  md.critical = NormalQuantileUpper(alpha_c);
+  md.significant = n_all > 0 && p_gate < alpha_c;
+  a.mag_gate_norm_uT = gate_n;
+  a.mag_gate_dip_rad = gate_d;
+  const double frac_noise = n_all ? static_cast<double>(g.out_noise) / n_all : 0.0;
+  const double frac_gate = n_all ? static_cast<double>(g.out_gate) / n_all : 0.0;
+  auto binom_sigma = [&](double fr) { return n_all ? std::sqrt(fr * (1 - fr) / n_all) : 0.0; };
+  md.values = {{"reference_norm_uT", a.mag_ref_norm_uT, a.sigma_mag_norm_uT},
+               {"reference_dip_rad", a.mag_ref_dip_rad, a.sigma_dip_rad},
+               {"robust_sigma_norm_uT", sig_n, sig_n / std::sqrt(2.0 * std::max(1L, n_all))},
+               {"robust_sigma_dip_rad", sig_d, sig_d / std::sqrt(2.0 * std::max(1L, n_all))},
+               {"max_norm_deviation_uT", g.max_dn, sig_n},
+               {"max_dip_deviation_at_rest_rad", g.max_dd, sig_d},
+               {"fraction_outside_reference_noise_band", frac_noise, binom_sigma(frac_noise)},
+               {"fraction_outside_gate", frac_gate, binom_sigma(frac_gate)},
+               {"samples_outside_gate_norm", static_cast<double>(g.out_gate_norm), 0.0},
+               {"samples_outside_gate_dip", static_cast<double>(g.out_gate_dip), 0.0},
+               {"p_value_reference_noise_band", p_noise, 0.0},
+               {"p_value_gate", p_gate, 0.0},
+               {"extension_mag_norm_tolerance", gate_n / a.mag_ref_norm_uT, 0.0},
+               {"extension_mag_dip_tolerance_rad", gate_d, 0.0}};
+  return md;
+}
+
+// ----- accel_motion -----
+
+// accel_motion: binomial test of |f| − g₀ in motion outside the noise band, and the RMS angle
+// between f and the base filter's gravity direction.
+ImuCandidate TestAccelMotion(const Context& c, const std::vector<Eigen::Vector4d>& q_base,
+                             double alpha_c, const ImuAnalysis& a) {
+  const auto& data = c.d;
+  const auto& s = c.s;
+  const Eigen::Vector3d up(0, 0, 1);
+  ImuCandidate am;
+  am.cause = "accel_motion";
+  am.tested = true;
+  am.axes = {"accelerometer"};
+  long n_mov = 0, out = 0;
+  Rms norm_err, angle;
+  for (int k = 0; k < c.n; ++k) {
+    if (!Moving(data, c.rest_mask, k)) continue;
+    ++n_mov;
+    const double f = data.accel[k].norm();
+    const double dn = f - a.gravity_ref;
+    norm_err.Add(dn);
+    if (std::abs(dn) > s.band_z * a.sigma_accel_norm) ++out;
+    if (q_base[k].allFinite() && f > 0) {
+      const Eigen::Vector3d up_B = geometry::QuatToMatrix(q_base[k]).transpose() * up;
+      angle.Add(std::acos(std::clamp(up_B.dot(data.accel[k]) / f, -1.0, 1.0)));
+    }
+  }
+  const double p0 = std::max(2.0 * NormalUpper(s.band_z), s.outlier_rate);
+  const double p = BinomialUpper(out, n_mov, p0);
+  am.statistic = ZOf(p);
+  am.critical = NormalQuantileUpper(alpha_c);
+  am.significant = n_mov > 0 && p < alpha_c;
+  const double frac = n_mov ? static_cast<double>(out) / n_mov : 0.0;
+  am.values = {
+      {"gravity_reference_m_s2", a.gravity_ref, a.sigma_accel_norm},
+      {"rms_norm_minus_g_in_motion_m_s2", norm_err.value(), a.sigma_accel_norm},
+      {"rms_gravity_disagreement_rad", angle.value(), a.sigma_accel_norm / a.gravity_ref},
+      {"fraction_outside_noise_band", frac, n_mov ? std::sqrt(frac * (1 - frac) / n_mov) : 0.0},
+      {"p_value", p, 0.0}};
+  if (n_mov == 0) {
+    am.tested = false;
+    am.note = "no motion samples";
+  }
+  return am;
+}
+
+// ----- time_offset -----
+
+struct TimeOffsetTest {
+  ImuCandidate candidate;
+  double tau_first = kNaN, tau_second = kNaN;  // lag fitted on each half of the motion samples
+  int split = 0;                               // first sample of the second half
+};
+
+// σ of the lag over the motion samples: sd / √B of the lags of B contiguous blocks (NaN with
+// fewer than two finite).
+double LagSigma(const Context& c, const std::vector<Eigen::Vector3d>& w_truth,
+                const std::vector<int>& motion_idx) {
+  const int B = std::max(2, c.s.offset_blocks);
+  std::vector<double> taus;
+  for (int b = 0; b < B; ++b) {
+    const size_t i0 = motion_idx.size() * b / B, i1 = motion_idx.size() * (b + 1) / B;
+    const std::vector<int> blk(motion_idx.begin() + static_cast<long>(i0),
+                               motion_idx.begin() + static_cast<long>(i1));
+    const double t = EstimateLag(c, w_truth, blk);
+    if (std::isfinite(t)) taus.push_back(t);
+  }
+  return taus.size() >= 2 ? Sd(taus) / std::sqrt(taus.size()) : kNaN;
+}
+
+// time_offset (truth present): the lag between gyro and truth rate over the motion samples, and
+// on each half of them (for the cross-fitted gain).
+TimeOffsetTest TestTimeOffset(const Context& c, double alpha_c, bool has_truth) {
+  TimeOffsetTest r;
+  r.split = c.n;
+  ImuCandidate& to = r.candidate;
+  to.cause = "time_offset";
+  to.axes = {"imu"};
+  if (!has_truth) {
+    to.note = "no truth orientation (q_w..q_z) in the stream: no second source to time";
+    return r;
+  }
+  spdlog::info("imu analysis: time offset gyro vs truth rate");
+  const std::vector<Eigen::Vector3d> w_truth = TruthRates(c);
+  std::vector<int> motion_idx;
+  for (int k = 0; k < c.n; ++k)
+    if (Moving(c.d, c.rest_mask, k) && w_truth[k].allFinite()) motion_idx.push_back(k);
+  if (motion_idx.size() <= 100) {
+    to.note = "too few motion samples with truth";
+    return r;
+  }
+  to.tested = true;
+  const double tau = EstimateLag(c, w_truth, motion_idx);
+  const double sigma = LagSigma(c, w_truth, motion_idx);
+  const size_t h = motion_idx.size() / 2;
+  r.split = motion_idx[h];
+  r.tau_first =
+      EstimateLag(c, w_truth, {motion_idx.begin(), motion_idx.begin() + static_cast<long>(h)});
+  r.tau_second =
+      EstimateLag(c, w_truth, {motion_idx.begin() + static_cast<long>(h), motion_idx.end()});
+  to.statistic = std::isfinite(sigma) && sigma > 0 ? std::abs(tau) / sigma : 0.0;
+  to.critical = NormalQuantileUpper(alpha_c / 2.0);
+  to.significant = to.statistic > to.critical && std::abs(tau) >= c.s.min_offset_periods * c.dt;
+  to.values = {{"time_offset_s", tau, sigma},
+               {"time_offset_first_half_s", r.tau_first, sigma * std::sqrt(2.0)},
+               {"time_offset_second_half_s", r.tau_second, sigma * std::sqrt(2.0)},
+               {"sample_period_s", c.dt, 0.0}};
+  return r;
+}
+
+// ----- Gains -----
+
+// The fitted extensions' filter settings (see the header comment).
+struct ExtensionSettings {
+  double gyro_bias_random_walk = 0.0;
+  double mag_ref_norm = 0.0, mag_ref_dip = 0.0;
+  double mag_norm_tolerance = 0.0, mag_dip_tolerance = 0.0;
+};
+
+// The base filter with any of the fitted extensions, each run once.
+class ExtendedFilters {
+ public:
+  ExtendedFilters(const ImuStreamData& data, const est::OrientationKfSettings& base,
+                  const ExtensionSettings& ext)
+      : data_(data), base_(base), ext_(ext) {}
+
+  // q per sample of the base filter with the extensions chosen.
+  const std::vector<Eigen::Vector4d>& Run(bool bias, bool mag, bool acc) {
+    const std::string key = std::string(bias ? "B" : "-") + (mag ? "M" : "-") + (acc ? "A" : "-");
+    if (!runs_.count(key)) {
+      spdlog::info("imu analysis: filter run '{}'", key);
+      runs_[key] = RunOrientationFilter(data_, Settings(bias, mag, acc));
+    }
+    return runs_[key];
+  }
+
+ private:
+  est::OrientationKfSettings Settings(bool bias, bool mag, bool acc) const {
+    est::OrientationKfSettings f = base_;
+    if (bias) f.gyro_bias_random_walk = ext_.gyro_bias_random_walk;
+    if (mag) {
+      f.reject_mag = true;
+      f.mag_ref_norm = ext_.mag_ref_norm;
+      f.mag_ref_dip = ext_.mag_ref_dip;
+      f.mag_norm_tolerance = ext_.mag_norm_tolerance;
+      f.mag_dip_tolerance = ext_.mag_dip_tolerance;
+    }
+    if (acc) f.reject_accel = true;
+    return f;
+  }
+
+  const ImuStreamData& data_;
+  const est::OrientationKfSettings base_;
+  const ExtensionSettings ext_;
+  std::map<std::string, std::vector<Eigen::Vector4d>> runs_;
+};
+
+// Cross-fitted offset scoring: τ from one half applied to the other.
+OrientationScore ScoreShifted(const Context& c, const std::vector<Eigen::Vector4d>& q,
+                              const TimeOffsetTest& t) {
+  OrientationScore s1 = ScoreAgainstTruth(c.d, q, t.tau_second, 0, t.split);
+  const OrientationScore s2 = ScoreAgainstTruth(c.d, q, t.tau_first, t.split, c.n);
+  s1.total.sum += s2.total.sum;
+  s1.total.n += s2.total.n;
+  s1.heading.sum += s2.heading.sum;
+  s1.heading.n += s2.heading.n;
+  s1.inclination.sum += s2.inclination.sum;
+  s1.inclination.n += s2.inclination.n;
+  return s1;
+}
+
+// Each candidate's gain alone (truth present): base filter vs base + its extension.
+void MeasureCandidateGains(const Context& c, const std::vector<Eigen::Vector4d>& q_base,
+                           const TimeOffsetTest& t, ExtendedFilters& filters, ImuAnalysis& a) {
+  const auto& data = c.d;
+  ImuCandidate &gb = a.candidates[0], &md = a.candidates[1], &am = a.candidates[2],
+               &to = a.candidates[3];
+  const OrientationScore base_score = ScoreAgainstTruth(data, q_base);
+  gb.before = md.before = am.before = to.before = base_score;
+  gb.after = ScoreAgainstTruth(data, filters.Run(true, false, false));
+  const auto& q_mag = filters.Run(false, true, false);
+  md.after = ScoreAgainstTruth(data, q_mag);
+  // Heading over the disturbed windows alone (movement samples), where the gate acts.
+  Rms hb, he;
+  for (int k = 0; k < c.n; ++k) {
+    if (!a.mag_disturbed[k] || !Moving(data, c.rest_mask, k) || !data.q_truth[k].allFinite() ||
+        !q_base[k].allFinite() || !q_mag[k].allFinite())
+      continue;
+    hb.Add(BroadErrors(q_base[k], data.q_truth[k]).heading);
+    he.Add(BroadErrors(q_mag[k], data.q_truth[k]).heading);
+  }
+  md.values.push_back({"disturbed_window_samples", static_cast<double>(hb.n), 0.0});
+  md.values.push_back({"heading_rmse_disturbed_windows_base_rad", hb.value(), 0.0});
+  md.values.push_back({"heading_rmse_disturbed_windows_extended_rad", he.value(), 0.0});
+  am.after = ScoreAgainstTruth(data, filters.Run(false, false, true));
+  if (to.tested && std::isfinite(t.tau_first) && std::isfinite(t.tau_second))
+    to.after = ScoreShifted(c, q_base, t);
+}
+
+// Per-sample heading and total errors of the base and the extended filter into a.
+void StoreErrorSeries(const Context& c, const std::vector<Eigen::Vector4d>& q_base,
+                      const std::vector<Eigen::Vector4d>& q_ext, ImuAnalysis& a) {
+  a.heading_err_base_rad.assign(c.n, kNaN);
+  a.heading_err_ext_rad.assign(c.n, kNaN);
+  a.total_err_base_rad.assign(c.n, kNaN);
+  a.total_err_ext_rad.assign(c.n, kNaN);
+  for (int k = 0; k < c.n; ++k) {
+    const auto& qt = c.d.q_truth[k];
+    if (!qt.allFinite()) continue;
+    if (q_base[k].allFinite()) {
+      const AngleErrors e = BroadErrors(q_base[k], qt);
+      a.heading_err_base_rad[k] = e.heading;
+      a.total_err_base_rad[k] = e.total;
+    }
+    if (q_ext[k].allFinite()) {
+      const AngleErrors e = BroadErrors(q_ext[k], qt);
+      a.heading_err_ext_rad[k] = e.heading;
+      a.total_err_ext_rad[k] = e.total;
+    }
+  }
+}
+
+// The gain of all selected extensions together (truth present), and the error series.
+void MeasureSelectionGain(const Context& c, const std::vector<Eigen::Vector4d>& q_base,
+                          const TimeOffsetTest& t, ExtendedFilters& filters, ImuAnalysis& a) {
+  const bool sb = a.candidates[0].significant, sm = a.candidates[1].significant,
+             sa = a.candidates[2].significant, st = a.candidates[3].significant;
+  const auto& q_ext = filters.Run(sb, sm, sa);
+  a.base_score = ScoreAgainstTruth(c.d, q_base);
+  a.extended_score = st ? ScoreShifted(c, q_ext, t) : ScoreAgainstTruth(c.d, q_ext);
+  a.time_offset_s = st ? a.candidates[3].values[0].value : 0.0;
+  StoreErrorSeries(c, q_base, q_ext, a);
+}
+
 }  // namespace
 
 ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSettings& settings) {
   ValidateImuStream(data);
-  Context c{data, settings, 0, 0.0, 0.0, {}};
-  c.n = static_cast<int>(data.t.size());
-  c.dt = (data.t.back() - data.t.front()) / (c.n - 1);
-  c.rate = 1.0 / c.dt;
+  Context c = MakeContext(data, settings);
   const auto& s = settings;
   const double alpha_c = s.alpha / 4.0;  // Bonferroni over the four candidates
 
@@ -307,439 +885,28 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
     throw std::invalid_argument("IMU stream: no rest segment of at least " +
                                 std::to_string(s.min_rest_s) + " s (movement = 0 or still)");
 
-  // --- Reference on the first rest ---
+  // The reference on the first rest (at most reference_max_s of it).
   const auto [rb, re_full] = a.rests.front();
   const int re = std::min(re_full, rb + static_cast<int>(s.reference_max_s * c.rate));
-  {
-    std::vector<double> nm, dip, fn;
-    for (int k = rb; k < re; ++k) {
-      const double m = data.mag_uT[k].norm(), f = data.accel[k].norm();
-      nm.push_back(m);
-      fn.push_back(f);
-      dip.push_back(std::asin(std::clamp(-data.mag_uT[k].dot(data.accel[k]) / (m * f), -1.0, 1.0)));
-    }
-    a.mag_ref_norm_uT = Mean(nm);
-    a.mag_ref_dip_rad = Mean(dip);
-    a.gravity_ref = Mean(fn);
-    const double sm = s.mag_noise_density_uT * std::sqrt(c.rate);
-    const double sa = s.accel_noise_density * std::sqrt(c.rate);
-    a.sigma_mag_norm_uT = std::max(Sd(nm), sm);
-    a.sigma_accel_norm = std::max(Sd(fn), sa);
-    a.sigma_dip_rad = std::max(Sd(dip), std::hypot(sm / a.mag_ref_norm_uT, sa / a.gravity_ref));
-  }
+  FitReference(c, rb, re, a);
 
-  // --- Base filter ---
   spdlog::info("imu analysis: base filter (trusts every sample, constant gyro bias)");
   const est::OrientationKfSettings base_f = BaseFilter(s);
-  std::map<std::string, std::vector<Eigen::Vector4d>> runs;
-  runs["base"] = RunOrientationFilter(data, base_f);
-  const auto& q_base = runs["base"];
-  const Eigen::Vector3d up(0, 0, 1);
+  const std::vector<Eigen::Vector4d> q_base = RunOrientationFilter(data, base_f);
 
-  // ===== gyro_bias =====
-  ImuCandidate gb;
-  gb.cause = "gyro_bias";
-  gb.tested = true;
-  {
-    spdlog::info("imu analysis: Allan deviation over {} rests", a.rests.size());
-    std::array<std::vector<double>, 3> cum;
-    for (int i = 0; i < 3; ++i) {
-      cum[i].assign(c.n + 1, 0.0);
-      for (int k = 0; k < c.n; ++k) cum[i][k + 1] = cum[i][k] + data.gyro[k](i);
-    }
-    int longest = 0;
-    for (auto [b, e] : a.rests) longest = std::max(longest, e - b);
-    std::vector<int> ms;
-    for (double lm = 0.0; std::pow(10.0, lm) <= longest / 2.0; lm += 0.1) {
-      const int m = static_cast<int>(std::round(std::pow(10.0, lm)));
-      if (ms.empty() || m != ms.back()) ms.push_back(m);
-    }
-    auto& A = a.allan;
-    for (int m : ms) {
-      double clusters = 0.0;
-      for (auto [b, e] : a.rests) clusters += std::max(0.0, (e - b) / static_cast<double>(m) - 1.0);
-      const double rel = clusters > 0 ? 1.0 / std::sqrt(2.0 * clusters) : kNaN;
-      if (!(rel <= s.allan_max_rel_sigma)) continue;
-      std::array<double, 3> av{};
-      for (int i = 0; i < 3; ++i) {
-        double sum = 0.0;
-        long cnt = 0;
-        for (auto [b, e] : a.rests) {
-          const auto [ss, cc] = AllanTerms(cum[i], b, e, m, c.dt);
-          sum += ss;
-          cnt += cc;
-        }
-        av[i] = cnt > 0 ? std::sqrt(0.5 * sum / cnt) : kNaN;
-      }
-      A.tau_s.push_back(m * c.dt);
-      A.rel_sigma.push_back(rel);
-      for (int i = 0; i < 3; ++i) A.adev_rad_s[i].push_back(av[i]);
-    }
-    // White level N_w: median of σ_A √τ over the short-τ range (never below the stated density).
-    std::array<double, 3> white_rel{};
-    for (int i = 0; i < 3; ++i) {
-      std::vector<double> v;
-      double rel = kNaN;
-      for (size_t j = 0; j < A.tau_s.size(); ++j)
-        if (A.tau_s[j] >= s.allan_white_tau_min_s - 1e-12 &&
-            A.tau_s[j] <= s.allan_white_tau_max_s + 1e-12) {
-          v.push_back(A.adev_rad_s[i][j] * std::sqrt(A.tau_s[j]));
-          rel = A.rel_sigma[j];
-        }
-      if (v.empty() && !A.tau_s.empty()) {
-        v.push_back(A.adev_rad_s[i][0] * std::sqrt(A.tau_s[0]));
-        rel = A.rel_sigma[0];
-      }
-      const double w = v.empty() ? s.gyro_noise_density : Median(v);
-      A.white_level[i] = std::max(w, s.gyro_noise_density);
-      white_rel[i] = std::isfinite(rel) ? rel / std::sqrt(std::max<size_t>(1, v.size())) : 0.0;
-    }
-    // Fit AVAR = c0/τ + c1 + c2 τ (weighted LS) per axis: N = √c0, B = √(c1 π / 2ln2), K = √(3c2).
-    std::vector<int> test_idx;
-    for (size_t j = 0; j < A.tau_s.size(); ++j)
-      if (A.tau_s[j] >= s.allan_test_tau_min_s - 1e-12) test_idx.push_back(static_cast<int>(j));
-    const int tests = 3 * (static_cast<int>(test_idx.size()) + 1);
-    gb.critical = NormalQuantileUpper(alpha_c / std::max(1, tests));
-    double best_z = -1e300;
-    std::array<bool, 3> axis_hit{};
-    std::array<double, 3> K{}, Ks{}, B{}, Bs{}, N{}, Ns{};
-    for (int i = 0; i < 3; ++i) {
-      const int m = static_cast<int>(A.tau_s.size());
-      if (m >= 3) {
-        Eigen::MatrixXd H(m, 3);
-        Eigen::VectorXd y(m);
-        for (int j = 0; j < m; ++j) {
-          const double av = A.adev_rad_s[i][j] * A.adev_rad_s[i][j];
-          const double sd = 2.0 * A.rel_sigma[j] * av;  // σ of AVAR
-          H(j, 0) = 1.0 / A.tau_s[j] / sd;
-          H(j, 1) = 1.0 / sd;
-          H(j, 2) = A.tau_s[j] / sd;
-          y(j) = av / sd;
-        }
-        const Eigen::Matrix3d HtH = H.transpose() * H;
-        const Eigen::Vector3d coef = HtH.ldlt().solve(H.transpose() * y);
-        const Eigen::Matrix3d cov = HtH.inverse();
-        auto root = [](double v, double var, double scale, double* sig) {
-          const double x = std::sqrt(std::max(v, 0.0) * scale);
-          // σ of √(v·scale) by the delta method; at v ≤ 0 the one-σ upper value.
-          *sig = v > 0 ? 0.5 * scale * std::sqrt(var) / x
-                       : std::sqrt(std::max(0.0, (v + std::sqrt(var)) * scale));
-          return x;
-        };
-        N[i] = root(coef(0), cov(0, 0), 1.0, &Ns[i]);
-        B[i] = root(coef(1), cov(1, 1), std::numbers::pi / (2.0 * std::log(2.0)), &Bs[i]);
-        K[i] = root(coef(2), cov(2, 2), 3.0, &Ks[i]);
-      }
-      for (int j : test_idx) {
-        const double line = A.white_level[i] / std::sqrt(A.tau_s[j]);
-        const double z =
-            (A.adev_rad_s[i][j] / line - 1.0) / std::hypot(A.rel_sigma[j], white_rel[i]);
-        best_z = std::max(best_z, z);
-        if (z > gb.critical) axis_hit[i] = true;
-      }
-    }
-    // Drift: mean of the first rest vs the last.
-    std::array<double, 3> drift{}, drift_sigma{};
-    if (a.rests.size() >= 2) {
-      const auto [b1, e1] = a.rests.front();
-      const auto [b2, e2] = a.rests.back();
-      for (int i = 0; i < 3; ++i) {
-        double m1 = 0, m2 = 0;
-        for (int k = b1; k < e1; ++k) m1 += data.gyro[k](i);
-        for (int k = b2; k < e2; ++k) m2 += data.gyro[k](i);
-        m1 /= (e1 - b1);
-        m2 /= (e2 - b2);
-        const double w = A.white_level[i];
-        drift[i] = m2 - m1;
-        drift_sigma[i] = std::sqrt(w * w / ((e1 - b1) * c.dt) + w * w / ((e2 - b2) * c.dt) +
-                                   s.earth_rate * s.earth_rate);
-        const double z = std::abs(drift[i]) / drift_sigma[i];
-        best_z = std::max(best_z, z);
-        if (z > gb.critical) axis_hit[i] = true;
-      }
-    }
-    gb.statistic = best_z;
-    for (int i = 0; i < 3; ++i) {
-      if (axis_hit[i]) gb.axes.push_back(kAxis[i]);
-      const std::string ax = std::string("_") + kAxis[i];
-      gb.values.push_back({"white_noise_density" + ax + "_rad_s_sqrt_hz", N[i], Ns[i]});
-      gb.values.push_back({"bias_instability" + ax + "_rad_s", B[i], Bs[i]});
-      gb.values.push_back({"rate_random_walk" + ax + "_rad_s_sqrt_s", K[i], Ks[i]});
-      if (a.rests.size() >= 2)
-        gb.values.push_back({"bias_drift" + ax + "_rad_s", drift[i], drift_sigma[i]});
-    }
-    gb.significant = !gb.axes.empty();
-    gb.note = "white line from the data's short-τ level (stated " +
-              std::to_string(s.gyro_noise_density) + " rad/s/√Hz)";
-    if (A.tau_s.empty() || test_idx.empty()) {
-      gb.note = "rests too short for the long-τ Allan test";
-    }
-    double k_ext = s.base_bias_random_walk;
-    for (int i = 0; i < 3; ++i)
-      k_ext = std::max({k_ext, K[i], B[i] / std::sqrt(s.bias_time_constant_s)});
-    gb.values.push_back({"extension_bias_random_walk_rad_s_sqrt_s", k_ext, 0.0});
-  }
-  const double ext_bias_rw = gb.values.back().value;
+  const ImuCandidate gb = TestGyroBias(c, alpha_c, a);
+  const ImuCandidate md = TestMagneticDisturbance(c, q_base, rb, re, alpha_c, a);
+  const ImuCandidate am = TestAccelMotion(c, q_base, alpha_c, a);
+  const TimeOffsetTest to = TestTimeOffset(c, alpha_c, a.has_truth);
+  a.candidates = {gb, md, am, to.candidate};
 
-  // ===== magnetic_disturbance =====
-  ImuCandidate md;
-  md.cause = "magnetic_disturbance";
-  md.tested = true;
-  md.axes = {"magnetometer"};
-  a.mag_norm_uT.assign(c.n, kNaN);
-  a.mag_dip_rad.assign(c.n, kNaN);
-  a.mag_disturbed.assign(c.n, 0);
-  double ext_norm_tol = s.filter.mag_norm_tolerance, ext_dip_tol = s.filter.mag_dip_tolerance;
-  {
-    // Per-sample deviations from the reference (dip from the base filter's attitude).
-    std::vector<double> dn, dd, dd_test;
-    std::vector<int> dk;  // sample index of each deviation
-    for (int k = 0; k < c.n; ++k) {
-      const double m = data.mag_uT[k].norm();
-      a.mag_norm_uT[k] = m;
-      if (!q_base[k].allFinite()) continue;
-      const Eigen::Vector3d down_B = -geometry::QuatToMatrix(q_base[k]).transpose() * up;
-      a.mag_dip_rad[k] = std::asin(std::clamp(data.mag_uT[k].dot(down_B) / m, -1.0, 1.0));
-      if (k >= rb && k < re) continue;  // the reference itself
-      dn.push_back(m - a.mag_ref_norm_uT);
-      dk.push_back(k);
-      dd.push_back(a.mag_dip_rad[k] - a.mag_ref_dip_rad);
-      // The test's dip: at rests from the accelerometer (gravity alone there); in motion the
-      // filter's tilt may carry the accelerometer's own error, so only the norm is tested.
-      const double f = data.accel[k].norm();
-      dd_test.push_back(
-          c.rest_mask[k]
-              ? std::asin(std::clamp(-data.mag_uT[k].dot(data.accel[k]) / (m * f), -1.0, 1.0)) -
-                    a.mag_ref_dip_rad
-              : 0.0);
-    }
-    // Robust spread about the reference (1.4826 MAD): the field the data shows most of the time,
-    // never below the noise of the reference rest. A disturbance is what falls outside it.
-    auto robust = [](const std::vector<double>& v, double floor) {
-      std::vector<double> abs_v;
-      for (double x : v) abs_v.push_back(std::abs(x));
-      return std::max(1.4826 * Median(abs_v), floor);
-    };
-    const double sig_n = robust(dn, a.sigma_mag_norm_uT), sig_d = robust(dd, a.sigma_dip_rad);
-    const double gate_n = s.band_z * sig_n, gate_d = s.band_z * sig_d;
-    const long n_all = static_cast<long>(dn.size());
-    long out_noise = 0, out_gate = 0, out_gate_norm = 0, out_gate_dip = 0;
-    double max_dn = 0.0, max_dd = 0.0;
-    for (size_t i = 0; i < dn.size(); ++i) {
-      max_dn = std::max(max_dn, std::abs(dn[i]));
-      max_dd = std::max(max_dd, std::abs(dd_test[i]));
-      if (std::abs(dn[i]) > s.band_z * a.sigma_mag_norm_uT ||
-          std::abs(dd_test[i]) > s.band_z * a.sigma_dip_rad)
-        ++out_noise;
-      const bool gn = std::abs(dn[i]) > gate_n, gd = std::abs(dd_test[i]) > gate_d;
-      out_gate += gn || gd;
-      if (gn || gd) {
-        // Disturbed window: ±disturbed_window_s around each sample outside the gate.
-        const int w = static_cast<int>(std::round(s.disturbed_window_s * c.rate));
-        for (int j = std::max(0, dk[i] - w); j < std::min(c.n, dk[i] + w + 1); ++j)
-          a.mag_disturbed[j] = 1;
-      }
-      out_gate_norm += gn;
-      out_gate_dip += gd;
-    }
-    const double p_band = std::max(4.0 * NormalUpper(s.band_z), s.outlier_rate);
-    const double p_noise = BinomialUpper(out_noise, n_all, p_band);
-    const double p_gate = BinomialUpper(out_gate, n_all, p_band);
-    md.statistic = ZOf(p_gate);
-    md.critical = NormalQuantileUpper(alpha_c);
-    md.significant = n_all > 0 && p_gate < alpha_c;
-    ext_norm_tol = gate_n / a.mag_ref_norm_uT;
-    a.mag_gate_norm_uT = gate_n;
-    a.mag_gate_dip_rad = gate_d;
-    ext_dip_tol = gate_d;
-    const double frac_noise = n_all ? static_cast<double>(out_noise) / n_all : 0.0;
-    const double frac_gate = n_all ? static_cast<double>(out_gate) / n_all : 0.0;
-    auto binom_sigma = [&](double f) { return n_all ? std::sqrt(f * (1 - f) / n_all) : 0.0; };
-    md.values = {{"reference_norm_uT", a.mag_ref_norm_uT, a.sigma_mag_norm_uT},
-                 {"reference_dip_rad", a.mag_ref_dip_rad, a.sigma_dip_rad},
-                 {"robust_sigma_norm_uT", sig_n, sig_n / std::sqrt(2.0 * std::max(1L, n_all))},
-                 {"robust_sigma_dip_rad", sig_d, sig_d / std::sqrt(2.0 * std::max(1L, n_all))},
-                 {"max_norm_deviation_uT", max_dn, sig_n},
-                 {"max_dip_deviation_at_rest_rad", max_dd, sig_d},
-                 {"fraction_outside_reference_noise_band", frac_noise, binom_sigma(frac_noise)},
-                 {"fraction_outside_gate", frac_gate, binom_sigma(frac_gate)},
-                 {"samples_outside_gate_norm", static_cast<double>(out_gate_norm), 0.0},
-                 {"samples_outside_gate_dip", static_cast<double>(out_gate_dip), 0.0},
-                 {"p_value_reference_noise_band", p_noise, 0.0},
-                 {"p_value_gate", p_gate, 0.0},
-                 {"extension_mag_norm_tolerance", ext_norm_tol, 0.0},
-                 {"extension_mag_dip_tolerance_rad", ext_dip_tol, 0.0}};
-  }
-
-  // ===== accel_motion =====
-  ImuCandidate am;
-  am.cause = "accel_motion";
-  am.tested = true;
-  am.axes = {"accelerometer"};
-  {
-    long n_mov = 0, out = 0;
-    Rms norm_err, angle;
-    for (int k = 0; k < c.n; ++k) {
-      if (!Moving(data, c.rest_mask, k)) continue;
-      ++n_mov;
-      const double f = data.accel[k].norm();
-      const double dn = f - a.gravity_ref;
-      norm_err.Add(dn);
-      if (std::abs(dn) > s.band_z * a.sigma_accel_norm) ++out;
-      if (q_base[k].allFinite() && f > 0) {
-        const Eigen::Vector3d up_B = geometry::QuatToMatrix(q_base[k]).transpose() * up;
-        angle.Add(std::acos(std::clamp(up_B.dot(data.accel[k]) / f, -1.0, 1.0)));
-      }
-    }
-    const double p0 = std::max(2.0 * NormalUpper(s.band_z), s.outlier_rate);
-    const double p = BinomialUpper(out, n_mov, p0);
-    am.statistic = ZOf(p);
-    am.critical = NormalQuantileUpper(alpha_c);
-    am.significant = n_mov > 0 && p < alpha_c;
-    const double frac = n_mov ? static_cast<double>(out) / n_mov : 0.0;
-    am.values = {
-        {"gravity_reference_m_s2", a.gravity_ref, a.sigma_accel_norm},
-        {"rms_norm_minus_g_in_motion_m_s2", norm_err.value(), a.sigma_accel_norm},
-        {"rms_gravity_disagreement_rad", angle.value(), a.sigma_accel_norm / a.gravity_ref},
-        {"fraction_outside_noise_band", frac, n_mov ? std::sqrt(frac * (1 - frac) / n_mov) : 0.0},
-        {"p_value", p, 0.0}};
-    if (n_mov == 0) {
-      am.tested = false;
-      am.note = "no motion samples";
-    }
-  }
-
-  // ===== time_offset =====
-  ImuCandidate to;
-  to.cause = "time_offset";
-  to.axes = {"imu"};
-  std::vector<int> motion_idx;
-  std::vector<Eigen::Vector3d> w_truth;
-  double tau_first = kNaN, tau_second = kNaN;
-  int split = c.n;
+  a.gain_metric = md.significant ? "heading" : "total";  // the gate acts on heading only
   if (a.has_truth) {
-    spdlog::info("imu analysis: time offset gyro vs truth rate");
-    w_truth = TruthRates(c);
-    for (int k = 0; k < c.n; ++k)
-      if (Moving(data, c.rest_mask, k) && w_truth[k].allFinite()) motion_idx.push_back(k);
-    if (motion_idx.size() > 100) {
-      to.tested = true;
-      const double tau = EstimateLag(c, w_truth, motion_idx);
-      const int B = std::max(2, s.offset_blocks);
-      std::vector<double> taus;
-      for (int b = 0; b < B; ++b) {
-        const size_t i0 = motion_idx.size() * b / B, i1 = motion_idx.size() * (b + 1) / B;
-        const std::vector<int> blk(motion_idx.begin() + static_cast<long>(i0),
-                                   motion_idx.begin() + static_cast<long>(i1));
-        const double t = EstimateLag(c, w_truth, blk);
-        if (std::isfinite(t)) taus.push_back(t);
-      }
-      const double sigma = taus.size() >= 2 ? Sd(taus) / std::sqrt(taus.size()) : kNaN;
-      const size_t h = motion_idx.size() / 2;
-      split = motion_idx[h];
-      tau_first =
-          EstimateLag(c, w_truth, {motion_idx.begin(), motion_idx.begin() + static_cast<long>(h)});
-      tau_second =
-          EstimateLag(c, w_truth, {motion_idx.begin() + static_cast<long>(h), motion_idx.end()});
-      to.statistic = std::isfinite(sigma) && sigma > 0 ? std::abs(tau) / sigma : 0.0;
-      to.critical = NormalQuantileUpper(alpha_c / 2.0);
-      to.significant = to.statistic > to.critical && std::abs(tau) >= s.min_offset_periods * c.dt;
-      to.values = {{"time_offset_s", tau, sigma},
-                   {"time_offset_first_half_s", tau_first, sigma * std::sqrt(2.0)},
-                   {"time_offset_second_half_s", tau_second, sigma * std::sqrt(2.0)},
-                   {"sample_period_s", c.dt, 0.0}};
-    } else {
-      to.note = "too few motion samples with truth";
-    }
-  } else {
-    to.note = "no truth orientation (q_w..q_z) in the stream: no second source to time";
-  }
-
-  // ===== Gains =====
-  auto run = [&](const std::string& key, const est::OrientationKfSettings& f) {
-    if (!runs.count(key)) {
-      spdlog::info("imu analysis: filter run '{}'", key);
-      runs[key] = RunOrientationFilter(data, f);
-    }
-    return runs[key];
-  };
-  auto with = [&](bool bias, bool mag, bool acc) {
-    est::OrientationKfSettings f = base_f;
-    if (bias) f.gyro_bias_random_walk = ext_bias_rw;
-    if (mag) {
-      f.reject_mag = true;
-      f.mag_ref_norm = a.mag_ref_norm_uT;
-      f.mag_ref_dip = a.mag_ref_dip_rad;
-      f.mag_norm_tolerance = ext_norm_tol;
-      f.mag_dip_tolerance = ext_dip_tol;
-    }
-    if (acc) f.reject_accel = true;
-    return f;
-  };
-  auto key = [](bool b, bool m, bool x) {
-    return std::string(b ? "B" : "-") + (m ? "M" : "-") + (x ? "A" : "-");
-  };
-  // Cross-fitted offset scoring: τ from one half applied to the other.
-  auto score_shifted = [&](const std::vector<Eigen::Vector4d>& q) {
-    OrientationScore s1 = ScoreAgainstTruth(data, q, tau_second, 0, split);
-    const OrientationScore s2 = ScoreAgainstTruth(data, q, tau_first, split, c.n);
-    s1.total.sum += s2.total.sum;
-    s1.total.n += s2.total.n;
-    s1.heading.sum += s2.heading.sum;
-    s1.heading.n += s2.heading.n;
-    s1.inclination.sum += s2.inclination.sum;
-    s1.inclination.n += s2.inclination.n;
-    return s1;
-  };
-  if (a.has_truth) {
-    const OrientationScore base_score = ScoreAgainstTruth(data, q_base);
-    gb.before = md.before = am.before = to.before = base_score;
-    gb.after = ScoreAgainstTruth(data, run(key(true, false, false), with(true, false, false)));
-    const auto& q_mag = run(key(false, true, false), with(false, true, false));
-    md.after = ScoreAgainstTruth(data, q_mag);
-    // Heading over the disturbed windows alone (movement samples), where the gate acts.
-    Rms hb, he;
-    for (int k = 0; k < c.n; ++k) {
-      if (!a.mag_disturbed[k] || !Moving(data, c.rest_mask, k) || !data.q_truth[k].allFinite() ||
-          !q_base[k].allFinite() || !q_mag[k].allFinite())
-        continue;
-      hb.Add(BroadErrors(q_base[k], data.q_truth[k]).heading);
-      he.Add(BroadErrors(q_mag[k], data.q_truth[k]).heading);
-    }
-    md.values.push_back({"disturbed_window_samples", static_cast<double>(hb.n), 0.0});
-    md.values.push_back({"heading_rmse_disturbed_windows_base_rad", hb.value(), 0.0});
-    md.values.push_back({"heading_rmse_disturbed_windows_extended_rad", he.value(), 0.0});
-    am.after = ScoreAgainstTruth(data, run(key(false, false, true), with(false, false, true)));
-    if (to.tested && std::isfinite(tau_first) && std::isfinite(tau_second))
-      to.after = score_shifted(q_base);
-  }
-  a.candidates = {gb, md, am, to};
-
-  const bool sb = gb.significant, sm = md.significant, sa = am.significant, st = to.significant;
-  a.gain_metric = sm ? "heading" : "total";  // the gate acts on heading only
-  if (a.has_truth) {
-    const auto& q_ext = run(key(sb, sm, sa), with(sb, sm, sa));
-    a.base_score = ScoreAgainstTruth(data, q_base);
-    a.extended_score = st ? score_shifted(q_ext) : ScoreAgainstTruth(data, q_ext);
-    a.time_offset_s = st ? a.candidates[3].values[0].value : 0.0;
-    a.heading_err_base_rad.assign(c.n, kNaN);
-    a.heading_err_ext_rad.assign(c.n, kNaN);
-    a.total_err_base_rad.assign(c.n, kNaN);
-    a.total_err_ext_rad.assign(c.n, kNaN);
-    for (int k = 0; k < c.n; ++k) {
-      const auto& qt = data.q_truth[k];
-      if (!qt.allFinite()) continue;
-      if (q_base[k].allFinite()) {
-        const AngleErrors e = BroadErrors(q_base[k], qt);
-        a.heading_err_base_rad[k] = e.heading;
-        a.total_err_base_rad[k] = e.total;
-      }
-      if (q_ext[k].allFinite()) {
-        const AngleErrors e = BroadErrors(q_ext[k], qt);
-        a.heading_err_ext_rad[k] = e.heading;
-        a.total_err_ext_rad[k] = e.total;
-      }
-    }
+    const ExtensionSettings ext{gb.values.back().value, a.mag_ref_norm_uT, a.mag_ref_dip_rad,
+                                a.mag_gate_norm_uT / a.mag_ref_norm_uT, a.mag_gate_dip_rad};
+    ExtendedFilters filters(data, base_f, ext);
+    MeasureCandidateGains(c, q_base, to, filters, a);
+    MeasureSelectionGain(c, q_base, to, filters, a);
   }
   for (const auto& cnd : a.candidates)
     spdlog::info("imu analysis: {} {} (statistic {:.2f}, critical {:.2f})", cnd.cause,
