@@ -154,13 +154,17 @@ TEST(ExtendedEkf, RecoversHiddenEffectsAgreesWithBatchFitAndBeatsGeometry) {
     double worst = 0;
     for (int k = 0; k < e.size(); ++k) {
       EXPECT_NEAR(ekf.sigma_e()(k) / lm.sigma_e(k), 1.0, 0.05) << k;
-      EXPECT_LT(std::abs(e(k) - lm.e(k)), 0.1 * lm.sigma_e(k)) << k;
+      EXPECT_LT(std::abs(e(k) - lm.e(k)), 0.03 * lm.sigma_e(k)) << k;
       worst = std::max(worst, std::abs(e(k) - lm.e(k)) / lm.sigma_e(k));
     }
     std::printf("seed %u: |e_EKF - e_batch| at most %.2g σ\n", seed - 1, worst);
     const Eigen::VectorXd x = ekf.x();
-    for (int i : s.identified)
-      EXPECT_LT(std::abs(x(i) - lm.x(i)), 0.1 * ekf.sigma()(i)) << s.model.parameters()[i].name;
+    double worst_x = 0;
+    for (int i : s.identified) {
+      EXPECT_LT(std::abs(x(i) - lm.x(i)), 0.03 * ekf.sigma()(i)) << s.model.parameters()[i].name;
+      worst_x = std::max(worst_x, std::abs(x(i) - lm.x(i)) / ekf.sigma()(i));
+    }
+    std::printf("seed %u: |x_EKF - x_batch| at most %.2g σ\n", seed - 1, worst_x);
 
     // Held-out: extended ≈ truth model (the noise), geometric EKF clearly worse.
     // The geometric EKF on the same poses, its gate off (the gate rejects most poses the

@@ -86,6 +86,11 @@ TEST(RcalCli, ExperimentPaperMeetsTheNoiseLimitAndEkfAgreesWithLm) {
   EXPECT_EQ(j["ekf"]["rejected_poses"], 0);
   for (const char* f : {"report.md", "convergence.png", "poses.png", "parameters.png"})
     EXPECT_TRUE(fs::exists(d / "out" / f)) << f;
+  // Golden output: every seed-1 figure the README states for this experiment (the testing-set
+  // table, the Table 2 layout against the measured poses, the Cramér–Rao ratio, EKF ≈ LM) is
+  // tests/tools/golden/experiment_paper_seed1.json, reproduced to 1e-6. Regenerate with
+  //   rcal experiment paper --json F   (then drop F's ekf.median_update_time_s)
+  ExpectGolden(j, ReadJson(RCAL_SOURCE_DIR "/tests/tools/golden/experiment_paper_seed1.json"), "");
   // Deterministic: the same seed gives the same figures.
   const Result again = RunRcal("experiment paper --out " + (d / "out2").string() + " --json " +
                                (d / "r2.json").string());
@@ -137,6 +142,22 @@ TEST(RcalCli, CalibrateTheRealUr10) {
   }
   EXPECT_NEAR(by_method["lm"]["test_mean_position_error_m"].get<double>(),
               by_method["ekf"]["test_mean_position_error_m"].get<double>(), 2e-5);
+
+  // Golden output: the README's UR10 table (fitted, 5-fold and leave-one-out rows, LM and EKF)
+  // is tests/tools/golden/calibrate_ur10.json, reproduced to 1e-6 (the fits and the fold
+  // assignment are deterministic). Each entry M_folds_K is the --json output of
+  //   rcal calibrate DATA --robot URDF --method M --folds K   without its "data" and "robot" paths.
+  const json golden = ReadJson(RCAL_SOURCE_DIR "/tests/tools/golden/calibrate_ur10.json");
+  for (const std::string method : {"lm", "ekf"})
+    for (const int folds : {5, 23}) {
+      const std::string key = method + "_folds_" + std::to_string(folds);
+      const fs::path out = d / (key + ".json");
+      const Result r = RunRcal("calibrate " + data + " --robot " + urdf + " --method " + method +
+                               " --folds " + std::to_string(folds) + " --out " +
+                               (d / key).string() + " --json " + out.string());
+      ASSERT_EQ(r.exit_code, 0) << r.output;
+      ExpectGolden(ReadJson(out), golden.at(key), key);
+    }
 }
 
 TEST(RcalCli, CalibrateRejectsBadFilesNamingTheProblem) {
@@ -585,6 +606,46 @@ TEST(RcalCli, DetectionSweepImuRunsEveryCell) {
     }
   }
   EXPECT_EQ(j.at("rows")[0].at("cause"), "");
+}
+
+// The README's table of rcal analyze on IMU streams (trials 02, 07, 10, 15, 30): effects named,
+// their evidence, base and extended RMSE, Allan deviations. Deterministic, so every figure of
+// tests/tools/golden/analyze_broad.json must be reproduced (relative 1e-6). Each entry is the
+// analysis.json of `rcal analyze ../shared/data/broad/broad_TT_100hz.csv` without its "data" path.
+TEST(RcalCli, AnalyzeReproducesTheImuStreamTableOnBroad) {
+  const fs::path d = TempDir("analyze_broad");
+  const json golden = ReadJson(RCAL_SOURCE_DIR "/tests/tools/golden/analyze_broad.json");
+  ASSERT_EQ(golden.size(), 5u);
+  for (const auto& [t, want] : golden.items()) {
+    const Result r =
+        RunRcal("analyze ../shared/data/broad/broad_" + t + "_100hz.csv --out " + (d / t).string());
+    ASSERT_EQ(r.exit_code, 0) << t << ": " << r.output;
+    ExpectGolden(ReadJson(d / t / "analysis.json"), want, "broad_" + t);
+  }
+}
+
+// The README's BROAD table: rcal fuse on every real trial in ../shared/data/broad with the shipped
+// settings. The filters are deterministic on a file (the simulated position sensor is seeded), so
+// every figure of tests/tools/golden/fuse_broad.json must be reproduced (relative 1e-6, counts
+// exactly). A change that moves a figure regenerates the file and the README table with it:
+//   bash deploy/broad-table --golden tests/tools/golden/fuse_broad.json
+TEST(RcalCli, FuseReproducesTheBroadTableOnEveryTrial) {
+  const fs::path d = TempDir("fuse_broad");
+  const json golden = ReadJson(RCAL_SOURCE_DIR "/tests/tools/golden/fuse_broad.json");
+  size_t trials = 0;
+  for (const auto& e : fs::directory_iterator(RCAL_SHARED_DIR "/data/broad")) {
+    const std::string name = e.path().filename().string();  // broad_TT_100hz.csv
+    if (name.rfind("broad_", 0) != 0 || e.path().extension() != ".csv") continue;
+    const std::string t = name.substr(6, name.find('_', 6) - 6);
+    ASSERT_TRUE(golden.contains(t)) << name << " has no golden figures: regenerate the file";
+    const fs::path out = d / ("broad_" + t + ".json");
+    const Result r = RunRcal("fuse " + e.path().string() + " --out " + (d / t).string() +
+                             " --json " + out.string());
+    ASSERT_EQ(r.exit_code, 0) << name << ": " << r.output;
+    ExpectGolden(ReadJson(out), golden.at(t), "broad_" + t);
+    ++trials;
+  }
+  EXPECT_EQ(trials, golden.size()) << "a trial of the golden file is missing from the data";
 }
 
 // rcal fuse --set NAME=VALUE: the whole value must be one finite number (std::stod took "0.1abc"

@@ -482,9 +482,9 @@ json PaperJson(const PaperOptions& o, const kinematics::KinematicModel& model,
           {"parameters", r.params.params},
           {"poses_sweep",
            {{"poses", r.n.n_axis},
-            {"ekf_test_mean_position_error_mm", r.n.n_ekf},
-            {"lm_test_mean_position_error_mm", r.n.n_lm},
-            {"crb_test_mean_position_error_mm", r.n.n_crb}}}};
+            {"ekf_test_mean_position_error_m", MetresFromMm(r.n.n_ekf)},
+            {"lm_test_mean_position_error_m", MetresFromMm(r.n.n_lm)},
+            {"crb_test_mean_position_error_m", MetresFromMm(r.n.n_crb)}}}};
 }
 
 // ---- stdout ----

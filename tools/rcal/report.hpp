@@ -11,6 +11,14 @@ namespace rcal::tool {
 constexpr double kMm = 1e3;                        // m → mm, for reports only
 constexpr double kDeg = 180.0 / std::numbers::pi;  // rad → deg, for reports only
 
+/// Figures kept in mm for the reports, back in metres for the JSON files (SI in files).
+inline std::vector<double> MetresFromMm(const std::vector<double>& v_mm) {
+  std::vector<double> v_m;
+  v_m.reserve(v_mm.size());
+  for (double x : v_mm) v_m.push_back(x / kMm);
+  return v_m;
+}
+
 inline std::string Fmt(double v, int digits = 3) {
   char buf[64];
   std::snprintf(buf, sizeof buf, "%.*f", digits, v);
