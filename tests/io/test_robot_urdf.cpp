@@ -300,6 +300,111 @@ TEST(RobotUrdf, BadInputIsNamed) {
             std::string::npos);
 }
 
+// A URDF of the links and joints given; each joint "name:parent:child" is revolute about z with
+// limits ±1 and an origin 0.1 m up.
+std::string GraphUrdf(const std::vector<std::string>& links,
+                      const std::vector<std::string>& joints) {
+  std::string xml = "<?xml version=\"1.0\"?>\n<robot name=\"graph\">\n";
+  for (const auto& l : links) xml += "  <link name=\"" + l + "\"/>\n";
+  for (const auto& j : joints) {
+    const size_t a = j.find(':'), b = j.find(':', a + 1);
+    xml += "  <joint name=\"" + j.substr(0, a) + "\" type=\"revolute\"><parent link=\"" +
+           j.substr(a + 1, b - a - 1) + "\"/><child link=\"" + j.substr(b + 1) +
+           "\"/><origin xyz=\"0 0 0.1\"/><axis xyz=\"0 0 1\"/>"
+           "<limit lower=\"-1\" upper=\"1\" effort=\"1\" velocity=\"1\"/></joint>\n";
+  }
+  return xml + "</robot>\n";
+}
+
+TEST(RobotUrdf, ALoopIsRefusedNamingTheJointThatClosesIt) {
+  // j4's child a is an ancestor of its parent c. liburdfdom accepts this (base is still the one
+  // root); walking to the tip recursed without end (SIGSEGV), and with a tip link the walk up
+  // never reached the base.
+  const std::string xml =
+      GraphUrdf({"base", "a", "b", "c"}, {"j1:base:a", "j2:a:b", "j3:b:c", "j4:c:a"});
+  const std::string expected =
+      "loop.urdf: joint 'j4' closes a loop: its child link 'a' is an ancestor of its parent "
+      "link 'c'";
+  EXPECT_EQ(ErrorOf([&] { ParseUrdfRobotSpec(xml, "loop.urdf"); }), expected);
+  UrdfOptions o;
+  o.tip_link = "c";
+  EXPECT_EQ(ErrorOf([&] { ParseUrdfRobotSpec(xml, "loop.urdf", o); }), expected);
+  // A loop without the root (every link has a parent), and a joint onto its own link.
+  EXPECT_NE(ErrorOf([&] {
+              ParseUrdfRobotSpec(GraphUrdf({"a", "b"}, {"j1:a:b", "j2:b:a"}), "l.urdf");
+            }).find("l.urdf: joint 'j2' closes a loop"),
+            std::string::npos);
+  EXPECT_EQ(ErrorOf([&] {
+              ParseUrdfRobotSpec(GraphUrdf({"a", "b"}, {"j1:a:b", "j2:b:b"}), "s");
+            }),
+            "s: joint 'j2': link 'b' is both its parent and its child");
+}
+
+TEST(RobotUrdf, ALinkWithSeveralParentsIsRefused) {
+  // A diamond: no loop as parent links go, but c is the child of two joints (liburdfdom keeps
+  // the last one and lists c under both parents).
+  const std::string xml =
+      GraphUrdf({"base", "a", "b", "c"}, {"j1:base:a", "j2:base:b", "j3:a:c", "j4:b:c"});
+  EXPECT_EQ(ErrorOf([&] { ParseUrdfRobotSpec(xml, "d.urdf"); }),
+            "d.urdf: joint 'j4': link 'c' already has a parent (joint 'j3'); a link has one "
+            "parent in a URDF tree");
+}
+
+TEST(RobotUrdf, AMissingLinkIsNamedWithItsJoint) {
+  EXPECT_EQ(ErrorOf([&] {
+              ParseUrdfRobotSpec(GraphUrdf({"base", "a"}, {"j1:base:a", "j2:a:ghost"}), "m.urdf");
+            }),
+            "m.urdf: joint 'j2': child link 'ghost' is not a <link> of the file");
+  EXPECT_EQ(ErrorOf([&] {
+              ParseUrdfRobotSpec(GraphUrdf({"base", "a"}, {"j1:nowhere:a"}), "m.urdf");
+            }),
+            "m.urdf: joint 'j1': parent link 'nowhere' is not a <link> of the file");
+  std::string no_parent = GraphUrdf({"base", "a"}, {"j1:base:a"});
+  no_parent.replace(no_parent.find("<parent link=\"base\"/>"), 21, "");
+  EXPECT_EQ(ErrorOf([&] { ParseUrdfRobotSpec(no_parent, "m.urdf"); }),
+            "m.urdf: joint 'j1': no <parent link=\"...\"/>");
+}
+
+TEST(RobotUrdf, ALongChainIsWalkedWithoutRecursion) {
+  // 100 000 links in a row: a recursive walk to the deepest joint needed ~100 000 stack frames.
+  constexpr int kLinks = 100000;
+  std::string xml = "<robot name=\"long\">\n";
+  for (int i = 0; i < kLinks; ++i) xml += "<link name=\"l" + std::to_string(i) + "\"/>";
+  for (int i = 1; i < kLinks; ++i)
+    xml += "<joint name=\"j" + std::to_string(i) + "\" type=\"continuous\"><parent link=\"l" +
+           std::to_string(i - 1) + "\"/><child link=\"l" + std::to_string(i) +
+           "\"/><axis xyz=\"0 0 1\"/></joint>\n";
+  xml += "</robot>\n";
+  const RobotSpec spec = ParseUrdfRobotSpec(xml, "long.urdf");
+  ASSERT_EQ(spec.links.size(), static_cast<size_t>(kLinks - 1));
+  EXPECT_EQ(spec.links.back().joint->name, "j" + std::to_string(kLinks - 1));
+}
+
+TEST(RobotUrdf, DeeplyNestedXmlIsRefusedBeforeTinyxmlRecursesIntoIt) {
+  // tinyxml parses (and frees) one stack frame per nesting level: 300 000 levels overflowed it.
+  std::string xml = "<robot name=\"deep\">";
+  for (int i = 0; i < 300000; ++i) xml += "<a>";
+  EXPECT_EQ(ErrorOf([&] { ParseUrdfRobotSpec(xml, "deep.urdf"); }),
+            "deep.urdf: XML elements nest deeper than 100 levels (line 1)");
+  // Quoted '>' , comments, CDATA and empty elements do not count as nesting.
+  std::string fine = "<robot name=\"x\">";
+  for (int i = 0; i < 500; ++i) fine += "<!-- <a> --><b/><c d=\"<e>\"/><![CDATA[<f>]]>";
+  fine += "</robot>";
+  EXPECT_NE(ErrorOf([&] { ParseUrdfRobotSpec(fine, "fine.urdf"); }).find("not a valid URDF"),
+            std::string::npos);
+}
+
+TEST(RobotUrdf, AbsurdOriginsAndLimitsAreRefusedNamingTheJoint) {
+  std::string far = TinyUrdf("");
+  far.replace(far.find("xyz=\"0 0 0.1\""), 13, "xyz=\"0 0 1e6\"");
+  EXPECT_EQ(ErrorOf([&] { ParseUrdfRobotSpec(far, "far.urdf"); }),
+            "far.urdf: joint 'ab': origin xyz beyond 100 m: not an arm's dimension");
+  std::string wide = TinyUrdf("");
+  wide.replace(wide.find("upper=\"1\""), 9, "upper=\"1e6\"");
+  EXPECT_EQ(ErrorOf([&] { ParseUrdfRobotSpec(wide, "wide.urdf"); }),
+            "wide.urdf: joint 'ab': <limit> beyond 100 rad");
+}
+
 TEST(RobotUrdf, ContinuousAndPrismaticJoints) {
   std::string xml = TinyUrdf("");
   xml.replace(xml.find("type=\"revolute\""), 15, "type=\"continuous\"");

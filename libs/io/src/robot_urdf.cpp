@@ -7,17 +7,168 @@
 #include <cctype>
 #include <charconv>
 #include <cmath>
-#include <functional>
+#include <cstring>
+#include <map>
 #include <numbers>
+#include <set>
 #include <stdexcept>
+#include <vector>
 
 #include "rcal/io/atomic_file.hpp"
 
 namespace rcal::io {
 namespace {
 
+/// Deepest element nesting accepted. tinyxml parses, copies and frees a document recursively, one
+/// stack frame per level, so the file must not choose the depth; a URDF nests 5 or 6 deep.
+constexpr int kMaxXmlDepth = 100;
+
+/// Throws when the elements of `xml` nest deeper than kMaxXmlDepth, before tinyxml recurses into
+/// them. A scan as tinyxml reads tags: comments, CDATA, declarations and `<!...>` hold no
+/// elements; quoted attribute values may hold '>'; `<x/>` opens nothing. Errs only towards a
+/// deeper count (a tag tinyxml would refuse still counts), never a shallower one.
+void CheckXmlDepth(const std::string& xml, const std::string& source) {
+  auto skip_past = [&](size_t from, const char* end) {
+    const size_t e = xml.find(end, from);
+    return e == std::string::npos ? xml.size() : e + std::strlen(end);
+  };
+  int depth = 0, line = 1;
+  for (size_t i = 0; i < xml.size();) {
+    if (xml[i] != '<') {
+      line += xml[i] == '\n' ? 1 : 0;
+      ++i;
+      continue;
+    }
+    size_t next = 0;
+    if (xml.compare(i, 4, "<!--") == 0) {
+      next = skip_past(i + 4, "-->");
+    } else if (xml.compare(i, 9, "<![CDATA[") == 0) {
+      next = skip_past(i + 9, "]]>");
+    } else if (xml.compare(i, 2, "<?") == 0 || xml.compare(i, 2, "<!") == 0) {
+      next = skip_past(i + 2, ">");
+    } else if (xml.compare(i, 2, "</") == 0) {
+      next = skip_past(i + 2, ">");
+      depth = std::max(0, depth - 1);
+    } else {
+      // A start tag: to its '>' outside quotes.
+      size_t k = i + 1;
+      char quote = 0;
+      for (; k < xml.size(); ++k) {
+        const char c = xml[k];
+        if (quote != 0) {
+          if (c == quote) quote = 0;
+        } else if (c == '"' || c == '\'') {
+          quote = c;
+        } else if (c == '>') {
+          break;
+        }
+      }
+      const bool empty = k < xml.size() && xml[k - 1] == '/';
+      if (!empty && ++depth > kMaxXmlDepth)
+        throw std::runtime_error(source + ": XML elements nest deeper than " +
+                                 std::to_string(kMaxXmlDepth) + " levels (line " +
+                                 std::to_string(line) + ")");
+      next = k < xml.size() ? k + 1 : xml.size();
+    }
+    line += static_cast<int>(std::count(xml.begin() + static_cast<std::ptrdiff_t>(i),
+                                        xml.begin() + static_cast<std::ptrdiff_t>(next), '\n'));
+    i = next;
+  }
+}
+
+/// Checks that the <link>s and <joint>s of the <robot> form one tree, naming the joint at fault:
+/// every joint names an existing parent and child link, no link is the child of two joints or of
+/// its own joint, and no joint's child is an ancestor of its parent (a loop). Iterative, so the
+/// file's size, not its shape, bounds the work. Other faults are left to liburdfdom.
+void CheckLinkTree(const TiXmlDocument& doc, const std::string& source) {
+  const TiXmlElement* robot = doc.RootElement();
+  if (robot == nullptr || std::string(robot->Value()) != "robot") return;
+  std::set<std::string> links;
+  for (const TiXmlElement* l = robot->FirstChildElement("link"); l != nullptr;
+       l = l->NextSiblingElement("link")) {
+    const char* name = l->Attribute("name");
+    if (name == nullptr) throw std::runtime_error(source + ": a <link> has no name");
+    if (!links.insert(name).second)
+      throw std::runtime_error(source + ": link '" + name + "' is defined twice");
+  }
+  struct Edge {
+    std::string joint, parent;
+    int order = 0;  // position of the joint in the file
+  };
+  std::map<std::string, Edge> parent_of;  // child link → its joint and parent link
+  std::set<std::string> joints;
+  std::vector<std::pair<std::string, Edge>> second_parents;  // child link → a later joint onto it
+  int order = 0;
+  for (const TiXmlElement* j = robot->FirstChildElement("joint"); j != nullptr;
+       j = j->NextSiblingElement("joint"), ++order) {
+    const char* name_attr = j->Attribute("name");
+    if (name_attr == nullptr) throw std::runtime_error(source + ": a <joint> has no name");
+    const std::string name = name_attr;
+    const std::string where = source + ": joint '" + name + "'";
+    if (!joints.insert(name).second) throw std::runtime_error(where + ": defined twice");
+    auto link_of = [&](const char* role) {
+      const TiXmlElement* e = j->FirstChildElement(role);
+      const char* link = e != nullptr ? e->Attribute("link") : nullptr;
+      if (link == nullptr) throw std::runtime_error(where + ": no <" + role + " link=\"...\"/>");
+      if (!links.count(link))
+        throw std::runtime_error(where + ": " + role + " link '" + link +
+                                 "' is not a <link> of the file");
+      return std::string(link);
+    };
+    const std::string parent = link_of("parent"), child = link_of("child");
+    if (parent == child)
+      throw std::runtime_error(where + ": link '" + child + "' is both its parent and its child");
+    if (!parent_of.emplace(child, Edge{name, parent, order}).second)
+      second_parents.push_back({child, Edge{name, parent, order}});
+  }
+  // Each link has at most one parent, so following parents from any link either reaches a root
+  // or runs into a loop. done: links known to reach a root.
+  std::set<std::string> done;
+  for (const std::string& start : links) {
+    std::vector<std::string> path;
+    std::set<std::string> on_path;
+    std::string l = start;
+    for (;;) {
+      if (done.count(l)) break;
+      if (!on_path.insert(l).second) {
+        // The loop is the part of the path from l on; name its last joint in the file.
+        const Edge* last = nullptr;
+        for (auto p = std::find(path.begin(), path.end(), l); p != path.end(); ++p) {
+          const Edge& e = parent_of.at(*p);
+          if (last == nullptr || e.order > last->order) last = &e;
+        }
+        const std::string child = std::find_if(parent_of.begin(), parent_of.end(), [&](auto& kv) {
+                                    return &kv.second == last;
+                                  })->first;
+        throw std::runtime_error(source + ": joint '" + last->joint +
+                                 "' closes a loop: its child " + "link '" + child +
+                                 "' is an ancestor of its parent link '" + last->parent + "'");
+      }
+      path.push_back(l);
+      const auto p = parent_of.find(l);
+      if (p == parent_of.end()) break;
+      l = p->second.parent;
+    }
+    done.insert(path.begin(), path.end());
+  }
+  // The first parents form a forest now. A later joint onto a link that has one closes a loop
+  // when its child is an ancestor of its parent; otherwise the link has two parents.
+  for (const auto& [child, e] : second_parents) {
+    for (auto p = parent_of.find(e.parent); p != parent_of.end();
+         p = parent_of.find(p->second.parent))
+      if (p->second.parent == child)
+        throw std::runtime_error(source + ": joint '" + e.joint + "' closes a loop: its child " +
+                                 "link '" + child + "' is an ancestor of its parent link '" +
+                                 e.parent + "'");
+    throw std::runtime_error(source + ": joint '" + e.joint + "': link '" + child +
+                             "' already has a parent (joint '" + parent_of.at(child).joint +
+                             "'); a link has one parent in a URDF tree");
+  }
+}
+
 /// Checks XML well-formedness first: urdfdom only logs its reasons, tinyxml gives the line.
 void ParseXml(TiXmlDocument* doc, const std::string& xml, const std::string& source) {
+  CheckXmlDepth(xml, source);
   doc->Parse(xml.c_str());
   if (doc->Error())
     throw std::runtime_error(source + ": malformed XML: " + doc->ErrorDesc() + " (line " +
@@ -27,6 +178,9 @@ void ParseXml(TiXmlDocument* doc, const std::string& xml, const std::string& sou
 urdf::ModelInterfaceSharedPtr ParseUrdf(const std::string& xml, const std::string& source) {
   TiXmlDocument doc;
   ParseXml(&doc, xml, source);
+  // liburdfdom links a loop's links by shared_ptr (leaked) and leaves a link with several parents
+  // to its last joint; walking such a tree never ends. Only a proper tree reaches it.
+  CheckLinkTree(doc, source);
   urdf::ModelInterfaceSharedPtr model = urdf::parseURDF(xml);
   if (!model)
     throw std::runtime_error(source +
@@ -42,6 +196,11 @@ void Origin(const urdf::Joint& j, Eigen::Vector3d* xyz, Eigen::Vector3d* rpy) {
   const Eigen::Quaterniond q(p.rotation.w, p.rotation.x, p.rotation.y, p.rotation.z);
   *rpy = RobustRpy(q.normalized().toRotationMatrix());
 }
+
+/// Largest joint origin offset accepted [m] and largest |limit| [rad | m]: beyond them a value is
+/// a typo or garbage, not an arm (as robot_yaml.hpp's bounds).
+constexpr double kMaxUrdfLength = 100.0;
+constexpr double kMaxUrdfLimit = 100.0;
 
 std::string Num(double v) {
   if (v == 0.0) return "0";
@@ -70,22 +229,31 @@ RobotSpec ParseUrdfRobotSpec(const std::string& urdf_xml, const std::string& sou
     // The child link of the deepest moving joint below the base (depth counted in moving
     // joints); fixed frames after it (flange, tool0, cameras) are left to the marker offset and
     // IMU mounting. Two such links (two arms, gripper fingers) are ambiguous.
+    // Depth first with an explicit stack (the file must not choose the recursion depth) and a
+    // visited set (CheckLinkTree has refused loops; this keeps the walk finite regardless).
     int best = 0;
     std::vector<std::string> tied;
-    std::function<void(const urdf::Link&, int)> walk = [&](const urdf::Link& l, int moving) {
-      for (const auto& c : l.child_links) {
-        const bool moves = c->parent_joint && c->parent_joint->type != urdf::Joint::FIXED;
-        const int depth = moving + (moves ? 1 : 0);
-        if (moves && depth > best) {
-          best = depth;
-          tied = {c->name};
-        } else if (moves && depth == best) {
-          tied.push_back(c->name);
-        }
-        walk(*c, depth);
+    std::vector<std::pair<const urdf::Link*, int>> stack{{base.get(), 0}};
+    std::set<const urdf::Link*> visited{base.get()};
+    while (!stack.empty()) {
+      const auto [l, moving] = stack.back();
+      stack.pop_back();
+      // Children pushed in reverse, so they are visited in file order (the order ties are named).
+      for (auto c = l->child_links.rbegin(); c != l->child_links.rend(); ++c) {
+        if (!visited.insert(c->get()).second)
+          throw std::runtime_error(source + ": link '" + (*c)->name + "' is reached twice");
+        const bool moves = (*c)->parent_joint && (*c)->parent_joint->type != urdf::Joint::FIXED;
+        stack.emplace_back(c->get(), moving + (moves ? 1 : 0));
       }
-    };
-    walk(*base, 0);
+      if (l == base.get()) continue;
+      const bool moves = l->parent_joint && l->parent_joint->type != urdf::Joint::FIXED;
+      if (moves && moving > best) {
+        best = moving;
+        tied = {l->name};
+      } else if (moves && moving == best) {
+        tied.push_back(l->name);
+      }
+    }
     if (tied.empty())
       throw std::runtime_error(source + ": no moving joint below base link '" + base_name + "'");
     if (tied.size() != 1) {
@@ -102,6 +270,10 @@ RobotSpec ParseUrdfRobotSpec(const std::string& urdf_xml, const std::string& sou
   // Walk up from the tip to the base.
   std::vector<urdf::JointConstSharedPtr> chain;
   for (urdf::LinkConstSharedPtr l = tip; l->name != base_name;) {
+    // A tree has no path longer than its joints; a longer one would be a loop.
+    if (chain.size() > urdf->joints_.size())
+      throw std::runtime_error(source + ": the links above tip link '" + tip_name +
+                               "' form a loop");
     if (!l->parent_joint)
       throw std::runtime_error(source + ": tip link '" + tip_name + "' is not below base link '" +
                                base_name + "'");
@@ -121,6 +293,11 @@ RobotSpec ParseUrdfRobotSpec(const std::string& urdf_xml, const std::string& sou
     const std::string where = source + ": joint '" + j->name + "'";
     LinkSpec l;
     Origin(*j, &l.xyz, &l.rpy);
+    if (!l.xyz.allFinite() || !l.rpy.allFinite())
+      throw std::runtime_error(where + ": origin is not finite");
+    if (l.xyz.cwiseAbs().maxCoeff() > kMaxUrdfLength)
+      throw std::runtime_error(where + ": origin xyz beyond " + Num(kMaxUrdfLength) +
+                               " m: not an arm's dimension");
     if (j->type == urdf::Joint::FIXED) {
       l.name = j->name;
       l.identify = false;
@@ -151,15 +328,18 @@ RobotSpec ParseUrdfRobotSpec(const std::string& urdf_xml, const std::string& sou
     } else {
       joint.lower = j->limits->lower;
       joint.upper = j->limits->upper;
+      if (!std::isfinite(joint.lower) || !std::isfinite(joint.upper))
+        throw std::runtime_error(where + ": <limit> lower and upper must be finite");
       if (!(joint.lower < joint.upper))
         throw std::runtime_error(where + ": lower limit must be below upper limit");
+      if (std::max(std::abs(joint.lower), std::abs(joint.upper)) > kMaxUrdfLimit)
+        throw std::runtime_error(where + ": <limit> beyond " + Num(kMaxUrdfLimit) +
+                                 (j->type == urdf::Joint::PRISMATIC ? " m" : " rad"));
     }
     l.axis = {j->axis.x, j->axis.y, j->axis.z};
     if (!l.axis.allFinite() || l.axis.norm() < 1e-9)
       throw std::runtime_error(where + ": axis must be a nonzero vector");
     l.axis.normalize();
-    if (!l.xyz.allFinite() || !l.rpy.allFinite())
-      throw std::runtime_error(where + ": origin is not finite");
     l.joint = joint;
     l.identify = options.identify_joints;
     spec.links.push_back(l);
