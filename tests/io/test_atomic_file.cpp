@@ -5,6 +5,10 @@
 
 #include <gtest/gtest.h>
 #include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
 
 #include <atomic>
 #include <csignal>
@@ -136,6 +140,69 @@ TEST(AtomicFile, ConcurrentWritersOfOnePathEachLeaveAWholeFile) {
   EXPECT_EQ(failures, 0);
   EXPECT_EQ(torn, 0);
   EXPECT_EQ(Names(d.path()), std::set<std::string>{"shared.txt"});
+}
+
+// The temporary files of `target` in `dir` (names starting "TARGET.tmp.").
+std::vector<std::string> TempFiles(const fs::path& dir, const std::string& target) {
+  std::vector<std::string> out;
+  for (const auto& n : Names(dir))
+    if (n.rfind(target + ".tmp.", 0) == 0) out.push_back(n);
+  return out;
+}
+
+// A child process that rewrites `path` with 32 MB until killed; returns when one of its
+// temporary files exists, killed by SIGKILL, so the file it was writing stays behind.
+pid_t KillAWriterMidWrite(const fs::path& dir, const std::string& target) {
+  for (int attempt = 0; attempt < 50; ++attempt) {
+    const pid_t pid = ::fork();
+    if (pid == 0) {
+      const std::string big = Binary(32 << 20, 3);
+      for (;;) AtomicWriteFile(dir / target, big);
+    }
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+    while (TempFiles(dir, target).empty() && std::chrono::steady_clock::now() < until)
+      std::this_thread::yield();
+    ::kill(pid, SIGKILL);
+    int status = 0;
+    ::waitpid(pid, &status, 0);
+    // Killed between two writes (the rename done): try again.
+    for (const auto& n : TempFiles(dir, target))
+      if (n.rfind(target + ".tmp." + std::to_string(pid) + ".", 0) == 0) return pid;
+  }
+  ADD_FAILURE() << "no writer was killed mid-write in 50 attempts";
+  return 0;
+}
+
+TEST(AtomicFile, TemporaryFilesOfKilledWritersAreRemovedOnTheFirstWrite) {
+  ScratchDir d;
+  const pid_t dead = KillAWriterMidWrite(d.path(), "checkpoint.bin");
+  ASSERT_NE(dead, 0);
+  ASSERT_EQ(TempFiles(d.path(), "checkpoint.bin").size(), 1u);
+  // A live process's temporary file (a child that sleeps) and a dead writer's file of another
+  // target must stay.
+  const pid_t live = ::fork();
+  if (live == 0) {
+    ::pause();
+    ::_exit(0);
+  }
+  const std::string live_tmp = "checkpoint.bin.tmp." + std::to_string(live) + ".0";
+  const std::string other_tmp = "other.bin.tmp." + std::to_string(dead) + ".0";
+  AtomicWriteFile(d / live_tmp, "being written by a live process");
+  AtomicWriteFile(d / other_tmp, "another target's");
+  // The old name (no counter) of a dead writer goes too.
+  AtomicWriteFile(d / ("checkpoint.bin.tmp." + std::to_string(dead)), "old layout");
+
+  AtomicWriteFile(d / "checkpoint.bin", "fresh\n");
+  EXPECT_EQ(ReadFile(d / "checkpoint.bin"), "fresh\n");
+  EXPECT_EQ(TempFiles(d.path(), "checkpoint.bin"), std::vector<std::string>{live_tmp});
+  EXPECT_TRUE(fs::exists(d / other_tmp));
+  // Once the live one has died, an explicit clean-up at start removes its file as well.
+  ::kill(live, SIGKILL);
+  ::waitpid(live, nullptr, 0);
+  EXPECT_EQ(RemoveStaleTempFiles(d / "checkpoint.bin"), 1);
+  EXPECT_TRUE(TempFiles(d.path(), "checkpoint.bin").empty());
+  EXPECT_EQ(RemoveStaleTempFiles(d / "other.bin"), 1);
+  EXPECT_EQ(Names(d.path()), (std::set<std::string>{"checkpoint.bin"}));
 }
 
 TEST(AtomicFile, ReadFileOfAMissingFileNamesIt) {
