@@ -312,6 +312,16 @@ INSTANTIATE_TEST_SUITE_P(
                 "links[3].d: value is not finite"},
         BadCase{"tool: {a: 0.010, alpha: 0.1", "tool: {a: 0.010, alpha: inf",
                 "tool.alpha: value is not finite"},
+        // absurd values (were accepted: a 1e6 m link, a 1e9 rad limit, a 1 km tool)
+        BadCase{"{a: 0, alpha: -pi/2, d: 0.645", "{a: 0, alpha: -pi/2, d: 1e6",
+                "links[3].d: '1e6' is beyond 100 m: not an arm's dimension"},
+        BadCase{"tool: {a: 0.010,", "tool: {a: -1000,",
+                "tool.a: '-1000' is beyond 100 m: not an arm's dimension"},
+        BadCase{"upper: 5*pi/6", "upper: 1e9", "links[1].joint.upper: '1e9' is beyond 100 rad"},
+        BadCase{"{a: 0.150, alpha: -pi/2,", "{a: 0.150, alpha: 1e300,",
+                "links[0].alpha: '1e300' is beyond 100 rad"},
+        BadCase{"lower: -17*pi/18, upper: 17*pi/18", "lower: 1, upper: 1",
+                "links[0].joint: lower limit must be below upper limit"},
         // duplicate key, malformed YAML
         BadCase{"tool: {a: 0.010,", "tool: {a: 0.010, a: 0.02,", "tool.a: duplicate key"},
         BadCase{"links:\n", "links: [\n", "malformed YAML"},

@@ -21,6 +21,9 @@ using kinematics::Joint;
 using kinematics::JointType;
 
 constexpr const char* kSchema = "rcal.robot/1";
+/// Bounds of every length [m] and angle [rad] in a file (robot_yaml.hpp).
+constexpr double kMaxLength = 100.0;
+constexpr double kMaxAngle = 100.0;
 
 /// YAML's spellings of the non-finite numbers (.nan, .inf, -.Inf, ...), or nullopt.
 std::optional<double> YamlSpecial(const std::string& s) {
@@ -127,6 +130,9 @@ class Reader {
           &n);
     }
     if (!std::isfinite(*v)) Fail(path, "value is not finite: '" + s + "'", &n);
+    if (!angle && std::abs(*v) > kMaxLength)
+      Fail(path, "'" + s + "' is beyond 100 m: not an arm's dimension", &n);
+    if (angle && std::abs(*v) > kMaxAngle) Fail(path, "'" + s + "' is beyond 100 rad", &n);
     return *v;
   }
 

@@ -3,7 +3,9 @@
 // Schema `rcal.robot/1`. SI units only: lengths in metres, angles in radians. Any angle may be
 // written as a number or as a readable multiple of π: `pi`, `-pi/2`, `2*pi/3`, `0.5*pi`.
 // Unknown keys, missing required keys, wrong types and non-finite values are errors naming the
-// file and the key path, e.g. `grb3016.yaml: links[2].alpah: unknown key (line 14)`.
+// file and the key path, e.g. `grb3016.yaml: links[2].alpah: unknown key (line 14)`. So are
+// absurd values: a length (or prismatic limit) beyond 100 m, an angle (or revolute limit) beyond
+// 100 rad, a lower limit not below the upper one.
 //
 //   schema: rcal.robot/1                     # required, exactly this
 //   name: grb3016                            # required
