@@ -3,13 +3,19 @@
 //
 // Messages are LCM-generated types (anything with encode/decode/getEncodedSize). A message that
 // fails to decode (truncated, wrong type: the LCM fingerprint differs) never reaches the typed
-// handler: the error handler gets a reason naming the channel, and the process goes on.
+// handler: the error handler gets a reason naming the channel, and the process goes on. Before
+// the generated decoder runs, the bytes are walked by the type's schema (lcm_schema.hpp): a length
+// field that is negative, beyond the bytes present or beyond a sane limit is refused there, with a
+// reason naming the channel, the type and the field (LCM 1.3.1's decoders allocate from such a
+// field before checking it: 2 GB from a 422-byte message, then read past the buffer).
 #pragma once
 
 #include <cstdint>
 #include <functional>
 #include <string>
 #include <vector>
+
+#include "rcal/transport/lcm_schema.hpp"
 
 namespace rcal::transport {
 
@@ -41,13 +47,21 @@ class Transport {
     return PublishRaw(channel, buffer.data(), size);
   }
 
-  /// Subscribes a typed handler. Bytes that do not decode as `Msg` go to `on_error` (if given)
-  /// with a reason naming the channel and the type; `on_message` is not called.
+  /// Subscribes a typed handler. Bytes that do not decode as `Msg`, or that CheckLcmMessage
+  /// refuses, go to `on_error` (if given) with a reason naming the channel and the type (and the
+  /// field at fault); `on_message` is not called. `Msg` must be a type of lcmtypes/.
   template <typename Msg>
   void Subscribe(const std::string& channel, std::function<void(const Msg&)> on_message,
                  ErrorHandler on_error = {}) {
     SubscribeRaw(channel, [on_message = std::move(on_message), on_error = std::move(on_error)](
                               const std::string& ch, const void* data, int size) {
+      const std::string refused = size < 0 ? std::string(Msg::getTypeName()) + ": negative size"
+                                           : CheckLcmMessage(Msg::getTypeName(), Msg::getHash(),
+                                                             data, static_cast<size_t>(size));
+      if (!refused.empty()) {
+        if (on_error) on_error("channel " + ch + ": " + refused);
+        return;
+      }
       Msg msg;
       int decoded = -1;
       try {
