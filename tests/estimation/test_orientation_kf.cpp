@@ -313,6 +313,51 @@ TEST(OrientationKf, RefusesBadInputWithoutChangingState) {
   EXPECT_EQ(kf.counters().samples, 0);
 }
 
+// Issue 11: one gyro sample of 1e300 rad/s (finite) made every later estimate NaN. Values beyond
+// the sensor's range are refused naming the field, and the state is unchanged.
+TEST(OrientationKf, RefusesValuesBeyondTheSensorRange) {
+  OrientationKf kf;
+  const Eigen::Vector3d w(0.01, 0, 0), f(0, 0, -kG), m(20, 0, 40);
+  ASSERT_TRUE(kf.Update(0.0, w, f, m).ok());
+  ASSERT_TRUE(kf.Update(0.01, w, f, m).ok());
+  const Eigen::Vector4d q = kf.q_EB();
+  Status s = kf.Update(0.02, Eigen::Vector3d(1e300, 0, 0), f, m);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.error().find("gyro is beyond the sensor range"), std::string::npos) << s.error();
+  s = kf.Update(0.02, w, Eigen::Vector3d(0, 0, -400.0), m);  // 41 g, range 320 m/s²
+  EXPECT_NE(s.error().find("accelerometer is beyond the sensor range"), std::string::npos)
+      << s.error();
+  EXPECT_EQ(kf.q_EB(), q);
+  // At the range itself a sample is still taken.
+  EXPECT_TRUE(kf.Update(0.02, Eigen::Vector3d(0, 0, 0.01), Eigen::Vector3d(0, 0, -kG), m).ok());
+  for (int k = 3; k < 100; ++k) ASSERT_TRUE(kf.Update(0.01 * k, w, f, m).ok());
+  EXPECT_TRUE(kf.q_EB().allFinite());
+  EXPECT_EQ(kf.counters().input_rejected, 2);
+}
+
+// A state that goes non-finite is never kept: here a process noise of 1e300 (a degenerate
+// setting) overflows P on the first step. The filter resets, says so, counts it, and its
+// accessors never return NaN.
+TEST(OrientationKf, ResetsWhenTheStateGoesNonFinite) {
+  OrientationKfSettings st;
+  st.attitude_process_noise = 1e300;
+  st.angular_accel_noise = 1e300;
+  OrientationKf kf(st);
+  const Eigen::Vector3d w(0.01, 0, 0), f(0, 0, -kG), m(20, 0, 40);
+  ASSERT_TRUE(kf.Update(0.0, w, f, m).ok());
+  const Status s = kf.Update(0.01, w, f, m);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.error().find("non-finite"), std::string::npos) << s.error();
+  EXPECT_FALSE(kf.initialized());
+  EXPECT_EQ(kf.counters().resets, 1);
+  EXPECT_TRUE(kf.q_EB().allFinite());
+  EXPECT_TRUE(kf.P().allFinite());
+  // It initialises again at the next sample.
+  EXPECT_TRUE(kf.Update(0.02, w, f, m).ok());
+  EXPECT_TRUE(kf.initialized());
+  EXPECT_EQ(kf.counters().resets, 1);
+}
+
 // BROAD trial 02 (real IMU, optical truth) with the default settings, scored as the benchmark
 // scores. Thresholds: the published Madgwick figures for this trial (1.50 / 1.26 / 0.80°).
 TEST(OrientationKf, BeatsMadgwickOnBroadTrial02) {

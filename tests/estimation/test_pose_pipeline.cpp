@@ -11,6 +11,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <random>
 
 #include "rcal/cell/sim_cell.hpp"
@@ -41,7 +42,9 @@ double ChiSquareQuantileWh(double z, double k) {
   return k * std::pow(1.0 - h + z * std::sqrt(h), 3);
 }
 
-Outcome Simulate(int num_stops, unsigned seed, double still_s = 1.5, double move_s = 1.0) {
+// `inject`, when given, is called after every regular sample (at its time t) to add bad input.
+Outcome Simulate(int num_stops, unsigned seed, double still_s = 1.5, double move_s = 1.0,
+                 const std::function<void(PosePipeline&, double)>& inject = {}) {
   std::mt19937_64 rng(seed);
   std::normal_distribution<double> n(0, 1);
   auto n3 = [&] { return Eigen::Vector3d(n(rng), n(rng), n(rng)); };
@@ -59,6 +62,7 @@ Outcome Simulate(int num_stops, unsigned seed, double still_s = 1.5, double move
     ASSERT_TRUE(pipe.AddImu(t, w_I + sg * n3(), -R.transpose() * g_E + sa * n3(),
                             R.transpose() * m_E + sm * n3()));
     ASSERT_TRUE(pipe.AddPosition(t, p + sp * n3()));
+    if (inject) inject(pipe, t);
     t += dt;
   };
   for (int k = 0; k < num_stops; ++k) {
@@ -241,6 +245,29 @@ TEST(PosePipeline, DeterministicForTheSameInput) {
   for (size_t k = 0; k < a.poses.size(); ++k) {
     EXPECT_EQ(a.poses[k].p_WM_W, b.poses[k].p_WM_W);
     EXPECT_EQ(a.poses[k].covariance, b.poses[k].covariance);
+  }
+}
+
+// Issue 11: one IMU sample with a gyro of 1e300 rad/s made the orientation KF NaN for good and
+// the pipeline produced no pose after it. Refused (beyond the sensor range), it changes nothing:
+// the same poses, bit for bit, as without it.
+TEST(PosePipeline, AGyroBeyondItsRangeIsRefusedAndChangesNoPose) {
+  const Outcome clean = Simulate(6, 7);
+  int refused = 0;
+  const Outcome poisoned = Simulate(6, 7, 1.5, 1.0, [&](PosePipeline& pipe, double t) {
+    if (std::abs(t - 4.0) > 1e-9 && std::abs(t - 6.3) > 1e-9) return;
+    const Status s = pipe.AddImu(t, Eigen::Vector3d(1e300, 0, 0), Eigen::Vector3d(0, 0, 9.81),
+                                 Eigen::Vector3d(20, 0, 44));
+    EXPECT_FALSE(s);
+    EXPECT_NE(s.error().find("gyro is beyond the sensor range"), std::string::npos) << s.error();
+    ++refused;
+  });
+  EXPECT_EQ(refused, 2);
+  ASSERT_EQ(poisoned.poses.size(), clean.poses.size());
+  ASSERT_GE(clean.poses.size(), 4u);
+  for (size_t i = 0; i < clean.poses.size(); ++i) {
+    EXPECT_EQ(poisoned.poses[i].p_WM_W, clean.poses[i].p_WM_W) << i;
+    EXPECT_EQ(poisoned.poses[i].covariance, clean.poses[i].covariance) << i;
   }
 }
 

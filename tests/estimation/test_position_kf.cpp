@@ -163,5 +163,23 @@ TEST(PositionKf, RefusesBadInputWithoutChangingState) {
   EXPECT_EQ(kf.counters().input_rejected, 4);
 }
 
+// A state that goes non-finite is never kept: without the gate, a position of −1e308 after one
+// of +1e308 (both finite) overflows the innovation. The filter resets and says so.
+TEST(PositionKf, ResetsWhenTheStateGoesNonFinite) {
+  PositionKfSettings st;
+  st.position_gate_chi2 = 0.0;
+  PositionKf kf(st);
+  ASSERT_TRUE(kf.UpdatePosition(0.0, Eigen::Vector3d(1e308, 0, 0)).ok());
+  const Status s = kf.UpdatePosition(0.01, Eigen::Vector3d(-1e308, 0, 0));
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.error().find("non-finite"), std::string::npos) << s.error();
+  EXPECT_FALSE(kf.initialized());
+  EXPECT_EQ(kf.counters().resets, 1);
+  EXPECT_TRUE(kf.x().allFinite());
+  EXPECT_TRUE(kf.P().allFinite());
+  ASSERT_TRUE(kf.UpdatePosition(0.02, Eigen::Vector3d(1, 2, 3)).ok());
+  EXPECT_EQ(kf.p_WM_W(), Eigen::Vector3d(1, 2, 3));
+}
+
 }  // namespace
 }  // namespace rcal::estimation

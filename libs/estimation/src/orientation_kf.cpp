@@ -73,7 +73,9 @@ void OrientationKf::Reset() {
   f_I_lp_.setZero();
   m_I_lp_.setZero();
   P_.setIdentity();
+  const std::int64_t resets = counters_.resets;
   counters_ = {};
+  counters_.resets = resets;
   last_tilt_nis_ = std::numeric_limits<double>::quiet_NaN();
   last_heading_nis_ = std::numeric_limits<double>::quiet_NaN();
   last_accel_used_ = false;
@@ -182,6 +184,14 @@ Status OrientationKf::Update(double t, const Eigen::Vector3d& gyro_B, const Eige
   if (!use.mag) ++counters_.mag_rejected;
   last_accel_used_ = use.accel;
   last_mag_used_ = use.mag;
+  if (!(q_EB_.allFinite() && omega_B_.allFinite() && bias_B_.allFinite() && P_.allFinite() &&
+        q_IB_.allFinite() && f_I_lp_.allFinite() && m_I_lp_.allFinite())) {
+    // Never publish or build on a NaN state: start over at the next sample.
+    Reset();
+    ++counters_.resets;
+    return Status::Error("orientation_kf: state went non-finite at t = " + Num(t) +
+                         " s; filter reset (" + std::to_string(counters_.resets) + " so far)");
+  }
   return Status::Ok();
 }
 
@@ -196,6 +206,12 @@ Status OrientationKf::CheckInput(double t, const Eigen::Vector3d& gyro_B,
   if (!gyro_B.allFinite()) return Refuse("gyro is not finite: " + Vec(gyro_B));
   if (!f_B.allFinite()) return Refuse("accelerometer is not finite: " + Vec(f_B));
   if (!m_B.allFinite()) return Refuse("magnetometer is not finite: " + Vec(m_B));
+  if (gyro_B.cwiseAbs().maxCoeff() > settings_.gyro_range)
+    return Refuse("gyro is beyond the sensor range (" + Num(settings_.gyro_range) +
+                  " rad/s): " + Vec(gyro_B));
+  if (f_B.cwiseAbs().maxCoeff() > settings_.accel_range)
+    return Refuse("accelerometer is beyond the sensor range (" + Num(settings_.accel_range) +
+                  " m/s^2): " + Vec(f_B));
   if (initialized_ && !(t > t_))
     return Refuse("time t = " + Num(t) + " s is not after the previous sample (" + Num(t_) + " s)");
   return Status::Ok();

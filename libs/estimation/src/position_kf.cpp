@@ -51,7 +51,9 @@ void PositionKf::Reset() {
   t_ = 0.0;
   x_.setZero();
   P_.setIdentity();
+  const std::int64_t resets = counters_.resets;
   counters_ = {};
+  counters_.resets = resets;
   last_position_nis_ = 0.0;
   last_position_accepted_ = false;
   consecutive_rejections_ = 0;
@@ -151,7 +153,19 @@ Status PositionKf::UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen
   const Mat9 IKH = Mat9::Identity() - K * H;
   P_ = IKH * P_ * IKH.transpose() + K * R * K.transpose();
   ++counters_.accel_samples;
-  return Status::Ok();
+  return GuardState(t);
+}
+
+Status PositionKf::GuardState(double t) {
+  if (x_.allFinite() && P_.allFinite()) return Status::Ok();
+  // Never keep (or publish) a NaN state: initialise again at the next position sample.
+  Reset();
+  ++counters_.resets;
+  std::ostringstream o;
+  o.precision(17);
+  o << "position_kf: state went non-finite at t = " << t << " s; filter reset (" << counters_.resets
+    << " so far)";
+  return Status::Error(o.str());
 }
 
 Status PositionKf::UpdatePosition(double t, const Eigen::Vector3d& p_WM_W) {
@@ -191,7 +205,7 @@ Status PositionKf::UpdatePosition(double t, const Eigen::Vector3d& p_WM_W) {
   P_ = 0.5 * (P_ + P_.transpose());
   ++counters_.position_samples;
   last_position_accepted_ = true;
-  return Status::Ok();
+  return GuardState(t);
 }
 
 }  // namespace rcal::estimation

@@ -44,8 +44,10 @@
 // Rejection: the accelerometer when ||f| − g| > accel_norm_tolerance or its tilt innovation
 // fails a χ² gate; the magnetometer when |m| or its dip angle departs from the reference or its
 // heading innovation fails a χ² gate. Each rejection is counted (Counters).
-// Bad input (non-finite values, non-increasing time) is refused with a Status naming the field;
-// the state is then unchanged.
+// Bad input (non-finite values, values beyond the sensor's range, non-increasing time) is refused
+// with a Status naming the field; the state is then unchanged. A state that still goes non-finite
+// (an input within range but a degenerate step) is never kept: the filter resets, counts it
+// (Counters::resets) and says so in the returned Status, and initialises again on the next sample.
 #pragma once
 
 #include <Eigen/Core>
@@ -152,6 +154,12 @@ struct OrientationKfSettings {
   double initial_attitude_sigma = 0.1;  ///< [rad]
   double initial_rate_sigma = 0.1;      ///< [rad/s]
   double initial_bias_sigma = 0.01;     ///< [rad/s]
+
+  // --- Plausibility: the sensor cannot report beyond its range, so such a sample is corrupt ---
+  /// Largest |gyro| per axis [rad/s]: 40 rad/s ≈ 2300 °/s, above the widest MEMS range (2000 °/s).
+  double gyro_range = 40.0;
+  /// Largest |specific force| per axis [m/s²]: 320 m/s² ≈ 32 g (MEMS IMUs: 16–20 g).
+  double accel_range = 320.0;
 };
 
 class OrientationKf {
@@ -165,11 +173,12 @@ class OrientationKf {
     std::int64_t mag_gated = 0;              ///< of which by the χ² heading gate
     std::int64_t zero_rate_updates = 0;      ///< samples with a zero-rate update
     std::int64_t mag_reference_changes = 0;  ///< new magnetic references adopted
+    std::int64_t resets = 0;                 ///< state went non-finite: reset (kept by Reset)
   };
 
   explicit OrientationKf(const OrientationKfSettings& settings = {});
 
-  /// Forgets the state, the learned magnetic reference and the counters.
+  /// Forgets the state, the learned magnetic reference and the counters (but `resets`).
   void Reset();
 
   /// One IMU sample at time t [s] (strictly increasing): gyro ω_meas [rad/s], specific force

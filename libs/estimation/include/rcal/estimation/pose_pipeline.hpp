@@ -30,7 +30,9 @@
 // A window is dropped (counted, with the reason) when it has fewer than min_window_samples IMU
 // samples, no accepted position sample, or an IMU gap longer than max_gap, or is the warm-up.
 // Bad input (non-finite values, wrong joint count, time going backwards) is refused with a
-// Status naming the field and counted; the state is unchanged.
+// Status naming the field and counted; the state is unchanged. A filter whose state goes
+// non-finite resets (Counters::filter_resets): both filters start again at the next rest, the
+// open window is dropped, and no pose is ever built from a non-finite state.
 #pragma once
 
 #include <Eigen/Core>
@@ -122,6 +124,7 @@ class PosePipeline {
     std::int64_t windows_emitted = 0;  ///< poses produced
     std::int64_t windows_dropped = 0;  ///< windows without a usable pose (or the warm-up)
     std::int64_t imu_before_rest = 0;  ///< IMU samples before the filters started (at rest)
+    std::int64_t filter_resets = 0;    ///< a filter's state went non-finite: both restarted
     std::string last_error;            ///< last refusal or drop reason
   };
 
@@ -154,6 +157,7 @@ class PosePipeline {
   Status Refuse(const std::string& reason);
   void CloseWindow();
   void Drop(const std::string& reason);
+  void FilterReset(double t);
 
   PosePipelineSettings settings_;
   OrientationKf ori_;

@@ -21,6 +21,8 @@
 // (H = rows of p), the accelerometer observes A (H = rows of A). Update as NOTES.md Eqs. 15–17,
 // Joseph form. The position sensor is χ²-gated: NIS = yᵀS⁻¹y > position_gate_chi2 rejects it
 // (counted). Bad input and out-of-order time are refused with a Status; the state is unchanged.
+// A state that goes non-finite anyway is never kept: the filter resets (Counters::resets) and
+// the update returns an Error saying so; the next position sample initialises it again.
 #pragma once
 
 #include <Eigen/Core>
@@ -65,9 +67,11 @@ class PositionKf {
     std::int64_t position_rejected = 0;  ///< position samples rejected by the χ² gate
     std::int64_t input_rejected = 0;     ///< refused calls (bad input, time order)
     std::int64_t reinitialised = 0;      ///< re-initialisations after a run of rejections
+    std::int64_t resets = 0;             ///< state went non-finite: reset (kept by Reset)
   };
 
   explicit PositionKf(const PositionKfSettings& settings = {});
+  /// Forgets the state and the counters (but `resets`).
   void Reset();
 
   /// Accelerometer sample at t [s] (not before the last update): specific force f_B [m/s²] in
@@ -102,6 +106,8 @@ class PositionKf {
   using Vec9 = Eigen::Matrix<double, 9, 1>;
   void PredictTo(double t);
   Status Check(double t, const Eigen::Vector3d& v, const char* name);
+  // After an update: Ok, or the state went non-finite and the filter was reset (an Error).
+  Status GuardState(double t);
   void Initialise(double t, const Eigen::Vector3d& p);
 
   PositionKfSettings settings_;
