@@ -94,6 +94,20 @@ const LcmSchema& RcalLcmSchema();
 std::string CheckLcmMessage(std::string_view type_name, int64_t fingerprint, const void* data,
                             size_t size, const LcmLimits& limits = {});
 
+/// Checks `data` with CheckLcmMessage, then decodes it into `msg`. Returns "" on success, else
+/// the reason (the check's, or "does not decode as T" when the generated decoder fails or throws).
+/// Every decode of LCM data in rcal goes through this (Transport::Subscribe, the log readers).
+template <typename Msg>
+std::string DecodeLcm(const void* data, size_t size, Msg* msg) {
+  std::string refused = CheckLcmMessage(Msg::getTypeName(), Msg::getHash(), data, size);
+  if (!refused.empty()) return refused;
+  try {
+    if (msg->decode(data, 0, static_cast<int>(size)) == static_cast<int>(size)) return {};
+  } catch (...) {  // generated code does not throw, but allocation can
+  }
+  return std::to_string(size) + " bytes do not decode as " + Msg::getTypeName();
+}
+
 namespace detail {
 /// The embedded .lcm files: (file name, text). Defined in the generated lcm_schema_text.cpp.
 struct EmbeddedLcmFile {

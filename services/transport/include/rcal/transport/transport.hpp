@@ -55,24 +55,13 @@ class Transport {
                  ErrorHandler on_error = {}) {
     SubscribeRaw(channel, [on_message = std::move(on_message), on_error = std::move(on_error)](
                               const std::string& ch, const void* data, int size) {
-      const std::string refused = size < 0 ? std::string(Msg::getTypeName()) + ": negative size"
-                                           : CheckLcmMessage(Msg::getTypeName(), Msg::getHash(),
-                                                             data, static_cast<size_t>(size));
+      Msg msg;
+      // Bounds first (DecodeLcm): the generated decoder allocates from length fields unchecked.
+      const std::string refused =
+          size < 0 ? std::string(Msg::getTypeName()) + ": negative size"
+                   : DecodeLcm(data, static_cast<size_t>(size), &msg);
       if (!refused.empty()) {
         if (on_error) on_error("channel " + ch + ": " + refused);
-        return;
-      }
-      Msg msg;
-      int decoded = -1;
-      try {
-        decoded = msg.decode(data, 0, size);
-      } catch (...) {  // generated code does not throw, but allocation can
-        decoded = -1;
-      }
-      if (decoded < 0) {
-        if (on_error)
-          on_error("channel " + ch + ": " + std::to_string(size) + " bytes do not decode as " +
-                   Msg::getTypeName());
         return;
       }
       on_message(msg);
