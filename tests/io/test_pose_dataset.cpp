@@ -7,11 +7,13 @@
 #include <Eigen/Geometry>
 #include <cmath>
 #include <fstream>
+#include <numbers>
 #include <random>
 #include <sstream>
 
 #include "io_test_util.hpp"
 #include "rcal/io/atomic_file.hpp"
+#include "rcal/io/robot_urdf.hpp"
 
 namespace rcal::io {
 namespace {
@@ -184,7 +186,137 @@ INSTANTIATE_TEST_SUITE_P(
                "columns 'phix1,phiy1,phiz1' come together"},
         BadCsv{"x1,y1,phix1,phiy1,phiz1,j1,j2\n1,2,0,0,0,0,0\n", "missing column 'z1'"},
         BadCsv{"x1,y1,z1,j1,j2,j3\n1,2,3,0,0,0\n", "has 3 joint columns, expected 2"},
-        BadCsv{"x1,y1,z1,j1,j2\n1,2,3,0,\n", "row 1 column 'j2' is empty"}));
+        BadCsv{"x1,y1,z1,j1,j2\n1,2,3,0,\n", "row 1 column 'j2' is empty"},
+        // Values no measurement has (were read: q1 = 1e308 calibrated a robot, held-out 116 m).
+        BadCsv{"q1,q2,x,y,z\n0,0,1,2,3\n1e308,0,1,2,3\n",
+               "row 2 column 'q1' is 1e308: outside [-1000, 1000] rad or m"},
+        BadCsv{"q1,q2,x,y,z\n0,0,1e12,2,3\n",
+               "row 1 column 'x' is 1e12: outside [-1e+06, 1e+06] m"},
+        BadCsv{"q1,q2,x,y,z\n0,0,1,2,inf\n", "row 1 column 'z' is 'inf': a number is required"},
+        BadCsv{"q1,q2,x,y,z,temperature\n0,0,1,2,3,-300\n",
+               "row 1 column 'temperature' is -300: outside [-273.15, 1000] °C"},
+        BadCsv{"q1,q2,x,y,z,payload\n0,0,1,2,3,-1\n",
+               "row 1 column 'payload' is -1: outside [0, 10000] kg"},
+        BadCsv{"q1,q2,x,y,z,time\n0,0,1,2,3,1e300\n",
+               "row 1 column 'time' is 1e300: outside [-1e+10, 1e+10] s"},
+        BadCsv{"x1,y1,z1,phix1,phiy1,phiz1,j1,j2\n1,2,3,0,1e9,0,0,0\n",
+               "row 1 column 'phiy1' is 1e9: outside [-100, 100] rad"}));
+
+LoadedRobot Grb3016(bool unknown_base) {
+  LoadedRobot r = LoadRobot(testing::SourceDir() / "config/robots/grb3016.yaml");
+  if (unknown_base) {
+    r.spec.base = FrameSpec{};
+    r.model = BuildModel(r.spec);
+  }
+  return r;
+}
+
+// The GRB3016 at its zero pose with the marker 0.1 m in front of the origin, as a dataset row.
+PoseSample SampleAt(const Eigen::VectorXd& q, const Eigen::Vector3d& p, int row) {
+  PoseSample s;
+  s.q = q;
+  s.p_WM_W = p;
+  s.row = row;
+  return s;
+}
+
+TEST(PosePlausibility, ArmReachIsTheSumOfTheDrawingsTranslations) {
+  // Independent truth: the D–H lengths of config/robots/grb3016.yaml, summed by hand (links
+  // a + d, tool a + d); the unknown base adds nothing.
+  const LoadedRobot r = Grb3016(true);
+  double by_hand = r.spec.tool->a + r.spec.tool->d;
+  for (const auto& l : r.spec.links) by_hand += std::abs(l.a) + std::abs(l.d);
+  EXPECT_NEAR(ArmReach(r.model, false), by_hand, 1e-12);
+  EXPECT_NEAR(ArmReach(r.model, true), by_hand, 1e-12);
+  // A known base 2 m away counts with include_base.
+  LoadedRobot moved = Grb3016(false);
+  moved.spec.base = FrameSpec{Eigen::Vector3d(2.0, 0, 0), Eigen::Vector3d::Zero(), false};
+  moved.model = BuildModel(moved.spec);
+  EXPECT_NEAR(ArmReach(moved.model, true), by_hand + 2.0, 1e-12);
+  // Every pose of the arm lies within it.
+  std::mt19937 rng(3);
+  for (int k = 0; k < 200; ++k) {
+    Eigen::VectorXd q(6);
+    for (int j = 0; j < 6; ++j) {
+      const auto& jt = r.model.joints()[j];
+      q(j) = std::uniform_real_distribution<double>(jt.lower, jt.upper)(rng);
+    }
+    EXPECT_LE(r.model.Forward(q, r.model.Nominal()).p_WM_W.norm(), by_hand);
+  }
+}
+
+TEST(PosePlausibility, JointsBeyondTheirLimitsAreRefusedNamingRowAndColumn) {
+  const LoadedRobot r = Grb3016(false);
+  PoseDataset d;
+  d.num_joints = 6;
+  Eigen::VectorXd q = Eigen::VectorXd::Zero(6);
+  d.samples = {SampleAt(q, {0.5, 0, 0.5}, 1)};
+  EXPECT_EQ(ErrorOf([&] { CheckPosesPlausible(d, r.model, "p.csv"); }), "<no error>");
+  // j2's limits are [-pi/2, 5pi/6]: 0.05 rad beyond passes (the margin is 0.1 rad), 0.2 does not.
+  q(1) = -std::numbers::pi / 2 - 0.05;
+  d.samples.push_back(SampleAt(q, {0.5, 0, 0.5}, 2));
+  EXPECT_EQ(ErrorOf([&] { CheckPosesPlausible(d, r.model, "p.csv"); }), "<no error>");
+  q(1) = -std::numbers::pi / 2 - 0.2;
+  d.samples.push_back(SampleAt(q, {0.5, 0, 0.5}, 3));
+  EXPECT_EQ(ErrorOf([&] { CheckPosesPlausible(d, r.model, "p.csv"); }),
+            "p.csv: row 3 column 'q2' (joint 'j2') is -1.7708 rad: beyond its limits "
+            "[-1.5708, 2.61799] by more than 0.1 rad (PosePlausibility::joint_limit_margin_rad)");
+  PosePlausibility loose;
+  loose.joint_limit_margin_rad = 0.3;
+  EXPECT_EQ(ErrorOf([&] { CheckPosesPlausible(d, r.model, "p.csv", loose); }), "<no error>");
+  // q1 = 1e6 rad on j1 (limits ±17pi/18); j6 spans ±2pi, a full turn: bounded at ±100 rad only.
+  d.samples.resize(1);
+  d.samples[0].q(0) = 1e6;
+  EXPECT_NE(ErrorOf([&] {
+              CheckPosesPlausible(d, r.model, "p.csv");
+            }).find("p.csv: row 1 column 'q1' (joint 'j1') is 1e+06 rad: beyond its limits"),
+            std::string::npos);
+  d.samples[0].q(0) = 0.0;
+  d.samples[0].q(5) = 20.0;
+  EXPECT_EQ(ErrorOf([&] { CheckPosesPlausible(d, r.model, "p.csv"); }), "<no error>");
+  d.samples[0].q(5) = 1e6;
+  EXPECT_EQ(ErrorOf([&] { CheckPosesPlausible(d, r.model, "p.csv"); }),
+            "p.csv: row 1 column 'q6' (joint 'j6') is 1e+06 rad: beyond ±100 rad "
+            "(PosePlausibility::wrapping_joint_bound_rad)");
+}
+
+TEST(PosePlausibility, PositionsBeyondTheArmsReachAreRefused) {
+  // The GRB3016 with its base unknown (rcal's --frames auto): positions are judged against
+  // their median. x = 1000 m in one row of 5.
+  const LoadedRobot r = Grb3016(true);
+  PoseDataset d;
+  d.num_joints = 6;
+  for (int k = 0; k < 5; ++k)
+    d.samples.push_back(SampleAt(Eigen::VectorXd::Zero(6), {10.0 + 0.3 * k, -5.0, 1.0}, k + 1));
+  EXPECT_EQ(ErrorOf([&] { CheckPosesPlausible(d, r.model, "p.csv"); }), "<no error>");
+  d.samples[3].p_WM_W.x() = 1000.0;
+  const std::string msg = ErrorOf([&] { CheckPosesPlausible(d, r.model, "p.csv"); });
+  EXPECT_NE(msg.find("p.csv: row 4 column 'x' is 1000 m: the marker is 989.4 m from the median "
+                     "of the measured positions, beyond the arm's reach"),
+            std::string::npos)
+      << msg;
+  // With the base known (world = base), |p| itself is bounded: 10 m is out of reach.
+  const LoadedRobot fixed = Grb3016(false);
+  d.samples[3].p_WM_W.x() = 10.9;
+  EXPECT_NE(ErrorOf([&] { CheckPosesPlausible(d, fixed.model, "p.csv"); })
+                .find("p.csv: row 1 column 'x' is 10 m: the marker is 11.225 m from the world "
+                      "origin"),
+            std::string::npos);
+}
+
+TEST(PosePlausibility, TheRealUr10DataPassesAndOnePositionOf1e12DoesNot) {
+  UrdfOptions o;
+  o.add_base_frame = true;
+  o.add_marker = true;
+  const LoadedRobot r = LoadRobot(testing::SharedDir() / "data/figaroh_ur10/robot.urdf", o);
+  PoseDataset d = LoadFigarohUr10(FigarohCsv());
+  EXPECT_EQ(ErrorOf([&] { CheckPosesPlausible(d, r.model, "ur10.csv"); }), "<no error>");
+  d.samples[7].p_WM_W.z() = 1e12;
+  EXPECT_NE(ErrorOf([&] {
+              CheckPosesPlausible(d, r.model, "ur10.csv");
+            }).find("ur10.csv: row 8 column 'z1' is 1e+12 m"),
+            std::string::npos);
+}
 
 TEST(PoseDataset, FigarohUr10LoadsWithOrientation) {
   const PoseDataset d = LoadPoseDataset(FigarohCsv(), 6);  // layout detected from x1/phix1

@@ -57,6 +57,9 @@ io::PoseDataset LoadPoseDataFor(const io::LoadedRobot& robot, const std::string&
     data = io::LoadPoseDataset(path, robot.model.num_joints(), joint_names);
   }
   if (data.samples.empty()) throw std::runtime_error(data_path + ": no poses");
+  // Poses this robot cannot have produced (joints far beyond their limits, a marker beyond the
+  // arm's reach) would be fitted as if true: refused, naming the row and the column.
+  io::CheckPosesPlausible(data, robot.model, data_path);
   for (const auto& s : data.samples)
     if (s.marker != 0)
       throw std::runtime_error(data_path +

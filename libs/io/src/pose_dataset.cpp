@@ -2,8 +2,10 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <numbers>
 #include <set>
 #include <sstream>
 #include <stdexcept>
@@ -41,6 +43,42 @@ double Required(const CsvTable& t, int r, const std::string& column) {
     Fail(t, Row(r) + " column '" + column + "' is " +
                 (t.Text(r, column).empty() ? "empty" : "'" + t.Text(r, column) + "'") +
                 ": a number is required");
+  return v;
+}
+
+/// Bounds of values no measurement can have (pose_dataset.hpp); beyond them a cell is garbage.
+constexpr double kMaxJoint = 1e3;        // [rad | m]
+constexpr double kMaxPosition = 1e6;     // [m]
+constexpr double kMaxAngle = 100.0;      // [rad], FIGAROH roll, pitch, yaw
+constexpr double kMaxTime = 1e10;        // [s]
+constexpr double kMaxPayload = 1e4;      // [kg]
+constexpr double kMaxTemperature = 1e3;  // [°C]
+constexpr double kAbsoluteZero = -273.15;
+
+std::string Number(double v) {
+  std::ostringstream o;
+  o << v;
+  return o.str();
+}
+
+/// A required cell within [lo, hi].
+double Bounded(const CsvTable& t, int r, const std::string& column, double lo, double hi,
+               const char* unit) {
+  const double v = Required(t, r, column);
+  if (v < lo || v > hi)
+    Fail(t, Row(r) + " column '" + column + "' is " + t.Text(r, column) + ": outside [" +
+                Number(lo) + ", " + Number(hi) + "] " + unit);
+  return v;
+}
+
+/// An optional cell (NaN when absent) within [lo, hi] when present.
+double OptionalBounded(const CsvTable& t, int r, const std::string& column, double lo, double hi,
+                       const char* unit) {
+  const double v = t.At(r, column);
+  if (std::isnan(v)) return v;
+  if (!std::isfinite(v) || v < lo || v > hi)
+    Fail(t, Row(r) + " column '" + column + "' is " + t.Text(r, column) + ": outside [" +
+                Number(lo) + ", " + Number(hi) + "] " + unit);
   return v;
 }
 
@@ -106,16 +144,20 @@ PoseDataset ParseFigaroh(const CsvTable& t, int expected_num_joints,
   out.has_orientation = true;
   for (int r = 0; r < t.rows(); ++r) {
     Eigen::VectorXd q(out.num_joints);
-    for (int j = 0; j < out.num_joints; ++j) q(j) = Required(t, r, joints[j]);
+    for (int j = 0; j < out.num_joints; ++j)
+      q(j) = Bounded(t, r, joints[j], -kMaxJoint, kMaxJoint, "rad or m");
     for (size_t m = 0; m < marker_orientation.size(); ++m) {
       const std::string s = std::to_string(m + 1);
       PoseSample p;
       p.q = q;
+      p.row = r + 1;
       p.marker = static_cast<int>(m);
-      for (int i = 0; i < 3; ++i) p.p_WM_W(i) = Required(t, r, std::string(1, "xyz"[i]) + s);
+      for (int i = 0; i < 3; ++i)
+        p.p_WM_W(i) = Bounded(t, r, std::string(1, "xyz"[i]) + s, -kMaxPosition, kMaxPosition, "m");
       if (marker_orientation[m]) {
-        const double roll = Required(t, r, "phix" + s), pitch = Required(t, r, "phiy" + s),
-                     yaw = Required(t, r, "phiz" + s);
+        const double roll = Bounded(t, r, "phix" + s, -kMaxAngle, kMaxAngle, "rad"),
+                     pitch = Bounded(t, r, "phiy" + s, -kMaxAngle, kMaxAngle, "rad"),
+                     yaw = Bounded(t, r, "phiz" + s, -kMaxAngle, kMaxAngle, "rad");
         p.has_orientation = true;
         p.q_EI_wxyz = geometry::MatrixToQuat(geometry::FromRpy(roll, pitch, yaw));
       }
@@ -176,9 +218,11 @@ PoseDataset ParseRcal(const CsvTable& t, int expected_num_joints) {
   out.has_orientation = quat_cols && t.rows() > 0;
   for (int r = 0; r < t.rows(); ++r) {
     PoseSample p;
+    p.row = r + 1;
     p.q.resize(n);
-    for (int j = 0; j < n; ++j) p.q(j) = Required(t, r, qcols[j]);
-    p.p_WM_W = {Required(t, r, "x"), Required(t, r, "y"), Required(t, r, "z")};
+    for (int j = 0; j < n; ++j) p.q(j) = Bounded(t, r, qcols[j], -kMaxJoint, kMaxJoint, "rad or m");
+    for (int i = 0; i < 3; ++i)
+      p.p_WM_W(i) = Bounded(t, r, std::string(1, "xyz"[i]), -kMaxPosition, kMaxPosition, "m");
     if (quat_cols) {
       Eigen::Vector4d q;
       int present = 0;
@@ -204,9 +248,10 @@ PoseDataset ParseRcal(const CsvTable& t, int expected_num_joints) {
              Row(r) + " column 'marker' must be an integer id, got '" + t.Text(r, "marker") + "'");
       p.marker = static_cast<int>(m);
     }
-    if (t.Has("temperature")) p.temperature = t.At(r, "temperature");
-    if (t.Has("payload")) p.payload = t.At(r, "payload");
-    if (t.Has("time")) p.time = t.At(r, "time");
+    if (t.Has("temperature"))
+      p.temperature = OptionalBounded(t, r, "temperature", kAbsoluteZero, kMaxTemperature, "°C");
+    if (t.Has("payload")) p.payload = OptionalBounded(t, r, "payload", 0.0, kMaxPayload, "kg");
+    if (t.Has("time")) p.time = OptionalBounded(t, r, "time", -kMaxTime, kMaxTime, "s");
     if (dq_count != 0) {
       int present = 0;
       for (const auto& c : dqcols) present += std::isfinite(t.At(r, c)) ? 1 : 0;
@@ -251,7 +296,100 @@ std::string Num(double v) {
   return std::string(buf, ptr);
 }
 
+/// "row N" of a sample (its file row), else "pose N" (its place in the dataset, 1 = first).
+std::string Where(const PoseSample& p, size_t i) {
+  return p.row > 0 ? "row " + std::to_string(p.row) : "pose " + std::to_string(i + 1);
+}
+
+bool IsUnknownBase(const kinematics::KinematicModel& model,
+                   const kinematics::ElementaryTransform& et) {
+  return et.param >= 0 && model.parameters()[et.param].group == "base";
+}
+
 }  // namespace
+
+double ArmReach(const kinematics::KinematicModel& model, bool include_base) {
+  double reach = 0.0;
+  for (const auto& et : model.ets(kinematics::Segment::kChain)) {
+    if (et.kind != kinematics::ElementaryTransform::Kind::kTranslation) continue;
+    if (!include_base && IsUnknownBase(model, et)) continue;
+    double v = std::abs(et.nominal);
+    if (et.joint >= 0) {
+      const kinematics::Joint& j = model.joints()[et.joint];
+      v += std::max(std::abs(j.lower), std::abs(j.upper));
+    }
+    reach += v;
+  }
+  return reach;
+}
+
+void CheckPosesPlausible(const PoseDataset& data, const kinematics::KinematicModel& model,
+                         const std::string& source, const PosePlausibility& settings) {
+  const auto& joints = model.joints();
+  for (size_t i = 0; i < data.samples.size(); ++i) {
+    const PoseSample& p = data.samples[i];
+    if (p.q.size() != model.num_joints())
+      throw std::runtime_error(source + ": " + Where(p, i) + " has " + std::to_string(p.q.size()) +
+                               " joints, the robot " + std::to_string(model.num_joints()));
+    for (int j = 0; j < model.num_joints(); ++j) {
+      const kinematics::Joint& jt = joints[j];
+      const std::string column =
+          data.joint_names.size() == joints.size() ? data.joint_names[j] : Indexed("q", j + 1);
+      const std::string at = source + ": " + Where(p, i) + " column '" + column + "' (joint '" +
+                             jt.name + "') is " + Number(p.q(j));
+      if (!std::isfinite(p.q(j))) throw std::runtime_error(at + ": not a number");
+      const bool revolute = jt.type == kinematics::JointType::kRevolute;
+      if (revolute && jt.upper - jt.lower >= 2.0 * std::numbers::pi - 1e-9) {
+        if (std::abs(p.q(j)) > settings.wrapping_joint_bound_rad)
+          throw std::runtime_error(at + " rad: beyond ±" +
+                                   Number(settings.wrapping_joint_bound_rad) +
+                                   " rad (PosePlausibility::wrapping_joint_bound_rad)");
+        continue;
+      }
+      const double margin =
+          revolute ? settings.joint_limit_margin_rad : settings.joint_limit_margin_m;
+      if (p.q(j) < jt.lower - margin || p.q(j) > jt.upper + margin)
+        throw std::runtime_error(
+            at + (revolute ? " rad" : " m") + ": beyond its limits [" + Number(jt.lower) + ", " +
+            Number(jt.upper) + "] by more than " + Number(margin) + (revolute ? " rad" : " m") +
+            " (PosePlausibility::joint_limit_margin_" + (revolute ? "rad" : "m") + ")");
+    }
+  }
+  // Positions: against the origin when the base is known, else against the median position.
+  bool unknown_base = false;
+  for (const auto& et : model.ets(kinematics::Segment::kChain))
+    unknown_base =
+        unknown_base || (et.kind == kinematics::ElementaryTransform::Kind::kTranslation &&
+                         IsUnknownBase(model, et));
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  double bound = ArmReach(model, true) + settings.reach_margin_m;
+  if (unknown_base && !data.samples.empty()) {
+    for (int k = 0; k < 3; ++k) {
+      std::vector<double> v;
+      for (const auto& p : data.samples)
+        if (std::isfinite(p.p_WM_W(k))) v.push_back(p.p_WM_W(k));
+      if (v.empty()) continue;
+      std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+      centre(k) = v[v.size() / 2];
+    }
+    bound = (1.0 + std::sqrt(3.0)) * ArmReach(model, false) + settings.reach_margin_m;
+  }
+  for (size_t i = 0; i < data.samples.size(); ++i) {
+    const PoseSample& p = data.samples[i];
+    const double dist = (p.p_WM_W - centre).norm();
+    if (std::isfinite(dist) && dist <= bound) continue;
+    int k = 0;
+    (p.p_WM_W - centre).cwiseAbs().maxCoeff(&k);
+    const std::string marker = data.joint_names.empty() ? "" : std::to_string(p.marker + 1);
+    const std::string column = std::string(1, "xyz"[k]) + marker;
+    throw std::runtime_error(
+        source + ": " + Where(p, i) + " column '" + column + "' is " + Number(p.p_WM_W(k)) +
+        " m: the marker is " + Number(dist) + " m from " +
+        (unknown_base ? "the median of the measured positions" : "the world origin") +
+        ", beyond the arm's reach (" + Number(bound - settings.reach_margin_m) + " m + " +
+        Number(settings.reach_margin_m) + " m, PosePlausibility::reach_margin_m)");
+  }
+}
 
 PoseDataset ParsePoseDataset(const std::string& text, const std::string& source,
                              int expected_num_joints, const std::vector<std::string>& joint_names) {

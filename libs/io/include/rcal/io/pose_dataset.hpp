@@ -18,6 +18,12 @@
 // phixk, phiyk, phizk (roll, pitch, yaw [rad], R = Rz(yaw)·Ry(pitch)·Rx(roll)), world frame; every
 // other column is a joint position named after its joint, in the model's joint order. Marker k
 // becomes PoseSample::marker = k − 1, one sample per marker and row.
+//
+// Values no measurement can have are refused naming the row and column: non-finite joints and
+// positions, |q| beyond 1000 (rad or m), |x|, |y|, |z| beyond 1e6 m, angles beyond 100 rad,
+// temperature outside [−273.15, 1000] °C, payload outside [0, 1e4] kg, |time| beyond 1e10 s.
+// What the robot cannot reach is CheckPosesPlausible's: joints beyond their limits, positions
+// beyond the arm's reach.
 #pragma once
 
 #include <Eigen/Core>
@@ -25,6 +31,8 @@
 #include <limits>
 #include <string>
 #include <vector>
+
+#include "rcal/kinematics/model.hpp"
 
 namespace rcal::io {
 
@@ -42,6 +50,7 @@ struct PoseSample {
   double time = kAbsent;         ///< [s], NaN when absent
   Eigen::VectorXi dq_sign;       ///< sign of the last motion per joint; empty when absent
   Set set = kUnspecified;
+  int row = 0;  ///< data row of the file it was read from (1 = first), 0 when not from a file
 
   static constexpr double kAbsent = std::numeric_limits<double>::quiet_NaN();
 };
@@ -73,6 +82,39 @@ PoseDataset LoadFigarohDataset(const std::filesystem::path& path,
 /// The UR10 data of ../shared/data/figaroh_ur10/calibration.csv: the FIGAROH layout with the six
 /// UR joint columns (shoulder_pan_joint … wrist_3_joint) in chain order.
 PoseDataset LoadFigarohUr10(const std::filesystem::path& path);
+
+/// How far measured poses may lie from what the robot can do before they are refused as
+/// impossible (a wrong unit, a corrupted cell, another robot's file), not just inaccurate.
+struct PosePlausibility {
+  /// A joint may read this far beyond its limits [rad] (revolute) or [m] (prismatic): limits in
+  /// a robot file are often the controller's soft limits, and calibration data sits near them.
+  double joint_limit_margin_rad = 0.1;
+  double joint_limit_margin_m = 0.01;
+  /// A revolute joint whose limits span a full turn or more (a URDF continuous joint gets
+  /// [−π, π]) may read any number of turns: it is refused only beyond ±this [rad].
+  double wrapping_joint_bound_rad = 100.0;
+  /// Positions may lie this far [m] beyond the arm's reach (ArmReach): room for an unknown
+  /// marker offset and errors in the drawing.
+  double reach_margin_m = 1.0;
+};
+
+/// An upper bound [m] on the distance of the marker from the origin of the chain's first frame:
+/// the sum of the translations of the chain (link lengths and offsets, a prismatic joint at its
+/// largest |limit|, the nominal tool and marker offsets). With `include_base`, the nominal
+/// world ← base translation is included (then it bounds |p_WM_W|); without, identified base
+/// translations are left out (their nominal is only a guess).
+double ArmReach(const kinematics::KinematicModel& model, bool include_base);
+
+/// Refuses a dataset the robot cannot have produced: a joint beyond its limits by more than the
+/// margin, or a marker position beyond the arm's reach plus the margin. When the world ← base
+/// translation is known (fixed in the model), |p_WM_W| is bounded by ArmReach(model, true); when
+/// it is identified (unknown), each position's distance from the median of all positions is
+/// bounded by (1 + √3)·ArmReach(model, false) (the median of points in a ball of radius R lies
+/// within √3·R of its centre). Throws std::runtime_error "SOURCE: row N column 'q2': ..." naming
+/// the first offending row (PoseSample::row, else the sample's position in the dataset) and
+/// column.
+void CheckPosesPlausible(const PoseDataset& data, const kinematics::KinematicModel& model,
+                         const std::string& source, const PosePlausibility& settings = {});
 
 /// The rcal-layout CSV text of a dataset (full double precision). Optional columns are written
 /// when any sample has them; `comments` become `#` lines.
