@@ -8,6 +8,16 @@
 // decode, wrong sizes, NaN, time not after the last pose) are rejected, counted in HEALTH, and
 // leave the state untouched.
 //
+// Time and sequence (issue 11): POSE_MEASUREMENT passes an estimation::TimeGate (--horizon,
+// default an hour of sensor time between poses; --resync-samples): an exact duplicate, a pose
+// before the last, or one beyond the horizon or the host-clock ceiling is refused and counted in
+// HEALTH, and never becomes the last time or reaches the checkpoint; a pose stream that started
+// over (a restarted still_window with a new time base) is re-synchronised after --resync-samples
+// consistent poses. A checkpoint whose time is beyond the host-clock ceiling is not trusted: it
+// is moved aside as *.rejected. pose_index gaps (poses lost on the wire or in LCM's queue) are
+// counted in HEALTH gaps. Joints beyond the model's limits by more than --joint-margin and
+// positions beyond transport::SensorRanges::position are refused naming the field.
+//
 // --cell-seed S (sensor level): the model, base set and start of the offline
 // `rcal experiment paper --sensors --seed S` (rcal::cell::MakeCell: the arm plus the set-up
 // frames base/earth/marker/IMU). The first --guess-poses poses are held back, the set-up guess is
@@ -27,6 +37,7 @@
 #include <optional>
 
 #include "rcal/cell/online_identification.hpp"
+#include "rcal/estimation/time_gate.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
 #include "rcal/identification/metrics.hpp"
 #include "rcal/io/robot_urdf.hpp"
@@ -35,6 +46,7 @@
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/checkpoint_json.hpp"
+#include "rcal/transport/filter_nodes.hpp"
 #include "rcal/transport/health.hpp"
 #include "rcal/transport/lcm_transport.hpp"
 
@@ -42,6 +54,16 @@ namespace {
 
 using namespace rcal;
 namespace ch = transport::channels;
+
+// Poses are seconds to minutes apart and irregular: an hour's horizon, no gap count from time
+// (pose_index counts the gaps).
+estimation::TimeGateSettings PoseTimeGate() {
+  estimation::TimeGateSettings s;
+  s.horizon_us = 3'600'000'000LL;
+  s.resync_samples = 3;
+  s.gap_factor = 0.0;
+  return s;
+}
 
 struct Options {
   std::string robot = "config/robots/grb3016.yaml";
@@ -52,6 +74,8 @@ struct Options {
   int guess_poses = 6;
   bool position_only = false;
   std::string name = "ekf_identifier";
+  estimation::TimeGateSettings time = PoseTimeGate();
+  double joint_margin = 0.1;  // [rad | m] beyond the joint limits
 };
 
 class Identifier {
@@ -62,7 +86,8 @@ class Identifier {
         robot_(io::LoadRobot(services::RepoPath(o.robot))),
         id_(robot_.spec, robot_.model, {o.ident_seed, o.cell_seed, o.guess_poses, o.position_only}),
         model_id_(transport::ModelId(id_.model())),
-        health_(o.name) {
+        health_(o.name),
+        gate_(o.time) {
     if (id_.cell())
       spdlog::info(
           "cell of seed {}: {} parameters, base set of {}; set-up guess from the first {} poses",
@@ -97,7 +122,15 @@ class Identifier {
       const auto f = transport::LoadCheckpoint(o_.checkpoint);
       if (f.model_id != model_id_)
         throw std::runtime_error("model_id " + f.model_id + " is not " + model_id_);
+      if (const std::string why =
+              transport::UntrustedCheckpointTime(f, estimation::HostCeilingUs());
+          !why.empty())
+        throw std::runtime_error(why);
       id_.Restore(f.checkpoint, f.held, f.utime, f.last_pose_index);
+      if (id_.ekf().accepted() > 0 || !id_.held().empty()) {
+        gate_.Restore(f.utime);
+        last_pose_index_ = f.last_pose_index;
+      }
       spdlog::info(
           "resumed from {}: {} poses accepted, {} held for the set-up guess, last utime {}",
           o_.checkpoint, id_.ekf().accepted(), id_.held().size(), id_.last_utime());
@@ -115,20 +148,58 @@ class Identifier {
     spdlog::warn("rejected: {}", reason);
   }
 
+  // Heartbeats follow accepted time only: a refused time never schedules one.
+  void Beat() {
+    if (gate_.last()) health_.Tick(*gate_.last(), t_);
+  }
+
+  // Joints within the model's limits (+ margin) and the position within the sensor's range.
+  std::string Implausible(const kinematics::PoseMeasurement& z) const {
+    const auto& joints = id_.model().joints();
+    for (int i = 0; i < z.q.size() && i < static_cast<int>(joints.size()); ++i)
+      if (z.q(i) < joints[i].lower - o_.joint_margin || z.q(i) > joints[i].upper + o_.joint_margin)
+        return "pose_measurement.q[" + std::to_string(i) + "]: " + std::to_string(z.q(i)) +
+               " is beyond the joint's limits [" + std::to_string(joints[i].lower) + ", " +
+               std::to_string(joints[i].upper) + "] by more than " +
+               std::to_string(o_.joint_margin);
+    if (const double r = z.p_WM_W.norm(); r > transport::SensorRanges{}.position)
+      return "pose_measurement.p: " + std::to_string(r) +
+             " m from the sensor is beyond the position sensor's range";
+    return "";
+  }
+
   void OnPose(const pose_measurement_t& msg) {
     health_.Received();
     std::string error;
     auto z = transport::FromMessage(msg, &error);
-    if (!z) {
+    if (z) error = Implausible(*z);
+    if (!z || !error.empty()) {
       Reject(error);
-      health_.Tick(std::max(msg.utime, id_.last_utime()), t_);
+      Beat();
       return;
     }
+    const auto verdict = health_.Gate(gate_, msg.utime, "pose_measurement.utime");
+    if (!estimation::Usable(verdict)) {
+      spdlog::warn("rejected: {}", health_.last_error());
+      Beat();
+      return;
+    }
+    if (verdict == estimation::TimeVerdict::kResynchronised) {
+      // The pose stream started over with a new time base: keep the estimate, take its time.
+      spdlog::warn("{}", health_.last_error());
+      id_.Restore(id_.ekf().Checkpoint(), id_.held(), msg.utime - 1, -1);
+      last_pose_index_.reset();
+    }
+    // pose_index counts from 0 per still_window run: a step of more than one is poses lost; a
+    // step back is a restarted still_window, not a loss.
+    if (last_pose_index_ && msg.pose_index > *last_pose_index_ + 1)
+      health_.Gap(msg.pose_index - *last_pose_index_ - 1);
+    last_pose_index_ = msg.pose_index;
     const auto out = id_.Add({std::move(*z), msg.utime, msg.pose_index},
                              [this](const cell::OnlineIdentification::Update& u) { Applied(u); });
     if (!out.rejected.empty()) {
       Reject(out.rejected);
-      health_.Tick(std::max(msg.utime, id_.last_utime()), t_);
+      Beat();
       return;
     }
     if (out.held) {
@@ -202,6 +273,8 @@ class Identifier {
   cell::OnlineIdentification id_;
   std::string model_id_;
   transport::Health health_;
+  estimation::TimeGate gate_;
+  std::optional<int64_t> last_pose_index_;
 };
 
 }  // namespace
@@ -230,7 +303,20 @@ int main(int argc, char** argv) {
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   app.add_option("--name", o.name, "process name in HEALTH")->capture_default_str();
+  double horizon_s = static_cast<double>(o.time.horizon_us) * 1e-6;
+  app.add_option("--horizon", horizon_s,
+                 "a pose more than this past the last accepted one is refused [s]")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--resync-samples", o.time.resync_samples,
+                 "consistent refused poses that re-synchronise a pose stream whose time jumped")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--joint-margin", o.joint_margin,
+                 "joints beyond the model's limits by more than this are refused [rad | m]")
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
+  o.time.horizon_us = std::llround(horizon_s * 1e6);
 
   try {
     rcal::services::InstallStopHandlers();

@@ -11,6 +11,12 @@
 // the process died is cut short; lcm-logplayer and lcm::LogFile readers stop at it). The CSV is
 // appended to; a row cut short by a kill (no final newline) is removed before the first new row
 // (it is the only part of the file ever rewritten), and each row goes to the file in one write.
+//
+// Losses: the logger records every message it receives, duplicates included (the log is the
+// bus's record), and counts in HEALTH gaps the POSE_MEASUREMENT pose_index values that never
+// arrived (a step of more than one; a step back is a restarted still_window). HEALTH's time is
+// the KINEMATIC_PARAMS and POSE_MEASUREMENT utimes that pass a time gate (a far-future utime
+// never schedules the heartbeat).
 #include <spdlog/spdlog.h>
 
 #include <fcntl.h>
@@ -24,11 +30,14 @@
 #include <fstream>
 #include <lcm/lcm-cpp.hpp>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <string>
 
 #include "log_files.hpp"
+#include "rcal/estimation/time_gate.hpp"
 #include "rcal/kinematic_params_t.hpp"
+#include "rcal/pose_measurement_t.hpp"
 #include "rcal/services/common.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/health.hpp"
@@ -109,6 +118,18 @@ int main(int argc, char** argv) {
     // falls behind under load must catch up, not drop events).
     transport::LcmTransport t(lcm_url, transport::kAllChannelsQueueCapacity);
     transport::Health health("logger");
+    // Only for the heartbeat's time: an hour's horizon (poses and estimates are sparse), no
+    // gap count from time, and its refusals are not the logger's (it records every message).
+    estimation::TimeGateSettings beat_time;
+    beat_time.horizon_us = 3'600'000'000LL;
+    beat_time.resync_samples = 3;
+    beat_time.gap_factor = 0.0;
+    estimation::TimeGate beat_gate(beat_time);
+    auto beat = [&](int64_t utime) {
+      beat_gate.SetCeiling(estimation::HostCeilingUs());
+      if (estimation::Usable(beat_gate.Offer(utime))) health.Tick(utime, t);
+    };
+    std::optional<int32_t> last_pose_index;
     int file_index = logger::NextFileIndex(dir, prefix);
     long long bytes = 0;
     int64_t event = 0;
@@ -153,7 +174,20 @@ int main(int argc, char** argv) {
           for (int i = 0; i < m.num_params; ++i) row << "," << m.values[i] << "," << m.sigmas[i];
           row << "\n";
           if (!csv.Append(row.str(), false)) health.Error("CSV write failed");
-          health.Tick(m.utime, t);
+          beat(m.utime);
+        },
+        [&](const std::string& e) { health.Rejected(e); });
+    t.Subscribe<pose_measurement_t>(
+        transport::channels::kPoseMeasurement,
+        [&](const pose_measurement_t& m) {
+          if (last_pose_index && m.pose_index > *last_pose_index + 1) {
+            health.Gap(m.pose_index - *last_pose_index - 1);
+            spdlog::warn("POSE_MEASUREMENT: pose_index {} after {}: {} lost", m.pose_index,
+                         *last_pose_index, m.pose_index - *last_pose_index - 1);
+          }
+          // A duplicate keeps the sequence where it is.
+          if (!last_pose_index || m.pose_index != *last_pose_index) last_pose_index = m.pose_index;
+          beat(m.utime);
         },
         [&](const std::string& e) { health.Rejected(e); });
     if (const int rc =

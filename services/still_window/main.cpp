@@ -10,8 +10,14 @@
 // class on the same samples in the same order reproduces the offline windows to rounding.
 //
 // Input order: PosePipeline needs non-decreasing sensor time across the three streams (ties
-// allowed); a sample older than the last one is rejected and counted (HEALTH). Magnetic field:
-// IMU messages carry tesla; the pipeline is given µT (the unit its FQA noise is tuned for).
+// allowed); a sample older than the last one is rejected and counted (HEALTH). Each stream also
+// passes its own estimation::TimeGate (--horizon, --resync-samples): an exact duplicate (same
+// channel and utime: counted as such, it would make the window's covariance too small), a sample
+// before the last of its stream, or beyond the horizon or the host-clock ceiling is refused and
+// counted in HEALTH; a stream re-synchronised (its driver restarted) starts the pipeline over.
+// Values beyond the sensor's range (transport::SensorRanges) are refused naming the field. A
+// filter of the pipeline whose state went non-finite restarts (HEALTH filter_resets). Magnetic
+// field: IMU messages carry tesla; the pipeline is given µT (the unit its FQA noise is tuned for).
 // Warm-up: the pose pipeline starts its filters at the first stop (the joints standing still) and
 // drops that stop's window (estimation::PosePipelineSettings::rest_from_joints), so a process
 // started or restarted anywhere, in a move or inside a stop, publishes only windows of filters
@@ -43,8 +49,15 @@ namespace ch = transport::channels;
 class StillWindowNode {
  public:
   StillWindowNode(const estimation::PosePipelineSettings& ps, double warmup,
-                  transport::Transport& t, const std::string& name)
-      : pipeline_(ps), warmup_(warmup), t_(t), health_(name) {
+                  const estimation::TimeGateSettings& time, transport::Transport& t,
+                  const std::string& name)
+      : pipeline_(ps),
+        warmup_(warmup),
+        t_(t),
+        health_(name),
+        joints_gate_(time),
+        imu_gate_(time),
+        position_gate_(time) {
     t_.Subscribe<joint_state_t>(
         ch::kJoints, [this](const joint_state_t& m) { OnJoints(m); },
         [this](const std::string& e) { Bad(e); });
@@ -65,7 +78,34 @@ class StillWindowNode {
     health_.Rejected(e);
     spdlog::warn("rejected: {}", e);
   }
+  // The stream's time gate; false when refused (counted). On a re-synchronisation the pipeline
+  // starts over: its samples so far belong to the old time base.
+  bool Admit(estimation::TimeGate& gate, int64_t utime, const char* field) {
+    const auto v = health_.Gate(gate, utime, field);
+    if (v == estimation::TimeVerdict::kResynchronised) {
+      spdlog::warn("{}", health_.last_error());
+      pipeline_.Reset();
+      dropped_ = 0;
+      resets_ = 0;
+    }
+    if (estimation::Usable(v)) return true;
+    spdlog::warn("rejected: {}", health_.last_error());
+    Beat();
+    return false;
+  }
+  // Heartbeats follow accepted time only: a refused time never schedules one.
+  void Beat() {
+    std::optional<int64_t> last;
+    for (const auto* g : {&joints_gate_, &imu_gate_, &position_gate_})
+      if (g->last()) last = std::max(last.value_or(INT64_MIN), *g->last());
+    if (last) health_.Tick(*last, t_);
+  }
   void Done(int64_t utime, const estimation::Status& s) {
+    if (const auto r = pipeline_.counters().filter_resets; r > resets_) {
+      resets_ = r;
+      health_.FilterReset(s.error());
+      spdlog::error("filter reset: {}", s.error());
+    }
     if (!s.ok()) {
       health_.Rejected(s.error());
       spdlog::warn("rejected: {}", s.error());
@@ -84,6 +124,8 @@ class StillWindowNode {
       return Bad("joint_state.q: size does not match num_joints");
     Eigen::VectorXd q(m.num_joints);
     for (int i = 0; i < m.num_joints; ++i) q(i) = m.q[i];
+    if (!q.allFinite()) return Bad("joint_state.q: not finite");
+    if (!Admit(joints_gate_, m.utime, "joint_state.utime")) return;
     Done(m.utime, pipeline_.AddJoints(Seconds(m.utime), q));
   }
   void OnImu(const imu_sample_t& m) {
@@ -92,6 +134,7 @@ class StillWindowNode {
     const auto s = transport::ImuFromMessage(m, &error);
     if (!s) return Bad(error);
     if (!s->has_mag) return Bad("imu_sample: no magnetic field");
+    if (!Admit(imu_gate_, m.utime, "imu_sample.utime")) return;
     Done(s->utime, pipeline_.AddImu(Seconds(s->utime), s->gyro_B, s->f_B, s->m_B * 1e6));
   }
   void OnPosition(const position_sample_t& m) {
@@ -99,6 +142,7 @@ class StillWindowNode {
     std::string error;
     const auto s = transport::PositionFromMessage(m, &error);
     if (!s) return Bad(error);
+    if (!Admit(position_gate_, m.utime, "position_sample.utime")) return;
     Done(s->utime, pipeline_.AddPosition(Seconds(s->utime), s->p));
   }
   void Emit(const estimation::StillPose& p) {
@@ -124,7 +168,8 @@ class StillWindowNode {
   transport::Health health_;
   std::optional<double> t_first_;
   int emitted_ = 0;
-  std::int64_t dropped_ = 0;
+  std::int64_t dropped_ = 0, resets_ = 0;
+  estimation::TimeGate joints_gate_, imu_gate_, position_gate_;
 };
 
 }  // namespace
@@ -136,6 +181,8 @@ int main(int argc, char** argv) {
   double gyro_noise = sim_defaults.imu.gyro_noise_density;
   double warmup = 0.0;
   bool position_only = false;
+  estimation::TimeGateSettings time;
+  double horizon_s = static_cast<double>(time.horizon_us) * 1e-6;
   CLI::App app{
       "still_window: still-window pose measurements from the raw sensor streams.\n"
       "Subscribes JOINTS, IMU, POSITION; runs the pose pipeline (orientation + position KF, "
@@ -150,6 +197,14 @@ int main(int argc, char** argv) {
                  "windows beginning within this time of the first sample are dropped [s]")
       ->capture_default_str();
   app.add_flag("--position-only", position_only, "position-only measurements");
+  app.add_option("--horizon", horizon_s,
+                 "a sample more than this past the last of its stream is refused [s]")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--resync-samples", time.resync_samples,
+                 "consistent refused samples that re-synchronise a stream whose time jumped")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   app.add_option("--name", name, "process name in HEALTH")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
@@ -161,7 +216,8 @@ int main(int argc, char** argv) {
     ps.orientation.gyro_noise_density = gyro_noise;
     ps.use_orientation = !position_only;
     spdlog::info("still_window on {}", t.url());
-    StillWindowNode node(ps, warmup, t, name);
+    time.horizon_us = std::llround(horizon_s * 1e6);
+    StillWindowNode node(ps, warmup, time, t, name);
     if (const int rc =
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
         rc != 0)

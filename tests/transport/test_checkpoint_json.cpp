@@ -109,5 +109,18 @@ TEST(Checkpoint, SchemaOneStillLoads) {
   EXPECT_EQ(resumed.P(), ekf.P());
 }
 
+// Issue 11: a checkpoint holding a far-future time (2^62 µs) kept a restarted identifier stuck.
+TEST(Checkpoint, AFarFutureTimeIsNotTrusted) {
+  CheckpointFile c;
+  c.utime = 5'000'000;
+  EXPECT_EQ(UntrustedCheckpointTime(c, 10'000'000), "");
+  c.held.push_back({});
+  c.held[0].utime = int64_t{1} << 62;
+  EXPECT_NE(UntrustedCheckpointTime(c, 10'000'000).find("held[0].utime"), std::string::npos);
+  c.held.clear();
+  c.utime = int64_t{1} << 62;
+  EXPECT_NE(UntrustedCheckpointTime(c, 10'000'000).find("utime"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace rcal::transport

@@ -61,5 +61,31 @@ TEST(Health, CountsAndLastErrorArePublished) {
   EXPECT_GT(got[0].pid, 0);
 }
 
+// The new counts (issue 11, item 6) reach the message: a gate's verdicts counted apart and in
+// rejected, gaps from the gate, stale and filter resets.
+TEST(Health, TimeGateVerdictsAndLossesAreCountedInTheMessage) {
+  Health h("still_window");
+  estimation::TimeGate g;
+  for (int64_t u : {0, 10'000, 20'000, 50'000}) h.Gate(g, u, "imu_sample.utime");  // 2 missing
+  EXPECT_EQ(h.Gate(g, 50'000, "imu_sample.utime"), estimation::TimeVerdict::kDuplicate);
+  EXPECT_EQ(h.Gate(g, 40'000, "imu_sample.utime"), estimation::TimeVerdict::kOutOfOrder);
+  EXPECT_EQ(h.Gate(g, int64_t{1} << 62, "imu_sample.utime"),
+            estimation::TimeVerdict::kBeyondHorizon);
+  EXPECT_NE(h.last_error().find("imu_sample.utime"), std::string::npos);
+  h.Stale("kinematic_params: older");
+  h.FilterReset("orientation_kf: state went non-finite");
+  h.Gap(3);
+  const health_t m = h.Message(50'000);
+  EXPECT_EQ(m.rejected, 4);
+  EXPECT_EQ(m.duplicates, 1);
+  EXPECT_EQ(m.out_of_order, 1);
+  EXPECT_EQ(m.out_of_horizon, 1);
+  EXPECT_EQ(m.stale, 1);
+  EXPECT_EQ(m.gaps, 2 + 3);
+  EXPECT_EQ(m.filter_resets, 1);
+  EXPECT_EQ(m.resyncs, 0);
+  EXPECT_EQ(m.last_error, "orientation_kf: state went non-finite");
+}
+
 }  // namespace
 }  // namespace rcal::transport

@@ -195,5 +195,61 @@ TEST(IkCorrectorNode, WithEffectsCommandsTheExtendedArm) {
   EXPECT_EQ(extended.health().rejected(), 0);
 }
 
+// Issue 11: a duplicate or older KINEMATIC_PARAMS replaced the estimate in use (a stale 1-pose
+// estimate replaced the 30-pose one, IK off by 0.036 rad, rejected = 0). The newest by
+// (poses_used, utime) is kept, refusals counted; an identifier that started over is followed
+// after restart_params newer estimates in a row.
+TEST(IkCorrectorNode, KeepsTheNewestEstimateByPosesUsedThenUtime) {
+  Fixture f;
+  std::vector<int> all(f.model.num_params());
+  for (int i = 0; i < f.model.num_params(); ++i) all[i] = i;
+  const Eigen::VectorXd sigma = Eigen::VectorXd::Constant(f.model.num_params(), 1e-6);
+  const Eigen::VectorXd x_stale = f.model.Nominal() + 0.5 * (f.x_true - f.model.Nominal());
+  auto params = [&](const Eigen::VectorXd& x, int64_t utime, int32_t poses) {
+    return ToKinematicParams(f.model, x, sigma, all, f.model.name(), utime, poses);
+  };
+  f.node.OnParams(params(f.x_true, 60'000'000, 30));
+  ASSERT_EQ(f.node.x(), f.x_true);
+  // Older by poses_used (even with a later utime), older by utime, and a duplicate.
+  f.node.OnParams(params(x_stale, 5'000'000, 1));
+  f.node.OnParams(params(x_stale, 70'000'000, 29));
+  f.node.OnParams(params(x_stale, 59'000'000, 30));
+  f.node.OnParams(params(f.x_true, 60'000'000, 30));
+  EXPECT_EQ(f.node.x(), f.x_true);
+  EXPECT_EQ(f.node.params_utime(), 60'000'000);
+  EXPECT_EQ(f.node.params_poses_used(), 30);
+  EXPECT_EQ(f.node.health().stale(), 3);
+  EXPECT_EQ(f.node.health().duplicates(), 1);
+  EXPECT_EQ(f.node.health().rejected(), 4);
+  // Newer on poses_used (same utime) and on utime (same poses_used) are taken.
+  f.node.OnParams(params(x_stale, 60'000'000, 31));
+  EXPECT_EQ(f.node.x(), x_stale);
+  f.node.OnParams(params(f.x_true, 60'000'001, 31));
+  EXPECT_EQ(f.node.x(), f.x_true);
+  // A far-future utime is refused.
+  f.node.OnParams(params(x_stale, int64_t{1} << 62, 40));
+  EXPECT_EQ(f.node.x(), f.x_true);
+  EXPECT_EQ(f.node.health().out_of_horizon(), 1);
+  // The identifier started over without a checkpoint: 1, 2, 3, 4 refused, the 5th taken.
+  for (int k = 1; k <= 5; ++k) {
+    f.node.OnParams(params(x_stale, 1'000'000 * k, k));
+    EXPECT_EQ(f.node.x() == x_stale, k == 5) << k;
+  }
+  EXPECT_EQ(f.node.params_poses_used(), 5);
+  EXPECT_EQ(f.node.health().resyncs(), 1);
+  EXPECT_EQ(f.node.health().stale(), 3 + 4);
+}
+
+TEST(IkCorrectorNode, ADuplicateRequestIsAnsweredOnce) {
+  Fixture f;
+  sim::Rng rng(3);
+  const ik_request_t r = f.Request(sim::SampleJoints(f.model, 1, rng)[0], 1'000'000, 7);
+  f.node.OnRequest(r);
+  f.node.OnRequest(r);
+  f.Drain();
+  EXPECT_EQ(f.commands.size(), 1u);
+  EXPECT_EQ(f.node.health().duplicates(), 1);
+}
+
 }  // namespace
 }  // namespace rcal::transport

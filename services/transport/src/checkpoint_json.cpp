@@ -149,6 +149,18 @@ void SaveCheckpoint(const std::filesystem::path& path, const CheckpointFile& c) 
   io::AtomicWriteFile(path, CheckpointText(c));
 }
 
+std::string UntrustedCheckpointTime(const CheckpointFile& c, int64_t ceiling_us) {
+  const auto beyond = [&](const std::string& key, int64_t utime) {
+    return key + ": " + std::to_string(utime) + " is beyond the time ceiling (" +
+           std::to_string(ceiling_us) + ")";
+  };
+  if (c.utime > ceiling_us) return beyond("utime", c.utime);
+  for (size_t i = 0; i < c.held.size(); ++i)
+    if (c.held[i].utime > ceiling_us)
+      return beyond("held[" + std::to_string(i) + "].utime", c.held[i].utime);
+  return "";
+}
+
 CheckpointFile LoadCheckpoint(const std::filesystem::path& path) {
   try {
     return ParseCheckpoint(io::ReadFile(path));

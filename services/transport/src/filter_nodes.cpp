@@ -25,9 +25,17 @@ void Put3(const Eigen::Vector3d& v, double* out) {
   for (int i = 0; i < 3; ++i) out[i] = v(i);
 }
 
-std::string NotAfter(const char* field, int64_t utime, int64_t last) {
-  return std::string(field) + ": " + std::to_string(utime) + " is not after the last sample (" +
-         std::to_string(last) + ")";
+// Empty, or why v is beyond ±range on some axis.
+std::string BeyondRange(const char* field, const double* v, double range, const char* unit) {
+  for (int i = 0; i < 3; ++i)
+    if (std::abs(v[i]) > range)
+      return std::string(field) + ": " + std::to_string(v[i]) + " " + unit +
+             " is beyond the sensor range (" + std::to_string(range) + " " + unit + ")";
+  return "";
+}
+
+bool Finite(const Eigen::MatrixXd& m) {
+  return m.allFinite();
 }
 
 }  // namespace
@@ -45,10 +53,16 @@ imu_sample_t ToMessage(const ImuSample& s) {
   return m;
 }
 
-std::optional<ImuSample> ImuFromMessage(const imu_sample_t& msg, std::string* error) {
+std::optional<ImuSample> ImuFromMessage(const imu_sample_t& msg, std::string* error,
+                                        const SensorRanges& ranges) {
   if (!Finite3(msg.gyro)) return Fail<ImuSample>(error, "imu_sample.gyro: not finite");
   if (!Finite3(msg.accel)) return Fail<ImuSample>(error, "imu_sample.accel: not finite");
   if (msg.has_mag && !Finite3(msg.mag)) return Fail<ImuSample>(error, "imu_sample.mag: not finite");
+  for (const std::string& e :
+       {BeyondRange("imu_sample.gyro", msg.gyro, ranges.gyro, "rad/s"),
+        BeyondRange("imu_sample.accel", msg.accel, ranges.accel, "m/s^2"),
+        msg.has_mag ? BeyondRange("imu_sample.mag", msg.mag, ranges.mag, "T") : std::string()})
+    if (!e.empty()) return Fail<ImuSample>(error, e);
   ImuSample s;
   s.utime = msg.utime;
   s.sensor_id = msg.sensor_id;
@@ -69,9 +83,13 @@ position_sample_t ToMessage(const PositionSample& s) {
   return m;
 }
 
-std::optional<PositionSample> PositionFromMessage(const position_sample_t& msg,
-                                                  std::string* error) {
+std::optional<PositionSample> PositionFromMessage(const position_sample_t& msg, std::string* error,
+                                                  const SensorRanges& ranges) {
   if (!Finite3(msg.p)) return Fail<PositionSample>(error, "position_sample.p: not finite");
+  if (V3(msg.p).norm() > ranges.position)
+    return Fail<PositionSample>(error, "position_sample.p: " + std::to_string(V3(msg.p).norm()) +
+                                           " m from the origin is beyond the sensor range (" +
+                                           std::to_string(ranges.position) + " m)");
   PositionSample s;
   s.utime = msg.utime;
   s.marker_id = msg.marker_id;
@@ -133,7 +151,7 @@ tool_position_estimate_t ToToolPositionEstimate(const estimation::PositionKf& kf
 OrientationKfNode::OrientationKfNode(Transport& t,
                                      const estimation::OrientationKfSettings& settings,
                                      Options options)
-    : t_(t), o_(std::move(options)), kf_(settings), health_(o_.name) {
+    : t_(t), o_(std::move(options)), kf_(settings), health_(o_.name), gate_(o_.time) {
   t_.Subscribe<imu_sample_t>(
       o_.imu_channel, [this](const imu_sample_t& m) { OnImu(m); },
       [this](const std::string& e) { OnUndecodable(e); });
@@ -144,34 +162,45 @@ void OrientationKfNode::Announce() {
   t_.Publish(o_.health_channel, health_.Message(0));
 }
 
-void OrientationKfNode::Reject(const std::string& reason, int64_t utime) {
+// Heartbeats follow the accepted samples' time only: a refused time never schedules one.
+void OrientationKfNode::Beat() {
+  if (gate_.last()) health_.Tick(*gate_.last(), t_, o_.health_channel);
+}
+
+void OrientationKfNode::Reject(const std::string& reason) {
   health_.Rejected(reason);
-  health_.Tick(last_utime_.value_or(utime), t_, o_.health_channel);
+  Beat();
 }
 
 void OrientationKfNode::OnUndecodable(const std::string& reason) {
   health_.Received();
-  health_.Rejected(reason);
-  if (last_utime_) health_.Tick(*last_utime_, t_, o_.health_channel);
+  Reject(reason);
 }
 
 void OrientationKfNode::OnImu(const imu_sample_t& msg) {
   health_.Received();
   if (msg.sensor_id != o_.sensor_id) return;
   std::string error;
-  const auto s = ImuFromMessage(msg, &error);
-  if (!s) return Reject(error, msg.utime);
+  const auto s = ImuFromMessage(msg, &error, o_.ranges);
+  if (!s) return Reject(error);
   if (!s->has_mag)
-    return Reject("imu_sample.has_mag: false (the orientation KF needs the magnetometer)",
-                  msg.utime);
-  if (last_utime_ && msg.utime <= *last_utime_)
-    return Reject(NotAfter("imu_sample.utime", msg.utime, *last_utime_), msg.utime);
+    return Reject("imu_sample.has_mag: false (the orientation KF needs the magnetometer)");
+  const auto verdict = health_.Gate(gate_, msg.utime, "imu_sample.utime");
+  if (!estimation::Usable(verdict)) return Beat();
+  // A source that started over (a restarted driver): so does the filter.
+  if (verdict == estimation::TimeVerdict::kResynchronised) kf_.Reset();
+  const int64_t resets = kf_.counters().resets;
   const auto status = kf_.Update(SensorSeconds(msg.utime), s->gyro_B, s->f_B, s->m_B);
-  if (!status) return Reject("imu_sample: " + status.error(), msg.utime);
-  last_utime_ = msg.utime;
-  if (kf_.initialized() &&
-      t_.Publish(o_.orientation_channel, ToOrientationEstimate(kf_, msg.utime)))
-    health_.Published();
+  if (!status) {
+    if (kf_.counters().resets != resets) health_.FilterReset("imu_sample: " + status.error());
+    return Reject("imu_sample: " + status.error());
+  }
+  const orientation_estimate_t out = ToOrientationEstimate(kf_, msg.utime);
+  // Belt and braces: the filter resets on a non-finite state, so this never refuses.
+  const bool finite = Eigen::Map<const Eigen::Vector4d>(out.q_EI).allFinite() &&
+                      Eigen::Map<const Eigen::Matrix<double, 9, 1>>(out.covariance).allFinite() &&
+                      Finite3(out.gyro_bias);
+  if (kf_.initialized() && finite && t_.Publish(o_.orientation_channel, out)) health_.Published();
   health_.Tick(msg.utime, t_, o_.health_channel);
 }
 
@@ -179,7 +208,13 @@ void OrientationKfNode::OnImu(const imu_sample_t& msg) {
 
 PositionKfNode::PositionKfNode(Transport& t, const estimation::PositionKfSettings& settings,
                                Options options)
-    : t_(t), o_(std::move(options)), kf_(settings), health_(o_.name) {
+    : t_(t),
+      o_(std::move(options)),
+      kf_(settings),
+      health_(o_.name),
+      imu_gate_(o_.time),
+      orientation_gate_(o_.time),
+      position_gate_(o_.time) {
   auto undecodable = [this](const std::string& e) { OnUndecodable(e); };
   t_.Subscribe<imu_sample_t>(
       o_.imu_channel, [this](const imu_sample_t& m) { OnImu(m); }, undecodable);
@@ -205,14 +240,42 @@ void PositionKfNode::OnUndecodable(const std::string& reason) {
   Reject(reason);
 }
 
+bool PositionKfNode::Admit(estimation::TimeGate& gate, int64_t utime, const char* field) {
+  const auto verdict = health_.Gate(gate, utime, field);
+  if (!estimation::Usable(verdict)) {
+    health_.Tick(latest_, t_, o_.health_channel);
+    return false;
+  }
+  if (verdict == estimation::TimeVerdict::kResynchronised) StartOver();
+  return true;
+}
+
+void PositionKfNode::StartOver() {
+  // One stream's time base moved: the queued samples and the filter belong to the old one.
+  kf_.Reset();
+  pending_accel_.clear();
+  ready_accel_.clear();
+  pending_position_.clear();
+  last_applied_.reset();
+  last_imu_ = imu_gate_.last();
+  last_orientation_ = orientation_gate_.last();
+  last_position_ = position_gate_.last();
+  latest_ =
+      std::max({last_imu_.value_or(0), last_orientation_.value_or(0), last_position_.value_or(0)});
+}
+
+void PositionKfNode::FilterFailed(const std::string& reason, int64_t resets_before) {
+  if (kf_.counters().resets != resets_before) health_.FilterReset(reason);
+  Reject(reason);
+}
+
 void PositionKfNode::OnImu(const imu_sample_t& msg) {
   health_.Received();
   if (msg.sensor_id != o_.sensor_id) return;
   std::string error;
-  const auto s = ImuFromMessage(msg, &error);
+  const auto s = ImuFromMessage(msg, &error, o_.ranges);
   if (!s) return Reject(error);
-  if (last_imu_ && msg.utime <= *last_imu_)
-    return Reject(NotAfter("imu_sample.utime", msg.utime, *last_imu_));
+  if (!Admit(imu_gate_, msg.utime, "imu_sample.utime")) return;
   last_imu_ = msg.utime;
   latest_ = std::max(latest_, msg.utime);
   pending_accel_[msg.utime] = s->f_B;
@@ -229,8 +292,7 @@ void PositionKfNode::OnOrientation(const orientation_estimate_t& msg) {
   std::string error;
   const auto R = RotationFromMessage(msg, &error);
   if (!R) return Reject(error);
-  if (last_orientation_ && msg.utime <= *last_orientation_)
-    return Reject(NotAfter("orientation_estimate.utime", msg.utime, *last_orientation_));
+  if (!Admit(orientation_gate_, msg.utime, "orientation_estimate.utime")) return;
   last_orientation_ = msg.utime;
   latest_ = std::max(latest_, msg.utime);
   // Accelerometer samples before this orientation never got theirs: drop them.
@@ -251,13 +313,12 @@ void PositionKfNode::OnPosition(const position_sample_t& msg) {
   health_.Received();
   if (msg.marker_id != o_.marker_id) return;
   std::string error;
-  const auto s = PositionFromMessage(msg, &error);
+  const auto s = PositionFromMessage(msg, &error, o_.ranges);
   if (!s) return Reject(error);
-  if (last_position_ && msg.utime <= *last_position_)
-    return Reject(NotAfter("position_sample.utime", msg.utime, *last_position_));
-  if (last_applied_ && msg.utime < *last_applied_)
+  if (last_applied_ && msg.utime < *last_applied_ && msg.utime > last_position_.value_or(INT64_MIN))
     return Reject("position_sample.utime: " + std::to_string(msg.utime) +
                   " came after the filter reached " + std::to_string(*last_applied_));
+  if (!Admit(position_gate_, msg.utime, "position_sample.utime")) return;
   last_position_ = msg.utime;
   latest_ = std::max(latest_, msg.utime);
   pending_position_.emplace(msg.utime, s->p);
@@ -268,8 +329,11 @@ void PositionKfNode::OnPosition(const position_sample_t& msg) {
 
 void PositionKfNode::Applied(int64_t utime) {
   last_applied_ = utime;
-  if (kf_.initialized() && t_.Publish(o_.tool_position_channel, ToToolPositionEstimate(kf_, utime)))
-    health_.Published();
+  const tool_position_estimate_t out = ToToolPositionEstimate(kf_, utime);
+  // Belt and braces: the filter resets on a non-finite state, so this never refuses.
+  const bool finite = Finite3(out.p) && Finite3(out.v) &&
+                      Finite(Eigen::Map<const Eigen::Matrix<double, 36, 1>>(out.covariance));
+  if (kf_.initialized() && finite && t_.Publish(o_.tool_position_channel, out)) health_.Published();
   health_.Tick(utime, t_, o_.health_channel);
 }
 
@@ -287,9 +351,10 @@ void PositionKfNode::Flush(int64_t watermark) {
                std::to_string(*last_applied_));
         continue;
       }
+      const int64_t resets = kf_.counters().resets;
       const auto status = kf_.UpdateAccel(SensorSeconds(utime), fr.first, fr.second);
       if (!status) {
-        Reject("imu_sample: " + status.error());
+        FilterFailed("imu_sample: " + status.error(), resets);
         continue;
       }
       Applied(utime);
@@ -301,9 +366,10 @@ void PositionKfNode::Flush(int64_t watermark) {
                " came after the filter reached " + std::to_string(*last_applied_));
         continue;
       }
+      const int64_t resets = kf_.counters().resets;
       const auto status = kf_.UpdatePosition(SensorSeconds(utime), p);
       if (!status) {
-        Reject("position_sample: " + status.error());
+        FilterFailed("position_sample: " + status.error(), resets);
         continue;
       }
       Applied(utime);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 
+#include "rcal/estimation/time_gate.hpp"
 #include "rcal/transport/adapters.hpp"
 
 namespace rcal::transport {
@@ -40,10 +41,46 @@ void IkCorrectorNode::OnParams(const kinematic_params_t& msg) {
   std::string error;
   const auto values = ParamsFromMessage(msg, model_, &error);
   if (!values) return Reject(error);
-  x_ = *values;
+  if (const int64_t ceiling = estimation::HostCeilingUs(); msg.utime > ceiling) {
+    health_.OutOfHorizon("kinematic_params.utime: " + std::to_string(msg.utime) +
+                         " is beyond the time ceiling (" + std::to_string(ceiling) + ")");
+    health_.Tick(latest_, t_, o_.health_channel);
+    return;
+  }
+  const std::pair<int32_t, int64_t> order{msg.poses_used, msg.utime};
+  const std::pair<int32_t, int64_t> in_use{params_poses_used_, params_utime_};
+  if (params_poses_used_ >= 0 && order == in_use) {
+    health_.Duplicate("kinematic_params: poses_used " + std::to_string(msg.poses_used) +
+                      ", utime " + std::to_string(msg.utime) + " duplicates the estimate in use");
+    health_.Tick(latest_, t_, o_.health_channel);
+    return;
+  }
+  if (params_poses_used_ >= 0 && order < in_use) {
+    // Stale, unless a run of them says the identifier started over.
+    stale_run_ = stale_run_ > 0 && order > stale_last_ ? stale_run_ + 1 : 1;
+    stale_last_ = order;
+    if (stale_run_ < std::max(1, o_.restart_params)) {
+      health_.Stale("kinematic_params: poses_used " + std::to_string(msg.poses_used) + ", utime " +
+                    std::to_string(msg.utime) + " is older than the estimate in use (poses_used " +
+                    std::to_string(params_poses_used_) + ", utime " +
+                    std::to_string(params_utime_) + ")");
+      health_.Tick(latest_, t_, o_.health_channel);
+      return;
+    }
+    health_.Resync("kinematic_params: the identifier started over (" + std::to_string(stale_run_) +
+                   " newer estimates in a row from poses_used " + std::to_string(msg.poses_used) +
+                   ")");
+  }
+  Use(msg, *values);
+}
+
+void IkCorrectorNode::Use(const kinematic_params_t& msg, const Eigen::VectorXd& values) {
+  stale_run_ = 0;
+  x_ = values;
   calibrated_.SetParameters(x_);
   if (extended_) extended_->SetParameters(x_, extended_->e());
   params_utime_ = msg.utime;
+  params_poses_used_ = msg.poses_used;
   latest_ = std::max(latest_, msg.utime);
   health_.Tick(latest_, t_, o_.health_channel);
 }
@@ -53,6 +90,13 @@ void IkCorrectorNode::OnRequest(const ik_request_t& msg) {
   std::string error;
   const auto q = FromMessage(msg, model_.num_joints(), &error);
   if (!q) return Reject(error);
+  if (last_request_ && *last_request_ == std::make_pair(msg.request_id, msg.utime)) {
+    health_.Duplicate("ik_request: request_id " + std::to_string(msg.request_id) + ", utime " +
+                      std::to_string(msg.utime) + " duplicates the last request");
+    health_.Tick(latest_, t_, o_.health_channel);
+    return;
+  }
+  last_request_ = std::make_pair(msg.request_id, msg.utime);
   const auto solve = [&](ik::LevenbergMarquardtIk& s) {
     return q->position_only ? s.SolvePosition(q->T_WT.translation(), q->q_seed)
                             : s.Solve(q->T_WT, q->q_seed);

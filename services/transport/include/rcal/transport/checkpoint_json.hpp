@@ -38,4 +38,9 @@ void SaveCheckpoint(const std::filesystem::path& path, const CheckpointFile& c);
 /// Reads and parses. Throws std::runtime_error naming the path and the key.
 CheckpointFile LoadCheckpoint(const std::filesystem::path& path);
 
+/// "" when every time in `c` (utime and the held poses') is at most `ceiling_us` [µs]; else why
+/// not, naming the key. A checkpoint with a far-future time (issue 11: one pose at 2^62 µs made
+/// every later pose "out of order", also after a restart) is not to be resumed from.
+std::string UntrustedCheckpointTime(const CheckpointFile& c, int64_t ceiling_us);
+
 }  // namespace rcal::transport

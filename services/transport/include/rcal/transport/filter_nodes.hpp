@@ -5,9 +5,14 @@
 // tests and benchmarks, or a log), and runs the filter on sensor time t = utime · 1e-6 s.
 //
 // Bad input is rejected, counted in HEALTH with a reason naming the field, and leaves the filter
-// untouched: a message that does not decode (wrong type, truncated), non-finite values, a
-// non-unit quaternion, a utime not after the last one of the same stream (duplicate or out of
-// order), an IMU sample without magnetometer (the orientation KF needs it).
+// untouched: a message that does not decode (wrong type, truncated), non-finite values, values
+// beyond the sensor's range (SensorRanges), a non-unit quaternion, an IMU sample without
+// magnetometer (the orientation KF needs it). Time: every stream passes its own
+// estimation::TimeGate (Options::time): exact duplicates, samples before the last one and
+// samples beyond the horizon (or the host-clock ceiling) are refused and counted apart in HEALTH;
+// a stream whose time really jumped is re-synchronised after time.resync_samples consistent
+// samples, and the filter is then started over. A filter whose state goes non-finite resets
+// (HEALTH filter_resets, last_error) and nothing non-finite is ever published.
 #pragma once
 
 #include <Eigen/Core>
@@ -18,6 +23,7 @@
 
 #include "rcal/estimation/orientation_kf.hpp"
 #include "rcal/estimation/position_kf.hpp"
+#include "rcal/estimation/time_gate.hpp"
 #include "rcal/imu_sample_t.hpp"
 #include "rcal/orientation_estimate_t.hpp"
 #include "rcal/position_sample_t.hpp"
@@ -45,13 +51,26 @@ struct PositionSample {
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  ///< [m²]
 };
 
+/// What a sensor can report at most (per axis): a sample beyond it is corrupt, not a measurement.
+/// The defaults are above the widest ranges of the IMUs and position sensors rcal is used with.
+struct SensorRanges {
+  double gyro = 40.0;       ///< [rad/s] (≈ 2300 °/s; MEMS gyros: up to 2000 °/s)
+  double accel = 320.0;     ///< [m/s²] (≈ 32 g; MEMS accelerometers: 16–20 g)
+  double mag = 5e-3;        ///< [T] (the earth's field: 25–65 µT; magnetometers: ≤ 1.6 mT)
+  double position = 100.0;  ///< [m] from the position sensor's origin (laser trackers: ≤ 80 m)
+};
+
 imu_sample_t ToMessage(const ImuSample& s);
-/// Checks finite gyro and accel, finite mag when has_mag.
-std::optional<ImuSample> ImuFromMessage(const imu_sample_t& msg, std::string* error);
+/// Checks finite gyro and accel, finite mag when has_mag, each within `ranges` (the reason names
+/// the field and the range).
+std::optional<ImuSample> ImuFromMessage(const imu_sample_t& msg, std::string* error,
+                                        const SensorRanges& ranges = {});
 
 position_sample_t ToMessage(const PositionSample& s);
-/// Checks finite p and a finite, symmetric covariance with a non-negative diagonal.
-std::optional<PositionSample> PositionFromMessage(const position_sample_t& msg, std::string* error);
+/// Checks finite p within ranges.position of the origin and a finite, symmetric covariance with
+/// a non-negative diagonal.
+std::optional<PositionSample> PositionFromMessage(const position_sample_t& msg, std::string* error,
+                                                  const SensorRanges& ranges = {});
 
 // ---- estimates --------------------------------------------------------------------------------
 
@@ -82,6 +101,8 @@ class OrientationKfNode {
     std::string imu_channel = "IMU";
     std::string orientation_channel = "ORIENTATION";
     std::string health_channel = "HEALTH";
+    estimation::TimeGateSettings time;  ///< the IMU stream's time gate
+    SensorRanges ranges;
   };
   OrientationKfNode(Transport& t, const estimation::OrientationKfSettings& settings,
                     Options options);
@@ -100,12 +121,13 @@ class OrientationKfNode {
   const Health& health() const { return health_; }
 
  private:
-  void Reject(const std::string& reason, int64_t utime);
+  void Reject(const std::string& reason);
+  void Beat();
   Transport& t_;
   Options o_;
   estimation::OrientationKf kf_;
   Health health_;
-  std::optional<int64_t> last_utime_;
+  estimation::TimeGate gate_;
 };
 
 /// IMU + ORIENTATION + POSITION → PositionKf → TOOL_POSITION, HEALTH at 1 Hz of sensor time.
@@ -133,6 +155,8 @@ class PositionKfNode {
     std::string position_channel = "POSITION";
     std::string tool_position_channel = "TOOL_POSITION";
     std::string health_channel = "HEALTH";
+    estimation::TimeGateSettings time;  ///< each stream's time gate (IMU, ORIENTATION, POSITION)
+    SensorRanges ranges;
   };
   PositionKfNode(Transport& t, const estimation::PositionKfSettings& settings, Options options);
   PositionKfNode(Transport& t, const estimation::PositionKfSettings& settings)
@@ -154,6 +178,10 @@ class PositionKfNode {
   void Reject(const std::string& reason);
   void Flush(int64_t watermark);
   void Applied(int64_t utime);
+  // Offers utime to `gate`; false when refused. On a re-synchronisation the filter starts over.
+  bool Admit(estimation::TimeGate& gate, int64_t utime, const char* field);
+  void StartOver();
+  void FilterFailed(const std::string& reason, int64_t resets_before);
   Transport& t_;
   Options o_;
   estimation::PositionKf kf_;
@@ -165,6 +193,7 @@ class PositionKfNode {
   std::multimap<int64_t, std::pair<Eigen::Vector3d, Eigen::Matrix3d>> ready_accel_;
   std::multimap<int64_t, Eigen::Vector3d> pending_position_;
   int64_t unpaired_accel_ = 0;
+  estimation::TimeGate imu_gate_, orientation_gate_, position_gate_;
 };
 
 }  // namespace rcal::transport

@@ -9,6 +9,15 @@
 // the commanded motion (sign of the geometric answer − q_seed per joint). Parameters for another
 // model (model id, names, sizes), non-finite values, malformed requests and undecodable bytes are
 // rejected, counted in HEALTH, and change nothing.
+//
+// Which estimate is in use: the newest by (poses_used, utime). A KINEMATIC_PARAMS equal to the one
+// in use on both is a duplicate, one older on them is stale: refused and counted (HEALTH
+// duplicates / stale), so a late or replayed 1-pose estimate can never replace a 30-pose one. A
+// utime beyond the host-clock ceiling (estimation::HostCeilingUs) is refused as out of horizon.
+// An identifier that really started over (no checkpoint) sends estimates that are all stale:
+// after Options::restart_params of them in a row, each newer than the one before by
+// (poses_used, utime), they are taken (HEALTH resyncs). An IK_REQUEST with the request_id and
+// utime of the previous one is a duplicate: refused and counted, not answered twice.
 #pragma once
 
 #include <Eigen/Core>
@@ -44,6 +53,9 @@ class IkCorrectorNode {
     /// Context of every command: payload at the tool [kg], temperature [°C] (NaN: unknown).
     double payload_kg = 0.0;
     double temperature_c = std::numeric_limits<double>::quiet_NaN();
+    /// Consecutive stale estimates, each newer than the previous, that mean the identifier
+    /// started over [-] (≥ 1).
+    int restart_params = 5;
   };
   IkCorrectorNode(Transport& t, const kinematics::KinematicModel& model, Options options);
   IkCorrectorNode(Transport& t, const kinematics::KinematicModel& model)
@@ -59,10 +71,13 @@ class IkCorrectorNode {
   Eigen::VectorXd e() const { return extended_ ? extended_->e() : Eigen::VectorXd(); }
   /// utime of the KINEMATIC_PARAMS in use (0: nominal).
   int64_t params_utime() const { return params_utime_; }
+  /// poses_used of the KINEMATIC_PARAMS in use (−1: nominal).
+  int32_t params_poses_used() const { return params_poses_used_; }
   const Health& health() const { return health_; }
 
  private:
   void Reject(const std::string& reason);
+  void Use(const kinematic_params_t& msg, const Eigen::VectorXd& values);
   Transport& t_;
   const kinematics::KinematicModel& model_;
   Options o_;
@@ -70,6 +85,11 @@ class IkCorrectorNode {
   std::optional<ik::ExtendedIk> extended_;  // with effects: the calibrated answer
   Eigen::VectorXd x_;
   int64_t params_utime_ = 0, latest_ = 0;
+  int32_t params_poses_used_ = -1;
+  // The run of stale estimates (see the header): its length and its last (poses_used, utime).
+  int stale_run_ = 0;
+  std::pair<int32_t, int64_t> stale_last_{-1, 0};
+  std::optional<std::pair<int64_t, int64_t>> last_request_;  // (request_id, utime)
   Health health_;
 };
 

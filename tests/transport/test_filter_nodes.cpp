@@ -1,0 +1,197 @@
+// The filter nodes over memq:// against the library filters fed the clean stream (the truth of
+// what the node must compute): the poison samples of issue 11 (utime 2^62, gyro 1e300, exact
+// duplicates, a far-away position) are refused and counted, change nothing, HEALTH keeps beating
+// and nothing published is non-finite; a driver that restarts is followed after resync_samples.
+#include "rcal/transport/filter_nodes.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+#include "rcal/health_t.hpp"
+#include "rcal/transport/lcm_transport.hpp"
+
+namespace rcal::transport {
+namespace {
+
+constexpr int64_t kPoison = int64_t{1} << 62;
+constexpr int64_t kPeriod = 10'000;  // 100 Hz [µs]
+
+// A still IMU (ENU: specific force up, field north and down) with a small deterministic wobble.
+imu_sample_t Imu(int64_t utime, int k) {
+  ImuSample s;
+  s.utime = utime;
+  s.gyro_B = Eigen::Vector3d(1e-3 * std::sin(0.3 * k), 2e-3 * std::cos(0.2 * k), 1e-3);
+  s.f_B = Eigen::Vector3d(0.01 * std::sin(0.1 * k), 0.0, 9.81);
+  s.has_mag = true;
+  s.m_B = Eigen::Vector3d(0.0, 20e-6, -40e-6);
+  return ToMessage(s);
+}
+
+struct Outputs {
+  std::vector<orientation_estimate_t> orientation;
+  std::vector<tool_position_estimate_t> tool;
+  std::vector<health_t> health;
+  explicit Outputs(Transport& t) {
+    t.Subscribe<orientation_estimate_t>(
+        "ORIENTATION", [this](const orientation_estimate_t& m) { orientation.push_back(m); });
+    t.Subscribe<tool_position_estimate_t>(
+        "TOOL_POSITION", [this](const tool_position_estimate_t& m) { tool.push_back(m); });
+    t.Subscribe<health_t>("HEALTH", [this](const health_t& m) { health.push_back(m); });
+  }
+};
+
+void Drain(LcmTransport& t) {
+  while (t.HandleTimeout(0) > 0) {
+  }
+}
+
+TEST(OrientationKfNode, PoisonSamplesAreRefusedCountedAndChangeNothing) {
+  LcmTransport t("memq://");
+  Outputs out(t);
+  OrientationKfNode node(t, estimation::OrientationKfSettings{});
+  estimation::OrientationKf reference{estimation::OrientationKfSettings{}};
+  for (int k = 0; k < 300; ++k) {
+    const imu_sample_t m = Imu(k * kPeriod, k);
+    node.OnImu(m);
+    const ImuSample s = *ImuFromMessage(m, nullptr);
+    ASSERT_TRUE(reference.Update(SensorSeconds(m.utime), s.gyro_B, s.f_B, s.m_B));
+    if (k == 50) node.OnImu(Imu(kPoison, k));  // the far-future time
+    if (k == 60) {
+      imu_sample_t g = Imu(m.utime + 1, k);
+      g.gyro[0] = 1e300;  // finite, beyond any gyro's range
+      node.OnImu(g);
+    }
+    if (k == 70) node.OnImu(m);  // an exact duplicate
+    Drain(t);
+  }
+  // The node's filter is the reference's, bit for bit.
+  EXPECT_EQ(node.filter().q_EB(), reference.q_EB());
+  EXPECT_EQ(node.filter().P(), reference.P());
+  const Health& h = node.health();
+  EXPECT_EQ(h.received(), 303);
+  EXPECT_EQ(h.rejected(), 3) << h.last_error();
+  EXPECT_EQ(h.out_of_horizon(), 1);
+  EXPECT_EQ(h.duplicates(), 1);
+  EXPECT_EQ(h.gaps(), 0);
+  // One estimate per accepted sample, all finite, none at the poison's time.
+  ASSERT_EQ(out.orientation.size(), 300u);
+  for (const auto& o : out.orientation) {
+    EXPECT_LT(o.utime, 300 * kPeriod);
+    for (double v : o.q_EI) EXPECT_TRUE(std::isfinite(v));
+  }
+  // HEALTH beat at 0, 1 and 2 s of sensor time: the poison did not stop it.
+  std::vector<int64_t> beats;
+  for (const auto& b : out.health) beats.push_back(b.utime);
+  EXPECT_EQ(beats, (std::vector<int64_t>{0, 1'000'000, 2'000'000}));
+  EXPECT_EQ(out.health.back().out_of_horizon, 1);
+  EXPECT_EQ(out.health.back().duplicates, 1);
+}
+
+TEST(OrientationKfNode, APoisonedFirstSampleCannotSetTheTimeBase) {
+  LcmTransport t("memq://");
+  Outputs out(t);
+  OrientationKfNode node(t, estimation::OrientationKfSettings{});
+  node.OnImu(Imu(kPoison, 0));  // no reference yet: the host-clock ceiling refuses it
+  for (int k = 0; k < 50; ++k) node.OnImu(Imu(k * kPeriod, k));
+  Drain(t);
+  EXPECT_EQ(node.health().out_of_horizon(), 1);
+  EXPECT_EQ(node.health().rejected(), 1);
+  EXPECT_EQ(out.orientation.size(), 50u);
+}
+
+TEST(OrientationKfNode, ARestartedDriverIsFollowedAfterResyncSamples) {
+  LcmTransport t("memq://");
+  Outputs out(t);
+  OrientationKfNode::Options o;
+  o.time.resync_samples = 5;
+  OrientationKfNode node(t, estimation::OrientationKfSettings{}, o);
+  for (int k = 0; k < 100; ++k) node.OnImu(Imu(50'000'000 + k * kPeriod, k));
+  // The driver starts over at 0: 4 refused, then the filter starts again at the 5th sample.
+  estimation::OrientationKf reference{estimation::OrientationKfSettings{}};
+  for (int k = 0; k < 100; ++k) {
+    const imu_sample_t m = Imu(k * kPeriod, k);
+    node.OnImu(m);
+    const ImuSample s = *ImuFromMessage(m, nullptr);
+    if (k >= 4) {
+      ASSERT_TRUE(reference.Update(SensorSeconds(m.utime), s.gyro_B, s.f_B, s.m_B));
+    }
+  }
+  Drain(t);
+  EXPECT_EQ(node.health().resyncs(), 1);
+  EXPECT_EQ(node.health().out_of_order(), 4);
+  EXPECT_EQ(node.filter().q_EB(), reference.q_EB());
+  EXPECT_EQ(node.filter().P(), reference.P());
+  EXPECT_EQ(out.orientation.size(), 100u + 96u);
+}
+
+TEST(OrientationKfNode, GapsInTheStreamAreCounted) {
+  LcmTransport t("memq://");
+  OrientationKfNode node(t, estimation::OrientationKfSettings{});
+  for (int k = 0; k < 100; ++k)
+    if (k != 40 && k != 41 && k != 77) node.OnImu(Imu(k * kPeriod, k));
+  EXPECT_EQ(node.health().gaps(), 3);
+}
+
+TEST(ImuFromMessage, ValuesBeyondTheSensorRangeAreRefusedNamingTheField) {
+  std::string error;
+  imu_sample_t m = Imu(0, 0);
+  m.gyro[1] = 1e300;
+  EXPECT_FALSE(ImuFromMessage(m, &error));
+  EXPECT_NE(error.find("imu_sample.gyro"), std::string::npos) << error;
+  m = Imu(0, 0);
+  m.accel[2] = -400.0;
+  EXPECT_FALSE(ImuFromMessage(m, &error));
+  EXPECT_NE(error.find("imu_sample.accel"), std::string::npos) << error;
+  m = Imu(0, 0);
+  m.mag[0] = 1.0;  // 1 T
+  EXPECT_FALSE(ImuFromMessage(m, &error));
+  EXPECT_NE(error.find("imu_sample.mag"), std::string::npos) << error;
+  PositionSample p;
+  p.p = Eigen::Vector3d(1e6, 0, 0);
+  EXPECT_FALSE(PositionFromMessage(ToMessage(p), &error));
+  EXPECT_NE(error.find("position_sample.p"), std::string::npos) << error;
+}
+
+// position_kf: a POSITION at 2^62 made it publish p ≈ 2.5e24 m. Refused, it changes nothing.
+TEST(PositionKfNode, AFarFuturePositionIsRefusedAndNothingFarAwayIsPublished) {
+  LcmTransport t("memq://");
+  Outputs out(t);
+  PositionKfNode node(t, estimation::PositionKfSettings{});
+  estimation::PositionKf reference{estimation::PositionKfSettings{}};
+  auto position = [](int64_t utime, int k) {
+    PositionSample s;
+    s.utime = utime;
+    s.p = Eigen::Vector3d(1.0 + 1e-4 * std::sin(0.1 * k), 0.5, 0.2);
+    s.covariance = 1e-8 * Eigen::Matrix3d::Identity();
+    return ToMessage(s);
+  };
+  for (int k = 0; k < 200; ++k) {
+    const int64_t u = k * kPeriod;
+    if (k % 5 == 0) {
+      const position_sample_t p = position(u, k);
+      node.OnPosition(p);
+      // The node applies a position once the IMU stream is orientation_wait_us (1 s) past it:
+      // the last IMU sample is at 1.99 s, so the positions up to 0.99 s.
+      if (u <= 990'000) {
+        ASSERT_TRUE(
+            reference.UpdatePosition(SensorSeconds(u), Eigen::Map<const Eigen::Vector3d>(p.p)));
+      }
+      if (k == 50) {
+        node.OnPosition(position(kPoison, k));
+        node.OnPosition(p);  // duplicate
+      }
+    }
+    node.OnImu(Imu(u, k));  // no ORIENTATION: positions go in after orientation_wait_us
+    Drain(t);
+  }
+  EXPECT_EQ(node.filter().p_WM_W(), reference.p_WM_W());
+  EXPECT_EQ(node.health().out_of_horizon(), 1);
+  EXPECT_EQ(node.health().duplicates(), 1);
+  ASSERT_FALSE(out.tool.empty());
+  for (const auto& m : out.tool) EXPECT_LT(Eigen::Map<const Eigen::Vector3d>(m.p).norm(), 2.0);
+}
+
+}  // namespace
+}  // namespace rcal::transport
