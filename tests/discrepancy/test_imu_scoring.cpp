@@ -8,8 +8,10 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <random>
+#include <vector>
 
 namespace rcal::discrepancy {
 namespace {
@@ -110,6 +112,28 @@ TEST(ImuScoring, RmsAndScoreAccumulate) {
   EXPECT_DOUBLE_EQ(s.heading.value(), std::sqrt(0.01 / 2));
   EXPECT_DOUBLE_EQ(s.inclination.value(), std::sqrt(0.04 / 2));
   EXPECT_EQ(s.total.n, 2);
+}
+
+TEST(ImuScoring, NonFiniteEstimatesScoreNaNNeverZero) {
+  // A filter that published NaN was scored "total RMSE 0.00°": std::min(1, NaN) is 1, acos(1) 0.
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const Eigen::Vector4d truth(1, 0, 0, 0);
+  const std::vector<Eigen::Vector4d> bads{
+      Eigen::Vector4d(nan, nan, nan, nan), Eigen::Vector4d(1, nan, 0, 0),
+      Eigen::Vector4d(std::numeric_limits<double>::infinity(), 0, 0, 0),
+      Eigen::Vector4d(0, 0, 0, 0)};
+  for (const Eigen::Vector4d& bad : bads) {
+    for (const AngleErrors e : {BroadErrors(bad, truth), BroadErrors(truth, bad)}) {
+      EXPECT_TRUE(std::isnan(e.total)) << bad.transpose();
+      EXPECT_TRUE(std::isnan(e.heading)) << bad.transpose();
+      EXPECT_TRUE(std::isnan(e.inclination)) << bad.transpose();
+    }
+  }
+  // One NaN sample among good ones makes the RMSE NaN, so a report cannot show it as good.
+  OrientationScore s;
+  s.Add(BroadErrors(truth, truth));
+  s.Add(BroadErrors(Eigen::Vector4d(nan, nan, nan, nan), truth));
+  EXPECT_TRUE(std::isnan(s.total.value()));
 }
 
 }  // namespace

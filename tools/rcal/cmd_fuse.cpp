@@ -29,7 +29,7 @@
 #include "rcal/estimation/position_kf.hpp"
 #include "rcal/geometry/so3.hpp"
 #include "rcal/io/atomic_file.hpp"
-#include "rcal/io/csv_table.hpp"
+#include "rcal/io/imu_csv.hpp"
 #include "rcal/io/plot.hpp"
 
 namespace rcal::tool {
@@ -101,10 +101,18 @@ double ParseSetting(const std::string& name, const std::string& text) {
   return v;
 }
 
+// The sensor ranges beyond which the trial is refused (io/imu_csv.hpp).
+std::vector<Field> ImuFields(io::ImuCsvSettings& s) {
+  return {{"imu.gyro_range", "rad_s", &s.gyro_range_rad_s},
+          {"imu.accel_range", "m_s2", &s.accel_range_m_s2},
+          {"imu.mag_range", "uT", &s.mag_range_uT}};
+}
+
 void ApplyOverrides(const std::vector<std::string>& overrides, est::OrientationKfSettings& o,
-                    est::PositionKfSettings& p) {
+                    est::PositionKfSettings& p, io::ImuCsvSettings& imu) {
   auto fields = OrientationFields(o);
   for (const Field& f : PositionFields(p)) fields.push_back(f);
+  for (const Field& f : ImuFields(imu)) fields.push_back(f);
   for (const auto& kv : overrides) {
     const auto eq = kv.find('=');
     if (eq == std::string::npos)
@@ -158,23 +166,17 @@ int RunFuse(const FuseOptions& opt) {
   // The settings first: a bad --set is refused before a trial is read.
   est::OrientationKfSettings okf_settings = BroadOrientationSettings();
   est::PositionKfSettings pkf_settings = BroadPositionSettings(opt.pos_noise_m);
-  ApplyOverrides(opt.overrides, okf_settings, pkf_settings);
+  io::ImuCsvSettings imu_settings;
+  ApplyOverrides(opt.overrides, okf_settings, pkf_settings, imu_settings);
   const std::string path = ResolvePath(opt.trial);
-  const io::CsvTable table = io::CsvTable::Load(path);
-  const int n = table.rows();
+  // Every sample checked against the sensor ranges, time order and NaN before any is fused.
+  const io::ImuCsv trial = io::LoadImuCsv(path, imu_settings);
+  const int n = static_cast<int>(trial.t.size());
   if (n < 2) throw std::runtime_error("fuse: " + path + " has fewer than two rows");
-  const Eigen::VectorXd t = table.Column("t_s");
-  const Eigen::VectorXd gx = table.Column("gyr_x"), gy = table.Column("gyr_y"),
-                        gz = table.Column("gyr_z");
-  const Eigen::VectorXd ax = table.Column("acc_x"), ay = table.Column("acc_y"),
-                        az = table.Column("acc_z");
-  const Eigen::VectorXd mx = table.Column("mag_x"), my = table.Column("mag_y"),
-                        mz = table.Column("mag_z");
-  const Eigen::VectorXd qw = table.Column("q_w"), qx = table.Column("q_x"),
-                        qy = table.Column("q_y"), qz = table.Column("q_z");
-  const Eigen::VectorXd px = table.Column("pos_x"), py = table.Column("pos_y"),
-                        pz = table.Column("pos_z");
-  const Eigen::VectorXd movement = table.Column("movement");
+  for (const auto& [has, what] : {std::pair{trial.has_truth, "truth quaternion q_w..q_z"},
+                                  std::pair{trial.has_position, "truth position pos_x..pos_z"},
+                                  std::pair{trial.has_movement, "movement"}})
+    if (!has) throw std::runtime_error("fuse: " + path + ": missing the " + what + " columns");
 
   est::OrientationKf okf(okf_settings);
   est::PositionKf pkf(pkf_settings);
@@ -189,36 +191,43 @@ int RunFuse(const FuseOptions& opt) {
 
   OrientationScore kf_score, fqa_score;
   Rms pos_all, pos_moving;
-  long refused = 0, fqa_failed = 0, pos_samples = 0;
+  long refused = 0, fqa_failed = 0, pos_samples = 0, non_finite = 0;
   std::vector<double> plot_t, e_tot, e_head, e_incl, e_fqa, plot_pt, e_pos;
   for (int k = 0; k < n; ++k) {
-    const Eigen::Vector3d gyro(gx(k), gy(k), gz(k)), f_B(ax(k), ay(k), az(k)),
-        m_B(mx(k), my(k), mz(k));
-    const auto status = okf.Update(t(k), gyro, f_B, m_B);
+    const Eigen::Vector3d &gyro = trial.gyro[k], &f_B = trial.accel[k], &m_B = trial.mag_uT[k];
+    const double t_k = trial.t[k];
+    const auto status = okf.Update(t_k, gyro, f_B, m_B);
     if (!status) {
       if (refused++ < 5) spdlog::warn("sample {}: {}", k, status.error());
+      continue;
+    }
+    // A filter that has gone non-finite has failed: scored, its NaN would read as an error of 0.
+    if (!okf.q_EB().allFinite()) {
+      if (non_finite++ == 0)
+        spdlog::error("fuse: row {} (t = {} s): the orientation KF's estimate is not finite", k + 1,
+                      t_k);
       continue;
     }
     const auto q_fqa = est::Fqa(f_B, m_B, fqa_settings);
     if (!q_fqa) ++fqa_failed;
     // Position KF: accelerometer every sample, the simulated position sensor at pos_rate_hz.
-    (void)pkf.UpdateAccel(t(k), f_B, okf.R_EB());
-    const Eigen::Vector3d p_truth(px(k), py(k), pz(k));
-    if (t(k) >= next_pos_t - 1e-9 && p_truth.allFinite()) {
-      next_pos_t = (std::isfinite(next_pos_t) ? next_pos_t : t(k)) + pos_period;
+    (void)pkf.UpdateAccel(t_k, f_B, okf.R_EB());
+    const Eigen::Vector3d& p_truth = trial.p_truth[k];
+    if (t_k >= next_pos_t - 1e-9 && p_truth.allFinite()) {
+      next_pos_t = (std::isfinite(next_pos_t) ? next_pos_t : t_k) + pos_period;
       const Eigen::Vector3d noise(pos_noise(rng), pos_noise(rng), pos_noise(rng));
-      (void)pkf.UpdatePosition(t(k), p_truth + noise);
+      (void)pkf.UpdatePosition(t_k, p_truth + noise);
       ++pos_samples;
     }
-    const Eigen::Vector4d q_truth(qw(k), qx(k), qy(k), qz(k));
-    const bool moving = movement(k) > 0.5;
+    const Eigen::Vector4d& q_truth = trial.q_truth[k];
+    const bool moving = trial.movement[k] == 1;
     if (q_truth.allFinite()) {
       const AngleErrors e = BroadErrors(okf.q_EB(), q_truth);
       if (moving) {
         kf_score.Add(e);
         if (q_fqa) fqa_score.Add(BroadErrors(*q_fqa, q_truth));
       }
-      plot_t.push_back(t(k));
+      plot_t.push_back(t_k);
       e_tot.push_back(e.total * kRadToDeg);
       e_head.push_back(e.heading * kRadToDeg);
       e_incl.push_back(e.inclination * kRadToDeg);
@@ -227,9 +236,15 @@ int RunFuse(const FuseOptions& opt) {
     }
     if (pkf.initialized() && p_truth.allFinite()) {
       const double err = (pkf.p_WM_W() - p_truth).norm();
+      if (!std::isfinite(err)) {
+        if (non_finite++ == 0)
+          spdlog::error("fuse: row {} (t = {} s): the position KF's estimate is not finite", k + 1,
+                        t_k);
+        continue;
+      }
       pos_all.Add(err);
       if (moving) pos_moving.Add(err);
-      plot_pt.push_back(t(k));
+      plot_pt.push_back(t_k);
       e_pos.push_back(err * 1e3);
     }
   }
@@ -256,6 +271,9 @@ int RunFuse(const FuseOptions& opt) {
      << "), magnetometer " << oc.mag_rejected << " (χ² gate " << oc.mag_gated << "), position "
      << pc.position_rejected << " of " << pos_samples << ", refused input " << refused
      << "; zero-rate updates " << oc.zero_rate_updates << " of " << oc.samples << " samples.\n";
+  if (non_finite > 0)
+    md << "\n**FAILED**: " << non_finite
+       << " estimates were not finite (left out of the scores above).\n";
   std::cout << md.str();
 
   nlohmann::json j;
@@ -277,12 +295,17 @@ int RunFuse(const FuseOptions& opt) {
                    {"input", refused},
                    {"fqa_failed", fqa_failed}};
   j["zero_rate_updates"] = oc.zero_rate_updates;
+  j["non_finite_estimates"] = non_finite;
+  j["truth_missing"] = trial.truth_missing;
+  j["position_truth_missing"] = trial.position_missing;
   {
     auto o = okf_settings;
     auto p = pkf_settings;
     nlohmann::json js;
     for (const Field& f : OrientationFields(o)) js[f.key()] = *f.value;
     for (const Field& f : PositionFields(p)) js[f.key()] = *f.value;
+    auto imu = imu_settings;
+    for (const Field& f : ImuFields(imu)) js[f.key()] = *f.value;
     j["settings"] = js;
   }
   j["gyro_bias_final_rad_s"] = {okf.bias_B().x(), okf.bias_B().y(), okf.bias_B().z()};
@@ -312,6 +335,11 @@ int RunFuse(const FuseOptions& opt) {
     pos.ylabel = "|p - p_truth| [mm]";
     pos.series = {{"position KF", plot_pt, e_pos, "lines"}};
     io::PlotPng(pos, dir / (name + "_position_error.png"));
+  }
+  if (non_finite > 0) {
+    spdlog::error("fuse: {}: {} estimates were not finite: the filters failed on this trial", path,
+                  non_finite);
+    return 3;
   }
   return 0;
 }

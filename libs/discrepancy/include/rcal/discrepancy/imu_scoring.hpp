@@ -11,7 +11,8 @@
 
 namespace rcal::discrepancy {
 
-/// BROAD error angles [rad] of an estimate against truth.
+/// BROAD error angles [rad] of an estimate against truth; all NaN when either quaternion is
+/// non-finite or zero (so an RMSE over them is NaN, never a perfect 0).
 struct AngleErrors {
   double total = 0.0, heading = 0.0, inclination = 0.0;
 };

@@ -1,0 +1,126 @@
+// The BROAD-layout IMU stream reader (io/imu_csv.hpp): every real BROAD trial reads within the
+// default sensor ranges; values beyond a range, NaN where no gap is allowed, time not increasing
+// and partial truth quaternions are refused naming column and row; NaN truth is counted.
+#include "rcal/io/imu_csv.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <string>
+
+#include "io_test_util.hpp"
+#include "rcal/io/atomic_file.hpp"
+
+namespace rcal::io {
+namespace {
+
+using testing::ErrorOf;
+
+const std::string kHeader =
+    "t_s,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z,mag_x,mag_y,mag_z,q_w,q_x,q_y,q_z,pos_x,pos_y,pos_z,"
+    "movement\n";
+
+std::string Row(double t, const std::string& rest = "0.1,0,0,0,0,9.81,20,0,-40,1,0,0,0,0,0,1,0") {
+  return std::to_string(t) + "," + rest + "\n";
+}
+
+std::string Stream(int rows, int bad_row = -1, const std::string& bad = "") {
+  std::string s = kHeader;
+  for (int r = 1; r <= rows; ++r) s += r == bad_row ? bad : Row(0.01 * r);
+  return s;
+}
+
+TEST(ImuCsv, EveryBroadTrialReadsWithinTheDefaultRanges) {
+  int trials = 0;
+  for (const auto& e : std::filesystem::directory_iterator(testing::SharedDir() / "data/broad")) {
+    if (e.path().extension() != ".csv") continue;
+    ++trials;
+    const ImuCsv d = LoadImuCsv(e.path());
+    EXPECT_TRUE(d.has_truth && d.has_position && d.has_movement) << e.path();
+    EXPECT_GT(d.t.size(), 1000u) << e.path();
+    // Independent check of one value: trial 24's taps reach 144 m/s² (README of the data).
+    if (e.path().filename() == "broad_24_100hz.csv") {
+      double largest = 0;
+      for (const auto& a : d.accel) largest = std::max(largest, a.cwiseAbs().maxCoeff());
+      EXPECT_GT(largest, 140.0);
+      EXPECT_LT(largest, 160.0);
+    }
+    // Occluded truth is counted, not refused (trial 01 starts occluded).
+    long nan_rows = 0;
+    for (const auto& q : d.q_truth) nan_rows += std::isnan(q(0)) ? 1 : 0;
+    EXPECT_EQ(nan_rows, d.truth_missing) << e.path();
+  }
+  EXPECT_EQ(trials, 16);
+}
+
+TEST(ImuCsv, ValuesBeyondASensorsRangeAreRefusedNamingColumnAndRow) {
+  // gyro 1e300 (finite) made orientation_kf publish NaN for every later sample.
+  EXPECT_EQ(ErrorOf([] {
+              ParseImuCsv(Stream(5, 3, Row(0.03, "1e300,0,0,0,0,9.81,20,0,-40,1,0,0,0,0,0,1,0")),
+                          "s.csv");
+            }),
+            "s.csv: row 3 column 'gyr_x' is 1e300: beyond the gyro range ±35 rad/s "
+            "(ImuCsvSettings::gyro_range_rad_s)");
+  EXPECT_EQ(ErrorOf([] {
+              ParseImuCsv(Stream(5, 2, Row(0.02, "0,0,0,0,0,-170,20,0,-40,1,0,0,0,0,0,1,0")),
+                          "s.csv");
+            }),
+            "s.csv: row 2 column 'acc_z' is -170: beyond the accelerometer range ±160 m/s² "
+            "(ImuCsvSettings::accel_range_m_s2)");
+  EXPECT_EQ(ErrorOf([] {
+              ParseImuCsv(Stream(5, 4, Row(0.04, "0,0,0,0,0,9.81,20,6000,-40,1,0,0,0,0,0,1,0")),
+                          "s.csv");
+            }),
+            "s.csv: row 4 column 'mag_y' is 6000: beyond the magnetometer range ±5000 µT "
+            "(ImuCsvSettings::mag_range_uT)");
+  // The ranges are settings.
+  ImuCsvSettings wide;
+  wide.gyro_range_rad_s = 1e301;
+  EXPECT_EQ(ParseImuCsv(Stream(5, 3, Row(0.03, "1e300,0,0,0,0,9.81,20,0,-40,1,0,0,0,0,0,1,0")),
+                        "s.csv", wide)
+                .gyro[2]
+                .x(),
+            1e300);
+}
+
+TEST(ImuCsv, NaNTimeOrderAndTruthAreChecked) {
+  EXPECT_EQ(ErrorOf([] {
+              ParseImuCsv(Stream(5, 2, Row(0.02, "0,nan,0,0,0,9.81,20,0,-40,1,0,0,0,0,0,1,0")),
+                          "s.csv");
+            }),
+            "s.csv: row 2 column 'gyr_y' is nan: a finite number is required");
+  EXPECT_EQ(ErrorOf([] { ParseImuCsv(Stream(5, 3, Row(0.02)), "s.csv"); }),
+            "s.csv: row 3 column 't_s' is 0.020000: time must increase (previous row 0.02 s)");
+  EXPECT_EQ(ErrorOf([] {
+              ParseImuCsv(Stream(5, 3, Row(0.03, "0,0,0,0,0,9.81,20,0,-40,1,nan,0,0,0,0,1,0")),
+                          "s.csv");
+            }),
+            "s.csv: row 3 column 'q_x' is nan: a truth quaternion is all four numbers or all "
+            "four NaN");
+  EXPECT_EQ(ErrorOf([] {
+              ParseImuCsv(Stream(5, 3, Row(0.03, "0,0,0,0,0,9.81,20,0,-40,0,0,0,0,0,0,1,0")),
+                          "s.csv");
+            }),
+            "s.csv: row 3 column 'q_w' starts a quaternion of norm 0: not a unit quaternion "
+            "(ImuCsvSettings::quaternion_tolerance)");
+  EXPECT_EQ(ErrorOf([] {
+              ParseImuCsv(Stream(5, 5, Row(0.05, "0,0,0,0,0,9.81,20,0,-40,1,0,0,0,0,0,1,2")),
+                          "s.csv");
+            }),
+            "s.csv: row 5 column 'movement' is 2: must be 0 or 1");
+  EXPECT_EQ(ErrorOf([] { ParseImuCsv("t_s,gyr_x\n0,0\n", "s.csv"); }),
+            "s.csv: missing column 'gyr_y'");
+  EXPECT_EQ(ErrorOf([] { ParseImuCsv(kHeader, "s.csv"); }), "s.csv: no samples");
+  // NaN truth (occlusion) is a counted gap.
+  const ImuCsv d = ParseImuCsv(
+      Stream(5, 2, Row(0.02, "0,0,0,0,0,9.81,20,0,-40,nan,nan,nan,nan,nan,0,1,0")), "s.csv");
+  EXPECT_EQ(d.truth_missing, 1);
+  EXPECT_EQ(d.position_missing, 1);
+  EXPECT_TRUE(std::isnan(d.q_truth[1](0)));
+  EXPECT_TRUE(std::isnan(d.p_truth[1](1)));
+  EXPECT_EQ(d.q_truth[0], Eigen::Vector4d(1, 0, 0, 0));
+}
+
+}  // namespace
+}  // namespace rcal::io
