@@ -1,0 +1,194 @@
+// Files people bring that rcal must refuse, not crash on, stall on or fit as if true (issue 11):
+// each case runs the real `rcal` command on a file made from a real one with one defect, and
+// asserts a non-zero exit, a message naming the defect (joint, column, row), and that no
+// calibrated robot was written. Each of these exited 0 (or crashed) before the fix.
+#include <gtest/gtest.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Result {
+  int exit_code;  // -1: killed by a signal (a crash)
+  std::string output;
+};
+
+// Runs rcal under a 30 s CPU limit, so that a runaway walk fails the test instead of stalling it
+// (no address-space limit: a sanitizer build of rcal reserves terabytes of it).
+Result RunRcal(const std::string& args) {
+  const std::string cmd = std::string("cd ") + RCAL_SOURCE_DIR + " && ulimit -t 30 && " + RCAL_EXE +
+                          " " + args + " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  std::string out;
+  std::array<char, 4096> buf;
+  while (size_t n = fread(buf.data(), 1, buf.size(), p)) out.append(buf.data(), n);
+  const int status = pclose(p);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+
+fs::path TempDir(const std::string& name) {
+  const fs::path d =
+      fs::temp_directory_path() / ("rcal_bad_files_" + name + "_" + std::to_string(getpid()));
+  fs::remove_all(d);
+  fs::create_directories(d);
+  return d;
+}
+
+std::string Read(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+void Write(const fs::path& p, const std::string& text) {
+  std::ofstream(p) << text;
+}
+
+std::vector<std::string> Lines(const std::string& text) {
+  std::vector<std::string> out;
+  std::istringstream in(text);
+  for (std::string l; std::getline(in, l);) out.push_back(l);
+  return out;
+}
+
+std::string Join(const std::vector<std::string>& lines) {
+  std::string s;
+  for (const auto& l : lines) s += l + "\n";
+  return s;
+}
+
+// The CSV line with cell `column` (0-based) replaced.
+std::string SetCell(const std::string& line, int column, const std::string& value) {
+  std::vector<std::string> cells;
+  std::stringstream in(line);
+  for (std::string c; std::getline(in, c, ',');) cells.push_back(c);
+  cells.at(column) = value;
+  std::string s;
+  for (size_t i = 0; i < cells.size(); ++i) s += (i ? "," : "") + cells[i];
+  return s;
+}
+
+const std::string kUr10 = RCAL_SHARED_DIR "/data/figaroh_ur10";
+
+// The UR10 data with one cell of data row `row` (1 = first) in `column` replaced.
+fs::path Ur10With(const fs::path& dir, int row, int column, const std::string& value) {
+  std::vector<std::string> lines = Lines(Read(kUr10 + "/calibration.csv"));
+  lines.at(row) = SetCell(lines.at(row), column, value);
+  const fs::path p = dir / "poses.csv";
+  Write(p, Join(lines));
+  return p;
+}
+
+void ExpectRefused(const Result& r, const std::string& message, const fs::path& out) {
+  EXPECT_GT(r.exit_code, 0) << r.output;  // refused, not crashed (-1) and not accepted (0)
+  EXPECT_NE(r.output.find(message), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(out / "robot_calibrated.yaml")) << "a calibrated robot was written";
+}
+
+TEST(BadFiles, CalibrateRefusesAnAbsurdJointValueNamingRowAndColumn) {
+  // Column 6 of the FIGAROH file is shoulder_pan_joint. Was: exit 0, held-out error 116 m.
+  const fs::path d = TempDir("q");
+  for (const std::string v : {"1e308", "1e6"}) {
+    const Result r = RunRcal("calibrate " + Ur10With(d, 3, 6, v).string() + " --robot " + kUr10 +
+                             "/robot.urdf --out " + (d / "out").string());
+    ExpectRefused(r, "row 3 column 'shoulder_pan_joint'", d / "out");
+  }
+}
+
+TEST(BadFiles, CalibrateRefusesAPositionBeyondTheArmsReach) {
+  // x1 = 1000 m (was: exit 0, held-out 172 mm... mean of metres) and z1 = 1e12 m (σ = null).
+  const fs::path d = TempDir("x");
+  Result r = RunRcal("calibrate " + Ur10With(d, 3, 0, "1000").string() + " --robot " + kUr10 +
+                     "/robot.urdf --out " + (d / "out").string());
+  ExpectRefused(r, "row 3 column 'x1' is 1000 m: the marker is", d / "out");
+  EXPECT_NE(r.output.find("beyond the arm's reach"), std::string::npos) << r.output;
+  r = RunRcal("calibrate " + Ur10With(d, 5, 2, "1e12").string() + " --robot " + kUr10 +
+              "/robot.urdf --out " + (d / "out").string());
+  ExpectRefused(r, "row 5 column 'z1' is 1e12", d / "out");
+}
+
+std::string LoopUrdf() {
+  std::string x = "<?xml version=\"1.0\"?>\n<robot name=\"loop\">\n";
+  for (const char* l : {"base", "a", "b", "c"}) x += std::string("<link name=\"") + l + "\"/>\n";
+  const char* joints[][3] = {
+      {"j1", "base", "a"}, {"j2", "a", "b"}, {"j3", "b", "c"}, {"j4", "c", "a"}};
+  for (const auto& j : joints)
+    x += std::string("<joint name=\"") + j[0] + "\" type=\"revolute\"><parent link=\"" + j[1] +
+         "\"/><child link=\"" + j[2] +
+         "\"/><origin xyz=\"0 0 0.1\"/><axis xyz=\"0 0 1\"/>"
+         "<limit lower=\"-1\" upper=\"1\" effort=\"1\" velocity=\"1\"/></joint>\n";
+  return x + "</robot>\n";
+}
+
+TEST(BadFiles, AUrdfLoopIsRefusedNamingTheJoint) {
+  // Was: SIGSEGV (identifiability, calibrate), and with --tip memory growing ~130 MB/s.
+  const fs::path d = TempDir("loop");
+  Write(d / "loop.urdf", LoopUrdf());
+  Write(d / "poses.csv", "q1,q2,q3,x,y,z\n0,0,0,0.1,0.2,0.3\n0.1,0.1,0.1,0.1,0.2,0.3\n");
+  const std::string expected = "joint 'j4' closes a loop: its child link 'a' is an ancestor";
+  ExpectRefused(RunRcal("identifiability --robot " + (d / "loop.urdf").string()), expected,
+                d / "out");
+  ExpectRefused(RunRcal("calibrate " + (d / "poses.csv").string() + " --robot " +
+                        (d / "loop.urdf").string() + " --out " + (d / "out").string()),
+                expected, d / "out");
+  ExpectRefused(RunRcal("calibrate " + (d / "poses.csv").string() + " --robot " +
+                        (d / "loop.urdf").string() + " --tip c --out " + (d / "out").string()),
+                expected, d / "out");
+}
+
+TEST(BadFiles, AnAbsurdRobotYamlIsRefusedNamingTheKey) {
+  const fs::path d = TempDir("yaml");
+  std::string yaml = Read(RCAL_SOURCE_DIR "/config/robots/grb3016.yaml");
+  yaml.replace(yaml.find("d: 0.645"), 8, "d: 1e6");
+  Write(d / "robot.yaml", yaml);
+  ExpectRefused(RunRcal("identifiability --robot " + (d / "robot.yaml").string()),
+                "links[3].d: '1e6' is beyond 100 m", d / "out");
+}
+
+// The first 5000 rows of BROAD trial 02 (40 s of rest, then motion), one cell replaced.
+fs::path BroadWith(const fs::path& dir, int row, int column, const std::string& value) {
+  std::vector<std::string> lines = Lines(Read(RCAL_SHARED_DIR "/data/broad/broad_02_100hz.csv"));
+  lines.resize(5001);
+  if (row > 0) lines.at(row) = SetCell(lines.at(row), column, value);
+  const fs::path p = dir / "trial.csv";
+  Write(p, Join(lines));
+  return p;
+}
+
+TEST(BadFiles, FuseRefusesImuValuesBeyondTheSensorRange) {
+  // Gyro 1e300 (finite): was exit 0 and "total RMSE 0.00°" from a filter gone NaN.
+  const fs::path d = TempDir("fuse");
+  Result r = RunRcal("fuse " + BroadWith(d, 4100, 1, "1e300").string());
+  EXPECT_GT(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("row 4100 column 'gyr_x' is 1e300: beyond the gyro range ±35 rad/s"),
+            std::string::npos)
+      << r.output;
+  EXPECT_EQ(r.output.find("0.00 |"), std::string::npos) << r.output;
+  // NaN accelerometer, time going back.
+  r = RunRcal("fuse " + BroadWith(d, 4200, 6, "nan").string());
+  EXPECT_GT(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("row 4200 column 'acc_z' is nan: a finite number is required"),
+            std::string::npos)
+      << r.output;
+  r = RunRcal("fuse " + BroadWith(d, 4300, 0, "1").string());
+  EXPECT_GT(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("row 4300 column 't_s' is 1: time must increase"), std::string::npos)
+      << r.output;
+  // The range is a setting: a wider gyro range accepts the file (and the filter copes).
+  r = RunRcal("fuse " + BroadWith(d, 0, 0, "").string() + " --set imu.gyro_range=50");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+}
+
+}  // namespace
