@@ -304,9 +304,13 @@ int RunFuse(const FuseOptions& opt) {
     nlohmann::json js;
     for (const Field& f : OrientationFields(o)) js[f.key()] = *f.value;
     for (const Field& f : PositionFields(p)) js[f.key()] = *f.value;
-    auto imu = imu_settings;
-    for (const Field& f : ImuFields(imu)) js[f.key()] = *f.value;
     j["settings"] = js;
+    // The sensor ranges the trial was checked against (--set imu.NAME), apart from the filter
+    // settings: the magnetometer's is in µT, the unit of the file.
+    auto imu = imu_settings;
+    nlohmann::json ranges;
+    for (const Field& f : ImuFields(imu)) ranges[f.key()] = *f.value;
+    j["imu_ranges"] = ranges;
   }
   j["gyro_bias_final_rad_s"] = {okf.bias_B().x(), okf.bias_B().y(), okf.bias_B().z()};
   j["mag_reference"] = {{"norm_uT", okf.mag_ref_norm()}, {"dip_rad", okf.mag_ref_dip()}};
