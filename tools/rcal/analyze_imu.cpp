@@ -8,7 +8,6 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
-#include <lcm/lcm-cpp.hpp>
 #include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -19,7 +18,9 @@
 #include "rcal/imu_sample_t.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/csv_table.hpp"
+#include "rcal/io/lcm_log.hpp"
 #include "rcal/io/plot.hpp"
+#include "rcal/transport/lcm_schema.hpp"
 #include "report.hpp"
 
 namespace rcal::tool {
@@ -83,21 +84,24 @@ bool IsImuStreamCsv(const std::string& path) {
   return false;
 }
 
-disc::ImuStreamData LoadImuStreamLog(const std::string& path, const std::string& channel) {
-  lcm::LogFile log(path, "r");
-  if (!log.good()) throw std::runtime_error(path + ": cannot read the LCM log");
+disc::ImuStreamData LoadImuStreamLog(const std::string& path, const std::string& channel,
+                                     bool allow_gaps) {
+  io::LcmLogReader log(path);  // throws naming the file
   disc::ImuStreamData d;
   int64_t last = std::numeric_limits<int64_t>::min(), events = 0, skipped = 0;
   std::string first_reason;
   const auto skip = [&](const std::string& why) {
     if (skipped++ == 0) first_reason = "event " + std::to_string(events) + ": " + why;
   };
-  while (const lcm::LogEvent* e = log.readNextEvent()) {
+  while (const auto e = log.Next()) {
     if (e->channel != channel) continue;
     ++events;
     imu_sample_t m{};
-    if (m.decode(e->data, 0, e->datalen) < 0) {
-      skip("does not decode as imu_sample_t");
+    // Checked against the schema before the generated decoder runs; a loss of the log's.
+    if (const std::string why = transport::DecodeLcm(e->data.data(), e->data.size(), &m);
+        !why.empty()) {
+      log.Skip(*e, "does not decode as imu_sample_t: " + why);
+      skip("does not decode as imu_sample_t: " + why);
       continue;
     }
     const Eigen::Vector3d g = Eigen::Map<const Eigen::Vector3d>(m.gyro),
@@ -121,6 +125,7 @@ disc::ImuStreamData LoadImuStreamLog(const std::string& path, const std::string&
     d.accel.push_back(a);
     d.mag_uT.push_back(b * 1e6);  // the message carries tesla
   }
+  CheckLogGaps(path, log.stats(), allow_gaps);
   if (skipped > 0)
     spdlog::warn("{}: {} of {} {} events skipped (first: {})", path, skipped, events, channel,
                  first_reason);
@@ -192,7 +197,7 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
   const std::string path = ResolvePath(o.data);
   spdlog::info("rcal analyze: the IMU stream of {}; no robot needed", path);
   const disc::ImuStreamData data =
-      IsLcmLog(path) ? LoadImuStreamLog(path, o.channel) : LoadImuStreamCsv(path);
+      IsLcmLog(path) ? LoadImuStreamLog(path, o.channel, o.allow_gaps) : LoadImuStreamCsv(path);
   disc::ImuAnalysisSettings settings;
   settings.alpha = o.alpha;
   const disc::ImuAnalysis a = disc::AnalyzeImuStream(data, settings);

@@ -21,8 +21,11 @@ discrepancy::ImuStreamData LoadImuStreamCsv(const std::string& path);
 /// The IMU channel of an LCM log of the pipeline (imu_sample_t, field in T → µT): samples that
 /// fail to decode, are not finite, lack the magnetometer, or are not after the previous one are
 /// skipped and counted (a warning names the first reason). No truth orientation, no movement flag
-/// (rests are detected). Throws std::runtime_error when the log cannot be read or has no samples.
-discrepancy::ImuStreamData LoadImuStreamLog(const std::string& path, const std::string& channel);
+/// (rests are detected). The log's read summary is printed (CheckLogGaps): when frames were broken
+/// or events did not decode, throws unless `allow_gaps`. Throws std::runtime_error when the log
+/// cannot be read or has no samples.
+discrepancy::ImuStreamData LoadImuStreamLog(const std::string& path, const std::string& channel,
+                                            bool allow_gaps = false);
 
 /// Writes the stream in the BROAD layout (atomically).
 void WriteImuStreamCsv(const std::filesystem::path& path,
@@ -34,6 +37,7 @@ struct AnalyzeImuOptions {
   std::string json_path;
   double alpha = 0.01;
   std::string channel = "IMU";  ///< for an LCM log: the imu_sample_t channel
+  bool allow_gaps = false;      ///< for an LCM log: go on when it lost data (CheckLogGaps)
 };
 
 /// `rcal analyze` on an IMU stream: DIR/report.md with plots and DIR/analysis.json.

@@ -16,11 +16,12 @@ struct CalibrateLogOptions {
   unsigned cell_seed = 0;  ///< > 0: the simulated cell (ekf_identifier --cell-seed)
   int guess_poses = 6;     ///< with a cell: poses held back for the set-up guess
   std::string json_path;
+  bool allow_gaps = false;  ///< go on when the log lost data (CheckLogGaps); else exit non-zero
 };
 
 /// The options calibrate-log has besides LOG, --robot and --json (which `calibrate` shares):
-/// --channel, --ident-seed, --position-only, --cell-seed, --guess-poses. `suffix` is appended to
-/// each description.
+/// --channel, --ident-seed, --position-only, --cell-seed, --guess-poses, --allow-gaps. `suffix` is
+/// appended to each description.
 void AddCalibrateLogOptions(CLI::App& sub, CalibrateLogOptions& o, const std::string& suffix);
 
 /// Runs the identification over the log; returns the exit code. Throws std::runtime_error

@@ -45,7 +45,8 @@ struct Options {
   double stated_position_sigma_mm = 0.0;
   double stated_orientation_sigma_deg = 0.0;
   double link_density = 10.0;
-  bool imu = false;  // an LCM log: analyse its IMU channel instead of its poses
+  bool imu = false;         // an LCM log: analyse its IMU channel instead of its poses
+  bool allow_gaps = false;  // an LCM log that lost data: go on with what was read
 };
 
 // Human units for a regressor: joint angles in degrees, the rest as they are.
@@ -79,13 +80,14 @@ int Run(const Options& o) {
   // BROAD layout, or a log's IMU channel: the IMU-stream analysis, no robot.
   if (o.imu || IsImuStreamCsv(ResolvePath(o.data))) {
     AnalyzeImuOptions imu_options{o.data, o.out, o.json_path, o.alpha};
+    imu_options.allow_gaps = o.allow_gaps;
     if (o.imu && !IsLcmLog(ResolvePath(o.data)))
       throw std::runtime_error("rcal analyze --imu: " + o.data + " is not an LCM log");
     return RunAnalyzeImu(imu_options);
   }
   if (o.robot.empty()) throw std::runtime_error("rcal analyze: --robot is required for pose data");
   io::LoadedRobot robot = LoadRobotForCell(o.robot, o.tip_link, o.base_link, o.frames);
-  const io::PoseDataset data = LoadPoseDataFor(robot, o.data, "rcal analyze");
+  const io::PoseDataset data = LoadPoseDataFor(robot, o.data, "rcal analyze", o.allow_gaps);
   if (o.frames == "auto" && data.has_orientation)
     AddOrientationFrame(robot, IsLcmLog(ResolvePath(o.data)));
   const kinematics::KinematicModel& model = robot.model;
@@ -337,6 +339,9 @@ const RegisterCommand kAnalyze(
       sub.add_flag("--imu", o->imu,
                    "DATA is an LCM log: analyse its IMU channel (the sensor model) instead of "
                    "its POSE_MEASUREMENT events");
+      sub.add_flag("--allow-gaps", o->allow_gaps,
+                   "DATA is an LCM log that lost data (broken frames, undecodable events): go on "
+                   "with what could be read (default: refuse, exit non-zero)");
       sub.add_option("--tip", o->tip_link, "URDF: last link of the chain (the flange)");
       sub.add_option("--base-link", o->base_link, "URDF: first link of the chain");
       sub.add_option("--out", o->out, "output folder")->capture_default_str();

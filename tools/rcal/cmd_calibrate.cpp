@@ -163,7 +163,7 @@ int Run(const Options& o) {
   // The robot with the set-up frames a real cell has (URDF chains get them; YAML files get what
   // they lack), and the IMU/marker rotation when the data measures orientation.
   io::LoadedRobot robot = LoadRobotForCell(o.robot, o.tip_link, o.base_link, o.frames);
-  const io::PoseDataset data = LoadPoseDataFor(robot, o.data, "rcal calibrate");
+  const io::PoseDataset data = LoadPoseDataFor(robot, o.data, "rcal calibrate", o.log.allow_gaps);
   if (o.frames == "auto" && data.has_orientation)
     AddOrientationFrame(robot, IsLcmLog(ResolvePath(o.data)));
   const auto& model = robot.model;

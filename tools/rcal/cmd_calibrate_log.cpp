@@ -1,23 +1,27 @@
 // rcal calibrate-log LOG --robot R: the online identification run offline on a recorded LCM
 // event log (lcm-logger or the logger service). Reads the POSE_MEASUREMENT events in log order
-// with lcm::LogFile and runs them through the same checks and the same EKF, on the same
+// with io::LcmLogReader and runs them through the same checks and the same EKF, on the same
 // identifiable base set (--ident-seed), or the same simulated cell and set-up guess (--cell-seed),
 // as the ekf_identifier process (both run cell::OnlineIdentification): a log replayed through
 // the pipeline with lcm-logplayer and this command give the same parameters (a tested property).
 // Events that fail to decode or to validate, and poses not after the last accepted one, are
 // skipped and counted, as the process rejects them. `rcal calibrate --log LOG` runs this same code.
-#include <lcm/lcm-cpp.hpp>
+// Every event is checked against its schema before it is decoded; a log that lost data (broken
+// frames, bytes unreadable, undecodable events) is refused after its summary unless --allow-gaps.
 #include <memory>
 #include <nlohmann/json.hpp>
 
 #include "calibrate_log.hpp"
 #include "command.hpp"
+#include "pose_log.hpp"
 #include "rcal/cell/online_identification.hpp"
 #include "rcal/io/atomic_file.hpp"
+#include "rcal/io/lcm_log.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/pose_measurement_t.hpp"
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
+#include "rcal/transport/lcm_schema.hpp"
 
 namespace rcal::tool {
 
@@ -40,6 +44,9 @@ void AddCalibrateLogOptions(CLI::App& sub, CalibrateLogOptions& o, const std::st
                  "with --cell-seed: poses held back for the set-up guess" + suffix)
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  sub.add_flag("--allow-gaps", o.allow_gaps,
+               "an LCM log that lost data (broken frames, undecodable events): go on with what "
+               "could be read (default: refuse, exit non-zero)");
 }
 
 int RunCalibrateLog(const CalibrateLogOptions& o_in) {
@@ -52,14 +59,21 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
   const auto& model = id.model();
   const auto& base = id.base();
 
-  lcm::LogFile log(o.log, "r");
-  if (!log.good()) throw std::runtime_error("calibrate-log: cannot read " + o.log);
+  std::unique_ptr<io::LcmLogReader> log;
+  try {
+    log = std::make_unique<io::LcmLogReader>(o.log);
+  } catch (const std::exception&) {
+    throw std::runtime_error("calibrate-log: cannot read " + o.log);
+  }
   int64_t events = 0, skipped = 0;
-  while (const lcm::LogEvent* e = log.readNextEvent()) {
+  while (const auto e = log->Next()) {
     if (e->channel != o.channel) continue;
     ++events;
     pose_measurement_t msg;
-    if (msg.decode(e->data, 0, e->datalen) < 0) {
+    // Checked against the schema before the generated decoder allocates (num_joints = 2^28 + 6).
+    if (const std::string why = transport::DecodeLcm(e->data.data(), e->data.size(), &msg);
+        !why.empty()) {
+      log->Skip(*e, "does not decode as pose_measurement_t: " + why);
       ++skipped;
       continue;
     }
@@ -67,6 +81,8 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
     auto z = transport::FromMessage(msg, &error);
     if (!z || !id.Add({std::move(*z), msg.utime, msg.pose_index}).rejected.empty()) ++skipped;
   }
+  const io::LcmLogStats stats = log->stats();
+  CheckLogGaps(o.log, stats, o.allow_gaps);
   const auto& ekf = id.ekf();
   const int64_t last_utime = id.last_utime(), last_pose_index = id.last_pose_index();
   const Eigen::VectorXd x = ekf.x(), sigma = ekf.sigma();
@@ -93,6 +109,10 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
                         {"model_id", transport::ModelId(model)},
                         {"events", events},
                         {"skipped", skipped},
+                        {"log_events_read", stats.events_read},
+                        {"log_events_skipped", stats.events_skipped},
+                        {"log_broken_frames", stats.broken_frames},
+                        {"log_bytes_unreadable", stats.bytes_unreadable},
                         {"poses_accepted", ekf.accepted()},
                         {"poses_rejected", ekf.rejected()},
                         {"last_utime_us", ekf.accepted() > 0 ? last_utime : 0},

@@ -1,28 +1,39 @@
 #include "pose_log.hpp"
 
+#include <spdlog/spdlog.h>
 #include <array>
 #include <fstream>
-#include <lcm/lcm-cpp.hpp>
 #include <limits>
+
+#include <cstdio>
 #include <stdexcept>
 
 #include "rcal/geometry/so3.hpp"
 #include "rcal/pose_measurement_t.hpp"
 #include "rcal/transport/adapters.hpp"
+#include "rcal/transport/lcm_schema.hpp"
 
 namespace rcal::tool {
 
 bool IsLcmLog(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::array<unsigned char, 4> b{};
-  if (!in.read(reinterpret_cast<char*>(b.data()), b.size())) return false;
-  return b == std::array<unsigned char, 4>{0xED, 0xA1, 0xDA, 0x01};
+  return io::IsLcmLogFile(path);
+}
+
+void CheckLogGaps(const std::string& path, const io::LcmLogStats& stats, bool allow_gaps) {
+  std::printf("%s: %s\n", path.c_str(), stats.Summary().c_str());
+  for (const auto& r : stats.reasons) std::printf("  %s\n", r.c_str());
+  std::fflush(stdout);
+  if (!stats.lost()) return;
+  if (!allow_gaps)
+    throw std::runtime_error(path + ": the log lost data (" + stats.Summary() +
+                             "); --allow-gaps goes on with what could be read");
+  spdlog::warn("{}: the log lost data ({}); going on with what could be read (--allow-gaps)", path,
+               stats.Summary());
 }
 
 PoseLog ReadPoseLog(const std::filesystem::path& path, const kinematics::KinematicModel& model,
                     const std::string& channel) {
-  lcm::LogFile log(path.string(), "r");
-  if (!log.good()) throw std::runtime_error(path.string() + ": cannot read the LCM log");
+  io::LcmLogReader reader(path);  // throws naming the file
   PoseLog out;
   int64_t last_utime = std::numeric_limits<int64_t>::min();
   const auto skip = [&](const std::string& why) {
@@ -30,15 +41,20 @@ PoseLog ReadPoseLog(const std::filesystem::path& path, const kinematics::Kinemat
     if (out.first_skip_reason.empty())
       out.first_skip_reason = "event " + std::to_string(out.events) + ": " + why;
   };
-  while (const lcm::LogEvent* e = log.readNextEvent()) {
+  while (const auto e = reader.Next()) {
     if (e->channel != channel) continue;
     ++out.events;
     pose_measurement_t msg;
-    if (msg.decode(e->data, 0, e->datalen) < 0) {
-      skip("does not decode as pose_measurement_t");
+    // Checked against the schema before the generated decoder allocates (num_joints = 2^28 + 6).
+    if (const std::string why = transport::DecodeLcm(e->data.data(), e->data.size(), &msg);
+        !why.empty()) {
+      reader.Skip(*e, "does not decode as pose_measurement_t: " + why);
+      skip("does not decode as pose_measurement_t: " + why);
       continue;
     }
     std::string error;
+    // Invalid values (not finite, wrong dimension, not for this robot) are refused as
+    // ekf_identifier refuses them: counted here, not a loss of the log's.
     auto z = transport::FromMessage(msg, &error);
     if (z) error = kinematics::Validate(model, *z);
     if (!error.empty()) {
@@ -52,6 +68,7 @@ PoseLog ReadPoseLog(const std::filesystem::path& path, const kinematics::Kinemat
     last_utime = msg.utime;
     out.poses.push_back({std::move(*z), msg.utime, msg.pose_index});
   }
+  out.log = reader.stats();
   return out;
 }
 

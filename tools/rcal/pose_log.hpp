@@ -2,7 +2,9 @@
 // POSE_MEASUREMENT events in log order, decoded and checked exactly as ekf_identifier checks them
 // (transport::FromMessage, then kinematics::Validate against the robot), so offline commands see
 // the poses the live identifier saw. Events that fail are skipped and counted, with the first
-// reason kept for the message to the user.
+// reason kept for the message to the user. The log is read with io::LcmLogReader (damaged
+// frames skipped and counted) and every event checked against its schema before it is decoded
+// (transport::DecodeLcm); what was lost is in PoseLog::log, for CheckLogGaps.
 #pragma once
 
 #include <cstdint>
@@ -10,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "rcal/io/lcm_log.hpp"
 #include "rcal/io/pose_dataset.hpp"
 #include "rcal/kinematics/measurement.hpp"
 #include "rcal/kinematics/model.hpp"
@@ -30,7 +33,16 @@ struct PoseLog {
   int64_t events = 0;             ///< events on the channel
   int64_t skipped = 0;            ///< undecodable, invalid for the robot, or not after the last
   std::string first_skip_reason;  ///< empty when none skipped
+  /// What reading the log lost: broken frames, unreadable bytes, and the events of `channel`
+  /// that did not decode (its events_skipped). Poses with invalid values, invalid for the robot
+  /// or out of order are refused as the pipeline refuses them, counted in `skipped` only.
+  io::LcmLogStats log;
 };
+
+/// Prints "PATH: events read N, skipped S, broken frames B, bytes unreadable U" (and the first
+/// reasons) to stdout. When anything was lost and `allow_gaps` is false, throws
+/// std::runtime_error saying so (the command exits non-zero); with `allow_gaps`, warns.
+void CheckLogGaps(const std::string& path, const io::LcmLogStats& stats, bool allow_gaps);
 
 /// Reads `channel` of the log. Throws std::runtime_error naming the file when it cannot be read.
 PoseLog ReadPoseLog(const std::filesystem::path& path, const kinematics::KinematicModel& model,

@@ -41,7 +41,7 @@ void AddOrientationFrame(io::LoadedRobot& robot, bool earth_frame) {
 }
 
 io::PoseDataset LoadPoseDataFor(const io::LoadedRobot& robot, const std::string& data_path,
-                                const std::string& command) {
+                                const std::string& command, bool allow_gaps) {
   std::vector<std::string> joint_names;
   for (const auto& j : robot.model.joints()) joint_names.push_back(j.name);
   const std::string path = ResolvePath(data_path);
@@ -49,6 +49,7 @@ io::PoseDataset LoadPoseDataFor(const io::LoadedRobot& robot, const std::string&
   if (IsLcmLog(path)) {
     // A log of the pipeline: its POSE_MEASUREMENT events, checked as ekf_identifier checks them.
     const PoseLog log = ReadPoseLog(path, robot.model, transport::channels::kPoseMeasurement);
+    CheckLogGaps(data_path, log.log, allow_gaps);
     if (log.skipped > 0)
       spdlog::warn("{}: {} of {} {} events skipped (first: {})", data_path, log.skipped, log.events,
                    transport::channels::kPoseMeasurement, log.first_skip_reason);

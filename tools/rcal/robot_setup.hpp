@@ -24,9 +24,10 @@ void AddOrientationFrame(io::LoadedRobot& robot, bool earth_frame = false);
 
 /// The pose dataset at `data_path` with the joint columns named after `robot`'s joints (FIGAROH
 /// layout) and its joint count checked. Refuses an empty file, and several markers per tool,
-/// which `command` does not support yet.
+/// which `command` does not support yet. An LCM log's read summary is printed; a log that lost
+/// data (broken frames, undecodable events) is refused unless `allow_gaps` (CheckLogGaps).
 io::PoseDataset LoadPoseDataFor(const io::LoadedRobot& robot, const std::string& data_path,
-                                const std::string& command);
+                                const std::string& command, bool allow_gaps = false);
 
 /// The measurements of a dataset (covariances left empty: set them with
 /// identification::SetNoise).
