@@ -1,0 +1,122 @@
+// Shared by the transport fuzz targets: bytes decoded as one of rcal's message types the way every
+// rcal process and command decodes them (transport::DecodeLcm: the schema's bounds check, then
+// the generated decoder), then through the message → domain adapters of transport/adapters.hpp.
+// A crash, a sanitizer report, an allocation beyond libFuzzer's -malloc_limit_mb, or bytes the
+// check passes but the generated decoder refuses (the schema and the code disagree) is a finding.
+#pragma once
+
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <string_view>
+
+#include "rcal/calibration_status_t.hpp"
+#include "rcal/health_t.hpp"
+#include "rcal/ik_command_t.hpp"
+#include "rcal/ik_request_t.hpp"
+#include "rcal/imu_sample_t.hpp"
+#include "rcal/io/robot_urdf.hpp"
+#include "rcal/joint_state_t.hpp"
+#include "rcal/kinematic_params_t.hpp"
+#include "rcal/orientation_estimate_t.hpp"
+#include "rcal/pose_measurement_t.hpp"
+#include "rcal/position_sample_t.hpp"
+#include "rcal/supervisor_state_t.hpp"
+#include "rcal/tool_position_estimate_t.hpp"
+#include "rcal/transport/adapters.hpp"
+#include "rcal/transport/channels.hpp"
+#include "rcal/transport/lcm_schema.hpp"
+
+namespace rcal::fuzz {
+
+inline const kinematics::KinematicModel& Grb3016() {
+  static const kinematics::KinematicModel model =
+      io::LoadRobot(RCAL_SOURCE_DIR "/config/robots/grb3016.yaml").model;
+  return model;
+}
+
+// The adapters a process runs on a decoded message (none for the types only displayed).
+inline void Adapt(const pose_measurement_t& m) {
+  std::string error;
+  if (auto z = transport::FromMessage(m, &error)) (void)kinematics::Validate(Grb3016(), *z);
+}
+inline void Adapt(const ik_request_t& m) {
+  std::string error;
+  (void)transport::FromMessage(m, 6, &error);
+  (void)transport::FromMessage(m, -1, &error);
+}
+inline void Adapt(const kinematic_params_t& m) {
+  std::string error;
+  (void)transport::ParamsFromMessage(m, Grb3016(), &error);
+}
+template <typename Msg>
+void Adapt(const Msg&) {}
+
+template <typename Msg>
+void Decode(const std::uint8_t* data, std::size_t size) {
+  const std::string refused =
+      transport::CheckLcmMessage(Msg::getTypeName(), Msg::getHash(), data, size);
+  Msg msg;
+  const std::string why = transport::DecodeLcm(data, size, &msg);
+  if (refused.empty() != why.empty()) {
+    // The check passed bytes the generated decoder refuses (or the reverse): the schema walk and
+    // lcm-gen's code disagree on the format.
+    std::fprintf(stderr, "%s: check '%s', decode '%s'\n", Msg::getTypeName(), refused.c_str(),
+                 why.c_str());
+    std::abort();
+  }
+  if (why.empty()) Adapt(msg);
+}
+
+/// Decodes as the type with this index (mod 12).
+inline void DecodeAs(unsigned index, const std::uint8_t* data, std::size_t size) {
+  switch (index % 12) {
+    case 0:
+      return Decode<calibration_status_t>(data, size);
+    case 1:
+      return Decode<health_t>(data, size);
+    case 2:
+      return Decode<ik_command_t>(data, size);
+    case 3:
+      return Decode<ik_request_t>(data, size);
+    case 4:
+      return Decode<imu_sample_t>(data, size);
+    case 5:
+      return Decode<joint_state_t>(data, size);
+    case 6:
+      return Decode<kinematic_params_t>(data, size);
+    case 7:
+      return Decode<orientation_estimate_t>(data, size);
+    case 8:
+      return Decode<pose_measurement_t>(data, size);
+    case 9:
+      return Decode<position_sample_t>(data, size);
+    case 10:
+      return Decode<supervisor_state_t>(data, size);
+    default:
+      return Decode<tool_position_estimate_t>(data, size);
+  }
+}
+
+/// Decodes as the type the pipeline publishes on `channel` (pose_measurement_t if none).
+inline void DecodeChannel(std::string_view channel, const std::uint8_t* data, std::size_t size) {
+  namespace ch = transport::channels;
+  const std::string_view names[12] = {ch::kCalibrationStatus,
+                                      ch::kHealth,
+                                      ch::kIkCommand,
+                                      ch::kIkRequest,
+                                      ch::kImu,
+                                      ch::kJoints,
+                                      ch::kKinematicParams,
+                                      ch::kOrientation,
+                                      "",
+                                      ch::kPosition,
+                                      ch::kSupervisorState,
+                                      ch::kToolPosition};
+  for (unsigned i = 0; i < 12; ++i)
+    if (!names[i].empty() && names[i] == channel) return DecodeAs(i, data, size);
+  DecodeAs(8, data, size);
+}
+
+}  // namespace rcal::fuzz
