@@ -381,8 +381,8 @@ struct Consistency {
 // estimate is unbiased and P honest; the run fails above χ²_{1−α}(k), α = 1e-3, so an honest run
 // fails on one seed in a thousand. Σz² (marginal σ) is reported too but is not χ²(k): the
 // parameters are correlated, so its tail is heavier. (Every |z| ≤ 3 over 32 parameters failed
-// honest runs on ~8 % of seeds.) Measured over seeds 1–50: d² mean 35.0, σ 10.3 (χ²(32): 32, 8),
-// so P is ≈ 9 % optimistic and the honest false-alarm rate ≈ 4e-3 (the still windows'
+// honest runs on ~8 % of seeds.) Measured over seeds 1–50: d² mean 34.1, σ 9.5 (χ²(32): 32, 8),
+// so P is ≈ 6 % optimistic and the honest false-alarm rate ≈ 3e-3 (the still windows'
 // covariances are estimated from ~80 samples: window NEES 6.32, not 6).
 Consistency TestConsistency(const ParameterTable& t, const Eigen::MatrixXd& P_ekf, size_t k) {
   Consistency c;
