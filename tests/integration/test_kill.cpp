@@ -669,10 +669,12 @@ TEST_P(Kill, SurvivedAndParametersMatchTheUninterruptedRun) {
   // still_window logged as dropped (its pose pipeline's warm-up: the first stop after a start).
   for (const auto& [stop, r] : ref_window) {
     if (run_window.count(stop)) continue;
-    // The stop's window ends at r->utime and opens within the 1.5 s stop before it.
+    // The stop's window ends at r->utime and opens within the 1.5 s stop before it. (A copy, not
+    // the binding: clang 14 cannot capture a structured binding in a lambda.)
+    const std::int64_t end = r->utime;
     const bool dropped = std::any_of(run.dropped.begin(), run.dropped.end(), [&](const Dropped& w) {
-      return w.opening ? w.utime > r->utime - 2'000'000 && w.utime < r->utime
-                       : std::abs(w.utime - r->utime) <= 1000;
+      return w.opening ? w.utime > end - 2'000'000 && w.utime < end
+                       : std::abs(w.utime - end) <= 1000;
     });
     const bool cut = std::count(run.stops_cut.begin(), run.stops_cut.end(), stop) > 0;
     std::printf("stop %d: window missing (%s)\n", stop,

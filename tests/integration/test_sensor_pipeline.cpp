@@ -151,10 +151,10 @@ std::string Nft(const std::string& args) {
 // and of the still windows. The calibration must still converge within 2× the loss-free offline
 // figure, and the losses must show where an operator looks: the identifier's accepted poses fall
 // short of the poses sent, and the processes' HEALTH counts them. The drop pattern is the kernel's
-// random draw, not seeded, so the bound must hold for any pattern: measured over 6 runs 0.036–0.050
-// mm (1.19–1.65× the loss-free 0.0303 mm; 0.94–1.27× the Cramér–Rao figure of the poses that
-// arrived, 0.038–0.040 mm), 36–39 of 50 poses used. Before the window's position was its raw
-// mean, 12 runs gave 0.040–0.071 mm, 2 of them beyond 2×: the windows were overconfident when
+// random draw, not seeded, so the bound must hold for any pattern: measured over 8 runs 0.029–0.050
+// mm (at most 1.65× the loss-free 0.0303 mm; 0.80–1.27× the Cramér–Rao figure of the poses that
+// arrived, 0.036–0.040 mm), 37–43 of 50 poses used. Before the window's position was its raw
+// mean, 16 runs gave 0.037–0.071 mm, 5 of them beyond 2×: the windows were overconfident when
 // samples were lost.
 TEST_F(SensorPipeline, CalibratesThroughTwentyPercentPacketLoss) {
   RCAL_IN_NAMESPACE("SensorPipeline.CalibratesThroughTwentyPercentPacketLoss");
