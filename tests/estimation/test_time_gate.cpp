@@ -94,6 +94,20 @@ TEST(TimeGate, ARestartedDriverIsResynchronisedAfterNConsistentSamples) {
   EXPECT_EQ(g.counters().gap_samples, 0);  // the jump is not a gap
 }
 
+// Found by the poison integration test on a loaded machine: the test resends every POSITION, and
+// when it was descheduled its resends of 19.91–19.95 s arrived together after 19.96 s had been
+// accepted. Five increasing, mutually consistent out-of-order samples re-synchronised the
+// stream 10 ms back in time and restarted the filter (a window lost). Late data just below the
+// last time is never a new time base.
+TEST(TimeGate, ABurstOfLateResendsDoesNotPullTheStreamBack) {
+  TimeGate g;  // resync_samples 5, resync_min_jump_back_us 1 s
+  for (int k = 0; k <= 1996; ++k) g.Offer(k * kPeriod);
+  for (int k = 1991; k <= 1995; ++k) EXPECT_EQ(g.Offer(k * kPeriod), V::kOutOfOrder) << k;
+  EXPECT_EQ(g.counters().resyncs, 0);
+  EXPECT_EQ(*g.last(), 1996 * kPeriod);
+  EXPECT_EQ(g.Offer(1997 * kPeriod), V::kAccepted);
+}
+
 TEST(TimeGate, AnInconsistentRunDoesNotResynchronise) {
   TimeGateSettings s;
   s.resync_samples = 3;

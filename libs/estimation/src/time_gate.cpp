@@ -53,7 +53,11 @@ TimeVerdict TimeGate::Refuse(TimeVerdict v, int64_t utime) {
   }
   // The run of refused samples: consistent when each is after the previous, within the horizon,
   // and under the ceiling (a time beyond it never becomes a time base).
-  if (utime <= settings_.ceiling_us) {
+  const bool late = v == TimeVerdict::kOutOfOrder && last_ &&
+                    Step(utime, *last_) < settings_.resync_min_jump_back_us;
+  if (late) {
+    run_ = 0;  // late data interrupts a run of evidence for a new time base
+  } else if (utime <= settings_.ceiling_us) {
     const bool consistent =
         run_ > 0 && utime > run_last_ && Step(run_last_, utime) <= settings_.horizon_us;
     run_ = consistent ? run_ + 1 : 1;

@@ -35,6 +35,11 @@ struct TimeGateSettings {
   int64_t horizon_us = 10'000'000;
   /// Consecutive, mutually consistent refused samples that re-synchronise the source [-] (≥ 1).
   int resync_samples = 5;
+  /// A time going back by less than this is late data, never a new time base [µs]: a burst of
+  /// delayed resends (a sender descheduled under load) is a consistent, increasing run of
+  /// out-of-order samples just below the last one, and must not pull the stream back. A restarted
+  /// driver that goes back by less is accepted again once it passes the last time.
+  int64_t resync_min_jump_back_us = 1'000'000;
   /// No sample later than this is accepted [µs] (INT64_MAX: no ceiling). See SetCeiling.
   int64_t ceiling_us = std::numeric_limits<int64_t>::max();
   /// A step above gap_factor × the period counts the missing samples [-]; ≤ 1: no gap count.
