@@ -340,6 +340,26 @@ TEST(RobotUrdf, ALoopIsRefusedNamingTheJointThatClosesIt) {
             "s: joint 'j2': link 'b' is both its parent and its child");
 }
 
+TEST(RobotUrdf, TheRobotCheckedIsTheRobotLiburdfdomReads) {
+  // Found by fuzz_robot_urdf (a 1216-byte leak in liburdfdom): an unclosed <?xml declaration
+  // swallows the first <robot> tag, so the document's first element is a <link>; the check
+  // looked at that root and passed, while liburdfdom took the first top-level <robot> (a loop)
+  // and leaked its links.
+  std::string loop = GraphUrdf({"a", "b"}, {"j1:a:b", "j2:b:a"});
+  loop.erase(0, loop.find("<robot"));
+  const std::string xml =
+      "<?xml version=\"1.0\"\n<robot name=\"first\"><link name=\"base\"/></robot>\n" + loop;
+  EXPECT_NE(
+      ErrorOf([&] { ParseUrdfRobotSpec(xml, "u.urdf"); }).find("u.urdf: joint 'j2' closes a loop"),
+      std::string::npos);
+  // Two top-level robots: which one is meant is not guessed; none is an error too.
+  const std::string one = GraphUrdf({"base", "a"}, {"j1:base:a"});
+  EXPECT_EQ(ErrorOf([&] { ParseUrdfRobotSpec(one + one.substr(one.find("<robot")), "t.urdf"); }),
+            "t.urdf: more than one top-level <robot> element");
+  EXPECT_EQ(ErrorOf([&] { ParseUrdfRobotSpec("<model name=\"x\"/>", "n.urdf"); }),
+            "n.urdf: no top-level <robot> element");
+}
+
 TEST(RobotUrdf, ALinkWithSeveralParentsIsRefused) {
   // A diamond: no loop as parent links go, but c is the child of two joints (liburdfdom keeps
   // the last one and lists c under both parents).

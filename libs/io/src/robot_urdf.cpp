@@ -76,13 +76,25 @@ void CheckXmlDepth(const std::string& xml, const std::string& source) {
   }
 }
 
+/// The document's <robot> element: the first top-level one, as liburdfdom takes it (not the
+/// root element: a document whose first element is something else, e.g. a malformed declaration
+/// that tinyxml reads as an element, would otherwise be checked while liburdfdom reads another).
+/// A second top-level <robot> is refused: which of two robots a file means is not for rcal to
+/// guess.
+const TiXmlElement* RobotElement(const TiXmlDocument& doc, const std::string& source) {
+  const TiXmlElement* robot = doc.FirstChildElement("robot");
+  if (robot == nullptr) throw std::runtime_error(source + ": no top-level <robot> element");
+  if (robot->NextSiblingElement("robot") != nullptr)
+    throw std::runtime_error(source + ": more than one top-level <robot> element");
+  return robot;
+}
+
 /// Checks that the <link>s and <joint>s of the <robot> form one tree, naming the joint at fault:
 /// every joint names an existing parent and child link, no link is the child of two joints or of
 /// its own joint, and no joint's child is an ancestor of its parent (a loop). Iterative, so the
 /// file's size, not its shape, bounds the work. Other faults are left to liburdfdom.
 void CheckLinkTree(const TiXmlDocument& doc, const std::string& source) {
-  const TiXmlElement* robot = doc.RootElement();
-  if (robot == nullptr || std::string(robot->Value()) != "robot") return;
+  const TiXmlElement* robot = RobotElement(doc, source);
   std::set<std::string> links;
   for (const TiXmlElement* l = robot->FirstChildElement("link"); l != nullptr;
        l = l->NextSiblingElement("link")) {
@@ -370,7 +382,8 @@ std::string CalibratedUrdfText(const std::string& urdf_xml, const std::string& s
   const urdf::ModelInterfaceSharedPtr urdf = ParseUrdf(urdf_xml, source);
   TiXmlDocument doc;
   ParseXml(&doc, urdf_xml, source);
-  TiXmlElement* robot = doc.RootElement();
+  RobotElement(doc, source);  // the one <robot>, as checked by ParseUrdf
+  TiXmlElement* robot = doc.FirstChildElement("robot");
 
   const char* suffix[6] = {"_dx", "_dy", "_dz", "_drz", "_dry", "_drx"};
   int corrected = 0;
