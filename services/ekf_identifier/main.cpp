@@ -43,6 +43,7 @@
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/kinematics/identifiability.hpp"
 #include "rcal/services/common.hpp"
+#include "rcal/services/time_options.hpp"
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/checkpoint_json.hpp"
@@ -303,20 +304,11 @@ int main(int argc, char** argv) {
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   app.add_option("--name", o.name, "process name in HEALTH")->capture_default_str();
-  double horizon_s = static_cast<double>(o.time.horizon_us) * 1e-6;
-  app.add_option("--horizon", horizon_s,
-                 "a pose more than this past the last accepted one is refused [s]")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  app.add_option("--resync-samples", o.time.resync_samples,
-                 "consistent refused poses that re-synchronise a pose stream whose time jumped")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
+  services::AddTimeGateOptions(app, &o.time, "pose");
   app.add_option("--joint-margin", o.joint_margin,
                  "joints beyond the model's limits by more than this are refused [rad | m]")
       ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
-  o.time.horizon_us = std::llround(horizon_s * 1e6);
 
   try {
     rcal::services::InstallStopHandlers();

@@ -28,6 +28,7 @@
 
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/services/common.hpp"
+#include "rcal/services/time_options.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/filter_nodes.hpp"
 #include "rcal/transport/lcm_transport.hpp"
@@ -75,15 +76,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--gravity", settings.gravity, "local gravity [m/s²]")->capture_default_str();
   app.add_option("--sensor-id", options.sensor_id, "IMU to follow")->capture_default_str();
-  double horizon_s = static_cast<double>(options.time.horizon_us) * 1e-6;
-  app.add_option("--horizon", horizon_s,
-                 "a sample more than this past the last of its stream is refused [s]")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  app.add_option("--resync-samples", options.time.resync_samples,
-                 "consistent refused samples that re-synchronise a stream whose time jumped")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
+  services::AddTimeGateOptions(app, &options.time, "sample");
   app.add_option("--name", options.name, "process name in HEALTH")->capture_default_str();
   app.add_option("--lcm-url", lcm_url, "LCM URL");
   std::string state_path;
@@ -96,7 +89,6 @@ int main(int argc, char** argv) {
                  "file keeping the learned magnetic reference across restarts (JSON, written "
                  "atomically); a restart starts from it instead of learning it while moving");
   CLI11_PARSE(app, argc, argv);
-  options.time.horizon_us = std::llround(horizon_s * 1e6);
   settings.earth = earth == "enu" ? estimation::EarthFrame::kEnu : estimation::EarthFrame::kNed;
 
   try {

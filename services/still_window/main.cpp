@@ -33,6 +33,7 @@
 #include "rcal/estimation/pose_pipeline.hpp"
 #include "rcal/kinematics/measurement.hpp"
 #include "rcal/services/common.hpp"
+#include "rcal/services/time_options.hpp"
 #include "rcal/sim/imu_model.hpp"
 #include "rcal/sim/sensor_sim.hpp"
 #include "rcal/transport/adapters.hpp"
@@ -182,7 +183,6 @@ int main(int argc, char** argv) {
   double warmup = 0.0;
   bool position_only = false;
   estimation::TimeGateSettings time;
-  double horizon_s = static_cast<double>(time.horizon_us) * 1e-6;
   CLI::App app{
       "still_window: still-window pose measurements from the raw sensor streams.\n"
       "Subscribes JOINTS, IMU, POSITION; runs the pose pipeline (orientation + position KF, "
@@ -197,14 +197,7 @@ int main(int argc, char** argv) {
                  "windows beginning within this time of the first sample are dropped [s]")
       ->capture_default_str();
   app.add_flag("--position-only", position_only, "position-only measurements");
-  app.add_option("--horizon", horizon_s,
-                 "a sample more than this past the last of its stream is refused [s]")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  app.add_option("--resync-samples", time.resync_samples,
-                 "consistent refused samples that re-synchronise a stream whose time jumped")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
+  services::AddTimeGateOptions(app, &time, "sample");
   app.add_option("--name", name, "process name in HEALTH")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
@@ -216,7 +209,6 @@ int main(int argc, char** argv) {
     ps.orientation.gyro_noise_density = gyro_noise;
     ps.use_orientation = !position_only;
     spdlog::info("still_window on {}", t.url());
-    time.horizon_us = std::llround(horizon_s * 1e6);
     StillWindowNode node(ps, warmup, time, t, name);
     if (const int rc =
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });

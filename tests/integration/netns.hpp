@@ -117,10 +117,21 @@ class ProcessFixture : public ::testing::Test {
       kill(-p, SIGKILL);
       waitpid(p, nullptr, 0);
     }
-    if (!HasFailure())
+    if (!HasFailure()) {
       fs::remove_all(dir_);
-    else
-      std::fprintf(stderr, "logs kept in %s\n", dir_.c_str());
+      return;
+    }
+    std::fprintf(stderr, "logs kept in %s\n", dir_.c_str());
+    // The namespace is the test's own, so its UDP counters are the test's: datagrams the kernel
+    // dropped because a socket's receive buffer was full (RcvbufErrors) are losses no process
+    // can see.
+    if (std::getenv("RCAL_IN_NETNS")) {
+      FILE* snmp = std::fopen("/proc/net/snmp", "r");
+      char line[512];
+      while (snmp != nullptr && std::fgets(line, sizeof line, snmp) != nullptr)
+        if (std::string(line).rfind("Udp:", 0) == 0) std::fprintf(stderr, "namespace %s", line);
+      if (snmp != nullptr) std::fclose(snmp);
+    }
   }
   pid_t Start(const std::vector<std::string>& argv, const std::string& log) {
     const pid_t p = Spawn(argv, dir_ / log);

@@ -24,6 +24,7 @@ namespace {
 
 using namespace integration;
 namespace ch = transport::channels;
+using namespace std::chrono_literals;
 // Not the default port. Socket buffers for 16× real time: every socket on the group receives
 // every channel (~5 000 datagrams/s), and the kernel's default 212 kB held ~40 ms of them (one
 // TOOL_POSITION of 3599 lost on a loaded machine).
@@ -87,14 +88,33 @@ struct Listener {
   std::vector<std::pair<int64_t, tool_position_estimate_t>> tool;
   std::map<std::string, health_t> health;  // latest per process
   int duplicates = 0;
+  std::chrono::steady_clock::time_point last_arrival = std::chrono::steady_clock::now();
   Listener() {
     t.Subscribe<orientation_estimate_t>(ch::kOrientation, [this](const orientation_estimate_t& m) {
+      last_arrival = std::chrono::steady_clock::now();
       if (!orientation.emplace(m.utime, m).second) ++duplicates;
     });
-    t.Subscribe<tool_position_estimate_t>(
-        ch::kToolPosition,
-        [this](const tool_position_estimate_t& m) { tool.emplace_back(m.utime, m); });
+    t.Subscribe<tool_position_estimate_t>(ch::kToolPosition,
+                                          [this](const tool_position_estimate_t& m) {
+                                            last_arrival = std::chrono::steady_clock::now();
+                                            tool.emplace_back(m.utime, m);
+                                          });
     t.Subscribe<health_t>(ch::kHealth, [this](const health_t& m) { health[m.process] = m; });
+  }
+  /// Datagrams the kernel dropped on the way: at the listener and at the processes (their
+  /// latest HEALTH).
+  int64_t Dropped() const {
+    int64_t n = t.Dropped();
+    for (const auto& [process, h] : health) n += h.dropped;
+    return n;
+  }
+  std::string Counts() const {
+    std::string s = "listener dropped " + std::to_string(t.Dropped());
+    for (const auto& [process, h] : health)
+      s += "; " + process + ": received " + std::to_string(h.received) + ", rejected " +
+           std::to_string(h.rejected) + ", gaps " + std::to_string(h.gaps) + ", dropped " +
+           std::to_string(h.dropped) + ", published " + std::to_string(h.published);
+    return s;
   }
   bool WaitFor(const std::function<bool()>& done) {
     return Until(done, [this] { t.HandleTimeout(100); });
@@ -123,43 +143,76 @@ TEST_F(Filters, ReplayMatchesOfflineFiltersAtTwoSpeeds) {
   ASSERT_GT(ref.tool.size(), 2000u);
   for (const char* speed : {"4", "16"}) {
     SCOPED_TRACE(std::string("speed ") + speed);
-    Listener l;
-    const pid_t okf = Start(OrientationKfCmd(), std::string("orientation_kf_") + speed + ".log");
-    const pid_t pkf = Start(PositionKfCmd(), std::string("position_kf_") + speed + ".log");
-    // Both announce themselves (HEALTH at utime 0) once subscribed.
-    ASSERT_TRUE(l.WaitFor(
-        [&] { return l.health.count("orientation_kf") && l.health.count("position_kf"); }));
-    const pid_t src = Start({RCAL_SENSOR_ACQUISITION, "--source", "replay", kTrial, "--max-rows",
-                             std::to_string(kRows), "--speed", speed, "--lcm-url", kUrl},
-                            std::string("sensor_acquisition_") + speed + ".log");
-    ASSERT_TRUE(l.WaitFor([&] {
-      return l.orientation.size() >= ref.orientation.size() && l.tool.size() >= ref.tool.size();
-    })) << "orientations "
-        << l.orientation.size() << " of " << ref.orientation.size() << ", tool positions "
-        << l.tool.size() << " of " << ref.tool.size();
-    EXPECT_EQ(Wait(src), 0);
-    Reaped(src);
-    // Nothing more than the reference.
-    for (int i = 0; i < 5; ++i) l.t.HandleTimeout(20);
-    EXPECT_EQ(l.duplicates, 0);
-    ASSERT_EQ(l.orientation.size(), ref.orientation.size());
-    for (const auto& [utime, r] : ref.orientation) {
-      const auto it = l.orientation.find(utime);
-      ASSERT_NE(it, l.orientation.end()) << "no ORIENTATION at utime " << utime;
-      ExpectSame(it->second.q_EI, r.q_EI, 4, "q_EI", utime);
-      ExpectSame(it->second.covariance, r.covariance, 9, "covariance", utime);
-      ExpectSame(it->second.gyro_bias, r.gyro_bias, 3, "gyro_bias", utime);
+    // Equality needs every datagram. One the kernel dropped (a socket buffer full while its
+    // reader was not scheduled: a loaded machine) is counted in HEALTH and at the listener; such
+    // a run proves nothing about the filters and is repeated. A shortfall nothing counted fails.
+    constexpr int kAttempts = 3;
+    for (int attempt = 1; attempt <= kAttempts; ++attempt) {
+      const std::string tag = std::string(speed) + "_" + std::to_string(attempt) + ".log";
+      Listener l;
+      const pid_t okf = Start(OrientationKfCmd(), "orientation_kf_" + tag);
+      const pid_t pkf = Start(PositionKfCmd(), "position_kf_" + tag);
+      // Both announce themselves (HEALTH at utime 0) once subscribed.
+      ASSERT_TRUE(l.WaitFor(
+          [&] { return l.health.count("orientation_kf") && l.health.count("position_kf"); }));
+      const pid_t src = Start({RCAL_SENSOR_ACQUISITION, "--source", "replay", kTrial, "--max-rows",
+                               std::to_string(kRows), "--speed", speed, "--lcm-url", kUrl},
+                              "sensor_acquisition_" + tag);
+      const auto complete = [&] {
+        return l.orientation.size() >= ref.orientation.size() && l.tool.size() >= ref.tool.size();
+      };
+      bool src_done = false;
+      ASSERT_TRUE(l.WaitFor([&] {
+        if (complete()) return true;
+        if (!src_done && !Running(src)) {
+          src_done = true;
+          Reaped(src);
+        }
+        // The source has finished and nothing came for 3 s: whatever is missing is lost.
+        return src_done && std::chrono::steady_clock::now() - l.last_arrival > 3s;
+      }));
+      if (!complete()) {
+        const std::string what = "orientations " + std::to_string(l.orientation.size()) + " of " +
+                                 std::to_string(ref.orientation.size()) + ", tool positions " +
+                                 std::to_string(l.tool.size()) + " of " +
+                                 std::to_string(ref.tool.size()) + "; " + l.Counts();
+        ASSERT_GT(l.Dropped(), 0) << "lost, and counted nowhere: " << what;
+        std::printf(
+            "attempt %d at speed %s: datagrams dropped by the kernel and counted, run "
+            "repeated: %s\n",
+            attempt, speed, what.c_str());
+        ASSERT_LT(attempt, kAttempts) << "every attempt lost datagrams: " << what;
+        Stop(okf);
+        Stop(pkf);
+        continue;
+      }
+      if (!src_done) {
+        EXPECT_EQ(Wait(src), 0);
+        Reaped(src);
+      }
+      // Nothing more than the reference.
+      for (int i = 0; i < 5; ++i) l.t.HandleTimeout(20);
+      EXPECT_EQ(l.duplicates, 0);
+      ASSERT_EQ(l.orientation.size(), ref.orientation.size());
+      for (const auto& [utime, r] : ref.orientation) {
+        const auto it = l.orientation.find(utime);
+        ASSERT_NE(it, l.orientation.end()) << "no ORIENTATION at utime " << utime;
+        ExpectSame(it->second.q_EI, r.q_EI, 4, "q_EI", utime);
+        ExpectSame(it->second.covariance, r.covariance, 9, "covariance", utime);
+        ExpectSame(it->second.gyro_bias, r.gyro_bias, 3, "gyro_bias", utime);
+      }
+      ASSERT_EQ(l.tool.size(), ref.tool.size());
+      for (size_t k = 0; k < ref.tool.size(); ++k) {
+        ASSERT_EQ(l.tool[k].first, ref.tool[k].first) << "update " << k;
+        ExpectSame(l.tool[k].second.p, ref.tool[k].second.p, 3, "p", ref.tool[k].first);
+        ExpectSame(l.tool[k].second.v, ref.tool[k].second.v, 3, "v", ref.tool[k].first);
+        ExpectSame(l.tool[k].second.covariance, ref.tool[k].second.covariance, 36, "covariance",
+                   ref.tool[k].first);
+      }
+      EXPECT_EQ(Stop(okf), 0);
+      EXPECT_EQ(Stop(pkf), 0);
+      break;
     }
-    ASSERT_EQ(l.tool.size(), ref.tool.size());
-    for (size_t k = 0; k < ref.tool.size(); ++k) {
-      ASSERT_EQ(l.tool[k].first, ref.tool[k].first) << "update " << k;
-      ExpectSame(l.tool[k].second.p, ref.tool[k].second.p, 3, "p", ref.tool[k].first);
-      ExpectSame(l.tool[k].second.v, ref.tool[k].second.v, 3, "v", ref.tool[k].first);
-      ExpectSame(l.tool[k].second.covariance, ref.tool[k].second.covariance, 36, "covariance",
-                 ref.tool[k].first);
-    }
-    EXPECT_EQ(Stop(okf), 0);
-    EXPECT_EQ(Stop(pkf), 0);
   }
 }
 

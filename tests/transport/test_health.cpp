@@ -61,6 +61,40 @@ TEST(Health, CountsAndLastErrorArePublished) {
   EXPECT_GT(got[0].pid, 0);
 }
 
+// A transport that loses messages below the process: Tick with it puts its count in the beat.
+class LossyTransport final : public Transport {
+ public:
+  bool PublishRaw(const std::string& channel, const void* data, int size) override {
+    return inner.PublishRaw(channel, data, size);
+  }
+  void SubscribeRaw(const std::string& channel, RawHandler handler) override {
+    inner.SubscribeRaw(channel, std::move(handler));
+  }
+  int HandleTimeout(int timeout_ms) override { return inner.HandleTimeout(timeout_ms); }
+  int64_t Dropped() const override { return dropped; }
+  LcmTransport inner{"memq://"};
+  int64_t dropped = 0;
+};
+
+TEST(Health, TheTransportsDropsAreInTheBeat) {
+  LossyTransport t;
+  std::vector<health_t> got;
+  t.Subscribe<health_t>("HEALTH", [&](const health_t& m) { got.push_back(m); });
+  Health h("still_window");
+  t.dropped = 17;
+  EXPECT_TRUE(h.Tick(0, t));
+  t.dropped = 40;
+  EXPECT_FALSE(h.Tick(500'000, t));  // no beat due: read at the next one
+  EXPECT_EQ(h.dropped(), 17);
+  EXPECT_TRUE(h.Tick(1'000'000, t));
+  while (t.HandleTimeout(0) > 0) {
+  }
+  ASSERT_EQ(got.size(), 2u);
+  EXPECT_EQ(got[0].dropped, 17);
+  EXPECT_EQ(got[1].dropped, 40);
+  EXPECT_EQ(h.Message(2'000'000).dropped, 40);
+}
+
 // The new counts (issue 11, item 6) reach the message: a gate's verdicts counted apart and in
 // rejected, gaps from the gate, stale and filter resets.
 TEST(Health, TimeGateVerdictsAndLossesAreCountedInTheMessage) {

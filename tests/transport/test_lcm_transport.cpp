@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <cstdlib>
 
 #include "../integration/netns.hpp"
@@ -75,6 +76,34 @@ TEST(LcmTransport, ABurstOfAFewHundredMessagesIsQueuedNotDropped) {
       EXPECT_EQ(got, kBurst);
     }
   }
+}
+
+// Datagrams the kernel drops at the receive socket are counted: a socket buffer of the kernel's
+// minimum (~2 datagrams) and a burst sent faster than LCM's receive thread drains it lose some;
+// every datagram sent is then either delivered or in Dropped(). The LCM queue holds the whole
+// burst, so that the kernel is the only place to lose one.
+TEST(LcmTransport, DatagramsTheKernelDropsAreCounted) {
+  RCAL_IN_NAMESPACE("LcmTransport.DatagramsTheKernelDropsAreCounted");
+  constexpr int kBurst = 20000;
+  const std::string url = "udpm://239.255.76.67:7752?ttl=0&recv_buf_size=1";
+  LcmTransport rx(url, kBurst);
+  EXPECT_EQ(rx.receive_socket(), -1);
+  EXPECT_EQ(rx.Dropped(), 0);
+  int got = 0;
+  rx.Subscribe<pose_measurement_t>("POSE_MEASUREMENT", [&](const pose_measurement_t&) { ++got; });
+  ASSERT_GE(rx.receive_socket(), 0) << "the receive socket was not found";
+  LcmTransport tx(url);
+  pose_measurement_t m = Sample();
+  m.num_joints = 100;  // ~1 kB: a datagram per message, a few per minimum buffer
+  m.q.assign(100, 0.1);
+  for (int k = 0; k < kBurst; ++k) ASSERT_TRUE(tx.Publish("POSE_MEASUREMENT", m));
+  usleep(300'000);
+  while (rx.HandleTimeout(50) > 0) {
+  }
+  std::printf("%d of %d delivered, %lld dropped by the kernel\n", got, kBurst,
+              static_cast<long long>(rx.Dropped()));
+  EXPECT_GT(rx.Dropped(), 0) << "nothing was dropped: the test shows nothing";
+  EXPECT_EQ(got + rx.Dropped(), kBurst) << got << " delivered, " << rx.Dropped() << " dropped";
 }
 
 TEST(LcmTransport, WrongTypeAndTruncatedBytesAreRejectedNotDelivered) {

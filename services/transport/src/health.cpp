@@ -82,6 +82,9 @@ std::optional<health_t> Health::Tick(int64_t utime) {
 bool Health::Tick(int64_t utime, Transport& transport, const std::string& channel) {
   auto beat = Tick(utime);
   if (!beat) return false;
+  // Read when a beat is due (a system call), not per message.
+  dropped_ = transport.Dropped();
+  beat->dropped = dropped_;
   ++published_;
   beat->published = published_;
   return transport.Publish(channel, *beat);
@@ -103,6 +106,7 @@ health_t Health::Message(int64_t utime) const {
   m.resyncs = resyncs_;
   m.filter_resets = filter_resets_;
   m.stale = stale_;
+  m.dropped = dropped_;
   return m;
 }
 

@@ -1,8 +1,9 @@
 // The HEALTH heartbeat every process publishes: counts of messages received, rejected (with the
 // last reason) and published; of the rejected, the duplicates, the out-of-horizon, out-of-order
-// and stale ones; the messages missing (gaps), the time bases re-synchronised and the filter
-// resets (lcmtypes/health.lcm). Time comes from the messages' utime (sensor time), never from the
-// wall clock, so a replay at any speed publishes the same heartbeats.
+// and stale ones; the messages missing (gaps), the time bases re-synchronised, the filter resets
+// and the messages the transport lost below the process (dropped) (lcmtypes/health.lcm). Time comes
+// from the messages' utime (sensor time), never from the wall clock, so a replay at any speed
+// publishes the same heartbeats.
 #pragma once
 
 #include <cstdint>
@@ -39,6 +40,9 @@ class Health {
   void Resync(const std::string& reason);
   /// `n` messages never arrived (a gap in a sequence number or in a source's sample times).
   void Gap(int64_t n) { gaps_ += n; }
+  /// The transport's count of messages lost below the process (Transport::Dropped); Tick with a
+  /// transport takes it from there.
+  void SetDropped(int64_t total) { dropped_ = total; }
   /// A filter's state went non-finite and it was reset; `reason` says which and when.
   void FilterReset(const std::string& reason);
 
@@ -69,6 +73,7 @@ class Health {
   int64_t resyncs() const { return resyncs_; }
   int64_t filter_resets() const { return filter_resets_; }
   int64_t stale() const { return stale_; }
+  int64_t dropped() const { return dropped_; }
   const std::string& last_error() const { return last_error_; }
 
  private:
@@ -78,7 +83,7 @@ class Health {
   int64_t latest_ = 0;                // latest utime seen
   int64_t received_ = 0, rejected_ = 0, published_ = 0;
   int64_t duplicates_ = 0, out_of_horizon_ = 0, out_of_order_ = 0, gaps_ = 0, resyncs_ = 0,
-          filter_resets_ = 0, stale_ = 0;
+          filter_resets_ = 0, stale_ = 0, dropped_ = 0;
   std::string last_error_;
 };
 

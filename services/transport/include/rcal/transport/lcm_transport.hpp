@@ -39,6 +39,13 @@ class LcmTransport final : public Transport {
   bool PublishRaw(const std::string& channel, const void* data, int size) override;
   void SubscribeRaw(const std::string& channel, RawHandler handler) override;
   int HandleTimeout(int timeout_ms) override;
+  /// Datagrams the kernel dropped at this transport's receive socket (its SO_MEMINFO drop
+  /// count; Linux). LCM opens that socket at the first subscription; before, and for memq://,
+  /// 0. Messages LCM itself drops from a full subscription queue (queue_capacity) cannot be
+  /// told: LCM 1.3.1 counts them nowhere.
+  int64_t Dropped() const override;
+  /// The receive socket's file descriptor, or -1 (not subscribed yet, or not udpm://).
+  int receive_socket() const { return recv_fd_; }
 
   const std::string& url() const { return url_; }
   /// The underlying LCM instance (for lcm::LogFile-free helpers such as getFileno()).
@@ -55,6 +62,7 @@ class LcmTransport final : public Transport {
   int queue_capacity_;
   lcm::LCM lcm_;
   std::vector<std::unique_ptr<Slot>> slots_;
+  int recv_fd_ = -1;
 };
 
 }  // namespace rcal::transport

@@ -36,6 +36,10 @@ class Transport {
   /// Waits up to `timeout_ms` for one message and dispatches it. Returns 1 when one was handled,
   /// 0 on timeout, negative on a transport error.
   virtual int HandleTimeout(int timeout_ms) = 0;
+  /// Messages lost below the process since it started, as far as the transport can tell (over
+  /// udpm://: datagrams the kernel dropped at the receive socket because its buffer was full);
+  /// 0 where nothing can be lost or nothing can be told.
+  virtual int64_t Dropped() const { return 0; }
 
   /// Encodes and publishes a typed message. Returns false on an encoding or transport failure.
   template <typename Msg>
@@ -57,9 +61,8 @@ class Transport {
                               const std::string& ch, const void* data, int size) {
       Msg msg;
       // Bounds first (DecodeLcm): the generated decoder allocates from length fields unchecked.
-      const std::string refused =
-          size < 0 ? std::string(Msg::getTypeName()) + ": negative size"
-                   : DecodeLcm(data, static_cast<size_t>(size), &msg);
+      const std::string refused = size < 0 ? std::string(Msg::getTypeName()) + ": negative size"
+                                           : DecodeLcm(data, static_cast<size_t>(size), &msg);
       if (!refused.empty()) {
         if (on_error) on_error("channel " + ch + ": " + refused);
         return;
