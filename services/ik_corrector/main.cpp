@@ -53,6 +53,7 @@ int main(int argc, char** argv) {
         options.gravity.link_density_kg_per_m = ae.link_density_kg_per_m;
     }
     transport::IkCorrectorNode node(t, robot.model, options);
+    node.Announce();
     spdlog::info("ik_corrector on {} ({}, {} non-geometric effects)", t.url(), robot.model.name(),
                  options.effects.size());
     if (const int rc =

@@ -353,6 +353,17 @@ int main(int argc, char** argv) {
       ps.position_sigma = position_noise;
       ps.orientation_sigma = orientation_noise;
       ps.include_test = include_test;
+      // With --robot, the rows are checked against it (limits, reach) before any is published.
+      std::optional<io::LoadedRobot> replay_robot;
+      if (app.get_option("--robot")->count() > 0) {
+        replay_robot = io::LoadRobot(services::RepoPath(robot_path));
+        ps.model = &replay_robot->model;
+      } else {
+        spdlog::warn(
+            "sensor_acquisition: {} is not checked against a robot's joint limits and "
+            "reach (give --robot)",
+            path);
+      }
       sensors::PoseDatasetReplaySource src(path, ps);
       return RunSource(src, t, speed);
     }

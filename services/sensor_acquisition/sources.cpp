@@ -82,7 +82,9 @@ bool IsRawStreamCsv(const std::string& path) {
 PoseDatasetReplaySource::PoseDatasetReplaySource(const std::string& path,
                                                  const PoseDatasetReplaySettings& settings)
     : path_(path) {
-  const io::PoseDataset data = io::LoadPoseDataset(path, settings.num_joints);
+  const io::PoseDataset data = io::LoadPoseDataset(
+      path, settings.model != nullptr ? settings.model->num_joints() : settings.num_joints);
+  if (settings.model != nullptr) io::CheckPosesPlausible(data, *settings.model, path);
   std::vector<const io::PoseSample*> rows;
   for (const auto& s : data.samples)
     if (settings.include_test || s.set != io::PoseSample::kTest) rows.push_back(&s);

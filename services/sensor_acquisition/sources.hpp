@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "rcal/joint_state_t.hpp"
+#include "rcal/kinematics/model.hpp"
 #include "rcal/pose_measurement_t.hpp"
 #include "rcal/transport/filter_nodes.hpp"
 
@@ -87,7 +88,11 @@ struct PoseDatasetReplaySettings {
   double position_sigma = 5e-5;         ///< [m]
   double orientation_sigma = 1.745e-3;  ///< [rad]
   bool include_test = false;
-  int num_joints = -1;  ///< expected joints (−1: from the q1..qN columns)
+  int num_joints = -1;  ///< expected joints (−1: from the q1..qN columns, or the model's)
+  /// When set, every row is checked against this robot before anything is published: its
+  /// joint count, joints within its limits, positions within its reach
+  /// (io::CheckPosesPlausible); a row it cannot have produced refuses the whole file.
+  const kinematics::KinematicModel* model = nullptr;
 };
 
 class PoseDatasetReplaySource final : public SensorSource {

@@ -9,6 +9,7 @@
 // and counted in HEALTH, HEALTH keeps beating, nothing non-finite is published, and the
 // calibration equals, to 1e-9, cell::OnlineIdentification on the poses the identifier used, with
 // every window within half its σ of the offline window and its covariance within 3 % of it.
+// And ik_corrector under stale, duplicate and far-future estimates (the second test).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -23,6 +24,8 @@
 #include "rcal/cell/sim_cell.hpp"
 #include "rcal/health_t.hpp"
 #include "rcal/identification/metrics.hpp"
+#include "rcal/ik_command_t.hpp"
+#include "rcal/ik_request_t.hpp"
 #include "rcal/imu_sample_t.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/joint_state_t.hpp"
@@ -201,6 +204,110 @@ TEST_F(Poison, PoisonMessagesAreRefusedCountedAndChangeNoCalibration) {
                          w.cal[k].covariance.topLeftCorner<3, 3>().trace();
     EXPECT_NEAR(ratio, 1.0, 0.03) << "window " << k;
   }
+}
+
+// ik_corrector in a running pose-level pipeline (sensor_acquisition --source sim →
+// ekf_identifier → ik_corrector): after every estimate the test sends an exact duplicate of it, a
+// copy of the first (stale) estimate and a copy with utime 2^62, and a duplicate of every
+// IK_REQUEST. ik_corrector answers with the newest genuine estimate (a stale 1-pose estimate
+// once replaced the 30-pose one and moved the IK answer by 0.036 rad), counts every copy, and
+// answers each request once.
+TEST_F(Poison, IkCorrectorKeepsTheNewestEstimateAndCountsTheCopies) {
+  RCAL_IN_NAMESPACE("Poison.IkCorrectorKeepsTheNewestEstimateAndCountsTheCopies");
+  constexpr int kPoses = 20;
+  const std::string robot_file = RCAL_SOURCE_DIR "/config/robots/grb3016.yaml";
+  const auto robot = io::LoadRobot(robot_file);
+  transport::LcmTransport t(kUrl);
+  std::optional<kinematic_params_t> first, latest;
+  std::set<std::pair<int32_t, int64_t>> genuine;
+  std::map<int64_t, std::vector<ik_command_t>> answers;  // by request_id
+  std::map<std::string, health_t> health;
+  int sent_dup = 0, sent_stale = 0, sent_far = 0;
+  t.Subscribe<kinematic_params_t>(ch::kKinematicParams, [&](const kinematic_params_t& m) {
+    // Our own copies come back too: only a new (poses_used, utime) is the identifier's.
+    if (m.utime == kPoison || !genuine.insert({m.poses_used, m.utime}).second) return;
+    latest = m;
+    if (!first) {
+      first = m;
+      return;
+    }
+    kinematic_params_t far = m;
+    far.utime = kPoison;
+    t.Publish(ch::kKinematicParams, m);
+    t.Publish(ch::kKinematicParams, *first);
+    t.Publish(ch::kKinematicParams, far);
+    ++sent_dup;
+    ++sent_stale;
+    ++sent_far;
+  });
+  t.Subscribe<ik_command_t>(ch::kIkCommand,
+                            [&](const ik_command_t& c) { answers[c.request_id].push_back(c); });
+  t.Subscribe<health_t>(ch::kHealth, [&](const health_t& h) { health[h.process] = h; });
+  bool status_seen = false;
+  t.Subscribe<calibration_status_t>(ch::kCalibrationStatus,
+                                    [&](const calibration_status_t&) { status_seen = true; });
+
+  const pid_t ik =
+      Start({RCAL_IK_CORRECTOR, "--robot", robot_file, "--lcm-url", kUrl}, "ik_corrector.log");
+  const pid_t ekf = Start({RCAL_EKF_IDENTIFIER, "--robot", robot_file, "--checkpoint",
+                           (dir_ / "ekf.json").string(), "--lcm-url", kUrl},
+                          "ekf_identifier.log");
+  // Both up: ik_corrector announces itself, the identifier publishes its (empty) status.
+  ASSERT_TRUE(integration::Until([&] { return health.count("ik_corrector") && status_seen; },
+                                 [&] { t.HandleTimeout(100); }));
+  const pid_t sa = Start({RCAL_SENSOR_ACQUISITION, "--source", "sim", "--robot", robot_file,
+                          "--seed", std::to_string(kSeed), "--poses", std::to_string(kPoses),
+                          "--rate", "20", "--speed", "1", "--lcm-url", kUrl},
+                         "sensor_acquisition.log");
+  ASSERT_TRUE(integration::Until([&] { return latest && latest->poses_used == kPoses; },
+                                 [&] { t.HandleTimeout(100); }));
+  EXPECT_EQ(integration::Wait(sa), 0);
+  Reaped(sa);
+  for (int i = 0; i < 5; ++i) t.HandleTimeout(100);  // the copies of the last estimate
+
+  // A reachable target: the nominal tool position at q; seeded near q. Sent twice.
+  Eigen::VectorXd q = Eigen::VectorXd::Constant(robot.model.num_joints(), 0.3);
+  transport::IkQuery query;
+  query.request_id = 77;
+  query.position_only = true;
+  query.T_WT.translation() = robot.model.Forward(q, robot.model.Nominal()).p_WM_W;
+  query.q_seed = q.array() + 0.05;
+  const ik_request_t request = transport::ToMessage(query, latest->utime + 1);
+  t.Publish(ch::kIkRequest, request);
+  t.Publish(ch::kIkRequest, request);
+  ASSERT_TRUE(
+      integration::Until([&] { return answers.count(77) > 0; }, [&] { t.HandleTimeout(100); }, 30));
+  for (int i = 0; i < 10; ++i) t.HandleTimeout(100);  // a second answer would be here by now
+  // A later request (2 s of sensor time on): its heartbeat carries every count before it.
+  const int64_t last_utime = request.utime + 2'000'000;
+  query.request_id = 78;
+  t.Publish(ch::kIkRequest, transport::ToMessage(query, last_utime));
+  ASSERT_TRUE(integration::Until(
+      [&] { return answers.count(78) > 0 && health["ik_corrector"].utime >= last_utime; },
+      [&] { t.HandleTimeout(100); }, 30));
+  EXPECT_EQ(Stop(ekf), 0);
+  EXPECT_EQ(Stop(ik), 0);
+
+  ASSERT_GT(sent_dup, kPoses / 2);
+  ASSERT_EQ(answers[77].size(), 1u) << "a duplicate request was answered again";
+  const ik_command_t& answer = answers[77][0];
+  EXPECT_TRUE(answer.converged) << answer.reason;
+  EXPECT_EQ(answer.params_utime, latest->utime) << "not the newest estimate";
+  const health_t& h = health["ik_corrector"];
+  std::printf(
+      "sent %d duplicate, %d stale, %d far-future KINEMATIC_PARAMS; ik_corrector: "
+      "received %lld rejected %lld duplicates %lld stale %lld out_of_horizon %lld\n",
+      sent_dup, sent_stale, sent_far, static_cast<long long>(h.received),
+      static_cast<long long>(h.rejected), static_cast<long long>(h.duplicates),
+      static_cast<long long>(h.stale), static_cast<long long>(h.out_of_horizon));
+  // Every copy counted (what the kernel did not drop): the duplicates include the request's.
+  const int64_t lost = h.dropped;
+  EXPECT_GE(h.duplicates + lost, sent_dup + 1);
+  EXPECT_GE(h.stale + lost, sent_stale);
+  EXPECT_GE(h.out_of_horizon + lost, sent_far);
+  EXPECT_LE(h.duplicates, sent_dup + 1);
+  EXPECT_LE(h.stale, sent_stale);
+  EXPECT_LE(h.out_of_horizon, sent_far);
 }
 
 }  // namespace

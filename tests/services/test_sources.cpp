@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "rcal/io/robot_urdf.hpp"
 #include "sources.hpp"
 
 namespace rcal::sensors {
@@ -130,6 +131,34 @@ TEST(PoseDatasetReplaySource, JointsThenPosePerCalibrationRowWithTheNoiseCovaria
   EXPECT_DOUBLE_EQ(z1.covariance[1], 0);
   EXPECT_DOUBLE_EQ(z1.covariance[8], 4e-6);
   fs::remove(p);
+}
+
+TEST(PoseDatasetReplaySource, WithARobotARowItCannotHaveProducedRefusesTheFile) {
+  // The replay published any finite joint value: a q2 of 10 rad on the GRB3016 went out as
+  // JOINTS and POSE_MEASUREMENT.
+  const auto robot = io::LoadRobot(RCAL_SOURCE_DIR "/config/robots/grb3016.yaml");
+  const std::string header = "q1,q2,q3,q4,q5,q6,x,y,z\n";
+  const fs::path bad = WriteCsv("replay_bad", header +
+                                                  "0.1,0.2,0.3,0.1,0.2,0.3,0.5,0.1,0.4\n"
+                                                  "0.1,10,0.3,0.1,0.2,0.3,0.5,0.1,0.4\n");
+  PoseDatasetReplaySettings s;
+  s.model = &robot.model;
+  try {
+    PoseDatasetReplaySource src(bad.string(), s);
+    ADD_FAILURE() << "accepted";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("column 'q2'"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("beyond its limits"), std::string::npos) << e.what();
+  }
+  // Without the robot it cannot be told (and is published, with a warning from the process).
+  s.model = nullptr;
+  EXPECT_NO_THROW(PoseDatasetReplaySource(bad.string(), s));
+  // A row of the wrong joint count for the robot.
+  const fs::path five = WriteCsv("replay_five", "q1,q2,q3,q4,q5,x,y,z\n0,0,0,0,0,0.5,0,0.4\n");
+  s.model = &robot.model;
+  EXPECT_THROW(PoseDatasetReplaySource(five.string(), s), std::runtime_error);
+  fs::remove(bad);
+  fs::remove(five);
 }
 
 TEST(PoseDatasetReplaySource, TheBroadTrialIsARawStream) {

@@ -191,4 +191,16 @@ TEST(BadFiles, FuseRefusesImuValuesBeyondTheSensorRange) {
   EXPECT_EQ(r.exit_code, 0) << r.output;
 }
 
+TEST(BadFiles, AnalyzeRefusesImuValuesBeyondTheSensorRange) {
+  // rcal analyze read IMU streams with its own loader, which took any finite value: a 1e300
+  // gyro went into the analysis.
+  const fs::path d = TempDir("analyze");
+  const Result r = RunRcal("analyze " + BroadWith(d, 4100, 1, "1e300").string() + " --out " +
+                           (d / "out").string());
+  EXPECT_GT(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("row 4100 column 'gyr_x' is 1e300: beyond the gyro range ±35 rad/s"),
+            std::string::npos)
+      << r.output;
+}
+
 }  // namespace

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <vector>
 
+#include "rcal/health_t.hpp"
 #include "rcal/ik_command_t.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/sim/pose_sim.hpp"
@@ -49,6 +50,18 @@ struct Fixture {
 
 Eigen::VectorXd Q(const std::vector<double>& v) {
   return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<int>(v.size()));
+}
+
+TEST(IkCorrectorNode, AnnouncesItselfBeforeAnyMessage) {
+  Fixture f;
+  std::vector<health_t> beats;
+  f.t.Subscribe<health_t>(channels::kHealth, [&](const health_t& h) { beats.push_back(h); });
+  f.node.Announce();
+  f.Drain();
+  ASSERT_EQ(beats.size(), 1u);
+  EXPECT_EQ(beats[0].utime, 0);
+  EXPECT_EQ(beats[0].process, "ik_corrector");
+  EXPECT_EQ(beats[0].received, 0);
 }
 
 TEST(IkCorrectorNode, NominalUntilCalibratedThenCalibratedAgainstTruth) {

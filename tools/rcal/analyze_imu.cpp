@@ -18,6 +18,7 @@
 #include "rcal/imu_sample_t.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/csv_table.hpp"
+#include "rcal/io/imu_csv.hpp"
 #include "rcal/io/lcm_log.hpp"
 #include "rcal/io/plot.hpp"
 #include "rcal/transport/lcm_schema.hpp"
@@ -136,45 +137,16 @@ disc::ImuStreamData LoadImuStreamLog(const std::string& path, const std::string&
 }
 
 disc::ImuStreamData LoadImuStreamCsv(const std::string& path) {
-  const io::CsvTable table = io::CsvTable::Load(path);
-  const int n = table.rows();
+  // The same checks as rcal fuse: sensor ranges, time order, NaN, a unit truth quaternion.
+  const io::ImuCsv csv = io::LoadImuCsv(path);
+  if (csv.t.size() < 10) throw std::runtime_error(path + ": fewer than 10 rows");
   disc::ImuStreamData d;
-  auto col = [&](const char* name) {
-    const Eigen::VectorXd c = table.Column(name);  // throws naming a missing column
-    for (int k = 0; k < n; ++k)
-      if (!std::isfinite(c(k)))
-        throw std::runtime_error(path + ": column '" + name + "' is not a finite number at row " +
-                                 std::to_string(k + 1));
-    return c;
-  };
-  const Eigen::VectorXd t = col("t_s");
-  const Eigen::VectorXd gx = col("gyr_x"), gy = col("gyr_y"), gz = col("gyr_z");
-  const Eigen::VectorXd ax = col("acc_x"), ay = col("acc_y"), az = col("acc_z");
-  const Eigen::VectorXd mx = col("mag_x"), my = col("mag_y"), mz = col("mag_z");
-  if (n < 10) throw std::runtime_error(path + ": fewer than 10 rows");
-  for (int k = 0; k < n; ++k) {
-    if (k > 0 && !(t(k) > t(k - 1)))
-      throw std::runtime_error(path + ": column 't_s' does not increase at row " +
-                               std::to_string(k + 1));
-    d.t.push_back(t(k));
-    d.gyro.emplace_back(gx(k), gy(k), gz(k));
-    d.accel.emplace_back(ax(k), ay(k), az(k));
-    d.mag_uT.emplace_back(mx(k), my(k), mz(k));
-  }
-  if (table.Has("q_w")) {
-    const Eigen::VectorXd qw = table.Column("q_w"), qx = table.Column("q_x"),
-                          qy = table.Column("q_y"), qz = table.Column("q_z");
-    for (int k = 0; k < n; ++k) d.q_truth.emplace_back(qw(k), qx(k), qy(k), qz(k));
-  }
-  if (table.Has("movement")) {
-    const Eigen::VectorXd mv = table.Column("movement");
-    for (int k = 0; k < n; ++k) {
-      if (!(mv(k) == 0.0 || mv(k) == 1.0))
-        throw std::runtime_error(path + ": column 'movement' must be 0 or 1 at row " +
-                                 std::to_string(k + 1));
-      d.movement.push_back(static_cast<int>(mv(k)));
-    }
-  }
+  d.t = csv.t;
+  d.gyro = csv.gyro;
+  d.accel = csv.accel;
+  d.mag_uT = csv.mag_uT;
+  if (csv.has_truth) d.q_truth = csv.q_truth;
+  if (csv.has_movement) d.movement = csv.movement;
   return d;
 }
 

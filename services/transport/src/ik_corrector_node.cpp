@@ -26,6 +26,11 @@ IkCorrectorNode::IkCorrectorNode(Transport& t, const kinematics::KinematicModel&
       o_.request_channel, [this](const ik_request_t& m) { OnRequest(m); }, undecodable);
 }
 
+void IkCorrectorNode::Announce() {
+  health_.Published();
+  t_.Publish(o_.health_channel, health_.Message(0));
+}
+
 void IkCorrectorNode::Reject(const std::string& reason) {
   health_.Rejected(reason);
   health_.Tick(latest_, t_, o_.health_channel);

@@ -61,6 +61,10 @@ class IkCorrectorNode {
   IkCorrectorNode(Transport& t, const kinematics::KinematicModel& model)
       : IkCorrectorNode(t, model, Options{}) {}
 
+  /// Publishes one HEALTH with utime 0 (outside the 1 Hz schedule) so listeners know the process
+  /// is up before any estimate or request came (as the filter nodes do).
+  void Announce();
+
   void OnParams(const kinematic_params_t& msg);
   void OnRequest(const ik_request_t& msg);
   void OnUndecodable(const std::string& reason);
