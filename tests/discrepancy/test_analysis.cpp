@@ -108,6 +108,14 @@ TEST(Discrepancy, NamesTheHiddenCauseAndJoint) {
     const Case c = MakeCase(h.seed, h.effect, h.rms_over_noise);
     const Analysis a = Analyze(c.model, c.data);
     const std::string what = Describe(c.model, h.effect) + " seed " + std::to_string(h.seed);
+    if (a.effects.empty()) {
+      for (const auto& r : a.rounds) {
+        double zmax = 0;
+        for (double z : r.z) zmax = std::max(zmax, z);
+        std::printf("%s: round with largest z %.3f, critical %.3f\n", what.c_str(), zmax,
+                    r.z_critical);
+      }
+    }
     ASSERT_FALSE(a.effects.empty()) << what << ": nothing found";
     EXPECT_TRUE(a.effects.front().effect.SameAs(h.effect)) << what << ": found " << Found(c, a);
     EXPECT_LE(a.effects.size(), 2u) << what << ": found " << Found(c, a);

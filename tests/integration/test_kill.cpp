@@ -596,7 +596,9 @@ TEST_P(Kill, SurvivedAndParametersMatchTheUninterruptedRun) {
     if (k < run.poses.size()) ++gaps;
     std::printf("identifier: used %zu of %zu published poses (%zu missed in %zu gaps)\n",
                 run.used.size(), run.poses.size(), skipped, gaps);
-    if (victim == Victim::kEkfIdentifier) {
+    // Either identifier victim misses what was published while it was down (one run of poses;
+    // none when it restarts within a pose interval, which a slow build need not).
+    if (victim == Victim::kEkfIdentifier || victim == Victim::kEkfIdentifierGuess) {
       EXPECT_LE(gaps, 1u);
     } else {
       EXPECT_EQ(skipped, 0u);

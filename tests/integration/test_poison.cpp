@@ -156,11 +156,11 @@ TEST_F(Poison, PoisonMessagesAreRefusedCountedAndChangeNoCalibration) {
   for (const auto& [name, h] : health)
     std::printf(
         "HEALTH %s: received %lld rejected %lld duplicates %lld out_of_horizon %lld gaps %lld "
-        "filter_resets %lld, %d beats after the first poison; last_error '%s'\n",
+        "filter_resets %lld dropped %lld, %d beats after the first poison; last_error '%s'\n",
         name.c_str(), static_cast<long long>(h.received), static_cast<long long>(h.rejected),
         static_cast<long long>(h.duplicates), static_cast<long long>(h.out_of_horizon),
         static_cast<long long>(h.gaps), static_cast<long long>(h.filter_resets),
-        beats_after_poison[name], h.last_error.c_str());
+        static_cast<long long>(h.dropped), beats_after_poison[name], h.last_error.c_str());
 
   // Every poison refused and counted; HEALTH kept beating (a 1 Hz heartbeat over > 10 s of
   // sensor time after the first poison); nothing non-finite or far-future published.
@@ -169,7 +169,10 @@ TEST_F(Poison, PoisonMessagesAreRefusedCountedAndChangeNoCalibration) {
   const health_t& hs = health["still_window"];
   const health_t& ho = health["orientation_kf"];
   const health_t& he = health["ekf_identifier"];
-  EXPECT_GT(hs.duplicates, 0.9 * sent_duplicates);  // what the kernel did not drop
+  // Every duplicate counted, or it (or its original) was dropped by the kernel and counted as
+  // such (a loaded or sanitized run drops more); and most arrived.
+  EXPECT_GE(hs.duplicates + hs.dropped, sent_duplicates);
+  EXPECT_GT(hs.duplicates, 0.5 * sent_duplicates);
   EXPECT_GE(hs.out_of_horizon, 1);
   EXPECT_GE(ho.out_of_horizon, 1);
   EXPECT_GE(ho.rejected, ho.out_of_horizon + 1);  // the 1e300 gyros
