@@ -88,13 +88,18 @@ IdentifiabilityReport AnalyzeIdentifiability(const KinematicModel& model,
   // the last parameter backwards.
   const int k = n - rank;
   Eigen::MatrixXd N = (d.asDiagonal() * svd.matrixV().rightCols(k)).transpose();  // k × n
+  // A pivot is judged against the rows not yet reduced: the reduced rows are scaled to a unit
+  // pivot and can hold entries far larger than the rest, so a threshold over the whole matrix
+  // skipped real pivots (a UR-like 6R arm at a fitted point: 3 pivots for 18 null directions,
+  // 42 "identifiable" parameters at rank 27).
   std::vector<int> pivots;
   int row = 0;
   for (int col = n - 1; col >= 0 && row < k; --col) {
     int best = row;
     for (int r = row + 1; r < k; ++r)
       if (std::abs(N(r, col)) > std::abs(N(best, col))) best = r;
-    if (std::abs(N(best, col)) < settings.coefficient_zero * N.cwiseAbs().maxCoeff()) continue;
+    const double remaining = N.bottomRows(k - row).cwiseAbs().maxCoeff();
+    if (std::abs(N(best, col)) < settings.coefficient_zero * remaining) continue;
     N.row(row).swap(N.row(best));
     N.row(row) /= N(row, col);
     for (int r = 0; r < k; ++r)
