@@ -193,5 +193,24 @@ TEST(PositionKfNode, AFarFuturePositionIsRefusedAndNothingFarAwayIsPublished) {
   for (const auto& m : out.tool) EXPECT_LT(Eigen::Map<const Eigen::Vector3d>(m.p).norm(), 2.0);
 }
 
+// An accelerometer sample whose orientation never comes (or comes after the filter moved on) is
+// a sample the filter never uses: counted in HEALTH gaps, as missing. It was counted nowhere: a
+// replay at 16x lost 8 tool updates when orientation_kf lagged by more than --orientation-wait.
+TEST(PositionKfNode, AccelerometerSamplesWithoutTheirOrientationAreCountedAsMissing) {
+  LcmTransport t("memq://");
+  PositionKfNode node(t, estimation::PositionKfSettings{});
+  for (int k = 0; k < 30; ++k) node.OnImu(Imu(k * kPeriod, k));
+  EXPECT_EQ(node.health().gaps(), 0);  // waiting for their orientations
+  // The first orientation is for sample 10: samples 0-9 never get theirs.
+  orientation_estimate_t o{};
+  o.utime = 10 * kPeriod;
+  o.q_EI[0] = 1.0;
+  node.OnOrientation(o);
+  Drain(t);
+  EXPECT_EQ(node.unpaired_accel(), 10);
+  EXPECT_EQ(node.health().gaps(), 10);
+  EXPECT_EQ(node.health().rejected(), 0);
+}
+
 }  // namespace
 }  // namespace rcal::transport

@@ -280,6 +280,7 @@ void PositionKfNode::OnImu(const imu_sample_t& msg) {
   latest_ = std::max(latest_, msg.utime);
   pending_accel_[msg.utime] = s->f_B;
   while (pending_accel_.size() > o_.max_pending) {
+    health_.Gap(1);  // a sample the filter never used: counted as missing
     pending_accel_.erase(pending_accel_.begin());
     ++unpaired_accel_;
   }
@@ -298,6 +299,9 @@ void PositionKfNode::OnOrientation(const orientation_estimate_t& msg) {
   // Accelerometer samples before this orientation never got theirs: drop them.
   auto it = pending_accel_.begin();
   while (it != pending_accel_.end() && it->first < msg.utime) {
+    // Every loss counted, as missing (gaps): its orientation never came, or came after the
+    // filter had moved on (orientation_kf more than --orientation-wait of sensor time behind).
+    health_.Gap(1);
     it = pending_accel_.erase(it);
     ++unpaired_accel_;
   }
