@@ -91,14 +91,14 @@ inline Where InNamespaceOrDelegate(const char* filter) {
 #define RCAL_CANNOT_RUN_HERE(why) GTEST_SKIP() << why
 #endif
 
-#define RCAL_IN_NAMESPACE(filter)                                                            \
-  switch (::rcal::integration::InNamespaceOrDelegate(filter)) {                              \
-    case ::rcal::integration::Where::kNotPermitted:                                          \
-      RCAL_CANNOT_RUN_HERE("unshare -n is not permitted here (deploy/netns-run failed)");    \
-    case ::rcal::integration::Where::kDelegated:                                             \
-      return;                                                                                \
-    case ::rcal::integration::Where::kHere:                                                  \
-      break;                                                                                 \
+#define RCAL_IN_NAMESPACE(filter)                                                         \
+  switch (::rcal::integration::InNamespaceOrDelegate(filter)) {                           \
+    case ::rcal::integration::Where::kNotPermitted:                                       \
+      RCAL_CANNOT_RUN_HERE("unshare -n is not permitted here (deploy/netns-run failed)"); \
+    case ::rcal::integration::Where::kDelegated:                                          \
+      return;                                                                             \
+    case ::rcal::integration::Where::kHere:                                               \
+      break;                                                                              \
   }
 
 /// A temporary directory and the processes started in it; kills what is left at the end and
