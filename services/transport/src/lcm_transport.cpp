@@ -30,34 +30,27 @@ bool LcmTransport::PublishRaw(const std::string& channel, const void* data, int 
 
 namespace {
 
-/// The process's open file descriptors that are sockets.
-std::set<int> SocketFds() {
+/// The process's open UDP sockets bound to a port (LCM's receive socket is bound to the group's
+/// port; its send socket is not bound).
+std::set<int> BoundUdpFds() {
   std::set<int> fds;
   DIR* dir = opendir("/proc/self/fd");
   if (dir == nullptr) return fds;
   while (const dirent* e = readdir(dir)) {
     char* end = nullptr;
-    const long fd = std::strtol(e->d_name, &end, 10);
+    const int fd = static_cast<int>(std::strtol(e->d_name, &end, 10));
     if (end == e->d_name || *end != '\0') continue;
     int type = 0;
     socklen_t len = sizeof type;
-    if (getsockopt(static_cast<int>(fd), SOL_SOCKET, SO_TYPE, &type, &len) == 0)
-      fds.insert(static_cast<int>(fd));
+    if (getsockopt(fd, SOL_SOCKET, SO_TYPE, &type, &len) != 0 || type != SOCK_DGRAM) continue;
+    sockaddr_in addr{};
+    len = sizeof addr;
+    if (getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len) == 0 &&
+        addr.sin_family == AF_INET && addr.sin_port != 0)
+      fds.insert(fd);
   }
   closedir(dir);
   return fds;
-}
-
-/// A UDP socket bound to a port (LCM's receive socket is bound to the group's port; its send
-/// socket is not bound).
-bool IsBoundUdp(int fd) {
-  int type = 0;
-  socklen_t len = sizeof type;
-  if (getsockopt(fd, SOL_SOCKET, SO_TYPE, &type, &len) != 0 || type != SOCK_DGRAM) return false;
-  sockaddr_in addr{};
-  len = sizeof addr;
-  if (getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len) != 0) return false;
-  return addr.sin_family == AF_INET && addr.sin_port != 0;
 }
 
 }  // namespace
@@ -66,13 +59,13 @@ void LcmTransport::SubscribeRaw(const std::string& channel, RawHandler handler) 
   // udpm opens its receive socket at the first subscription: the bound UDP socket that appears
   // then is this transport's (what Dropped() reads).
   const bool first = slots_.empty() && url_.rfind("udpm://", 0) == 0;
-  const std::set<int> before = first ? SocketFds() : std::set<int>{};
+  const std::set<int> before = first ? BoundUdpFds() : std::set<int>{};
   slots_.push_back(std::make_unique<Slot>(Slot{std::move(handler)}));
   lcm::Subscription* sub = lcm_.subscribe(channel, &Slot::Handle, slots_.back().get());
   if (sub != nullptr) sub->setQueueCapacity(queue_capacity_);
   if (first)
-    for (const int fd : SocketFds())
-      if (!before.count(fd) && IsBoundUdp(fd)) recv_fd_ = fd;
+    for (const int fd : BoundUdpFds())
+      if (!before.count(fd)) recv_fd_ = fd;
 }
 
 int64_t LcmTransport::Dropped() const {
