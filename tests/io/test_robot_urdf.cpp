@@ -187,12 +187,13 @@ TEST(RobotUrdf, BaseFrameAndMarkerOptions) {
 
 TEST(RobotUrdf, CalibratedUrdfRoundTrips) {
   ScratchDir dir;
-  const KinematicModel m = LoadRobotUrdf(Ur10Urdf());
+  const LoadedRobot robot = LoadRobot(Ur10Urdf());
+  const KinematicModel& m = robot.model;
   std::mt19937 rng(13);
   for (int trial = 0; trial < 5; ++trial) {
     const Eigen::VectorXd x = kinematics::testing::RandomErrors(m, rng, 0.005, 0.02);
     const auto out = dir / "calibrated.urdf";
-    SaveCalibratedUrdf(Ur10Urdf(), out, m, x);
+    SaveCalibratedUrdf(Ur10Urdf(), out, robot.spec, m, x);
     const KinematicModel cal = LoadRobotUrdf(out);
     ASSERT_EQ(cal.num_params(), m.num_params());
     for (int k = 0; k < 20; ++k) {
@@ -201,21 +202,77 @@ TEST(RobotUrdf, CalibratedUrdfRoundTrips) {
     }
     // The rest of the file is kept: visuals, the fixed joints, the comment saying what changed.
     const std::string text = ReadFile(out);
-    EXPECT_NE(text.find("Calibrated by rcal: 6 joint origins corrected"), std::string::npos);
+    EXPECT_NE(
+        text.find("Calibrated by rcal: chain world -> wrist_3_link; 6 joint origins corrected"),
+        std::string::npos);
     EXPECT_NE(text.find("wall_joint"), std::string::npos);
     EXPECT_NE(text.find("<mesh"), std::string::npos);
   }
   // Zero errors leave the origins as they were.
   const std::string same =
-      CalibratedUrdfText(ReadFile(Ur10Urdf()), Ur10Urdf().string(), m, m.Nominal());
+      CalibratedUrdfText(ReadFile(Ur10Urdf()), Ur10Urdf().string(), robot.spec, m, m.Nominal());
   EXPECT_NE(same.find("rpy=\"1.570796326589793 3.141592653589793 3.141592653589793\""),
             std::string::npos);
 }
 
+// Issue 12: the calibrated URDF carries the set-up frames as fixed joints, so a user's tools see
+// the calibrated cell from the URDF alone: the chain rcal_world → rcal_marker_<id> of the file,
+// loaded with no errors, gives the calibrated marker positions (world frame), for every marker,
+// and rcal_world → rcal_imu the calibrated flange → IMU rotation. The chain here starts at
+// base_link, below the URDF's root (world → support_link → base_link on fixed joints).
+TEST(RobotUrdf, CalibratedUrdfCarriesTheSetupFramesAsFixedJoints) {
+  ScratchDir dir;
+  UrdfOptions o;
+  o.base_link = "base_link";
+  o.add_base_frame = true;
+  o.add_marker = true;
+  LoadedRobot robot = LoadRobot(Ur10Urdf(), o);
+  robot.spec.markers.push_back({3, {0.02, -0.05, 0.04}, true});
+  robot.spec.imu = FrameSpec{};
+  const KinematicModel m = BuildModel(robot.spec);
+  ASSERT_EQ(m.markers().size(), 2u);
+  std::mt19937 rng(21);
+  Eigen::VectorXd x = kinematics::testing::RandomErrors(m, rng, 0.005, 0.02);
+  x(m.FindParameter("base_x")) = 1.2;  // a far, turned base and 10 cm markers
+  x(m.FindParameter("base_rz")) = 2.5;
+  x(m.FindParameter("marker_z")) = 0.1;
+  x(m.FindParameter("imu_rx")) = 0.7;
+  const auto out = dir / "calibrated.urdf";
+  SaveCalibratedUrdf(Ur10Urdf(), out, robot.spec, m, x);
+  const std::string text = ReadFile(out);
+  EXPECT_NE(text.find("rcal_world (the position sensor's frame) -> world"), std::string::npos)
+      << text.substr(0, 600);
+  for (int slot = 0; slot < 2; ++slot) {
+    UrdfOptions reload;
+    reload.base_link = "rcal_world";
+    reload.tip_link = slot == 0 ? "rcal_marker" : "rcal_marker_3";
+    reload.identify_joints = false;
+    const KinematicModel cal = LoadRobotUrdf(out, reload);
+    ASSERT_EQ(cal.num_params(), 0);
+    for (int k = 0; k < 50; ++k) {
+      const Eigen::VectorXd q = kinematics::testing::RandomJoints(m, rng);
+      EXPECT_LT(
+          (cal.ToolFrame(q, cal.Nominal()).translation() - m.ForMarker(slot).Forward(q, x).p_WM_W)
+              .norm(),
+          1e-9)
+          << reload.tip_link;
+    }
+  }
+  UrdfOptions imu;
+  imu.base_link = "rcal_world";
+  imu.tip_link = "rcal_imu";
+  imu.identify_joints = false;
+  const KinematicModel cal = LoadRobotUrdf(out, imu);
+  const Eigen::VectorXd q = kinematics::testing::RandomJoints(m, rng);
+  EXPECT_LT((cal.ToolFrame(q, cal.Nominal()).linear() - m.Forward(q, x).R_EI).norm(), 1e-9);
+}
+
 TEST(RobotUrdf, CalibratedUrdfRejectsAForeignModel) {
   const KinematicModel other = kinematics::testing::UrLikeUrdf();
-  const std::string msg = ErrorOf(
-      [&] { CalibratedUrdfText(ReadFile(Ur10Urdf()), "robot.urdf", other, other.Nominal()); });
+  const RobotSpec spec = LoadRobot(Ur10Urdf()).spec;
+  const std::string msg = ErrorOf([&] {
+    CalibratedUrdfText(ReadFile(Ur10Urdf()), "robot.urdf", spec, other, other.Nominal());
+  });
   EXPECT_NE(msg.find("joint 'shoulder_pan' of model 'ur_like' is not in the URDF"),
             std::string::npos)
       << msg;

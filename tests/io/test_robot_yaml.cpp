@@ -202,7 +202,7 @@ TEST(RobotYaml, CalibratedUrdfConventionRoundTrips) {
   joint("wrist_2", {0, 0.1149, 0}, {0, 0, 0}, {0, 0, 1});
   joint("wrist_3", {0, 0, 0.1157}, {0, 0, 0}, {0, 1, 0});
   spec.links.back().identify = false;
-  spec.marker = FrameSpec{{0.0, 0.15, 0.05}, {0, 0, 0}, true};
+  spec.markers = {MarkerSpec{0, {0.0, 0.15, 0.05}, true}};
   ExpectCalibratedRoundTrip(spec, 8);
   ExpectCalibratedRoundTrip(spec, 9, 0.05, 0.5);  // large errors too
 }

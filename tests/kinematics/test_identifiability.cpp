@@ -142,5 +142,41 @@ TEST(Identifiability, TheBaseSetHasRankParametersAwayFromTheNominal) {
   }
 }
 
+// Several points measured on the tool, positions only: each adds its 3 offset coordinates. With
+// one point the tool is a point (4R + 2P + 6 − 3 = 27 for a 6R arm, Everett–Hollerbach); two
+// points add 3 (the tool's rotation about the line through them stays unseen, their distance is
+// seen: 30 = the full-pose count); three non-collinear points fix the whole tool frame and add
+// their shape: 4·6 + 3·3 = 33. Each measurement is judged at its own marker (ForMarker).
+TEST(Identifiability, EveryMarkerAddsItsThreeOffsetCoordinates) {
+  const KinematicModel m = UrLikeThreeMarkers();
+  const auto qs = RandomPoses(m, 60, 5);
+  for (int markers = 1; markers <= 3; ++markers) {
+    std::vector<PoseMeasurement> ms;
+    for (const auto& q : qs)
+      for (int k = 0; k < markers; ++k) {
+        PoseMeasurement pm;
+        pm.q = q;
+        pm.marker = k;
+        ms.push_back(pm);
+      }
+    const auto r = AnalyzeIdentifiability(m, ms, m.Nominal());
+    EXPECT_EQ(r.rank, 24 + 3 * markers) << markers << " marker(s)\n" << AllExplanations(r);
+    // The offsets of markers not measured are seen by nothing.
+    for (int k = markers; k < 3; ++k)
+      EXPECT_TRUE(Explains(r, "marker" + std::to_string(m.markers()[k].id) + "_x has no effect"))
+          << AllExplanations(r);
+  }
+  // The stacked Jacobian of measurements is the per-pose one at each marker's view.
+  std::vector<PoseMeasurement> two(2);
+  two[0].q = two[1].q = qs.front();
+  two[1].marker = 2;
+  two[1].has_orientation = true;
+  const Eigen::MatrixXd J = StackedJacobian(m, two, m.Nominal());
+  ASSERT_EQ(J.rows(), 9);
+  Eigen::MatrixXd J2(6, m.num_params());
+  m.ForMarker(2).IdentificationJacobian(qs.front(), m.Nominal(), J2);
+  EXPECT_EQ(J.bottomRows(6), J2);
+}
+
 }  // namespace
 }  // namespace rcal::kinematics

@@ -53,6 +53,8 @@ KinematicModel ModelFor(int which) {
       return SevenJointSetup();
     case 2:
       return UrLikeUrdf();
+    case 4:
+      return UrLikeThreeMarkers();
     default: {
       // Hayati β (with nominal values) in both D–H forms, a prismatic joint and an IMU.
       ModelBuilder b("hayati");
@@ -66,10 +68,16 @@ KinematicModel ModelFor(int which) {
   }
 }
 
+// Every marker of a model has its own view (ForMarker); each is checked like the model.
+int Slots(const KinematicModel& m) {
+  return std::max<int>(1, m.markers().size());
+}
+
 TEST_P(JacobianTest, IdentificationJacobianMatchesFiniteDifferences) {
-  const KinematicModel m = ModelFor(GetParam());
+  const KinematicModel model = ModelFor(GetParam());
   std::mt19937 rng(10 + GetParam());
-  for (int trial = 0; trial < 20; ++trial) {
+  for (int trial = 0; trial < 20 * Slots(model); ++trial) {
+    const KinematicModel& m = model.ForMarker(trial % Slots(model));
     const Eigen::VectorXd q = RandomJoints(m, rng);
     const Eigen::VectorXd x = RandomErrors(m, rng);
     Eigen::MatrixXd J(6, m.num_params());
@@ -84,16 +92,76 @@ TEST_P(JacobianTest, IdentificationJacobianMatchesFiniteDifferences) {
 }
 
 TEST_P(JacobianTest, JointJacobianMatchesFiniteDifferences) {
-  const KinematicModel m = ModelFor(GetParam());
+  const KinematicModel model = ModelFor(GetParam());
   std::mt19937 rng(20 + GetParam());
-  for (int trial = 0; trial < 20; ++trial) {
+  for (int trial = 0; trial < 20 * Slots(model); ++trial) {
+    const KinematicModel& m = model.ForMarker(trial % Slots(model));
     const Eigen::VectorXd q = RandomJoints(m, rng);
     const Eigen::VectorXd x = RandomErrors(m, rng);
     EXPECT_LT((m.JointJacobian(q, x) - NumericJointJacobian(m, q, x)).cwiseAbs().maxCoeff(), 1e-7);
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Robots, JacobianTest, ::testing::Values(0, 1, 2, 3));
+INSTANTIATE_TEST_SUITE_P(Robots, JacobianTest, ::testing::Values(0, 1, 2, 3, 4));
+
+// Several markers: marker k's position is the flange frame applied to its own offset
+// p_FM,k = nominal + error, the flange frame computed by a model whose chain ends there (no
+// marker); the orientation is the same for every marker; all views share x.
+TEST(Model, EachMarkerIsTheFlangeFrameAppliedToItsOwnOffset) {
+  const KinematicModel m = UrLikeThreeMarkers();
+  ASSERT_EQ(m.markers().size(), 3u);
+  EXPECT_EQ(m.markers()[1].id, 2);
+  EXPECT_EQ(m.MarkerSlot(5), 2);
+  EXPECT_EQ(m.MarkerSlot(1), -1);
+  EXPECT_EQ(m.num_params(), 6 + 36 + 9 + 3);
+  EXPECT_GE(m.FindParameter("marker2_y"), 0);
+  EXPECT_GE(m.FindParameter("marker5_z"), 0);
+  ModelBuilder fb("flange");
+  fb.BaseFrame({0.1, 0.2, 0.0}, {0.0, 0.0, 0.5})
+      .UrdfJoint({0, 0, 0.1273}, {0, 0, 0}, {0, 0, 1}, Rev("shoulder_pan"))
+      .UrdfJoint({0, 0.220941, 0}, {0, kPi / 2, 0}, {0, 1, 0}, Rev("shoulder_lift"))
+      .UrdfJoint({0, -0.1719, 0.612}, {0, 0, 0}, {0, 1, 0}, Rev("elbow"))
+      .UrdfJoint({0, 0, 0.5723}, {0, kPi / 2, 0}, {0, 1, 0}, Rev("wrist_1"))
+      .UrdfJoint({0, 0.1149, 0}, {0, 0, 0}, {0, 0, 1}, Rev("wrist_2"))
+      .UrdfJoint({0, 0, 0.1157}, {0, 0, 0}, {0, 1, 0}, Rev("wrist_3"));
+  const KinematicModel flange = fb.Build();  // parameters: the first 42 of m, in order
+  std::mt19937 rng(31);
+  for (int trial = 0; trial < 10; ++trial) {
+    const Eigen::VectorXd q = RandomJoints(m, rng);
+    const Eigen::VectorXd x = RandomErrors(m, rng);
+    const Eigen::Isometry3d T_WF = flange.ToolFrame(q, x.head(flange.num_params()));
+    for (int k = 0; k < 3; ++k) {
+      const Marker& mk = m.markers()[k];
+      const Eigen::Vector3d p_FM(mk.nominal.x() + x(mk.param[0]), mk.nominal.y() + x(mk.param[1]),
+                                 mk.nominal.z() + x(mk.param[2]));
+      const ToolPose pose = m.ForMarker(k).Forward(q, x);
+      EXPECT_LT((pose.p_WM_W - T_WF * p_FM).norm(), 1e-13) << "slot " << k;
+      EXPECT_LT((pose.R_EI - m.Forward(q, x).R_EI).norm(), 1e-13) << "slot " << k;
+    }
+  }
+  EXPECT_EQ(&m.ForMarker(0), &m);
+  EXPECT_EQ(&m.ForMarker(2).ForMarker(2), &m.ForMarker(2));
+  EXPECT_THROW(m.ForMarker(3), std::out_of_range);
+  EXPECT_THROW(m.ForMarker(2).ForMarker(1), std::out_of_range);  // a view is one marker
+  EXPECT_THROW(Grb3016().ForMarker(1), std::out_of_range);
+  // A copy keeps its views, and they measure their own marker.
+  const KinematicModel copy = m;
+  const Eigen::VectorXd q = RandomJoints(m, rng);
+  EXPECT_EQ(copy.ForMarker(1).Forward(q, m.Nominal()).p_WM_W,
+            m.ForMarker(1).Forward(q, m.Nominal()).p_WM_W);
+  EXPECT_GT((copy.ForMarker(1).Forward(q, m.Nominal()).p_WM_W -
+             copy.ForMarker(2).Forward(q, m.Nominal()).p_WM_W)
+                .norm(),
+            0.05);
+}
+
+TEST(Model, MarkerIdsAreDistinctAndEndTheChain) {
+  ModelBuilder b("twice");
+  b.DhLink(0.1, 0.0, 0.0, 0.0, Rev("j1")).MarkerOffset({0, 0, 0.1}, true, 3);
+  EXPECT_THROW(b.MarkerOffset({0, 0, 0.2}, true, 3), std::invalid_argument);
+  EXPECT_THROW(b.MarkerOffset({0, 0, 0.2}, true, -1), std::invalid_argument);
+  EXPECT_THROW(b.DhLink(0.1, 0.0, 0.0, 0.0, Rev("j2")), std::logic_error);
+}
 
 TEST(Model, DhLinkMatchesClosedFormMatrix) {
   // One standard D–H link against the textbook matrix.

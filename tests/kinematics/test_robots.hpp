@@ -60,6 +60,24 @@ inline KinematicModel UrLikeUrdf() {
   return b.Build();
 }
 
+/// UrLikeUrdf with three reflectors on the tool (marker ids 0, 2 and 5, as a laser tracker
+/// measures them) and an IMU.
+inline KinematicModel UrLikeThreeMarkers() {
+  ModelBuilder b("ur_like_3");
+  b.BaseFrame({0.1, 0.2, 0.0}, {0.0, 0.0, 0.5})
+      .UrdfJoint({0, 0, 0.1273}, {0, 0, 0}, {0, 0, 1}, Rev("shoulder_pan"))
+      .UrdfJoint({0, 0.220941, 0}, {0, kPi / 2, 0}, {0, 1, 0}, Rev("shoulder_lift"))
+      .UrdfJoint({0, -0.1719, 0.612}, {0, 0, 0}, {0, 1, 0}, Rev("elbow"))
+      .UrdfJoint({0, 0, 0.5723}, {0, kPi / 2, 0}, {0, 1, 0}, Rev("wrist_1"))
+      .UrdfJoint({0, 0.1149, 0}, {0, 0, 0}, {0, 0, 1}, Rev("wrist_2"))
+      .UrdfJoint({0, 0, 0.1157}, {0, 0, 0}, {0, 1, 0}, Rev("wrist_3"))
+      .MarkerOffset({0.0, 0.15, 0.05})
+      .MarkerOffset({0.08, -0.02, 0.10}, true, 2)
+      .MarkerOffset({-0.06, 0.04, 0.12}, true, 5)
+      .ImuMounting({0.2, -0.1, 0.4});
+  return b.Build();
+}
+
 inline Eigen::VectorXd RandomJoints(const KinematicModel& m, std::mt19937& rng) {
   Eigen::VectorXd q(m.num_joints());
   for (int j = 0; j < m.num_joints(); ++j) {

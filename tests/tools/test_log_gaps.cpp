@@ -219,7 +219,7 @@ TEST_F(CalibrateLog, EachDamageLosesOneEventSaysSoAndExitsNonZeroUnlessAllowed) 
 TEST(LogGaps, CalibrateAndAnalyzeOfALogRefuseALossyLogUnlessAllowed) {
   io::RobotSpec spec = io::LoadRobot(kRobot).spec;
   spec.base = io::FrameSpec{};
-  spec.marker = io::FrameSpec{};
+  spec.markers = {io::MarkerSpec{}};
   spec.imu = io::FrameSpec{};
   spec.earth = io::FrameSpec{};
   const auto model = io::BuildModel(spec);

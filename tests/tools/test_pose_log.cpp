@@ -41,7 +41,7 @@ fs::path TempDir(const std::string& name) {
 kinematics::KinematicModel CellModel() {
   io::RobotSpec spec = io::LoadRobot(RCAL_SOURCE_DIR "/config/robots/grb3016.yaml").spec;
   spec.base = io::FrameSpec{};
-  spec.marker = io::FrameSpec{};
+  spec.markers = {io::MarkerSpec{}};
   return io::BuildModel(spec);
 }
 
@@ -166,7 +166,7 @@ TEST(PoseLog, RcalAnalyzeFindsAnEffectHiddenInALog) {
 TEST(PoseLog, RcalAnalyzeIdentifiesTheEarthFrameOfALogsOrientations) {
   io::RobotSpec spec = io::LoadRobot(RCAL_SOURCE_DIR "/config/robots/grb3016.yaml").spec;
   spec.base = io::FrameSpec{};
-  spec.marker = io::FrameSpec{};
+  spec.markers = {io::MarkerSpec{}};
   spec.imu = io::FrameSpec{};
   spec.earth = io::FrameSpec{};
   const auto model = io::BuildModel(spec);
@@ -281,14 +281,16 @@ TEST(PoseLog, RcalCalibrateLogWithTheCellReachesTheOfflineRun) {
   const cell::OnlineResult offline = cell::RunOnline(c, w.cal, {});
   EXPECT_EQ(j.at("poses_accepted").get<int>(), offline.accepted);
   EXPECT_EQ(j.at("model_id"), transport::ModelId(c.model));
-  // One entry per parameter in model order, the unit in the key (value_m / value_rad).
+  // One entry per parameter in model order, the unit in the key (value_m / value_rad), the frame
+  // its value is in named.
   const auto& params = j.at("parameters");
   ASSERT_EQ(params.size(), static_cast<size_t>(offline.x.size()));
   for (int i = 0; i < offline.x.size(); ++i) {
     const auto& P = c.model.parameters()[i];
     const std::string unit = P.is_angle ? "rad" : "m";
     EXPECT_EQ(params[i].at("name"), P.name);
-    EXPECT_EQ(params[i].size(), 3u) << params[i].dump();
+    EXPECT_EQ(params[i].size(), 4u) << params[i].dump();
+    EXPECT_FALSE(params[i].at("frame").get<std::string>().empty()) << P.name;
     EXPECT_NEAR(params[i].at("value_" + unit).get<double>(), offline.x(i), 1e-9) << P.name;
     EXPECT_NEAR(params[i].at("sigma_" + unit).get<double>(), offline.sigma(i), 1e-9) << P.name;
   }

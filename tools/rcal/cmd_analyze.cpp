@@ -87,14 +87,15 @@ int Run(const Options& o) {
   }
   if (o.robot.empty()) throw std::runtime_error("rcal analyze: --robot is required for pose data");
   io::LoadedRobot robot = LoadRobotForCell(o.robot, o.tip_link, o.base_link, o.frames);
-  const io::PoseDataset data = LoadPoseDataFor(robot, o.data, "rcal analyze", o.allow_gaps);
+  const io::PoseDataset data = LoadPoseDataFor(robot, o.data, o.allow_gaps);
+  SetUpMarkers(robot, data, {}, o.frames == "auto");
   if (o.frames == "auto" && data.has_orientation)
     AddOrientationFrame(robot, IsLcmLog(ResolvePath(o.data)));
   const kinematics::KinematicModel& model = robot.model;
 
   discrepancy::PoseData pd;
   bool has_test = false;
-  pd.measurements = ToMeasurements(data);
+  pd.measurements = ToMeasurements(data, model);
   for (const auto& s : data.samples) {
     kinematics::EffectContext c;
     c.temperature_c = s.temperature;

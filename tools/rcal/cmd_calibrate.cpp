@@ -10,8 +10,10 @@
 #include <cmath>
 #include <filesystem>
 #include <limits>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <set>
 #include <sstream>
 
 #include "calibrate_log.hpp"
@@ -50,6 +52,8 @@ struct Options {
   double orientation_sigma_deg = 0.1;
   bool fixed_noise = false;
   std::string effects_path;
+  std::vector<std::string> marker_offsets;     ///< ID=x,y,z: known p_FM [m]
+  std::vector<std::string> marker_references;  ///< ID=ROW: offset measured at that row's joints
   double link_density = std::numeric_limits<double>::quiet_NaN();  // NaN: the file's, else 10
   CalibrateLogOptions log;  ///< --log LOG: the calibrate-log command
 };
@@ -148,6 +152,60 @@ ExtendedResult FitEffects(const Options& o, const kinematics::KinematicModel& mo
   return {std::move(ext), std::move(ef), identification::Summarize(p, r_o), std::move(held)};
 }
 
+// Every marker's offset comes from somewhere: fitted from its calibration rows, given
+// (--marker-offset), or measured at a stated configuration (--marker-reference ID=ROW, a marker
+// seen only in test rows). Returns the measured ones; throws naming the marker otherwise.
+std::vector<identification::MarkerReference> MarkerReferences(
+    const Options& o, const io::PoseDataset& data, const kinematics::KinematicModel& model,
+    const std::vector<kinematics::PoseMeasurement>& ms, const std::vector<bool>& is_test) {
+  const std::map<int, int> rows = ParseMarkerRows(o.marker_references, "--marker-reference");
+  const std::map<int, Eigen::Vector3d> known =
+      ParseMarkerOffsets(o.marker_offsets, "--marker-offset");
+  std::set<int> ids, fitted;
+  for (size_t i = 0; i < data.samples.size(); ++i) {
+    ids.insert(data.samples[i].marker);
+    if (!is_test[i]) fitted.insert(data.samples[i].marker);
+  }
+  std::vector<identification::MarkerReference> out;
+  for (const auto& [id, row] : rows) {
+    if (!ids.count(id))
+      throw std::runtime_error("--marker-reference " + std::to_string(id) + "=" +
+                               std::to_string(row) + ": no row of " + o.data + " measures marker " +
+                               std::to_string(id));
+    if (fitted.count(id))
+      throw std::runtime_error(
+          "--marker-reference " + std::to_string(id) + "=" + std::to_string(row) + ": marker " +
+          std::to_string(id) +
+          " has calibration rows, so its offset is fitted; a reference is for a marker measured "
+          "only in test rows (set = test)");
+    if (known.count(id))
+      throw std::runtime_error("marker " + std::to_string(id) +
+                               ": --marker-offset and --marker-reference both given");
+    int index = -1;
+    for (size_t i = 0; i < data.samples.size(); ++i)
+      if (data.samples[i].row == row) index = static_cast<int>(i);
+    if (index < 0 || data.samples[index].marker != id)
+      throw std::runtime_error("--marker-reference " + std::to_string(id) + "=" +
+                               std::to_string(row) + ": data row " + std::to_string(row) + " of " +
+                               o.data + " does not measure marker " + std::to_string(id));
+    out.push_back({ms[index].marker, index});
+  }
+  for (int id : ids)
+    if (!fitted.count(id) && !known.count(id) && !rows.count(id))
+      throw std::runtime_error(
+          "marker " + std::to_string(id) +
+          " appears only in test rows, so nothing fits its offset: give it with --marker-offset " +
+          std::to_string(id) + "=x,y,z [m, " + model.name() +
+          " flange frame] or name a row measuring it at a stated configuration with "
+          "--marker-reference " +
+          std::to_string(id) + "=ROW");
+  if (!out.empty() && !o.effects_path.empty())
+    throw std::runtime_error(
+        "--marker-reference with --effects is not supported: give the "
+        "marker's offset with --marker-offset");
+  return out;
+}
+
 int Run(const Options& o) {
   if (!o.log.log.empty()) {
     if (!o.data.empty()) throw std::runtime_error("rcal calibrate: give DATA or --log, not both");
@@ -163,14 +221,19 @@ int Run(const Options& o) {
   // The robot with the set-up frames a real cell has (URDF chains get them; YAML files get what
   // they lack), and the IMU/marker rotation when the data measures orientation.
   io::LoadedRobot robot = LoadRobotForCell(o.robot, o.tip_link, o.base_link, o.frames);
-  const io::PoseDataset data = LoadPoseDataFor(robot, o.data, "rcal calibrate", o.log.allow_gaps);
+  const io::PoseDataset data = LoadPoseDataFor(robot, o.data, o.log.allow_gaps);
+  SetUpMarkers(robot, data, ParseMarkerOffsets(o.marker_offsets, "--marker-offset"),
+               o.frames == "auto");
   if (o.frames == "auto" && data.has_orientation)
     AddOrientationFrame(robot, IsLcmLog(ResolvePath(o.data)));
   const auto& model = robot.model;
+  spdlog::info("chain {}", ChainText(robot));
 
-  std::vector<kinematics::PoseMeasurement> ms = ToMeasurements(data);
+  std::vector<kinematics::PoseMeasurement> ms = ToMeasurements(data, model);
   std::vector<bool> is_test;
   for (const auto& s : data.samples) is_test.push_back(s.set == io::PoseSample::kTest);
+  const std::vector<identification::MarkerReference> references =
+      MarkerReferences(o, data, model, ms, is_test);
   identification::SetNoise(ms, o.position_sigma_mm / kMm, o.orientation_sigma_deg / kDeg);
   identification::CalibrationSettings settings;
   settings.method = o.method == "ekf" ? identification::CalibrationSettings::Method::kEkf
@@ -187,7 +250,19 @@ int Run(const Options& o) {
   spdlog::info("{}: {} poses ({} for fitting), {}, robot {} with {} parameters", o.data, ms.size(),
                fit_set.size(), data.has_orientation ? "position and orientation" : "positions only",
                model.name(), model.num_params());
-  const identification::CalibrationFit fit = identification::Calibrate(model, fit_set, settings);
+  identification::CalibrationFit fit = identification::Calibrate(model, fit_set, settings);
+  // Markers measured at a stated configuration (test rows only): their offsets from that row.
+  for (const auto& ref : references) {
+    const auto& marker = model.markers()[ref.slot];
+    for (Eigen::VectorXd* x : {&fit.x_nominal, &fit.x}) {
+      const Eigen::Vector3d p_FM = identification::MarkerOffsetFromPoint(
+          model, ref.slot, *x, ms[ref.measurement].q, ms[ref.measurement].p_WM_W);
+      for (int a = 0; a < 3; ++a)
+        if (marker.param[a] >= 0) (*x)(marker.param[a]) = p_FM(a) - marker.nominal(a);
+    }
+    spdlog::info("marker {}: offset from row {}, not fitted", marker.id,
+                 data.samples[ref.measurement].row);
+  }
   spdlog::info("fitted {} parameters ({} set-up); noise σ {:.3f} mm, {:.3f}°",
                fit.identified.size(), fit.setup.size(), fit.position_sigma_m * kMm,
                fit.orientation_sigma_rad * kDeg);
@@ -198,7 +273,7 @@ int Run(const Options& o) {
     held = {ext->held.scheme, ext->held.nominal, ext->held.geometric};
   } else {
     spdlog::info("judging on poses not fitted...");
-    held = identification::HeldOut(model, ms, is_test, fit, settings);
+    held = identification::HeldOut(model, ms, is_test, fit, settings, references);
   }
 
   const fs::path out(o.out);
@@ -210,7 +285,7 @@ int Run(const Options& o) {
                                                Fmt(held.nominal.mean_position_m * kMm, 4) + " mm)"};
   io::SaveCalibratedRobotYaml(out / "robot_calibrated.yaml", robot.spec, model, fit.x, header);
   if (robot.from_urdf)
-    io::SaveCalibratedUrdf(robot.source, out / "robot_calibrated.urdf", model, fit.x);
+    io::SaveCalibratedUrdf(robot.source, out / "robot_calibrated.urdf", robot.spec, model, fit.x);
   if (ext)  // the geometry that goes with the calibrated effects
     io::SaveCalibratedRobotYaml(
         out / "robot_calibrated_extended.yaml", robot.spec, model, ext->fit.x,
@@ -235,19 +310,68 @@ int Run(const Options& o) {
   for (int i : fit.identified) {
     const auto& P = model.parameters()[i];
     const double u = P.is_angle ? kDeg : kMm;
-    prows.push_back({P.name, P.group, P.is_angle ? "deg" : "mm", Fmt(fit.x(i) * u, 4),
-                     Fmt(fit.sigma(i) * u, 4)});
+    prows.push_back({P.name, ParameterFrame(robot, i), P.is_angle ? "deg" : "mm",
+                     Fmt(fit.x(i) * u, 4), Fmt(fit.sigma(i) * u, 4)});
     jparams.push_back({{"name", P.name},
+                       {"frame", ParameterFrame(robot, i)},
                        {"unit", P.is_angle ? "rad" : "m"},
                        {"value", fit.x(i)},
                        {"sigma", fit.sigma(i)}});
+  }
+  // The calibrated set-up frames, whole (identified or not), each in its frame.
+  const io::RobotSpec calibrated = io::CalibratedSpec(robot.spec, model, fit.x);
+  const std::string& base_link = robot.spec.base_link;
+  const std::string& tip_link = robot.spec.tip_link;
+  std::vector<std::vector<std::string>> frows;
+  json jframes = json::object();
+  const auto mm3 = [](const Eigen::Vector3d& v) {
+    return Fmt(v.x() * kMm, 3) + ", " + Fmt(v.y() * kMm, 3) + ", " + Fmt(v.z() * kMm, 3);
+  };
+  const auto deg3 = [](const Eigen::Vector3d& v) {
+    return Fmt(v.x() * kDeg, 4) + ", " + Fmt(v.y() * kDeg, 4) + ", " + Fmt(v.z() * kDeg, 4);
+  };
+  const auto vec = [](const Eigen::Vector3d& v) {
+    return std::vector<double>{v.x(), v.y(), v.z()};
+  };
+  if (calibrated.base) {
+    frows.push_back(
+        {"world ← " + base_link, "T_WB",
+         "xyz " + mm3(calibrated.base->xyz) + " mm; rpy " + deg3(calibrated.base->rpy) + "°"});
+    jframes["world_from_base"] = {{"parent", "world"},
+                                  {"child", base_link},
+                                  {"xyz_m", vec(calibrated.base->xyz)},
+                                  {"rpy_rad", vec(calibrated.base->rpy)}};
+  }
+  json jmarkers = json::array();
+  for (const io::MarkerSpec& m : calibrated.markers) {
+    std::string source = m.identify ? "fitted" : "given (--marker-offset)";
+    for (const auto& ref : references)
+      if (model.markers()[ref.slot].id == m.id)
+        source = "measured at row " + std::to_string(data.samples[ref.measurement].row);
+    frows.push_back({tip_link + " → marker " + std::to_string(m.id), "p_FM, " + tip_link + " frame",
+                     "xyz " + mm3(m.xyz) + " mm (" + source + ")"});
+    jmarkers.push_back(
+        {{"id", m.id}, {"parent", tip_link}, {"xyz_m", vec(m.xyz)}, {"source", source}});
+  }
+  if (!jmarkers.empty()) jframes["tip_to_markers"] = jmarkers;
+  if (calibrated.imu) {
+    frows.push_back({tip_link + " → imu", "R_FI", "rpy " + deg3(calibrated.imu->rpy) + "°"});
+    jframes["tip_to_imu"] = {{"parent", tip_link}, {"rpy_rad", vec(calibrated.imu->rpy)}};
+  }
+  if (calibrated.earth) {
+    frows.push_back({"earth ← world", "R_EW", "rpy " + deg3(calibrated.earth->rpy) + "°"});
+    jframes["earth_from_world"] = {
+        {"parent", "earth"}, {"child", "world"}, {"rpy_rad", vec(calibrated.earth->rpy)}};
   }
   std::ostringstream md;
   md << "# rcal calibrate\n\n- Data: `" << o.data << "`, " << ms.size() << " poses, "
      << (data.has_orientation ? "position and orientation" : "positions only") << "\n- Robot: `"
      << o.robot << "` (" << model.name() << "), " << model.num_params() << " parameters, "
      << fit.identified.size() << " identifiable at these poses, " << fit.setup.size()
-     << " of them set-up frames\n- Method: " << o.method << "; noise "
+     << " of them set-up frames\n- Chain: " << ChainText(robot) << "; positions are of the "
+     << (model.markers().size() > 1 ? std::to_string(model.markers().size()) + " markers"
+                                    : std::string("marker"))
+     << " in the world (position sensor) frame\n- Method: " << o.method << "; noise "
      << (o.fixed_noise ? "given" : "estimated from the residuals") << ": "
      << Fmt(fit.position_sigma_m * kMm, 4) << " mm, " << Fmt(fit.orientation_sigma_rad * kDeg, 4)
      << "°\n\n'Nominal' is the drawing kinematics with only the set-up frames (world ← base, "
@@ -258,8 +382,10 @@ int Run(const Options& o) {
                  Row("fitted poses, calibrated", fit.calibrated_fit),
                  Row("held-out (" + held.scheme + "), nominal", held.nominal),
                  Row("held-out (" + held.scheme + "), calibrated", held.calibrated)})
-     << "\n![errors](errors.png)\n\n## Identified parameters\n\n"
-     << MdTable({"parameter", "group", "unit", "error", "σ"}, prows)
+     << "\n![errors](errors.png)\n\n## Set-up frames (calibrated)\n\n"
+     << MdTable({"frame", "what", "value"}, frows)
+     << "\nroll-pitch-yaw: R = Rz(yaw)·Ry(pitch)·Rx(roll).\n\n## Identified parameters\n\n"
+     << MdTable({"parameter", "frame", "unit", "error", "σ"}, prows)
      << "\nCalibrated robot: `robot_calibrated.yaml`"
      << (robot.from_urdf ? " and `robot_calibrated.urdf`" : "") << ".\n";
   if (ext) {
@@ -282,6 +408,16 @@ int Run(const Options& o) {
 
   json j = {{"data", o.data},
             {"robot", model.name()},
+            {"chain",
+             {{"base_link", base_link},
+              {"tip_link", tip_link},
+              {"joints",
+               [&] {
+                 std::vector<std::string> v;
+                 for (const auto& jt : model.joints()) v.push_back(jt.name);
+                 return v;
+               }()}}},
+            {"setup_frames", jframes},
             {"num_poses", ms.size()},
             {"num_identified", fit.identified.size()},
             {"method", o.method},
@@ -369,6 +505,13 @@ const RegisterCommand kCalibrate(
       sub.add_option("--effects", o->effects_path,
                      "analysis.json of `rcal analyze`: fit its effects with the geometry, write "
                      "the calibrated effects (values, sigma) to the JSON");
+      sub.add_option("--marker-offset", o->marker_offsets,
+                     "ID=x,y,z: marker ID's known offset p_FM [m, tip-link frame], not fitted "
+                     "(repeatable)");
+      sub.add_option("--marker-reference", o->marker_references,
+                     "ID=ROW: marker ID, measured only in test rows, has its offset measured at "
+                     "the configuration of data row ROW (solved with the calibrated model; that "
+                     "row is not judged) (repeatable)");
       sub.add_option("--link-density", o->link_density,
                      "[kg/m] gravity model of joint_compliance (default: the analysis.json's "
                      "link_density_kg_per_m, else 10)");

@@ -22,6 +22,7 @@
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/lcm_schema.hpp"
+#include "robot_setup.hpp"
 
 namespace rcal::tool {
 
@@ -93,33 +94,42 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
       ekf.rejected(), static_cast<long long>(skipped));
   // Every parameter in model order, its unit in the key: value_m and sigma_m, or value_rad and
   // sigma_rad.
+  io::LoadedRobot cell_robot = robot;  // the identifier's model: the arm and its set-up frames
+  cell_robot.model = model;
+  std::printf("  chain %s\n", ChainText(cell_robot).c_str());
   nlohmann::json names = nlohmann::json::array(), parameters = nlohmann::json::array();
   for (int i : base) {
-    std::printf("  %-16s %+.6e ± %.2e\n", model.parameters()[i].name.c_str(), x(i), sigma(i));
+    std::printf("  %-16s %+.6e ± %.2e  [%s]\n", model.parameters()[i].name.c_str(), x(i), sigma(i),
+                ParameterFrame(cell_robot, i).c_str());
   }
   for (int i = 0; i < x.size(); ++i) {
     const auto& P = model.parameters()[i];
     const std::string unit = P.is_angle ? "rad" : "m";
     names.push_back(P.name);
-    parameters.push_back({{"name", P.name}, {"value_" + unit, x(i)}, {"sigma_" + unit, sigma(i)}});
+    parameters.push_back({{"name", P.name},
+                          {"frame", ParameterFrame(cell_robot, i)},
+                          {"value_" + unit, x(i)},
+                          {"sigma_" + unit, sigma(i)}});
   }
   if (!o.json_path.empty()) {
-    nlohmann::json j = {{"log", o.log},
-                        {"robot", model.name()},
-                        {"model_id", transport::ModelId(model)},
-                        {"events", events},
-                        {"skipped", skipped},
-                        {"log_events_read", stats.events_read},
-                        {"log_events_skipped", stats.events_skipped},
-                        {"log_broken_frames", stats.broken_frames},
-                        {"log_bytes_unreadable", stats.bytes_unreadable},
-                        {"poses_accepted", ekf.accepted()},
-                        {"poses_rejected", ekf.rejected()},
-                        {"last_utime_us", ekf.accepted() > 0 ? last_utime : 0},
-                        {"last_pose_index", last_pose_index},
-                        {"identified", base},
-                        {"names", names},
-                        {"parameters", parameters}};
+    nlohmann::json j = {
+        {"log", o.log},
+        {"robot", model.name()},
+        {"chain", {{"base_link", robot.spec.base_link}, {"tip_link", robot.spec.tip_link}}},
+        {"model_id", transport::ModelId(model)},
+        {"events", events},
+        {"skipped", skipped},
+        {"log_events_read", stats.events_read},
+        {"log_events_skipped", stats.events_skipped},
+        {"log_broken_frames", stats.broken_frames},
+        {"log_bytes_unreadable", stats.bytes_unreadable},
+        {"poses_accepted", ekf.accepted()},
+        {"poses_rejected", ekf.rejected()},
+        {"last_utime_us", ekf.accepted() > 0 ? last_utime : 0},
+        {"last_pose_index", last_pose_index},
+        {"identified", base},
+        {"names", names},
+        {"parameters", parameters}};
     io::AtomicWriteFile(o.json_path, j.dump(2));
   }
   return 0;

@@ -71,7 +71,7 @@ int Run(const Options& o) {
   io::LoadedRobot robot = io::LoadRobot(ResolvePath(o.robot), uo);
   if (!robot.from_urdf) {
     if (!robot.spec.base) robot.spec.base = io::FrameSpec{};
-    if (!robot.spec.marker && !robot.spec.tool) robot.spec.marker = io::FrameSpec{};
+    if (robot.spec.markers.empty() && !robot.spec.tool) robot.spec.markers.push_back({});
     robot.model = io::BuildModel(robot.spec);
   }
   if (o.size != "visible" && o.size != "total") throw std::runtime_error("--size: visible|total");

@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include <filesystem>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
@@ -36,6 +37,7 @@ struct Options {
   double base_sigma_m = 0.05;
   double base_sigma_rad = 0.05;
   std::vector<double> marker_xyz{0.05, 0.0, 0.1};
+  std::vector<std::string> markers;  ///< ID=x,y,z: several markers, each measured at every pose
   double geometry_sigma_mm = 0.5;
   double geometry_sigma_deg = 0.05;
   double position_sigma_mm = 0.05;
@@ -49,7 +51,17 @@ struct Options {
 };
 
 int Run(const Options& o) {
-  const io::LoadedRobot robot = LoadRobotForCell(o.robot, o.tip_link, o.base_link, o.frames);
+  io::LoadedRobot robot = LoadRobotForCell(o.robot, o.tip_link, o.base_link, o.frames);
+  const std::map<int, Eigen::Vector3d> marker_truth = ParseMarkerOffsets(o.markers, "--marker");
+  if (!marker_truth.empty()) {
+    // The truth robot measures these markers; their offsets are truth, not drawing (identified).
+    io::PoseDataset ids;
+    for (const auto& [id, p_FM] : marker_truth) {
+      ids.samples.emplace_back();
+      ids.samples.back().marker = id;
+    }
+    SetUpMarkers(robot, ids, {}, o.frames == "auto");
+  }
   const kinematics::KinematicModel& model = robot.model;
 
   sim::Rng rng(o.seed);
@@ -65,6 +77,10 @@ int Run(const Options& o) {
     for (int k = 0; k < 3; ++k)
       if (P.name == marker_names[k] && o.marker_xyz.size() == 3) x(i) = o.marker_xyz[k];
   }
+  for (const kinematics::Marker& m : model.markers())
+    if (const auto t = marker_truth.find(m.id); t != marker_truth.end())
+      for (int a = 0; a < 3; ++a)
+        if (m.param[a] >= 0) x(m.param[a]) = t->second(a) - m.nominal(a);
   std::vector<sim::TruthEffect> effects;
   for (const auto& spec : o.effects) effects.push_back(sim::ParseEffectSpec(spec, model));
   kinematics::GravityModel gravity;
@@ -107,24 +123,32 @@ int Run(const Options& o) {
   io::PoseDataset data;
   data.num_joints = model.num_joints();
   data.has_orientation = noise.orientation;
-  for (size_t i = 0; i < ms.size(); ++i) {
+  // One row per marker and pose (MeasurePosesWithEffects measures every marker at each pose);
+  // the rows of one pose share its context and its set.
+  const size_t per_pose = ms.size() / qs.size();
+  io::PoseSample::Set set = io::PoseSample::kUnspecified;
+  for (size_t r = 0; r < ms.size(); ++r) {
+    const size_t i = r / per_pose;
     io::PoseSample s;
-    s.q = ms[i].q;
-    s.p_WM_W = ms[i].p_WM_W;
+    s.q = ms[r].q;
+    s.p_WM_W = ms[r].p_WM_W;
+    s.marker = model.markers().empty() ? 0 : model.markers()[ms[r].marker].id;
     s.has_orientation = noise.orientation;
-    if (s.has_orientation) s.q_EI_wxyz = geometry::MatrixToQuat(ms[i].R_EI);
+    if (s.has_orientation) s.q_EI_wxyz = geometry::MatrixToQuat(ms[r].R_EI);
     if (need_temperature) s.temperature = ctx[i].temperature_c;
     if (need_payload) s.payload = ctx[i].payload_kg;
     if (need_time) s.time = ctx[i].time_s;
     if (need_dq) s.dq_sign = ctx[i].dq_sign;
-    if (o.test_fraction > 0)
-      s.set = u(rng) < o.test_fraction ? io::PoseSample::kTest : io::PoseSample::kCal;
+    if (o.test_fraction > 0 && r % per_pose == 0)
+      set = u(rng) < o.test_fraction ? io::PoseSample::kTest : io::PoseSample::kCal;
+    s.set = set;
     data.samples.push_back(s);
   }
   std::ostringstream effects_text;
   for (const auto& e : o.effects) effects_text << " " << e;
   data.comments = {
       " simulated by rcal simulate, robot " + o.robot + ", seed " + std::to_string(o.seed),
+      " chain " + ChainText(robot) + "; positions of the marker(s) in the world frame [m]",
       " hidden effects:" + (o.effects.empty() ? std::string(" none") : effects_text.str()),
       " noise: position " + Fmt(o.position_sigma_mm, 4) + " mm per axis" +
           (noise.orientation ? ", orientation " + Fmt(o.orientation_sigma_deg, 4) + " deg" : ""),
@@ -149,15 +173,28 @@ int Run(const Options& o) {
                     {"joints", joints},
                     {"values", v}});
     }
-    io::AtomicWriteFile(o.truth_json, json({{"seed", o.seed},
-                                            {"robot", model.name()},
-                                            {"geometric_errors", jx},
-                                            {"effects", je},
-                                            {"position_noise_m", noise.position_sigma}})
-                                          .dump(2));
+    json jm = json::array();
+    for (const kinematics::Marker& m : model.markers()) {
+      Eigen::Vector3d p_FM = m.nominal;
+      for (int a = 0; a < 3; ++a)
+        if (m.param[a] >= 0) p_FM(a) += x(m.param[a]);
+      jm.push_back({{"id", m.id},
+                    {"frame", robot.spec.tip_link + " → marker " + std::to_string(m.id)},
+                    {"xyz_m", {p_FM.x(), p_FM.y(), p_FM.z()}}});
+    }
+    io::AtomicWriteFile(
+        o.truth_json,
+        json({{"seed", o.seed},
+              {"robot", model.name()},
+              {"chain", {{"base_link", robot.spec.base_link}, {"tip_link", robot.spec.tip_link}}},
+              {"markers", jm},
+              {"geometric_errors", jx},
+              {"effects", je},
+              {"position_noise_m", noise.position_sigma}})
+            .dump(2));
   }
-  std::printf("rcal simulate: %d poses of %s with %zu hidden effect(s) -> %s\n", o.poses,
-              model.name().c_str(), effects.size(), o.out.c_str());
+  std::printf("rcal simulate: %d poses of %s (%zu rows) with %zu hidden effect(s) -> %s\n", o.poses,
+              model.name().c_str(), data.samples.size(), effects.size(), o.out.c_str());
   return 0;
 }
 
@@ -186,6 +223,10 @@ const RegisterCommand kSimulate(
       sub.add_option("--marker-xyz", o->marker_xyz, "truth flange→marker offset [m]")
           ->delimiter(',')
           ->expected(3);
+      sub.add_option("--marker", o->markers,
+                     "ID=x,y,z: a marker with its truth offset [m, tip-link frame]; several: "
+                     "each measured at every pose, one row per marker (the marker column) "
+                     "(repeatable; replaces --marker-xyz)");
       sub.add_option("--geometry-sigma-mm", o->geometry_sigma_mm, "geometric length errors σ")
           ->capture_default_str();
       sub.add_option("--geometry-sigma-deg", o->geometry_sigma_deg, "geometric angle errors σ")

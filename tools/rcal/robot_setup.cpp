@@ -2,6 +2,11 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <set>
+#include <sstream>
 #include <stdexcept>
 
 #include "command.hpp"
@@ -25,7 +30,7 @@ io::LoadedRobot LoadRobotForCell(const std::string& robot_path, const std::strin
   if (add) {
     if (!robot.from_urdf) {
       if (!robot.spec.base) robot.spec.base = io::FrameSpec{};
-      if (!robot.spec.marker && !robot.spec.tool) robot.spec.marker = io::FrameSpec{};
+      if (robot.spec.markers.empty() && !robot.spec.tool) robot.spec.markers.push_back({});
     }
     robot.model = io::BuildModel(robot.spec);
   }
@@ -41,7 +46,7 @@ void AddOrientationFrame(io::LoadedRobot& robot, bool earth_frame) {
 }
 
 io::PoseDataset LoadPoseDataFor(const io::LoadedRobot& robot, const std::string& data_path,
-                                const std::string& command, bool allow_gaps) {
+                                bool allow_gaps) {
   std::vector<std::string> joint_names;
   for (const auto& j : robot.model.joints()) joint_names.push_back(j.name);
   const std::string path = ResolvePath(data_path);
@@ -61,25 +66,162 @@ io::PoseDataset LoadPoseDataFor(const io::LoadedRobot& robot, const std::string&
   // Poses this robot cannot have produced (joints far beyond their limits, a marker beyond the
   // arm's reach) would be fitted as if true: refused, naming the row and the column.
   io::CheckPosesPlausible(data, robot.model, data_path);
-  for (const auto& s : data.samples)
-    if (s.marker != 0)
-      throw std::runtime_error(data_path +
-                               ": column 'marker': several markers per tool are not supported by " +
-                               command + " yet (found id " + std::to_string(s.marker) + ")");
   return data;
 }
 
-std::vector<kinematics::PoseMeasurement> ToMeasurements(const io::PoseDataset& data) {
+void SetUpMarkers(io::LoadedRobot& robot, const io::PoseDataset& data,
+                  const std::map<int, Eigen::Vector3d>& known, bool add) {
+  std::set<int> ids;
+  for (const auto& s : data.samples) ids.insert(s.marker);
+  for (const auto& [id, p_FM] : known) ids.insert(id);
+  if (robot.spec.tool && !(ids.size() == 1 && *ids.begin() == 0))
+    throw std::runtime_error(
+        "column 'marker': the robot ends in a D–H tool, which is the one "
+        "measured point; several markers need a robot without tool:");
+  if (robot.spec.tool) return;
+  std::vector<io::MarkerSpec>& markers = robot.spec.markers;
+  // A chain that ends at the measured point itself (a robot file without marker): one point.
+  if (markers.empty() && ids.size() == 1 && *ids.begin() == 0 && known.empty()) return;
+  bool changed = false;
+  for (int id : ids) {
+    auto it = std::find_if(markers.begin(), markers.end(),
+                           [&](const io::MarkerSpec& m) { return m.id == id; });
+    if (it == markers.end()) {
+      // A URDF chain or a YAML robot given frames "auto" has marker 0 with an unknown offset; a
+      // dataset without id 0 does not measure it.
+      if (!add)
+        throw std::runtime_error("column 'marker': id " + std::to_string(id) +
+                                 " is not a marker of robot '" + robot.spec.name +
+                                 "' (--frames none); add it under markers: in the robot file");
+      markers.push_back({id, Eigen::Vector3d::Zero(), true});
+      it = markers.end() - 1;
+      changed = true;
+    }
+    if (const auto k = known.find(id); k != known.end()) {
+      it->xyz = k->second;
+      it->identify = false;
+      changed = true;
+    }
+  }
+  // Markers the data never measures would be parameters nothing sees.
+  const auto unseen = std::remove_if(markers.begin(), markers.end(),
+                                     [&](const io::MarkerSpec& m) { return !ids.count(m.id); });
+  changed |= unseen != markers.end();
+  markers.erase(unseen, markers.end());
+  if (changed) robot.model = io::BuildModel(robot.spec);
+}
+
+std::vector<kinematics::PoseMeasurement> ToMeasurements(const io::PoseDataset& data,
+                                                        const kinematics::KinematicModel& model) {
   std::vector<kinematics::PoseMeasurement> ms;
-  for (const auto& s : data.samples) {
+  for (size_t i = 0; i < data.samples.size(); ++i) {
+    const io::PoseSample& s = data.samples[i];
     kinematics::PoseMeasurement m;
     m.q = s.q;
     m.p_WM_W = s.p_WM_W;
+    if (!model.markers().empty() || s.marker != 0) {
+      m.marker = model.MarkerSlot(s.marker);
+      if (m.marker < 0)
+        throw std::runtime_error("row " + std::to_string(s.row > 0 ? s.row : int(i) + 1) +
+                                 ": marker " + std::to_string(s.marker) + " is not a marker of '" +
+                                 model.name() + "'");
+    }
     m.has_orientation = data.has_orientation;
     if (m.has_orientation) m.R_EI = geometry::QuatToMatrix(s.q_EI_wxyz);
     ms.push_back(m);
   }
   return ms;
+}
+
+namespace {
+
+double ParseNumber(const std::string& text, const std::string& what) {
+  double v = 0;
+  const char* first = text.data();
+  const char* last = text.data() + text.size();
+  if (first != last && *first == '+') ++first;
+  const auto [end, ec] = std::from_chars(first, last, v);
+  if (text.empty() || ec != std::errc() || end != last || !std::isfinite(v))
+    throw std::runtime_error(what + ": '" + text + "' is not a number");
+  return v;
+}
+
+// "ID=VALUE": the id and the value text.
+std::pair<int, std::string> SplitId(const std::string& value, const std::string& option) {
+  const size_t eq = value.find('=');
+  const std::string id = value.substr(0, eq == std::string::npos ? 0 : eq);
+  int v = -1;
+  const auto [end, ec] = std::from_chars(id.data(), id.data() + id.size(), v);
+  if (eq == std::string::npos || id.empty() || ec != std::errc() || end != id.data() + id.size() ||
+      v < 0)
+    throw std::runtime_error(option + " '" + value + "': expected MARKER_ID=...");
+  return {v, value.substr(eq + 1)};
+}
+
+}  // namespace
+
+std::map<int, Eigen::Vector3d> ParseMarkerOffsets(const std::vector<std::string>& values,
+                                                  const std::string& option) {
+  std::map<int, Eigen::Vector3d> out;
+  for (const std::string& value : values) {
+    const auto [id, rest] = SplitId(value, option);
+    std::vector<double> xyz;
+    std::stringstream ss(rest);
+    for (std::string part; std::getline(ss, part, ',');)
+      xyz.push_back(ParseNumber(part, option + " '" + value + "'"));
+    if (xyz.size() != 3)
+      throw std::runtime_error(option + " '" + value + "': expected ID=x,y,z [m]");
+    for (double c : xyz)
+      if (std::abs(c) > 10.0)
+        throw std::runtime_error(option + " '" + value +
+                                 "': beyond 10 m from the flange (the offset is in metres)");
+    if (!out.emplace(id, Eigen::Vector3d(xyz[0], xyz[1], xyz[2])).second)
+      throw std::runtime_error(option + ": marker " + std::to_string(id) + " given twice");
+  }
+  return out;
+}
+
+std::map<int, int> ParseMarkerRows(const std::vector<std::string>& values,
+                                   const std::string& option) {
+  std::map<int, int> out;
+  for (const std::string& value : values) {
+    const auto [id, rest] = SplitId(value, option);
+    const double row = ParseNumber(rest, option + " '" + value + "'");
+    if (row < 1 || row != std::floor(row) || row > 1e9)
+      throw std::runtime_error(option + " '" + value + "': expected ID=ROW, a data row ≥ 1");
+    if (!out.emplace(id, static_cast<int>(row)).second)
+      throw std::runtime_error(option + ": marker " + std::to_string(id) + " given twice");
+  }
+  return out;
+}
+
+std::string ChainText(const io::LoadedRobot& robot) {
+  std::string joints;
+  for (const auto& j : robot.model.joints()) joints += (joints.empty() ? "" : ", ") + j.name;
+  return robot.spec.base_link + " → " + robot.spec.tip_link + " (" +
+         std::to_string(robot.model.num_joints()) + " joints: " + joints + ")";
+}
+
+std::string ParameterFrame(const io::LoadedRobot& robot, int index) {
+  const kinematics::KinematicModel& model = robot.model;
+  const kinematics::Parameter& p = model.parameters().at(index);
+  const std::string& base = robot.spec.base_link;
+  const std::string& tip = robot.spec.tip_link;
+  if (p.group == "base")
+    return "world ← " + base + " (T_WB: translation in world, roll-pitch-yaw of R_WB)";
+  if (p.group == "earth") return "earth ← world (R_EW, roll-pitch-yaw)";
+  if (p.group == "imu") return tip + " → imu (R_FI, roll-pitch-yaw)";
+  if (p.group == "tool") return "D–H tool after the last joint (" + tip + ")";
+  if (p.group == "marker") {
+    for (const kinematics::Marker& m : model.markers())
+      for (int a = 0; a < 3; ++a)
+        if (m.param[a] == index)
+          return tip + " → marker " + std::to_string(m.id) + " (p_FM, " + tip + " frame)";
+    return tip + " → marker (p_FM, " + tip + " frame)";
+  }
+  for (const auto& j : model.joints())
+    if (p.group == j.name) return "origin of joint " + j.name + " (parent link frame)";
+  return p.group + " (D–H, previous link frame)";
 }
 
 }  // namespace rcal::tool

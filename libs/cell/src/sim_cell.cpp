@@ -27,7 +27,7 @@ double Since(Clock::time_point t0) {
 
 Cell MakeCell(io::RobotSpec arm, unsigned seed) {
   arm.base = io::FrameSpec{};
-  arm.marker = io::FrameSpec{Eigen::Vector3d(0.03, 0.0, 0.12), Eigen::Vector3d::Zero(), true};
+  arm.markers = {io::MarkerSpec{0, Eigen::Vector3d(0.03, 0.0, 0.12), true}};
   arm.imu = io::FrameSpec{};
   arm.earth = io::FrameSpec{};
   Cell c;

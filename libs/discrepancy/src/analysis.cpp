@@ -285,7 +285,7 @@ Prepared Prepare(const kinematics::KinematicModel& model, const PoseData& data,
   for (size_t i = 0; i < n; ++i) {
     const auto& m = p.ms[i];
     Eigen::MatrixXd Jx, Je;
-    L.ext.Jacobians(m.q, data.contexts[i], p.base_fit.x, e0, &Jx, &Je);
+    L.ext.ForMarker(m.marker).Jacobians(m.q, data.contexts[i], p.base_fit.x, e0, &Jx, &Je);
     const int d = m.dimension();
     Eigen::MatrixXd Jfull(d, cols);
     for (int c = 0; c < L.num_geo; ++c) Jfull.col(c) = Jx.col(L.identified[c]).head(d);
@@ -655,11 +655,12 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
             unit_ctx.temperature_c = f.reference + 1.0;
           const kinematics::ExtendedModel one(model, {f}, s.gravity);
           Eigen::MatrixXd Je;
-          one.Jacobians(m.q, unit_ctx, p.base_fit.x, one.NoEffects(), nullptr, &Je);
+          one.ForMarker(m.marker).Jacobians(m.q, unit_ctx, p.base_fit.x, one.NoEffects(), nullptr,
+                                            &Je);
           dir = Je.col(0).head<3>();
           g = kinematics::ThermalRegressor(f, ctx);
         } else {
-          dir = model.JointJacobian(m.q, p.base_fit.x).col(j).head<3>();
+          dir = model.ForMarker(m.marker).JointJacobian(m.q, p.base_fit.x).col(j).head<3>();
           const Eigen::Vector3d jc = L.Jp[i].col(col);
           g = dir.squaredNorm() > 0 ? jc.dot(dir) / dir.squaredNorm() : 0.0;
         }
@@ -668,7 +669,7 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
         rc.values.push_back(g);
         rc.residual_before_m.push_back(u.dot(L.rp[i]));
         rc.residual_after_m.push_back(
-            u.dot(m.p_WM_W - final_model.Forward(m.q, ctx, a.x, a.e).p_WM_W));
+            u.dot(m.p_WM_W - final_model.ForMarker(m.marker).Forward(m.q, ctx, a.x, a.e).p_WM_W));
       }
       rc.correlation = Correlation(rc.values, rc.residual_before_m);
       rc.p_value = FisherP(rc.correlation, rc.values.size());

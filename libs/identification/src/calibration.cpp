@@ -41,10 +41,8 @@ Eigen::Isometry3d FitRigidTransform(const std::vector<Eigen::Vector3d>& a,
 
 std::vector<int> SetupParameters(const kinematics::KinematicModel& model) {
   std::vector<int> out;
-  for (int i = 0; i < model.num_params(); ++i) {
-    const std::string& g = model.parameters()[i].group;
-    if (g == "base" || g == "marker" || g == "imu" || g == "earth") out.push_back(i);
-  }
+  for (int i = 0; i < model.num_params(); ++i)
+    if (kinematics::IsSetupGroup(model.parameters()[i].group)) out.push_back(i);
   return out;
 }
 
@@ -67,7 +65,7 @@ Eigen::VectorXd InitialSetupGuess(const kinematics::KinematicModel& model,
       return T;
     }();
     for (const auto& m : ms) {
-      const Eigen::Vector3d p_WM = model.Forward(m.q, x).p_WM_W;
+      const Eigen::Vector3d p_WM = model.ForMarker(m.marker).Forward(m.q, x).p_WM_W;
       a.push_back(T_WB0.inverse() * p_WM);  // in the base frame
       b.push_back(m.p_WM_W);
     }
@@ -245,12 +243,8 @@ CalibrationFit Calibrate(const kinematics::KinematicModel& model,
   CalibrationFit fit;
   const Eigen::VectorXd x0 = InitialSetupGuess(model, ms);
   fit.setup = IdentifiableSubset(model, ms, x0, SetupParameters(model));
-  // Identifiability at the data's own poses, around the set-up guess.
-  const auto kind = ms.front().has_orientation ? kinematics::MeasurementKind::kFullPose
-                                               : kinematics::MeasurementKind::kPositionOnly;
-  std::vector<Eigen::VectorXd> qs;
-  for (const auto& m : ms) qs.push_back(m.q);
-  fit.identified = kinematics::AnalyzeIdentifiability(model, qs, x0, kind).identifiable;
+  // Identifiability at the data's own poses (and markers), around the set-up guess.
+  fit.identified = kinematics::AnalyzeIdentifiability(model, ms, x0).identifiable;
 
   fit.position_sigma_m = std::sqrt(ms.front().covariance(0, 0));
   fit.orientation_sigma_rad =
@@ -270,7 +264,7 @@ CalibrationFit Calibrate(const kinematics::KinematicModel& model,
     constexpr int kRelinearisations = 3;
     for (int r = 0; r < kRelinearisations; ++r) {
       const std::vector<int> at_estimate =
-          kinematics::AnalyzeIdentifiability(model, qs, full.x, kind).identifiable;
+          kinematics::AnalyzeIdentifiability(model, ms, full.x).identifiable;
       if (at_estimate.size() <= fit.identified.size()) break;
       fit.identified = at_estimate;
       full = Solve(model, fit.identified, ms, full.x, settings.method);
@@ -302,8 +296,30 @@ CalibrationFit Calibrate(const kinematics::KinematicModel& model,
   return fit;
 }
 
+std::vector<int> ConfigurationGroups(const std::vector<kinematics::PoseMeasurement>& ms) {
+  std::vector<int> group(ms.size());
+  std::vector<size_t> first;  // first measurement of each group
+  for (size_t i = 0; i < ms.size(); ++i) {
+    int g = -1;
+    for (size_t k = 0; k < first.size() && g < 0; ++k) {
+      const Eigen::VectorXd& q0 = ms[first[k]].q;
+      if (q0.size() == ms[i].q.size() && (q0 - ms[i].q).lpNorm<Eigen::Infinity>() <= 1e-9)
+        g = static_cast<int>(k);
+    }
+    if (g < 0) {
+      g = static_cast<int>(first.size());
+      first.push_back(i);
+    }
+    group[i] = g;
+  }
+  return group;
+}
+
 HeldOutFolds MakeHeldOutFolds(int n, const std::vector<bool>& is_test,
-                              const CalibrationSettings& settings) {
+                              const CalibrationSettings& settings,
+                              const std::vector<int>& configuration) {
+  if (!configuration.empty() && static_cast<int>(configuration.size()) != n)
+    throw std::invalid_argument("MakeHeldOutFolds: one configuration id per pose");
   HeldOutFolds out;
   out.fold.assign(n, -1);
   const bool split = std::any_of(is_test.begin(), is_test.end(), [](bool b) { return b; });
@@ -312,16 +328,41 @@ HeldOutFolds MakeHeldOutFolds(int n, const std::vector<bool>& is_test,
       out.fold[i] = is_test[i] ? 0 : -1;
     out.folds = 1;
     out.scheme = "cal/test split";
-  } else {
-    out.folds = std::min(settings.folds, n);
-    std::vector<int> order(n);
-    std::iota(order.begin(), order.end(), 0);
-    std::mt19937_64 rng(settings.seed);
-    std::shuffle(order.begin(), order.end(), rng);
-    for (int k = 0; k < n; ++k) out.fold[order[k]] = k % out.folds;
-    out.scheme = out.folds == n ? "leave-one-out" : std::to_string(out.folds) + "-fold";
+    return out;
   }
+  // Whole configurations go to one fold: the rows of one configuration (several markers measured
+  // there, or the pose measured again) share its joint errors, and a fold that fitted one of them
+  // would flatter the others.
+  std::vector<int> group = configuration;
+  if (group.empty()) {
+    group.resize(n);
+    std::iota(group.begin(), group.end(), 0);
+  }
+  const int groups = n == 0 ? 0 : *std::max_element(group.begin(), group.end()) + 1;
+  out.folds = std::min(settings.folds, groups);
+  std::vector<int> order(groups), fold_of(groups);
+  std::iota(order.begin(), order.end(), 0);
+  std::mt19937_64 rng(settings.seed);
+  std::shuffle(order.begin(), order.end(), rng);
+  for (int k = 0; k < groups; ++k) fold_of[order[k]] = k % out.folds;
+  for (int i = 0; i < n; ++i) out.fold[i] = fold_of[group[i]];
+  const std::string unit = groups == n ? "" : " (by configuration)";
+  out.scheme = (out.folds == groups ? "leave-one-out" : std::to_string(out.folds) + "-fold") + unit;
   return out;
+}
+
+Eigen::Vector3d MarkerOffsetFromPoint(const kinematics::KinematicModel& model, int slot,
+                                      const Eigen::VectorXd& x, const Eigen::VectorXd& q,
+                                      const Eigen::Vector3d& p_WM_W) {
+  const kinematics::KinematicModel& view = model.ForMarker(slot);
+  const kinematics::Marker& marker = model.markers().at(slot);
+  // The view's chain ends at this marker: T_WM = T_WF · Trans(p_FM(x)), p_FM(x) = nominal + x.
+  Eigen::Vector3d p_FM = marker.nominal;
+  for (int i = 0; i < 3; ++i)
+    if (marker.param[i] >= 0) p_FM(i) += x(marker.param[i]);
+  const Eigen::Isometry3d T_WM = view.ToolFrame(q, x);
+  const Eigen::Vector3d p_WF_W = T_WM.translation() - T_WM.linear() * p_FM;
+  return T_WM.linear().transpose() * (p_WM_W - p_WF_W);
 }
 
 namespace {
@@ -333,11 +374,19 @@ ExtendedHeldOutErrors HeldOutRounds(const kinematics::KinematicModel& model,
                                     const CalibrationSettings& settings,
                                     const kinematics::ExtendedModel* ext,
                                     const std::vector<kinematics::EffectContext>* contexts,
-                                    const Eigen::VectorXd& e0) {
+                                    const Eigen::VectorXd& e0,
+                                    const std::vector<MarkerReference>& references) {
   std::vector<kinematics::PoseMeasurement> ms = all;
   SetNoise(ms, fit.position_sigma_m, fit.orientation_sigma_rad);
   const int n = static_cast<int>(ms.size());
-  const HeldOutFolds folds = MakeHeldOutFolds(n, is_test, settings);
+  HeldOutFolds folds = MakeHeldOutFolds(n, is_test, settings, ConfigurationGroups(ms));
+  for (const MarkerReference& ref : references) {
+    if (ref.measurement < 0 || ref.measurement >= n || ms[ref.measurement].marker != ref.slot)
+      throw std::invalid_argument("HeldOut: reference measurement " +
+                                  std::to_string(ref.measurement) + " is not one of marker slot " +
+                                  std::to_string(ref.slot));
+    folds.fold[ref.measurement] = -2;  // neither fitted nor judged
+  }
   ExtendedHeldOutErrors out;
   out.scheme = folds.scheme;
   std::vector<double> nom_p, nom_o, cal_p, cal_o, ext_p, ext_o;
@@ -349,13 +398,25 @@ ExtendedHeldOutErrors HeldOutRounds(const kinematics::KinematicModel& model,
     std::vector<kinematics::PoseMeasurement> train, held;
     std::vector<kinematics::EffectContext> train_ctx, held_ctx;
     for (int i = 0; i < n; ++i) {
+      if (folds.fold[i] == -2) continue;
       (folds.fold[i] == f ? held : train).push_back(ms[i]);
       if (contexts) (folds.fold[i] == f ? held_ctx : train_ctx).push_back((*contexts)[i]);
     }
     if (train.size() < 3 || held.empty()) continue;
     CalibrationSettings s = settings;
     s.estimate_noise = false;  // weights from the full fit; each fold refits its parameters
-    const CalibrationFit ff = Calibrate(model, train, s);
+    CalibrationFit ff = Calibrate(model, train, s);
+    // Markers measured at a stated configuration: their offset from that measurement with this
+    // round's fit, in both the nominal and the calibrated model.
+    for (const MarkerReference& ref : references) {
+      const auto& m = ms[ref.measurement];
+      const auto& marker = model.markers().at(ref.slot);
+      for (Eigen::VectorXd* x : {&ff.x_nominal, &ff.x}) {
+        const Eigen::Vector3d p_FM = MarkerOffsetFromPoint(model, ref.slot, *x, m.q, m.p_WM_W);
+        for (int i = 0; i < 3; ++i)
+          if (marker.param[i] >= 0) (*x)(marker.param[i]) = p_FM(i) - marker.nominal(i);
+      }
+    }
     append(ErrorsAgainstMeasurements(model, ff.x_nominal, held), nom_p, nom_o);
     append(ErrorsAgainstMeasurements(model, ff.x, held), cal_p, cal_o);
     if (!ext) continue;
@@ -378,9 +439,10 @@ ExtendedHeldOutErrors HeldOutRounds(const kinematics::KinematicModel& model,
 HeldOutErrors HeldOut(const kinematics::KinematicModel& model,
                       const std::vector<kinematics::PoseMeasurement>& ms,
                       const std::vector<bool>& is_test, const CalibrationFit& fit,
-                      const CalibrationSettings& settings) {
+                      const CalibrationSettings& settings,
+                      const std::vector<MarkerReference>& references) {
   const ExtendedHeldOutErrors e =
-      HeldOutRounds(model, ms, is_test, fit, settings, nullptr, nullptr, {});
+      HeldOutRounds(model, ms, is_test, fit, settings, nullptr, nullptr, {}, references);
   return {e.scheme, e.nominal, e.geometric};
 }
 
@@ -395,7 +457,7 @@ ExtendedHeldOutErrors HeldOutExtended(const kinematics::ExtendedModel& model,
   if (e0.size() != model.num_effect_params())
     throw std::invalid_argument("HeldOutExtended: e0 has " + std::to_string(e0.size()) +
                                 " values, expected " + std::to_string(model.num_effect_params()));
-  return HeldOutRounds(model.base(), ms, is_test, fit, settings, &model, &contexts, e0);
+  return HeldOutRounds(model.base(), ms, is_test, fit, settings, &model, &contexts, e0, {});
 }
 
 }  // namespace rcal::identification

@@ -88,7 +88,8 @@ ExtendedFit FitExtended(const kinematics::ExtendedModel& ext, const std::vector<
   double ssp = 0;
   int pose_count = 0;
   for (size_t i = 0; i < ms.size(); ++i) {
-    const Eigen::Vector3d r = ms[i].p_WM_W - ext.Forward(ms[i].q, ctx[i], f.x, f.e).p_WM_W;
+    const Eigen::Vector3d r =
+        ms[i].p_WM_W - ext.ForMarker(ms[i].marker).Forward(ms[i].q, ctx[i], f.x, f.e).p_WM_W;
     ssp += r.squaredNorm();
     ++pose_count;
   }

@@ -14,7 +14,8 @@ void ExtendedResidualAndJacobian(const kinematics::ExtendedModel& model,
   const int ng = static_cast<int>(identified.size()), ne = model.num_effect_params();
   Eigen::MatrixXd J_x, J_e;
   kinematics::ToolPose pose;
-  model.Jacobians(z.q, context, x, e, H ? &J_x : nullptr, H ? &J_e : nullptr, &pose);
+  model.ForMarker(z.marker).Jacobians(z.q, context, x, e, H ? &J_x : nullptr, H ? &J_e : nullptr,
+                                      &pose);
   r.resize(d);
   r.head<3>() = z.p_WM_W - pose.p_WM_W;
   if (d == 6) {

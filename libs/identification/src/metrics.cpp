@@ -35,7 +35,7 @@ PoseErrorStats ErrorsAgainstMeasurements(const kinematics::KinematicModel& model
                                          const std::vector<kinematics::PoseMeasurement>& ms) {
   std::vector<double> p, o;
   for (const auto& m : ms) {
-    const kinematics::ToolPose pose = model.Forward(m.q, x);
+    const kinematics::ToolPose pose = model.ForMarker(m.marker).Forward(m.q, x);
     p.push_back((m.p_WM_W - pose.p_WM_W).norm());
     if (m.has_orientation) o.push_back(geometry::AngleBetween(m.R_EI, pose.R_EI));
   }

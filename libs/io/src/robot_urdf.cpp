@@ -360,8 +360,9 @@ RobotSpec ParseUrdfRobotSpec(const std::string& urdf_xml, const std::string& sou
   if (moving == 0)
     throw std::runtime_error(source + ": no moving joint between '" + base_name + "' and '" +
                              tip_name + "'");
-  if (options.add_marker)
-    spec.marker = FrameSpec{options.marker_xyz, Eigen::Vector3d::Zero(), options.identify_marker};
+  if (options.add_marker) spec.markers.push_back({0, options.marker_xyz, options.identify_marker});
+  spec.base_link = base_name;
+  spec.tip_link = tip_name;
   return spec;
 }
 
@@ -374,8 +375,54 @@ kinematics::KinematicModel LoadRobotUrdf(const std::filesystem::path& urdf,
   return BuildModel(LoadUrdfRobotSpec(urdf, options));
 }
 
+namespace {
+
+Eigen::Isometry3d OriginTransform(const urdf::Joint& j) {
+  const urdf::Pose& p = j.parent_to_joint_origin_transform;
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.translation() = Eigen::Vector3d(p.position.x, p.position.y, p.position.z);
+  T.linear() = Eigen::Quaterniond(p.rotation.w, p.rotation.x, p.rotation.y, p.rotation.z)
+                   .normalized()
+                   .toRotationMatrix();
+  return T;
+}
+
+Eigen::Isometry3d FromXyzRpy(const Eigen::Vector3d& xyz, const Eigen::Vector3d& rpy) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.translation() = xyz;
+  T.linear() = (Eigen::AngleAxisd(rpy(2), Eigen::Vector3d::UnitZ()) *
+                Eigen::AngleAxisd(rpy(1), Eigen::Vector3d::UnitY()) *
+                Eigen::AngleAxisd(rpy(0), Eigen::Vector3d::UnitX()))
+                   .toRotationMatrix();
+  return T;
+}
+
+// A <link name=NAME/> and a fixed <joint> from PARENT to CHILD at origin T, appended to `robot`.
+void AppendFixedFrame(TiXmlElement* robot, const std::string& link, const std::string& joint,
+                      const std::string& parent, const std::string& child,
+                      const Eigen::Isometry3d& T) {
+  TiXmlElement l("link");
+  l.SetAttribute("name", link);
+  robot->InsertEndChild(l);
+  TiXmlElement j("joint");
+  j.SetAttribute("name", joint);
+  j.SetAttribute("type", "fixed");
+  TiXmlElement pe("parent"), ce("child"), oe("origin");
+  pe.SetAttribute("link", parent);
+  ce.SetAttribute("link", child);
+  oe.SetAttribute("xyz", Triple(T.translation()));
+  oe.SetAttribute("rpy", Triple(RobustRpy(T.linear())));
+  j.InsertEndChild(pe);
+  j.InsertEndChild(ce);
+  j.InsertEndChild(oe);
+  robot->InsertEndChild(j);
+}
+
+}  // namespace
+
 std::string CalibratedUrdfText(const std::string& urdf_xml, const std::string& source,
-                               const kinematics::KinematicModel& model, const Eigen::VectorXd& x) {
+                               const RobotSpec& spec, const kinematics::KinematicModel& model,
+                               const Eigen::VectorXd& x) {
   if (x.size() != model.num_params())
     throw std::runtime_error(source + ": x has " + std::to_string(x.size()) + " values, model '" +
                              model.name() + "' has " + std::to_string(model.num_params()));
@@ -423,10 +470,58 @@ std::string CalibratedUrdfText(const std::string& urdf_xml, const std::string& s
     origin->SetAttribute("rpy", Triple(rpy_new));
     ++corrected;
   }
-  const std::string note =
-      " Calibrated by rcal: " + std::to_string(corrected) +
-      " joint origins corrected by their identified placement errors. The world-base frame "
-      "and the marker offset are not part of a URDF; see the calibrated robot YAML. ";
+  // The set-up frames as fixed joints (names in robot_urdf.hpp).
+  const RobotSpec cal = CalibratedSpec(spec, model, x);
+  std::string frames;
+  const auto mention = [&](const std::string& what) {
+    frames += (frames.empty() ? "" : ", ") + what;
+  };
+  if (cal.base) {
+    // rcal_world is the parent of the URDF's root; the chain's base link may sit below the root
+    // on fixed joints (T_root,base from their origins).
+    const urdf::LinkConstSharedPtr root = urdf->getRoot();
+    Eigen::Isometry3d T_RB = Eigen::Isometry3d::Identity();
+    std::string moving;
+    for (urdf::LinkConstSharedPtr l = urdf->getLink(spec.base_link); l && l != root;
+         l = l->getParent()) {
+      const urdf::JointConstSharedPtr pj = l->parent_joint;
+      if (!pj) break;
+      if (pj->type != urdf::Joint::FIXED) moving = pj->name;
+      T_RB = OriginTransform(*pj) * T_RB;
+    }
+    if (!urdf->getLink(spec.base_link))
+      throw std::runtime_error(source + ": base link '" + spec.base_link + "' is not in the URDF");
+    if (moving.empty()) {
+      const Eigen::Isometry3d T_WB = FromXyzRpy(cal.base->xyz, cal.base->rpy);
+      AppendFixedFrame(robot, "rcal_world", "rcal_world_joint", "rcal_world", root->name,
+                       T_WB * T_RB.inverse());
+      mention("rcal_world (the position sensor's frame) -> " + root->name);
+      if (cal.earth) {
+        AppendFixedFrame(robot, "rcal_earth", "rcal_earth_joint", "rcal_earth", "rcal_world",
+                         FromXyzRpy(Eigen::Vector3d::Zero(), cal.earth->rpy));
+        mention("rcal_earth (the IMU's earth frame) -> rcal_world");
+      }
+    } else {
+      mention("no rcal_world: joint '" + moving + "' between the root and base link '" +
+              spec.base_link + "' moves (world <- base is in the calibrated robot YAML)");
+    }
+  }
+  for (const MarkerSpec& m : cal.markers) {
+    const std::string name = m.id == 0 ? "rcal_marker" : "rcal_marker_" + std::to_string(m.id);
+    AppendFixedFrame(robot, name, name + "_joint", spec.tip_link, name,
+                     FromXyzRpy(m.xyz, Eigen::Vector3d::Zero()));
+    mention(spec.tip_link + " -> " + name);
+  }
+  if (cal.imu) {
+    AppendFixedFrame(robot, "rcal_imu", "rcal_imu_joint", spec.tip_link, "rcal_imu",
+                     FromXyzRpy(Eigen::Vector3d::Zero(), cal.imu->rpy));
+    mention(spec.tip_link + " -> rcal_imu (orientation only)");
+  }
+  const std::string note = " Calibrated by rcal: chain " + spec.base_link + " -> " + spec.tip_link +
+                           "; " + std::to_string(corrected) +
+                           " joint origins corrected by their identified placement errors; "
+                           "set-up frames as fixed joints: " +
+                           (frames.empty() ? std::string("none") : frames) + ". ";
   TiXmlComment comment(note.c_str());
   if (robot->FirstChild() != nullptr) {
     robot->InsertBeforeChild(robot->FirstChild(), comment);
@@ -441,8 +536,10 @@ std::string CalibratedUrdfText(const std::string& urdf_xml, const std::string& s
 }
 
 void SaveCalibratedUrdf(const std::filesystem::path& source_urdf, const std::filesystem::path& out,
-                        const kinematics::KinematicModel& model, const Eigen::VectorXd& x) {
-  AtomicWriteFile(out, CalibratedUrdfText(ReadFile(source_urdf), source_urdf.string(), model, x));
+                        const RobotSpec& spec, const kinematics::KinematicModel& model,
+                        const Eigen::VectorXd& x) {
+  AtomicWriteFile(out,
+                  CalibratedUrdfText(ReadFile(source_urdf), source_urdf.string(), spec, model, x));
 }
 
 LoadedRobot LoadRobot(const std::filesystem::path& path, const UrdfOptions& urdf_options) {

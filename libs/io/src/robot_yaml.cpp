@@ -371,7 +371,8 @@ RobotSpec ParseRobotYaml(const std::string& text, const std::string& source) {
   }
   if (!root.IsDefined() || root.IsNull()) throw std::runtime_error(source + ": empty file");
   r.CheckMap(root, "",
-             {"schema", "name", "convention", "base", "links", "tool", "marker", "imu", "earth"});
+             {"schema", "name", "convention", "base", "links", "tool", "marker", "markers", "imu",
+              "earth"});
   const YAML::Node schema = r.Require(root, "", "schema");
   if (r.String(schema, "schema") != kSchema)
     r.Fail("schema", std::string("expected ") + kSchema + ", got '" + schema.Scalar() + "'",
@@ -403,7 +404,36 @@ RobotSpec ParseRobotYaml(const std::string& text, const std::string& source) {
   }
   if (joint_names.empty()) r.Fail("links", "no joint in the chain", &links);
   if (root["base"]) spec.base = ReadFrame(r, root["base"], "base", true, true);
-  if (root["marker"]) spec.marker = ReadFrame(r, root["marker"], "marker", true, false);
+  if (root["marker"] && root["markers"]) {
+    const YAML::Node both = root["markers"];
+    r.Fail("markers", "give marker (one, id 0) or markers (a list), not both", &both);
+  }
+  if (root["marker"]) {
+    const FrameSpec f = ReadFrame(r, root["marker"], "marker", true, false);
+    spec.markers.push_back({0, f.xyz, f.identify});
+  }
+  if (root["markers"]) {
+    const YAML::Node list = root["markers"];
+    if (!list.IsSequence() || list.size() == 0)
+      r.Fail("markers", "expected a list of markers, got " + Reader::Kind(list), &list);
+    for (size_t i = 0; i < list.size(); ++i) {
+      const std::string path = "markers[" + std::to_string(i) + "]";
+      const YAML::Node n = list[i];
+      r.CheckMap(n, path, {"id", "xyz", "identify"});
+      MarkerSpec m;
+      const YAML::Node id = r.Require(n, path, "id");
+      const std::string text = id.IsScalar() ? id.Scalar() : std::string();
+      const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), m.id);
+      if (text.empty() || ec != std::errc() || end != text.data() + text.size() || m.id < 0 ||
+          m.id > 1000000)
+        r.Fail(path + ".id", "expected an integer id from 0 to 1000000, got '" + text + "'", &id);
+      m.xyz = r.Vec3(r.Require(n, path, "xyz"), path + ".xyz", false);
+      if (n["identify"]) m.identify = r.Bool(n["identify"], path + ".identify");
+      for (const MarkerSpec& o : spec.markers)
+        if (o.id == m.id) r.Fail(path + ".id", "marker id " + std::to_string(m.id) + " twice", &id);
+      spec.markers.push_back(m);
+    }
+  }
   if (root["imu"]) spec.imu = ReadFrame(r, root["imu"], "imu", false, true);
   if (root["earth"]) spec.earth = ReadFrame(r, root["earth"], "earth", false, true);
   if (root["tool"]) {
@@ -448,7 +478,7 @@ kinematics::KinematicModel BuildModel(const RobotSpec& spec) {
     }
     if (spec.tool)
       b.ToolDh(spec.tool->a, spec.tool->alpha, spec.tool->d, spec.tool->theta, spec.tool->identify);
-    if (spec.marker) b.MarkerOffset(spec.marker->xyz, spec.marker->identify);
+    for (const MarkerSpec& m : spec.markers) b.MarkerOffset(m.xyz, m.identify, m.id);
     if (spec.imu) b.ImuMounting(spec.imu->rpy, spec.imu->identify);
     if (spec.earth) b.EarthFrame(spec.earth->rpy, spec.earth->identify);
   } catch (const std::logic_error& e) {
@@ -523,9 +553,17 @@ RobotSpec CalibratedSpec(const RobotSpec& spec, const kinematics::KinematicModel
       out.base->rpy(rpy_index(n[6])) += v;
       continue;
     }
-    if (out.marker && is({"marker_x", "marker_y", "marker_z"})) {
-      out.marker->xyz(n[7] - 'x') += v;
-      continue;
+    if (model.parameters()[i].group == "marker") {
+      // marker_x (id 0) or marker<id>_x: the slot's spec entry.
+      bool done = false;
+      for (int slot = 0; slot < static_cast<int>(model.markers().size()) && !done; ++slot)
+        for (int a = 0; a < 3 && !done; ++a)
+          if (model.markers()[slot].param[a] == i) {
+            for (MarkerSpec& m : out.markers)
+              if (m.id == model.markers()[slot].id) m.xyz(a) += v;
+            done = true;
+          }
+      if (done) continue;
     }
     if (out.imu && is({"imu_rx", "imu_ry", "imu_rz"})) {
       out.imu->rpy(rpy_index(n[5])) += v;
@@ -627,9 +665,14 @@ std::string RobotYamlText(const RobotSpec& spec, const std::vector<std::string>&
     o << "tool: {a: " << Num(spec.tool->a) << ", alpha: " << Angle(spec.tool->alpha)
       << ", d: " << Num(spec.tool->d) << ", theta: " << Angle(spec.tool->theta)
       << Identify(spec.tool->identify) << "}\n";
-  if (spec.marker)
-    o << "marker: {xyz: " << Vec(spec.marker->xyz, false) << Identify(spec.marker->identify)
+  if (spec.markers.size() == 1 && spec.markers[0].id == 0) {
+    o << "marker: {xyz: " << Vec(spec.markers[0].xyz, false) << Identify(spec.markers[0].identify)
       << "}\n";
+  } else if (!spec.markers.empty()) {
+    o << "markers:\n";
+    for (const MarkerSpec& m : spec.markers)
+      o << "  - {id: " << m.id << ", xyz: " << Vec(m.xyz, false) << Identify(m.identify) << "}\n";
+  }
   if (spec.imu)
     o << "imu: {rpy: " << Vec(spec.imu->rpy, true) << Identify(spec.imu->identify) << "}\n";
   if (spec.earth)

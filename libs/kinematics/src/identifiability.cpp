@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <sstream>
+#include <stdexcept>
 
 namespace rcal::kinematics {
 namespace {
@@ -54,14 +55,44 @@ Eigen::MatrixXd StackedJacobian(const KinematicModel& model, const std::vector<E
   return J;
 }
 
+Eigen::MatrixXd StackedJacobian(const KinematicModel& model, const std::vector<PoseMeasurement>& ms,
+                                const Eigen::VectorXd& x) {
+  int rows = 0;
+  for (const auto& m : ms) rows += m.dimension();
+  Eigen::MatrixXd J(rows, model.num_params());
+  Eigen::MatrixXd Ji(6, model.num_params());
+  int row = 0;
+  for (const auto& m : ms) {
+    model.ForMarker(m.marker).IdentificationJacobian(m.q, x, Ji);
+    J.middleRows(row, m.dimension()) = Ji.topRows(m.dimension());
+    row += m.dimension();
+  }
+  return J;
+}
+
 IdentifiabilityReport AnalyzeIdentifiability(const KinematicModel& model,
                                              const std::vector<Eigen::VectorXd>& qs,
                                              const Eigen::VectorXd& x, MeasurementKind kind,
                                              const IdentifiabilitySettings& settings) {
+  return AnalyzeJacobian(model, StackedJacobian(model, qs, x, kind), settings);
+}
+
+IdentifiabilityReport AnalyzeIdentifiability(const KinematicModel& model,
+                                             const std::vector<PoseMeasurement>& ms,
+                                             const Eigen::VectorXd& x,
+                                             const IdentifiabilitySettings& settings) {
+  return AnalyzeJacobian(model, StackedJacobian(model, ms, x), settings);
+}
+
+IdentifiabilityReport AnalyzeJacobian(const KinematicModel& model, const Eigen::MatrixXd& J,
+                                      const IdentifiabilitySettings& settings) {
   const int n = model.num_params();
+  if (J.cols() != n)
+    throw std::invalid_argument("AnalyzeJacobian: J has " + std::to_string(J.cols()) +
+                                " columns, model '" + model.name() + "' has " + std::to_string(n) +
+                                " parameters");
   IdentifiabilityReport report;
   report.num_params = n;
-  const Eigen::MatrixXd J = StackedJacobian(model, qs, x, kind);
   report.num_equations = static_cast<int>(J.rows());
 
   // Column scaling. A column at round-off level is a parameter nothing sees: it stays zero rather
@@ -92,9 +123,19 @@ IdentifiabilityReport AnalyzeIdentifiability(const KinematicModel& model,
   // pivot and can hold entries far larger than the rest, so a threshold over the whole matrix
   // skipped real pivots (a UR-like 6R arm at a fitted point: 3 pivots for 18 null directions,
   // 42 "identifiable" parameters at rank 27).
+  // Elimination order: the arm's parameters from the last backwards, then the set-up frames'
+  // (also from the last). So where a set-up frame and the arm explain the same motion (a marker's
+  // offset along the last joint's axis and that joint's placement along it; the base's z and
+  // d1), the arm keeps its drawing and the mounting takes the difference: the calibrated robot
+  // file then moves no frame of the arm by a marker's offset.
+  std::vector<int> order;
+  for (int pass = 0; pass < 2; ++pass)
+    for (int col = n - 1; col >= 0; --col)
+      if (IsSetupGroup(model.parameters()[col].group) == (pass == 1)) order.push_back(col);
   std::vector<int> pivots;
   int row = 0;
-  for (int col = n - 1; col >= 0 && row < k; --col) {
+  for (int col : order) {
+    if (row >= k) break;
     int best = row;
     for (int r = row + 1; r < k; ++r)
       if (std::abs(N(r, col)) > std::abs(N(best, col))) best = r;
@@ -112,7 +153,7 @@ IdentifiabilityReport AnalyzeIdentifiability(const KinematicModel& model,
     c.dropped = pivots[r];
     c.params.push_back(pivots[r]);
     c.direction.push_back(1.0);
-    for (int col = n - 1; col >= 0; --col) {
+    for (int col : order) {
       if (col == pivots[r]) continue;
       if (std::abs(N(r, col)) > settings.coefficient_zero) {
         c.params.push_back(col);

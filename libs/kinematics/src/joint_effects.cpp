@@ -6,10 +6,6 @@
 namespace rcal::kinematics {
 namespace {
 
-bool IsSetupGroup(const std::string& g) {
-  return g == "base" || g == "marker" || g == "imu" || g == "earth";
-}
-
 double OrZero(double v) {
   return std::isfinite(v) ? v : 0.0;
 }
@@ -78,6 +74,20 @@ ExtendedModel::ExtendedModel(KinematicModel base, std::vector<Effect> effects, G
     if (et.kind != ElementaryTransform::Kind::kTranslation) continue;
     arm_translation_[k] = et.param < 0 || !IsSetupGroup(base_.parameters()[et.param].group);
   }
+  if (base_.marker_slot() == 0 && base_.markers().size() > 1) {
+    auto views = std::make_shared<std::vector<ExtendedModel>>();
+    for (size_t k = 1; k < base_.markers().size(); ++k)
+      views->emplace_back(base_.ForMarker(static_cast<int>(k)), effects_, gravity_);
+    marker_views_ = std::move(views);
+  }
+}
+
+const ExtendedModel& ExtendedModel::ForMarker(int slot) const {
+  if (slot == base_.marker_slot()) return *this;
+  if (!marker_views_ || slot < 1 || slot > static_cast<int>(marker_views_->size()))
+    throw std::out_of_range("marker slot " + std::to_string(slot) + " not in extended model of '" +
+                            base_.name() + "'");
+  return (*marker_views_)[slot - 1];
 }
 
 std::vector<EffectParameter> ExtendedModel::EffectParameters() const {

@@ -9,7 +9,7 @@ namespace rcal::kinematics {
 
 Eigen::VectorXd Residual(const KinematicModel& model, const PoseMeasurement& m,
                          const Eigen::VectorXd& x) {
-  const ToolPose pose = model.Forward(m.q, x);
+  const ToolPose pose = model.ForMarker(m.marker).Forward(m.q, x);
   Eigen::VectorXd r(m.dimension());
   r.head<3>() = m.p_WM_W - pose.p_WM_W;
   if (m.has_orientation) r.tail<3>() = geometry::Log(m.R_EI * pose.R_EI.transpose());
@@ -22,7 +22,7 @@ void ResidualAndJacobian(const KinematicModel& model, const PoseMeasurement& m,
   thread_local Eigen::MatrixXd J;
   J.resize(6, model.num_params());
   ToolPose pose;
-  model.IdentificationJacobian(m.q, x, J, &pose);
+  model.ForMarker(m.marker).IdentificationJacobian(m.q, x, J, &pose);
   const int dim = m.dimension();
   r.resize(dim);
   r.head<3>() = m.p_WM_W - pose.p_WM_W;
@@ -36,6 +36,9 @@ std::string Validate(const KinematicModel& model, const PoseMeasurement& m) {
     return "q: " + std::to_string(m.q.size()) + " joints, model has " +
            std::to_string(model.num_joints());
   if (!m.q.allFinite()) return "q: not finite";
+  if (m.marker != 0 && (m.marker < 0 || m.marker >= static_cast<int>(model.markers().size())))
+    return "marker: slot " + std::to_string(m.marker) + ", model has " +
+           std::to_string(model.markers().size()) + " marker(s)";
   if (!m.p_WM_W.allFinite()) return "p_WM_W: not finite";
   if (m.has_orientation) {
     if (!m.R_EI.allFinite()) return "R_EI: not finite";

@@ -64,6 +64,22 @@ int KinematicModel::FindParameter(const std::string& name) const {
   return -1;
 }
 
+int KinematicModel::MarkerSlot(int id) const {
+  for (size_t k = 0; k < markers_.size(); ++k)
+    if (markers_[k].id == id) return static_cast<int>(k);
+  return -1;
+}
+
+const KinematicModel& KinematicModel::ForMarker(int slot) const {
+  if (slot == view_slot_) return *this;
+  if (view_slot_ != 0 || slot < 1 || slot >= static_cast<int>(markers_.size()) || !marker_views_)
+    throw std::out_of_range(
+        "marker slot " + std::to_string(slot) + " not in model '" + name_ + "' (" +
+        std::to_string(markers_.size()) + " marker(s)" +
+        (view_slot_ != 0 ? ", a view of slot " + std::to_string(view_slot_) : std::string()) + ")");
+  return (*marker_views_)[slot - 1];
+}
+
 bool KinematicModel::WithinLimits(const Eigen::VectorXd& q) const {
   if (q.size() != num_joints()) return false;
   for (int j = 0; j < num_joints(); ++j)
@@ -169,6 +185,9 @@ int ModelBuilder::AddParam(const std::string& name, bool is_angle, double nomina
 
 void ModelBuilder::Push(Segment s, Kind kind, const Eigen::Vector3d& axis, double nominal,
                         int param, int joint) {
+  if (s == Segment::kChain && model_.marker_et_ >= 0)
+    throw std::logic_error("model '" + model_.name_ +
+                           "': a chain transform after the marker offset");
   ElementaryTransform et;
   et.kind = kind;
   et.axis = axis.normalized();
@@ -311,13 +330,47 @@ ModelBuilder& ModelBuilder::ToolDh(double a, double alpha, double d, double thet
   return *this;
 }
 
-ModelBuilder& ModelBuilder::MarkerOffset(const Eigen::Vector3d& p_FM, bool identify) {
-  const char* names[3] = {"marker_x", "marker_y", "marker_z"};
-  for (int i = 0; i < 3; ++i) {
-    const int p = identify ? AddParam(names[i], false, p_FM(i), "marker") : -1;
-    Push(Segment::kChain, Kind::kTranslation, Eigen::Vector3d::Unit(i), p_FM(i), p);
+ModelBuilder& ModelBuilder::MarkerOffset(const Eigen::Vector3d& p_FM, bool identify, int id) {
+  if (model_.MarkerSlot(id) >= 0)
+    throw std::invalid_argument("model '" + model_.name_ + "': marker id " + std::to_string(id) +
+                                " given twice");
+  if (id < 0)
+    throw std::invalid_argument("model '" + model_.name_ + "': marker id " + std::to_string(id) +
+                                " is negative");
+  const std::string prefix = id == 0 ? "marker_" : "marker" + std::to_string(id) + "_";
+  const char* axes[3] = {"x", "y", "z"};
+  Marker m;
+  m.id = id;
+  m.nominal = p_FM;
+  for (int i = 0; i < 3; ++i)
+    m.param[i] = identify ? AddParam(prefix + axes[i], false, p_FM(i), "marker") : -1;
+  if (model_.markers_.empty()) {
+    const int first = static_cast<int>(model_.chain_.size());
+    for (int i = 0; i < 3; ++i)
+      Push(Segment::kChain, Kind::kTranslation, Eigen::Vector3d::Unit(i), p_FM(i), m.param[i]);
+    model_.marker_et_ = first;
   }
+  model_.markers_.push_back(m);
   return *this;
+}
+
+KinematicModel ModelBuilder::Build() const {
+  KinematicModel model = model_;
+  if (model.markers_.size() < 2) return model;
+  // A view per further marker: the chain's marker ETs read that marker's parameters and nominal.
+  auto views = std::make_shared<std::vector<KinematicModel>>();
+  for (size_t k = 1; k < model.markers_.size(); ++k) {
+    KinematicModel v = model_;
+    v.view_slot_ = static_cast<int>(k);
+    for (int i = 0; i < 3; ++i) {
+      ElementaryTransform& et = v.chain_[v.marker_et_ + i];
+      et.param = v.markers_[k].param[i];
+      et.nominal = v.markers_[k].nominal(i);
+    }
+    views->push_back(std::move(v));
+  }
+  model.marker_views_ = std::move(views);
+  return model;
 }
 
 ModelBuilder& ModelBuilder::ImuMounting(const Eigen::Vector3d& rpy_FI, bool identify) {

@@ -1,6 +1,7 @@
 #include "rcal/sim/effects.hpp"
 
 #include <Eigen/QR>
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
@@ -131,6 +132,12 @@ kinematics::PoseMeasurement MeasurePoseWithEffects(const EffectTruth& truth,
   return MeasureTruePose(truth.model.Forward(q, ctx, x_true, truth.e), q, noise, rng);
 }
 
+namespace {
+int MarkerSlots(const EffectTruth& truth) {
+  return std::max<int>(1, static_cast<int>(truth.model.base().markers().size()));
+}
+}  // namespace
+
 std::vector<kinematics::PoseMeasurement> MeasurePosesWithEffects(
     const EffectTruth& truth, const Eigen::VectorXd& x_true, const std::vector<Eigen::VectorXd>& qs,
     const std::vector<kinematics::EffectContext>& contexts, const PoseNoise& noise, Rng& rng) {
@@ -138,7 +145,12 @@ std::vector<kinematics::PoseMeasurement> MeasurePosesWithEffects(
     throw std::invalid_argument("MeasurePosesWithEffects: one context per pose");
   std::vector<kinematics::PoseMeasurement> out;
   for (size_t i = 0; i < qs.size(); ++i)
-    out.push_back(MeasurePoseWithEffects(truth, x_true, qs[i], contexts[i], noise, rng));
+    for (int k = 0; k < MarkerSlots(truth); ++k) {
+      out.push_back(
+          MeasureTruePose(truth.model.ForMarker(k).Forward(qs[i], contexts[i], x_true, truth.e),
+                          qs[i], noise, rng));
+      out.back().marker = k;
+    }
   return out;
 }
 

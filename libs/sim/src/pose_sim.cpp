@@ -1,5 +1,6 @@
 #include "rcal/sim/pose_sim.hpp"
 
+#include <algorithm>
 #include <numbers>
 #include <string>
 
@@ -91,6 +92,21 @@ std::vector<kinematics::PoseMeasurement> MeasurePoses(const kinematics::Kinemati
   out.reserve(qs.size());
   for (const auto& q : qs) out.push_back(MeasurePose(model, x_true, q, noise, rng));
   return out;
+}
+
+std::vector<kinematics::PoseMeasurement> MeasureMarkers(const kinematics::KinematicModel& model,
+                                                        const Eigen::VectorXd& x_true,
+                                                        const std::vector<Eigen::VectorXd>& qs,
+                                                        const PoseNoise& noise, Rng& rng) {
+  const int slots = std::max<int>(1, static_cast<int>(model.markers().size()));
+  std::vector<kinematics::PoseMeasurement> ms;
+  ms.reserve(qs.size() * slots);
+  for (const auto& q : qs)
+    for (int k = 0; k < slots; ++k) {
+      ms.push_back(MeasurePose(model.ForMarker(k), x_true, q, noise, rng));
+      ms.back().marker = k;
+    }
+  return ms;
 }
 
 }  // namespace rcal::sim

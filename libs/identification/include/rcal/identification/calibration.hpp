@@ -95,21 +95,47 @@ struct HeldOutErrors {
 
 /// Which poses each held-out round judges: fold[i] = the round that holds pose i out (−1: always
 /// fitted). The `set` split when `is_test` marks some poses (one round: the test poses), else
-/// k-fold, k = min(settings.folds, n), poses shuffled with settings.seed.
+/// k-fold over configurations, k = min(settings.folds, configurations), configurations shuffled
+/// with settings.seed; all poses of one configuration (`configuration[i]`, ids 0 … m − 1; empty:
+/// each pose its own) are held out together. Scheme "5-fold", "leave-one-out", with
+/// " (by configuration)" when configurations hold several poses.
 struct HeldOutFolds {
   std::vector<int> fold;
   int folds = 0;
   std::string scheme;  ///< "cal/test split", "5-fold", "leave-one-out"
 };
 HeldOutFolds MakeHeldOutFolds(int num_poses, const std::vector<bool>& is_test,
-                              const CalibrationSettings& settings);
+                              const CalibrationSettings& settings,
+                              const std::vector<int>& configuration = {});
 
-/// Errors on poses not fitted (MakeHeldOutFolds): a split when `is_test` marks some poses (fit on
-/// the others), else k-fold. Noise levels from `fit` are used as weights.
+/// Configuration id per measurement (0, 1, … in order of first appearance): measurements at the
+/// same joints (within 1e-9 rad | m) share one, e.g. several markers measured at one stop.
+std::vector<int> ConfigurationGroups(const std::vector<kinematics::PoseMeasurement>& ms);
+
+/// The offset p_FM [m, flange frame] of marker `slot` that puts it at the measured p_WM_W [m,
+/// world] when the arm stands at q, with the model at errors x: p_FM = T_WF(q, x)⁻¹ · p_WM_W.
+/// For a point whose offset is not fitted but measured once at a stated configuration.
+Eigen::Vector3d MarkerOffsetFromPoint(const kinematics::KinematicModel& model, int slot,
+                                      const Eigen::VectorXd& x, const Eigen::VectorXd& q,
+                                      const Eigen::Vector3d& p_WM_W);
+
+/// A marker whose offset is measured, not fitted: measurement `measurement` (an index into the
+/// poses given to HeldOut) measures marker `slot` at a stated configuration. Each round solves
+/// the marker's offset from it with that round's fit (MarkerOffsetFromPoint); that measurement is
+/// neither fitted nor judged.
+struct MarkerReference {
+  int slot = 0;
+  int measurement = 0;
+};
+
+/// Errors on poses not fitted (MakeHeldOutFolds, configurations from ConfigurationGroups): a split
+/// when `is_test` marks some poses (fit on the others), else k-fold. Noise levels from `fit` are
+/// used as weights. `references`: markers whose offsets are measured (MarkerReference).
 HeldOutErrors HeldOut(const kinematics::KinematicModel& model,
                       const std::vector<kinematics::PoseMeasurement>& ms,
                       const std::vector<bool>& is_test, const CalibrationFit& fit,
-                      const CalibrationSettings& settings = {});
+                      const CalibrationSettings& settings = {},
+                      const std::vector<MarkerReference>& references = {});
 
 /// Held-out errors of an extended model (geometry + effects) next to the geometric calibration,
 /// on the same folds as HeldOut (MakeHeldOutFolds). Each round calibrates the training poses as

@@ -9,8 +9,15 @@
 //
 // A calibrated URDF is the source URDF with each identified joint's <origin> replaced by the
 // origin composed with its error (rcal::io::ComposeUrdfOrigin), so loading it gives, at zero
-// errors, the calibrated kinematics. Everything else in the file is kept. The world ← base frame
-// and the flange → marker offset are not part of a URDF: they go to the calibrated YAML.
+// errors, the calibrated kinematics. Everything else in the file is kept. The calibrated set-up
+// frames are added as fixed joints (and written to the calibrated YAML too):
+//   rcal_world  → the URDF's root link   world ← base T_WB (the position sensor's frame; composed
+//                                         with the fixed joints from the root to the base link)
+//   rcal_earth  → rcal_world             earth ← world R_EW (the IMU's earth frame)
+//   tip link    → rcal_marker            flange → marker p_FM of marker id 0 (rcal_marker_<id>)
+//   tip link    → rcal_imu               flange → IMU R_FI
+// so the chain rcal_world → rcal_marker of the calibrated URDF, loaded with no errors, gives the
+// calibrated marker positions in the world frame.
 #pragma once
 
 #include <Eigen/Core>
@@ -54,13 +61,18 @@ kinematics::KinematicModel LoadRobotUrdf(const std::filesystem::path& urdf,
                                          const UrdfOptions& options = {});
 
 /// The source URDF text with each joint of `model` that has identified errors (parameters
-/// JOINT_dx … JOINT_drx) given its calibrated origin at parameter errors `x` [m, rad]. Throws
-/// std::runtime_error when a joint of the model is not in the URDF or x has the wrong size.
+/// JOINT_dx … JOINT_drx) given its calibrated origin at parameter errors `x` [m, rad], and the
+/// set-up frames as fixed joints (file comment). Throws std::runtime_error when a joint of the
+/// model is not in the URDF or x has the wrong size.
+/// `spec` is the description `model` was built from (BuildModel(spec), with its base and tip
+/// links): the set-up frames it has are written calibrated (file comment).
 std::string CalibratedUrdfText(const std::string& urdf_xml, const std::string& source,
-                               const kinematics::KinematicModel& model, const Eigen::VectorXd& x);
+                               const RobotSpec& spec, const kinematics::KinematicModel& model,
+                               const Eigen::VectorXd& x);
 /// Reads `source_urdf`, writes CalibratedUrdfText of it to `out` atomically.
 void SaveCalibratedUrdf(const std::filesystem::path& source_urdf, const std::filesystem::path& out,
-                        const kinematics::KinematicModel& model, const Eigen::VectorXd& x);
+                        const RobotSpec& spec, const kinematics::KinematicModel& model,
+                        const Eigen::VectorXd& x);
 
 /// A robot from any file rcal accepts, with what is needed to save it calibrated.
 struct LoadedRobot {

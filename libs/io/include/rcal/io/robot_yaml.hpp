@@ -30,7 +30,9 @@
 //       identify: true                       # optional (default true), joint entries only
 //     - {name: flange, xyz: [0, 0, 0], rpy: [0, 0, 0]}   # no joint: a fixed transform
 //   tool:   {a: 0.01, alpha: 0.1, d: 0.05, theta: 0.2, identify: true}  # optional, D–H tool
-//   marker: {xyz: [x, y, z], identify: true}  # optional: p_FM, flange → marker [m]
+//   marker: {xyz: [x, y, z], identify: true}  # optional: p_FM, flange → marker [m] (id 0)
+//   markers:                                 # or several measured points on the tool, each id
+//     - {id: 1, xyz: [x, y, z], identify: true}  # its own p_FM [m] (the datasets' `marker`)
 //   imu:    {rpy: [r, p, y], identify: true}  # optional: R_FI, flange → IMU [rad]
 //   earth:  {rpy: [r, p, y], identify: true}  # optional: R_EW, earth ← world [rad]
 //
@@ -80,14 +82,26 @@ struct FrameSpec {
   bool identify = true;
 };
 
+/// A measured point on the tool: its id (the datasets' `marker` column) and offset p_FM [m] in the
+/// flange frame.
+struct MarkerSpec {
+  int id = 0;
+  Eigen::Vector3d xyz = Eigen::Vector3d::Zero();
+  bool identify = true;
+};
+
 /// Everything a robot file says: the arm and its measurement set-up.
 struct RobotSpec {
   std::string name;
+  /// The chain's first and last links: the URDF link names it ran between; "base" and "flange"
+  /// for a YAML robot (not in the file). Reports name the chain and the frames of the set-up
+  /// offsets with them (world ← base_link, tip_link → marker).
+  std::string base_link = "base", tip_link = "flange";
   Convention convention = Convention::kDh;
   std::vector<LinkSpec> links;
   std::optional<FrameSpec> base;    ///< T_WB, world ← base
   std::optional<ToolSpec> tool;     ///< D–H tool after the last link
-  std::optional<FrameSpec> marker;  ///< p_FM = xyz (rpy unused)
+  std::vector<MarkerSpec> markers;  ///< flange → marker offsets, one per id (ids distinct)
   std::optional<FrameSpec> imu;     ///< R_FI = rpy (xyz unused)
   std::optional<FrameSpec> earth;   ///< R_EW = rpy (xyz unused)
 };

@@ -6,14 +6,17 @@
 // combinations. The n − r null-space directions are the parameter changes that move no measured
 // pose; reduced to row-echelon form they read as sentences ("d2 and d3 enter only as d2 − d3").
 // Each null direction is removed by fixing one parameter (its pivot) at nominal; the rest form the
-// base (identifiable) parameter set. Pivots are taken from the end of the parameter list first,
-// so tool and wrist parameters are dropped before base and shoulder ones.
+// base (identifiable) parameter set. Pivots are taken among the arm's parameters first, from the
+// end of the list (tool and wrist parameters are dropped before shoulder ones), then among the
+// set-up frames (IsSetupGroup): where the mounting and the arm explain the same motion, the arm
+// keeps its drawing and the set-up frame takes the difference.
 #pragma once
 
 #include <Eigen/Core>
 #include <string>
 #include <vector>
 
+#include "rcal/kinematics/measurement.hpp"
 #include "rcal/kinematics/model.hpp"
 
 namespace rcal::kinematics {
@@ -47,10 +50,24 @@ struct IdentifiabilityReport {
 Eigen::MatrixXd StackedJacobian(const KinematicModel& model, const std::vector<Eigen::VectorXd>& qs,
                                 const Eigen::VectorXd& x, MeasurementKind kind);
 
+/// Stacks the identification Jacobians of measurements at their own joints and markers (3 rows
+/// per position-only measurement, 6 per full pose) around parameter errors `x`.
+Eigen::MatrixXd StackedJacobian(const KinematicModel& model, const std::vector<PoseMeasurement>& ms,
+                                const Eigen::VectorXd& x);
+
 /// Rank, null-space combinations in words and a base parameter set.
 IdentifiabilityReport AnalyzeIdentifiability(const KinematicModel& model,
                                              const std::vector<Eigen::VectorXd>& qs,
                                              const Eigen::VectorXd& x, MeasurementKind kind,
                                              const IdentifiabilitySettings& settings = {});
+/// The same at measurements' own joints, markers and dimensions.
+IdentifiabilityReport AnalyzeIdentifiability(const KinematicModel& model,
+                                             const std::vector<PoseMeasurement>& ms,
+                                             const Eigen::VectorXd& x,
+                                             const IdentifiabilitySettings& settings = {});
+/// The same of a stacked identification Jacobian J (rows: measured quantities, columns: the
+/// model's parameters).
+IdentifiabilityReport AnalyzeJacobian(const KinematicModel& model, const Eigen::MatrixXd& J,
+                                      const IdentifiabilitySettings& settings = {});
 
 }  // namespace rcal::kinematics

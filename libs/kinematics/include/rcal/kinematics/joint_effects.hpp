@@ -33,6 +33,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <limits>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -96,6 +97,9 @@ class ExtendedModel {
   ExtendedModel(KinematicModel base, std::vector<Effect> effects, GravityModel gravity = {});
 
   const KinematicModel& base() const { return base_; }
+  /// The extended model measuring marker `slot` of the base (KinematicModel::ForMarker): the same
+  /// effects and parameters. Slot 0 is this model. Throws std::out_of_range for another slot.
+  const ExtendedModel& ForMarker(int slot) const;
   const std::vector<Effect>& effects() const { return effects_; }
   const GravityModel& gravity() const { return gravity_; }
   int num_effect_params() const { return num_effect_params_; }
@@ -149,7 +153,8 @@ class ExtendedModel {
   std::vector<int> offsets_;
   int num_effect_params_ = 0;
   std::vector<bool> arm_translation_;  // per chain ET: scaled by thermal
-  int base_end_ = 0;                   // first chain ET after the set-up base frame
+  std::shared_ptr<const std::vector<ExtendedModel>> marker_views_;  // slots 1 … (primary only)
+  int base_end_ = 0;  // first chain ET after the set-up base frame
 };
 
 /// Context as a regressor value, for analysis: temperature [°C] or time [s] (NaN when absent).

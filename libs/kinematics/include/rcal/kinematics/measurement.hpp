@@ -15,6 +15,10 @@ namespace rcal::kinematics {
 struct PoseMeasurement {
   Eigen::VectorXd q;                                 ///< joints as read [rad | m]
   Eigen::Vector3d p_WM_W = Eigen::Vector3d::Zero();  ///< measured marker position, world [m]
+  /// Which marker was measured: a slot of model.markers() (0: the first; not the dataset's id,
+  /// see KinematicModel::MarkerSlot). The model's view KinematicModel::ForMarker(marker) predicts
+  /// it.
+  int marker = 0;
   bool has_orientation = false;
   Eigen::Matrix3d R_EI = Eigen::Matrix3d::Identity();  ///< measured IMU orientation, imu → earth
   /// Covariance of the residual: 3×3 [m²] when position only, 6×6 [m², m·rad, rad²] otherwise.
@@ -23,7 +27,8 @@ struct PoseMeasurement {
   int dimension() const { return has_orientation ? 6 : 3; }
 };
 
-/// r = z − h(q, x) in the convention above; size 3 or 6 after `m.dimension()`.
+/// r = z − h(q, x) in the convention above (h of model.ForMarker(m.marker)); size 3 or 6 after
+/// `m.dimension()`.
 Eigen::VectorXd Residual(const KinematicModel& model, const PoseMeasurement& m,
                          const Eigen::VectorXd& x);
 

@@ -20,6 +20,13 @@
 //   earth  (rotations only, orientation output only): R_EW
 //   chain  base ETs (T_WB), links (T_BF), tool/marker ETs; position output = end of chain
 //   imu    (rotations only, orientation output only): R_FI
+//
+// Several markers (several points measured on the tool, e.g. laser-tracker reflectors): each
+// marker id has its own flange → marker offset p_FM (parameters marker_x/y/z for id 0,
+// marker<id>_x/y/z for id ≥ 1). The chain ends with the three translation ETs of the first
+// marker (slot 0); ForMarker(slot) is the same model with those ETs reading marker `slot`'s
+// parameters, so every function of a model (Forward, the Jacobians, ExtendedModel, IK) serves
+// any marker through its view. All views share one parameter vector x.
 // The paper's set-up is the special case of an empty earth and imu segment, a D–H tool link, and
 // measurements of the tool frame in the base frame.
 //
@@ -30,6 +37,8 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <array>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -58,11 +67,25 @@ struct Parameter {
   std::string group;      ///< "base", "link 3", "tool", "marker", "imu", "earth", joint name
 };
 
+/// Whether a parameter group is a set-up frame of the cell (world ← base, flange → marker,
+/// flange → IMU, earth ← world) rather than the arm's own geometry.
+inline bool IsSetupGroup(const std::string& group) {
+  return group == "base" || group == "marker" || group == "imu" || group == "earth";
+}
+
 struct Joint {
   std::string name;
   JointType type = JointType::kRevolute;
   double lower = -3.14159265358979;  ///< [rad] or [m]
   double upper = 3.14159265358979;   ///< [rad] or [m]
+};
+
+/// One measured point on the tool: its offset p_FM from the flange (the chain's last frame before
+/// the marker), three translations along the flange axes.
+struct Marker {
+  int id = 0;                            ///< the dataset's `marker` id
+  std::array<int, 3> param{-1, -1, -1};  ///< index of p_FM's x, y, z error in x; −1: fixed
+  Eigen::Vector3d nominal = Eigen::Vector3d::Zero();  ///< nominal p_FM [m], flange frame
 };
 
 /// What the sensors see at one pose.
@@ -90,6 +113,18 @@ class KinematicModel {
   /// Joints inside their limits?
   bool WithinLimits(const Eigen::VectorXd& q) const;
 
+  /// The markers on the tool, in slot order (slot 0 is the one the chain ends with); empty when
+  /// the model has no marker offset (the position output is then the end of the tool).
+  const std::vector<Marker>& markers() const { return markers_; }
+  /// Slot of the marker with dataset id `id`, or −1.
+  int MarkerSlot(int id) const;
+  /// The model measuring marker `slot` (markers()[slot]): the same parameters and joints, the
+  /// chain ending at that marker. Slot 0 (or a model without markers) is the model itself.
+  /// Throws std::out_of_range for a slot the model does not have.
+  const KinematicModel& ForMarker(int slot) const;
+  /// The marker slot this model measures: 0, or the slot of a ForMarker view.
+  int marker_slot() const { return view_slot_; }
+
   /// Marker position and IMU orientation at joints q with parameter errors x.
   ToolPose Forward(const Eigen::VectorXd& q, const Eigen::VectorXd& x) const;
 
@@ -113,6 +148,11 @@ class KinematicModel {
   std::vector<Joint> joints_;
   std::vector<Parameter> params_;
   std::vector<ElementaryTransform> earth_, chain_, imu_;
+  std::vector<Marker> markers_;
+  int marker_et_ = -1;  ///< index in chain_ of the first of the three marker ETs
+  int view_slot_ = 0;   ///< which marker this model measures (views: ≥ 1)
+  /// Views for slots 1 … markers_.size() − 1 (set by ModelBuilder::Build; null in views).
+  std::shared_ptr<const std::vector<KinematicModel>> marker_views_;
 };
 
 /// Builds a KinematicModel ET by ET. Links are numbered from 1 in parameter names, as the paper.
@@ -142,14 +182,18 @@ class ModelBuilder {
   ModelBuilder& FixedTransform(const Eigen::Vector3d& xyz, const Eigen::Vector3d& rpy);
   /// The paper's 4-parameter D–H tool transform after the last joint (tool_a … tool_theta).
   ModelBuilder& ToolDh(double a, double alpha, double d, double theta, bool identify = true);
-  /// Flange → marker translation p_FM [m] (marker_x, marker_y, marker_z).
-  ModelBuilder& MarkerOffset(const Eigen::Vector3d& p_FM, bool identify = true);
+  /// Flange → marker translation p_FM [m] of marker `id` (parameters marker_x, marker_y,
+  /// marker_z for id 0; marker<id>_x … for id ≥ 1). The first call ends the chain with the
+  /// marker's three translation ETs; later calls add further markers (other ids) measured from
+  /// the same flange. No chain ET may follow. Throws std::invalid_argument for an id given twice.
+  ModelBuilder& MarkerOffset(const Eigen::Vector3d& p_FM, bool identify = true, int id = 0);
   /// Flange → IMU rotation as roll-pitch-yaw [rad] (imu_rz, imu_ry, imu_rx): orientation only.
   ModelBuilder& ImuMounting(const Eigen::Vector3d& rpy_FI, bool identify = true);
   /// Earth ← world rotation as roll-pitch-yaw [rad] (earth_rz, earth_ry, earth_rx).
   ModelBuilder& EarthFrame(const Eigen::Vector3d& rpy_EW, bool identify = true);
 
-  KinematicModel Build() const { return model_; }
+  /// The model, with a view per additional marker (KinematicModel::ForMarker).
+  KinematicModel Build() const;
 
  private:
   int AddParam(const std::string& name, bool is_angle, double nominal, const std::string& group);

@@ -67,6 +67,8 @@ kinematics::PoseMeasurement MeasurePoseWithEffects(const EffectTruth& truth,
                                                    const kinematics::EffectContext& ctx,
                                                    const PoseNoise& noise, Rng& rng);
 
+/// Every marker of the truth's model measured at each pose (for each pose one measurement per
+/// marker slot, in slot order, PoseMeasurement::marker the slot; one per pose with one marker).
 std::vector<kinematics::PoseMeasurement> MeasurePosesWithEffects(
     const EffectTruth& truth, const Eigen::VectorXd& x_true, const std::vector<Eigen::VectorXd>& qs,
     const std::vector<kinematics::EffectContext>& contexts, const PoseNoise& noise, Rng& rng);

@@ -52,4 +52,12 @@ std::vector<kinematics::PoseMeasurement> MeasurePoses(const kinematics::Kinemati
                                                       const std::vector<Eigen::VectorXd>& qs,
                                                       const PoseNoise& noise, Rng& rng);
 
+/// Every marker of the model (KinematicModel::markers()) measured at each joint vector, as a
+/// tracker measuring several reflectors on the tool at one stop: for each q, one measurement per
+/// marker slot in slot order (PoseMeasurement::marker = the slot), each with its own noise.
+std::vector<kinematics::PoseMeasurement> MeasureMarkers(const kinematics::KinematicModel& model,
+                                                        const Eigen::VectorXd& x_true,
+                                                        const std::vector<Eigen::VectorXd>& qs,
+                                                        const PoseNoise& noise, Rng& rng);
+
 }  // namespace rcal::sim
