@@ -110,10 +110,9 @@ TEST(RcalCli, IdentifiabilityRanksOfTheGrb3016) {
     int rank;
   };
   // The paper's arm as its file describes it (--frames none: no set-up frames).
-  for (const Case& c :
-       {Case{"--frames none", 25}, Case{"--frames none --position-only", 22},
-        Case{"--frames none --tool 0,0,0,0", 23},
-        Case{"--frames none --tool 0,0,0,0 --position-only", 19}}) {
+  for (const Case& c : {Case{"--frames none", 25}, Case{"--frames none --position-only", 22},
+                        Case{"--frames none --tool 0,0,0,0", 23},
+                        Case{"--frames none --tool 0,0,0,0 --position-only", 19}}) {
     const Result r = RunRcal("identifiability " + c.args + " --json " + (d / "i.json").string());
     ASSERT_EQ(r.exit_code, 0) << r.output;
     EXPECT_EQ(ReadJson(d / "i.json")["rank"], c.rank) << c.args;
@@ -135,10 +134,10 @@ TEST(RcalCli, IdentifiabilityCountsWhatCalibrateIdentifies) {
     std::string args;
     int rank;
   };
-  for (const Case& c : {Case{"--position-only", 27}, Case{"--position-only --markers 2", 30},
-                        Case{"--position-only --markers 3", 33}, Case{"", 30},
-                        Case{"--earth-frame", 33}, Case{"--tip wrist_2_link --position-only", 23},
-                        Case{data, 30}}) {
+  for (const Case& c :
+       {Case{"--position-only", 27}, Case{"--position-only --markers 2", 30},
+        Case{"--position-only --markers 3", 33}, Case{"", 30}, Case{"--earth-frame", 33},
+        Case{"--tip wrist_2_link --position-only", 23}, Case{data, 30}}) {
     const Result r = RunRcal("identifiability --robot " + urdf + " " + c.args + " --json " +
                              (d / "i.json").string());
     ASSERT_EQ(r.exit_code, 0) << r.output;

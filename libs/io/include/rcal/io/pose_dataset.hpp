@@ -40,7 +40,7 @@ namespace rcal::io {
 struct PoseSample {
   enum Set { kUnspecified, kCal, kTest };
 
-  Eigen::VectorXd q;       ///< joint positions [rad | m]
+  Eigen::VectorXd q;                                 ///< joint positions [rad | m]
   Eigen::Vector3d p_WM_W = Eigen::Vector3d::Zero();  ///< measured marker position, world [m]
   bool has_orientation = false;
   Eigen::Vector4d q_EI_wxyz = Eigen::Vector4d(1, 0, 0, 0);  ///< unit, imu → earth [w,x,y,z]
