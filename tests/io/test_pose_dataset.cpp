@@ -178,6 +178,8 @@ INSTANTIATE_TEST_SUITE_P(
         BadCsv{"q1,q2,x,y,z,set\n0,0,1,2,3,cal\n0,0,1,2,3,train\n",
                "row 2 column 'set' must be cal or test (or empty), got 'train'"},
         BadCsv{"q1,q2,x,y,z,marker\n0,0,1,2,3,1.5\n", "row 1 column 'marker' must be an integer"},
+        BadCsv{"q1,q2,x,y,z,marker\n0,0,1,2,3,-2\n",
+               "row 1 column 'marker' must be an integer id from 0"},
         BadCsv{"q1,q2,x,y,z,dq1\n0,0,1,2,3,1\n", "missing column 'dq2'"},
         BadCsv{"q1,q2,x,y,z,dq1,dq2\n0,0,1,2,3,1,2\n", "row 1 column 'dq2' must be -1, 0 or 1"},
         BadCsv{"q1,q2,x,y,z\n0,0,1,2\n", "line 2 has 4 cells, the header has 5"},

@@ -132,6 +132,32 @@ void ExpectCalibratedRoundTrip(const RobotSpec& spec, unsigned seed, double sigm
   }
 }
 
+// Several markers (a list, one per id): each calibrated offset comes back on its own id, and the
+// text names them under markers:.
+TEST(RobotYaml, CalibratedMarkersRoundTripPerId) {
+  RobotSpec spec = LoadRobotSpec(Grb3016Path());
+  spec.tool.reset();
+  spec.base = FrameSpec{};
+  spec.markers = {
+      {0, {0.0, 0.0, 0.1}, true}, {4, {0.05, 0.0, 0.1}, true}, {7, {0, 0.05, 0.1}, false}};
+  ExpectCalibratedRoundTrip(spec, 17);
+  const KinematicModel model = BuildModel(spec);
+  ASSERT_EQ(model.markers().size(), 3u);
+  EXPECT_EQ(model.markers()[2].param[0], -1);  // identify: false
+  Eigen::VectorXd x = model.Nominal();
+  x(model.FindParameter("marker4_y")) = 0.02;
+  const RobotSpec cal = CalibratedSpec(spec, model, x);
+  EXPECT_EQ(cal.markers[1].id, 4);
+  EXPECT_DOUBLE_EQ(cal.markers[1].xyz.y(), 0.02);
+  const std::string text = RobotYamlText(cal);
+  EXPECT_NE(
+      text.find("markers:\n  - {id: 0, xyz: [0, 0, 0.1]}\n  - {id: 4, xyz: [0.05, 0.02, 0.1]}\n"
+                "  - {id: 7, xyz: [0, 0.05, 0.1], identify: false}\n"),
+      std::string::npos)
+      << text;
+  EXPECT_EQ(ParseRobotYaml(text).markers.size(), 3u);
+}
+
 TEST(RobotYaml, CalibratedGrb3016RoundTrips) {
   ExpectCalibratedRoundTrip(LoadRobotSpec(Grb3016Path()), 5);
 }
@@ -290,6 +316,16 @@ INSTANTIATE_TEST_SUITE_P(
         BadCase{"schema: rcal.robot/1\n", "", "schema: missing key"},
         BadCase{"convention: dh\n", "", "convention: missing key"},
         BadCase{"tool: {a: 0.010, ", "tool: {", "tool.a: missing key"},
+        BadCase{"tool: {a",
+                "markers: [{id: 1, xyz: [0, 0, 0.1]}, {id: 1, xyz: [0, 0, 0]}]\ntool: {a",
+                "markers[1].id: marker id 1 twice"},
+        BadCase{"tool: {a", "markers: [{id: -1, xyz: [0, 0, 0.1]}]\ntool: {a",
+                "markers[0].id: expected an integer id from 0 to 1000000, got '-1'"},
+        BadCase{"tool: {a", "markers: [{id: 2, xyz: [0, 0, 0.1], size: 3}]\ntool: {a",
+                "markers[0].size: unknown key"},
+        BadCase{"tool: {a",
+                "marker: {xyz: [0, 0, 0]}\nmarkers: [{id: 2, xyz: [0, 0, 0.1]}]\ntool: {a",
+                "markers: give marker (one, id 0) or markers (a list), not both"},
         // wrong types and values
         BadCase{"{a: 0.150, alpha: -pi/2, d: 0.250", "{a: [0.150, 1], alpha: -pi/2, d: 0.250",
                 "links[0].a: expected a number"},

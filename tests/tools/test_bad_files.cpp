@@ -119,6 +119,27 @@ TEST(BadFiles, CalibrateRefusesAPositionBeyondTheArmsReach) {
   ExpectRefused(r, "row 5 column 'z1' is 1e12", d / "out");
 }
 
+// A `marker` column that is not marker ids (here a row counter: 150 distinct values) would give
+// the model 3 parameters per value: refused, naming the column. Was (before several markers were
+// fitted): refused for any id but 0.
+TEST(BadFiles, CalibrateRefusesAMarkerColumnOfTooManyIds) {
+  const fs::path d = TempDir("markers");
+  Result r = RunRcal("simulate --robot " + kUr10 + "/robot.urdf --poses 150 --out " +
+                     (d / "sim.csv").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::vector<std::string> lines = Lines(Read(d / "sim.csv"));
+  int row = 0;
+  for (std::string& l : lines) {
+    if (l.empty() || l[0] == '#') continue;
+    l += row == 0 ? ",marker" : "," + std::to_string(row);
+    ++row;
+  }
+  Write(d / "poses.csv", Join(lines));
+  r = RunRcal("calibrate " + (d / "poses.csv").string() + " --robot " + kUr10 +
+              "/robot.urdf --out " + (d / "out").string());
+  ExpectRefused(r, "column 'marker': 150 distinct ids; rcal fits at most 100 markers", d / "out");
+}
+
 std::string LoopUrdf() {
   std::string x = "<?xml version=\"1.0\"?>\n<robot name=\"loop\">\n";
   for (const char* l : {"base", "a", "b", "c"}) x += std::string("<link name=\"") + l + "\"/>\n";

@@ -74,6 +74,12 @@ void SetUpMarkers(io::LoadedRobot& robot, const io::PoseDataset& data,
   std::set<int> ids;
   for (const auto& s : data.samples) ids.insert(s.marker);
   for (const auto& [id, p_FM] : known) ids.insert(id);
+  // Each marker adds three parameters; a column of row numbers or timestamps is not markers.
+  constexpr size_t kMaxMarkers = 100;
+  if (ids.size() > kMaxMarkers)
+    throw std::runtime_error("column 'marker': " + std::to_string(ids.size()) +
+                             " distinct ids; rcal fits at most " + std::to_string(kMaxMarkers) +
+                             " markers on one tool");
   if (robot.spec.tool && !(ids.size() == 1 && *ids.begin() == 0))
     throw std::runtime_error(
         "column 'marker': the robot ends in a D–H tool, which is the one "

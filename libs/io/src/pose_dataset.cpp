@@ -243,9 +243,9 @@ PoseDataset ParseRcal(const CsvTable& t, int expected_num_joints) {
     out.has_orientation = out.has_orientation && p.has_orientation;
     if (t.Has("marker")) {
       const double m = t.At(r, "marker");
-      if (!std::isfinite(m) || m != std::round(m) || std::abs(m) > 1e9)
-        Fail(t,
-             Row(r) + " column 'marker' must be an integer id, got '" + t.Text(r, "marker") + "'");
+      if (!std::isfinite(m) || m != std::round(m) || m < 0 || m > 1e6)
+        Fail(t, Row(r) + " column 'marker' must be an integer id from 0 to 1000000, got '" +
+                    t.Text(r, "marker") + "'");
       p.marker = static_cast<int>(m);
     }
     if (t.Has("temperature"))

@@ -7,7 +7,7 @@
 //   x, y, z         measured marker position p_WM_W, world frame [m]          required
 //   qw, qx, qy, qz  measured tool orientation q_EI (imu → earth), [w,x,y,z]   optional, all four
 //                   (norm within 1e-3 of 1, normalised; a row may leave all four empty)
-//   marker          integer id of the measured point (own flange→marker offset) optional, 0
+//   marker          integer id ≥ 0 of the measured point (own flange→marker offset) optional, 0
 //   temperature [°C], payload [kg], time [s]                                  optional, NaN
 //   dq1..dqN        sign (−1, 0, +1) of each joint's last motion before the stop  optional
 //   set             `cal` | `test` (empty: unspecified)                        optional
