@@ -11,6 +11,7 @@
 #include "rcal/identification/ekf_identifier.hpp"
 #include "rcal/identification/extended_lm.hpp"
 #include "rcal/identification/extended_measurement.hpp"
+#include "rcal/identification/setup_guess.hpp"
 #include "rcal/kinematics/identifiability.hpp"
 
 namespace rcal::identification {
@@ -48,90 +49,7 @@ std::vector<int> SetupParameters(const kinematics::KinematicModel& model) {
 
 Eigen::VectorXd InitialSetupGuess(const kinematics::KinematicModel& model,
                                   const std::vector<kinematics::PoseMeasurement>& ms) {
-  Eigen::VectorXd x = model.Nominal();
-  const char* names[6] = {"base_x", "base_y", "base_z", "base_rz", "base_ry", "base_rx"};
-  int idx[6];
-  bool has_base = true;
-  for (int k = 0; k < 6; ++k) has_base &= (idx[k] = model.FindParameter(names[k])) >= 0;
-  if (has_base && ms.size() >= 3) {
-    // Align the model's marker positions with the base frame at its nominal placement.
-    std::vector<Eigen::Vector3d> a, b;
-    const Eigen::Isometry3d T_WB0 = [&] {
-      // Nominal base transform = the chain's first six ETs at their nominal values.
-      Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-      const auto& ets = model.ets(kinematics::Segment::kChain);
-      for (int k = 0; k < 6 && k < static_cast<int>(ets.size()); ++k)
-        T = T * kinematics::EtTransform(ets[k], ets[k].nominal);
-      return T;
-    }();
-    for (const auto& m : ms) {
-      const Eigen::Vector3d p_WM = model.ForMarker(m.marker).Forward(m.q, x).p_WM_W;
-      a.push_back(T_WB0.inverse() * p_WM);  // in the base frame
-      b.push_back(m.p_WM_W);
-    }
-    const Eigen::Isometry3d T_WB = FitRigidTransform(a, b);
-    const Eigen::Vector3d rpy = geometry::ToRpy(T_WB.linear());
-    const Eigen::Vector3d rpy0 = geometry::ToRpy(T_WB0.linear());
-    for (int k = 0; k < 3; ++k) x(idx[k]) = T_WB.translation()(k) - T_WB0.translation()(k);
-    x(idx[3]) = rpy(2) - rpy0(2);
-    x(idx[4]) = rpy(1) - rpy0(1);
-    x(idx[5]) = rpy(0) - rpy0(0);
-  }
-  // Orientation frames. With both an earth ← world and a flange → IMU rotation, the measured
-  // orientations are R_meas,k = Y · A_k · X (A_k the model's orientation with both at identity):
-  // a hand–eye problem. Rotation vectors of relative rotations obey Log(M_k M_lᵀ) = Y Log(A_k
-  // A_lᵀ), so Y is the Kabsch alignment of those vectors over all pairs, then X the chordal mean of
-  // A_kᵀ Yᵀ M_k. With an IMU rotation only, X is the chordal mean of A_kᵀ M_k.
-  const auto find3 = [&](const char* a, const char* b, const char* c, int* idx) {
-    idx[0] = model.FindParameter(a);
-    idx[1] = model.FindParameter(b);
-    idx[2] = model.FindParameter(c);
-    return idx[0] >= 0 && idx[1] >= 0 && idx[2] >= 0;
-  };
-  int imu[3], earth[3];
-  const bool has_imu = find3("imu_rz", "imu_ry", "imu_rx", imu);
-  const bool has_earth = find3("earth_rz", "earth_ry", "earth_rx", earth);
-  std::vector<const kinematics::PoseMeasurement*> with;
-  for (const auto& m : ms)
-    if (m.has_orientation) with.push_back(&m);
-  if (!has_imu || with.empty()) return x;
-  // The Rz·Ry·Rx ETs of a segment hold rpy = nominal + x; a correction R is composed on the side
-  // where the segment meets the chain.
-  const auto nominal_rotation = [&](kinematics::Segment seg) {
-    Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
-    for (const auto& et : model.ets(seg)) R = R * kinematics::EtTransform(et, et.nominal).linear();
-    return R;
-  };
-  const auto set_rpy = [&](const int* idx, const Eigen::Matrix3d& R, const Eigen::Matrix3d& R0) {
-    const Eigen::Vector3d rpy = geometry::ToRpy(R), rpy0 = geometry::ToRpy(R0);
-    x(idx[0]) = rpy(2) - rpy0(2);
-    x(idx[1]) = rpy(1) - rpy0(1);
-    x(idx[2]) = rpy(0) - rpy0(0);
-  };
-  const Eigen::Matrix3d R_EW0 = nominal_rotation(kinematics::Segment::kEarth);
-  const Eigen::Matrix3d R_FI0 = nominal_rotation(kinematics::Segment::kImu);
-  std::vector<Eigen::Matrix3d> A, M;  // A_k = R_EW0ᵀ · model orientation · R_FI0ᵀ
-  for (const auto* m : with) {
-    A.push_back(R_EW0.transpose() * model.Forward(m->q, x).R_EI * R_FI0.transpose());
-    M.push_back(m->R_EI);
-  }
-  Eigen::Matrix3d Y = R_EW0;
-  if (has_earth && with.size() >= 3) {
-    Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
-    for (size_t k = 0; k < A.size(); ++k)
-      for (size_t l = k + 1; l < A.size(); ++l)
-        H += geometry::Log(A[k] * A[l].transpose()) *
-             geometry::Log(M[k] * M[l].transpose()).transpose();
-    Eigen::JacobiSVD<Eigen::Matrix3d> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
-    Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
-    D(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1.0 : 1.0;
-    Y = svd.matrixV() * D * svd.matrixU().transpose();
-    set_rpy(earth, Y, R_EW0);
-  }
-  Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
-  for (size_t k = 0; k < A.size(); ++k) sum += A[k].transpose() * Y.transpose() * M[k];
-  set_rpy(imu, geometry::Orthonormalize(sum), R_FI0);
-  return x;
+  return GuessSetup(model, ms).x;
 }
 
 std::vector<int> IdentifiableSubset(const kinematics::KinematicModel& model,

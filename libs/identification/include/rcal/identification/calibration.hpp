@@ -36,11 +36,12 @@ Eigen::Isometry3d FitRigidTransform(const std::vector<Eigen::Vector3d>& a,
 /// Parameters of the set-up frames: groups base, marker, imu, earth.
 std::vector<int> SetupParameters(const kinematics::KinematicModel& model);
 
-/// Starting errors with the set-up frames guessed from the data: world ← base by a rigid
-/// alignment of positions; earth ← world and flange → IMU rotations by a hand–eye solve of the
+/// Starting errors with the set-up frames guessed from the data (GuessSetup, setup_guess.hpp):
+/// world ← base and the marker offsets by registering the drawing's marker points to the
+/// measured ones; earth ← world and flange → IMU rotations by a hand–eye solve of the
 /// orientations (R_meas = Y·A·X), or the IMU rotation alone by a chordal mean when there is no
-/// earth frame. Frames the model lacks, or too few poses (3 positions, 3 orientations for the
-/// earth frame), leave those parameters at 0.
+/// earth frame; a bad pose left out. Frames the model lacks, or too few poses (3 positions, 3
+/// orientations for the earth frame), leave those parameters at 0.
 Eigen::VectorXd InitialSetupGuess(const kinematics::KinematicModel& model,
                                   const std::vector<kinematics::PoseMeasurement>& ms);
 
