@@ -115,17 +115,24 @@ TEST(CalibrationSweep, RunsDoNotDependOnJobsOrOnOtherRuns) {
 
 // Issue 12, item 1, on every arm and both modes (0.5 mm / 1 mrad geometric errors, random set-up
 // frames, 200 calibration and 100 test poses, 0.05 mm / 0.05° noise, starting noise 2× wrong):
-// - the estimated noise within 1.1× of the truth on every seed, the median within 1.05×;
 // - the identified count equal to the rank of the identification Jacobian at the truth;
-// - the test-pose error against the truth within 10 % of its Cramér–Rao prediction, as a median
-//   over all runs. A single calibration's error fluctuates around its Cramér–Rao mean (the error
-//   is one draw of the estimate's scatter over ~rank directions, so roughly ±1/√(2·rank), 13 % at
-//   rank 30; measured over the 20-seed matrix: 0.80–1.23), so single seeds are held to a wider
-//   band only to catch a fit that failed outright.
+// - the estimated noise within 1.1× of the truth on every seed, the median within 1.05×
+//   (measured over 20 seeds per arm and mode: 0.93–1.07, medians 0.98–1.02);
+// - LM converged (stopped before its 100-iteration cap): with a base set chosen ill-conditioned,
+//   it crept along a nearly flat direction for all 100 iterations on 27 of 120 positions-only
+//   runs, drifting |x| to 1.3 (now ≤ 0.01), up to 30 χ² units above the optimum and 1.7× its
+//   test error;
+// - the test-pose position error against the truth within 10 % of its Cramér–Rao prediction, as
+//   a median over all runs. A single calibration's error is one draw of the estimate's scatter
+//   over ~rank directions, so it fluctuates around its Cramér–Rao mean by roughly 1/√(2·rank),
+//   13 % at rank 30: measured over the 20-seed matrix, 0.59–1.50 (sd 0.145), every extreme at the
+//   optimum LM reaches from the truth. Single seeds are held only to a band that catches a fit
+//   that failed outright; orientation (a few directions carry it: sd 0.31 per seed, pooled median
+//   1.01 over 120 runs) to 25 % as a median.
 TEST(CalibrationSweep, EveryArmReachesItsNoiseFloor) {
-  constexpr int kSeeds = 3;
+  constexpr int kSeeds = 5;
   const fs::path d = TempDir("matrix");
-  std::vector<double> all_ratios;
+  std::vector<double> position_ratios, orientation_ratios;
   for (const auto& arm : kArms)
     for (bool position_only : {false, true}) {
       const std::string mode = position_only ? "positions only" : "full pose";
@@ -141,6 +148,7 @@ TEST(CalibrationSweep, EveryArmReachesItsNoiseFloor) {
         const unsigned seed = run["seed_index"];
         SCOPED_TRACE("seed " + std::to_string(seed));
         EXPECT_EQ(run["identified"], run["rank_at_truth"]);
+        EXPECT_LT(run["lm_iterations"].get<int>(), 100);
         std::vector<double> ratios = {run["position_noise_ratio"].get<double>()};
         if (!position_only) ratios.push_back(run["orientation_noise_ratio"].get<double>());
         for (double k : ratios) {
@@ -149,25 +157,32 @@ TEST(CalibrationSweep, EveryArmReachesItsNoiseFloor) {
           noise.push_back(k);
         }
         const double cr = run["position_error_over_cramer_rao"];
-        EXPECT_GT(cr, 0.6);
-        EXPECT_LT(cr, 1.5);
-        all_ratios.push_back(cr);
+        EXPECT_GT(cr, 0.5);
+        EXPECT_LT(cr, 1.7);
+        position_ratios.push_back(cr);
+        if (!position_only)
+          orientation_ratios.push_back(run["orientation_error_over_cramer_rao"].get<double>());
       }
       const double m = Median(noise);
       EXPECT_LT(m, 1.05);
       EXPECT_GT(m, 1.0 / 1.05);
     }
-  ASSERT_EQ(all_ratios.size(), kArms.size() * 2 * kSeeds);
-  const double m = Median(all_ratios);
+  ASSERT_EQ(position_ratios.size(), kArms.size() * 2 * kSeeds);
+  const double m = Median(position_ratios), mo = Median(orientation_ratios);
   EXPECT_GT(m, 0.9);
   EXPECT_LT(m, 1.1);
+  EXPECT_GT(mo, 0.75);
+  EXPECT_LT(mo, 1.25);
+  std::printf("test / Cramér–Rao, median over %zu runs: position %.3f, orientation %.3f\n",
+              position_ratios.size(), m, mo);
   fs::remove_all(d);
 }
 
 // `rcal analyze` names nothing on clean data of any arm, full pose or positions only (the issue
-// asks ≤ 1 % over ≥ 100 seeds per arm: the README table; here a few seeds per arm and mode).
+// asks ≤ 1 % over ≥ 100 seeds per arm: the README table, 0 / 100 everywhere; here 5 seeds per arm
+// and mode).
 TEST(CalibrationSweep, AnalyzeNamesNothingOnCleanDataOfAnyArm) {
-  constexpr int kSeeds = 2;
+  constexpr int kSeeds = 5;
   const fs::path d = TempDir("clean");
   for (const auto& arm : kArms)
     for (bool position_only : {false, true}) {
