@@ -12,6 +12,7 @@
 #include "rcal/identification/calibration.hpp"
 #include "rcal/identification/metrics.hpp"
 #include "rcal/kinematics/identifiability.hpp"
+#include "rcal/kinematics/measurement.hpp"
 #include "rcal/sim/pose_sim.hpp"
 
 namespace rcal::tool {
@@ -122,6 +123,17 @@ CalibrationSeedResult RunCalibrationSeed(const kinematics::KinematicModel& model
   const auto& sv = truth.singular_values;
   if (truth.rank > 0) r.last_kept_singular_value = sv(truth.rank - 1) / sv(0);
   if (truth.rank < sv.size()) r.first_dropped_singular_value = sv(truth.rank) / sv(0);
+
+  double ss_p = 0, ss_o = 0;
+  for (const auto& m : measured) {
+    const Eigen::VectorXd e = kinematics::Residual(model, m, x_true);
+    ss_p += e.head<3>().squaredNorm();
+    if (m.has_orientation) ss_o += e.tail<3>().squaredNorm();
+  }
+  const double n_axes = 3.0 * static_cast<double>(measured.size());
+  r.realized_position_noise_ratio = std::sqrt(ss_p / n_axes) / s.position_sigma_m;
+  if (!s.position_only)
+    r.realized_orientation_noise_ratio = std::sqrt(ss_o / n_axes) / s.orientation_sigma_rad;
 
   // The user does not know the noise: Calibrate starts from a wrong one and estimates it.
   auto ms = measured;

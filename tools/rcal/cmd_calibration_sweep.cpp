@@ -88,15 +88,17 @@ int Run(const Options& o) {
       model.name().c_str(), mode.c_str(), o.poses, o.test_poses, o.position_sigma_mm,
       o.position_only ? 0.0 : o.orientation_sigma_deg);
   json jruns = json::array();
-  std::vector<double> np, no, rp, ro, secs;
+  std::vector<double> np, no, rp, ro, secs, ep, eo;  // e*: estimated / realized noise
   int count_eq_rank = 0;
   for (const auto& r : runs) {
     count_eq_rank += r.identified == r.rank_at_truth;
     np.push_back(r.position_noise_ratio);
+    ep.push_back(r.position_noise_ratio / r.realized_position_noise_ratio);
     rp.push_back(r.position_ratio);
     secs.push_back(r.seconds);
     if (!o.position_only) {
       no.push_back(r.orientation_noise_ratio);
+      eo.push_back(r.orientation_noise_ratio / r.realized_orientation_noise_ratio);
       ro.push_back(r.orientation_ratio);
     }
     std::printf("| %u | %d / %d | %.3f, %s | %.4f | %.4f | %.3f, %s | %d | %.2f |\n", r.seed_index,
@@ -113,6 +115,8 @@ int Run(const Options& o) {
                      {"first_dropped_singular_value", r.first_dropped_singular_value},
                      {"position_noise_ratio", r.position_noise_ratio},
                      {"orientation_noise_ratio", r.orientation_noise_ratio},
+                     {"realized_position_noise_ratio", r.realized_position_noise_ratio},
+                     {"realized_orientation_noise_ratio", r.realized_orientation_noise_ratio},
                      {"test_mean_position_error_m", r.test_position_m},
                      {"cramer_rao_mean_position_error_m", r.cr_position_m},
                      {"position_error_over_cramer_rao", r.position_ratio},
@@ -126,7 +130,8 @@ int Run(const Options& o) {
   }
   const RatioSummary snp = SummarizeRatios(np), srp = SummarizeRatios(rp),
                      sno = SummarizeRatios(no), sro = SummarizeRatios(ro),
-                     ssec = SummarizeRatios(secs);
+                     ssec = SummarizeRatios(secs), sep = SummarizeRatios(ep),
+                     seo = SummarizeRatios(eo);
   std::printf(
       "\nidentified == rank at the truth: %d of %d seeds\nposition noise est/true: median %.3f "
       "(%.3f–%.3f)\n",
@@ -134,6 +139,10 @@ int Run(const Options& o) {
   if (!o.position_only)
     std::printf("orientation noise est/true: median %.3f (%.3f–%.3f)\n", sno.median, sno.min,
                 sno.max);
+  std::printf("noise est/realized (this seed's noise at the truth): position %.3f (%.3f–%.3f)",
+              sep.median, sep.min, sep.max);
+  if (!o.position_only) std::printf(", orientation %.3f (%.3f–%.3f)", seo.median, seo.min, seo.max);
+  std::printf("\n");
   std::printf("test position error / Cramér–Rao: median %.3f (%.3f–%.3f)\n", srp.median, srp.min,
               srp.max);
   if (!o.position_only)
@@ -162,6 +171,8 @@ int Run(const Options& o) {
                    {{"identified_equals_rank", count_eq_rank},
                     {"position_noise_ratio", SummaryJson(snp)},
                     {"orientation_noise_ratio", SummaryJson(sno)},
+                    {"position_noise_over_realized", SummaryJson(sep)},
+                    {"orientation_noise_over_realized", SummaryJson(seo)},
                     {"position_error_over_cramer_rao", SummaryJson(srp)},
                     {"orientation_error_over_cramer_rao", SummaryJson(sro)},
                     {"cpu_s", SummaryJson(ssec)}}}};
