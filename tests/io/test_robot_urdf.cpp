@@ -7,6 +7,7 @@
 #include <numbers>
 #include <random>
 #include <sstream>
+#include <tuple>
 
 #include "../kinematics/test_robots.hpp"
 #include "io_test_util.hpp"
@@ -509,6 +510,59 @@ TEST(RobotUrdf, LoadRobotDispatchesOnTheExtension) {
   EXPECT_EQ(yaml.model.num_params(), 28);
   EXPECT_NE(ErrorOf([&] { LoadRobot("robot.txt"); }).find("unknown robot file type"),
             std::string::npos);
+}
+
+// The arm test matrix's GRB3016 (tests/data/arms/grb3016.urdf, hand-written) is the arm of
+// config/robots/grb3016.yaml: the same tool frame at random joints and the same joint limits. The
+// YAML model chains standard D–H ETs (Rz Tz Tx Rx per link, then the D–H tool), the URDF model
+// its joints' origins and rotations: two independent layouts of one arm.
+TEST(RobotUrdf, TheMatrixGrb3016IsTheArmOfTheYamlModel) {
+  UrdfOptions o;
+  o.tip_link = "tool0";
+  const LoadedRobot urdf = LoadRobot(testing::SourceDir() / "tests/data/arms/grb3016.urdf", o);
+  const LoadedRobot yaml = LoadRobot(testing::SourceDir() / "config/robots/grb3016.yaml");
+  ASSERT_EQ(urdf.model.num_joints(), 6);
+  ASSERT_EQ(yaml.model.num_joints(), 6);
+  for (int j = 0; j < 6; ++j) {
+    EXPECT_EQ(urdf.model.joints()[j].name, yaml.model.joints()[j].name);
+    EXPECT_NEAR(urdf.model.joints()[j].lower, yaml.model.joints()[j].lower, 1e-15) << j;
+    EXPECT_NEAR(urdf.model.joints()[j].upper, yaml.model.joints()[j].upper, 1e-15) << j;
+  }
+  std::mt19937 rng(12);
+  std::vector<Eigen::VectorXd> qs{Eigen::VectorXd::Zero(6)};
+  for (int k = 0; k < 200; ++k) qs.push_back(kinematics::testing::RandomJoints(yaml.model, rng));
+  for (const auto& q : qs) {
+    const Eigen::Isometry3d a = urdf.model.ToolFrame(q, urdf.model.Nominal());
+    const Eigen::Isometry3d b = yaml.model.ToolFrame(q, yaml.model.Nominal());
+    EXPECT_LT((a.translation() - b.translation()).norm(), 1e-12) << q.transpose();
+    EXPECT_LT((a.linear() - b.linear()).norm(), 1e-12) << q.transpose();
+  }
+}
+
+// Every arm of the test matrix loads with the default tip detection, ends at the link its comment
+// names, and its model's tool frame is the URDF's origins chained by hand.
+TEST(RobotUrdf, EveryMatrixArmLoadsWithItsDefaultTip) {
+  const std::vector<std::tuple<std::string, std::string, std::string, int>> arms = {
+      {"grb3016", "base_link", "link_6", 6},
+      {"kr6_like", "base_link", "link_6", 6},
+      {"ur5e_like", "base_link", "wrist_3_link", 6},
+      {"panda_like", "link0", "link7", 7},
+      {"irb120_like", "base_link", "link_6", 6}};
+  for (const auto& [name, base, tip, joints] : arms) {
+    const auto path = testing::SourceDir() / "tests/data/arms" / (name + ".urdf");
+    const LoadedRobot r = LoadRobot(path);
+    ASSERT_EQ(r.model.num_joints(), joints) << name;
+    EXPECT_EQ(r.model.name(), name);
+    const std::string xml = ReadFile(path);
+    std::mt19937 rng(13);
+    for (int k = 0; k < 20; ++k) {
+      const Eigen::VectorXd q = kinematics::testing::RandomJoints(r.model, rng);
+      EXPECT_LT(FrameDifference(r.model.ToolFrame(q, r.model.Nominal()),
+                                ChainByHand(xml, base, tip, ByName(r.model, q))),
+                1e-12)
+          << name;
+    }
+  }
 }
 
 TEST(RobotUrdf, UrdfRobotSavesAsYamlAndLoadsCalibrated) {

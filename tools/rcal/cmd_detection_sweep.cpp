@@ -25,9 +25,9 @@
 #include "rcal/identification/calibration.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/robot_urdf.hpp"
-#include "rcal/io/robot_yaml.hpp"
 #include "rcal/sim/effects.hpp"
 #include "report.hpp"
+#include "robot_setup.hpp"
 
 namespace rcal::tool {
 namespace {
@@ -41,6 +41,7 @@ struct Options {
   unsigned first_seed = 1000;
   std::string json_path;
   std::string robot = "../shared/data/figaroh_ur10/robot.urdf";
+  std::string tip_link, base_link;  ///< URDF chain (empty: detected, the root)
   int poses = 60;
   std::vector<double> magnitudes{2.0, 3.0, 5.0};
   double position_sigma_mm = 0.05;
@@ -65,15 +66,10 @@ nlohmann::json EffectJson(const Effect& e) {
 }
 
 int Run(const Options& o) {
-  io::UrdfOptions uo;
-  uo.add_base_frame = true;
-  uo.add_marker = true;
-  io::LoadedRobot robot = io::LoadRobot(ResolvePath(o.robot), uo);
-  if (!robot.from_urdf) {
-    if (!robot.spec.base) robot.spec.base = io::FrameSpec{};
-    if (robot.spec.markers.empty() && !robot.spec.tool) robot.spec.markers.push_back({});
-    robot.model = io::BuildModel(robot.spec);
-  }
+  // The robot as `rcal analyze` loads it for such data: set-up frames added, and the flange →
+  // IMU rotation when orientation is measured.
+  io::LoadedRobot robot = LoadRobotForCell(o.robot, o.tip_link, o.base_link, "auto");
+  if (o.orientation_sigma_deg > 0) AddOrientationFrame(robot);
   if (o.size != "visible" && o.size != "total") throw std::runtime_error("--size: visible|total");
   const kinematics::KinematicModel& model = robot.model;
   const int nj = model.num_joints();
@@ -309,6 +305,8 @@ const RegisterCommand kSweep(
           ->delimiter(',');
       sub.add_option("--json", o->json_path, "write the rates here");
       sub.add_option("--robot", o->robot, "robot file (YAML or URDF)")->capture_default_str();
+      sub.add_option("--tip", o->tip_link, "URDF tip link (default: detected)");
+      sub.add_option("--base-link", o->base_link, "URDF base link (default: the root)");
       sub.add_option("--poses", o->poses, "poses per dataset")->capture_default_str();
       sub.add_option("--magnitudes", o->magnitudes,
                      "effect sizes as RMS marker displacement / position σ")

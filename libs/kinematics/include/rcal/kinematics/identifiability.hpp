@@ -26,6 +26,10 @@ enum class MeasurementKind { kFullPose, kPositionOnly };
 struct IdentifiabilitySettings {
   double rank_tolerance = 1e-9;    ///< relative to the largest singular value of J_s
   double coefficient_zero = 1e-6;  ///< null-vector entries below this (relative) are zero
+  /// A parameter is dropped for a null direction only when its scaled entry is at least this share
+  /// of the largest one left among the parameters not yet passed (keeps the base set well
+  /// conditioned, not just of full rank).
+  double pivot_share = 0.1;
 };
 
 /// One direction of the parameter space that no measurement sees.
