@@ -620,7 +620,17 @@ TEST(RcalCli, AnalyzeReproducesTheImuStreamTableOnBroad) {
     const Result r =
         RunRcal("analyze ../shared/data/broad/broad_" + t + "_100hz.csv --out " + (d / t).string());
     ASSERT_EQ(r.exit_code, 0) << t << ": " << r.output;
-    ExpectGolden(ReadJson(d / t / "analysis.json"), want, "broad_" + t);
+    const json got = ReadJson(d / t / "analysis.json");
+    ExpectGolden(got, want, "broad_" + t);
+    // Issue 12, item 5: no z clamped to that of p = 1e-300 (37.05, the old accel_motion figure
+    // of every trial); a p below 1e-300 carries its bound and its exact log10.
+    for (const auto& c : got.at("candidates")) {
+      EXPECT_GT(std::abs(c.at("statistic_z").get<double>() - 37.047096), 1e-3) << t;
+      if (c.contains("p_value") && c.at("p_value").get<double>() < 1e-300) {
+        EXPECT_EQ(c.value("p_value_bound", ""), "< 1e-300") << t << " " << c.at("cause");
+        EXPECT_LT(c.at("log10_p_value").get<double>(), -300) << t;
+      }
+    }
   }
 }
 
