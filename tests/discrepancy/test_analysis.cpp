@@ -93,6 +93,44 @@ TEST(Discrepancy, CleanDataHasNoEffect) {
   }
 }
 
+// A tracker measuring three reflectors at each stop (UR-like arm, markers 0, 2, 5): the rows of a
+// stop share its context and its fold (the scheme says "by configuration"), clean data give
+// nothing, and a periodic error of the elbow (3σ) is named, its offsets fitted per marker.
+TEST(Discrepancy, SeveralMarkersPerStop) {
+  for (const bool hidden : {false, true}) {
+    const kinematics::KinematicModel model = kinematics::testing::UrLikeThreeMarkers();
+    sim::Rng rng(hidden ? 41 : 40);
+    sim::PoseNoise noise;
+    noise.position_sigma = 5e-5;
+    noise.orientation = false;
+    const Eigen::VectorXd x = sim::RandomErrors(model, rng, 1e-3, 1e-3);
+    const int stops = 40;
+    const auto qs = sim::SampleJoints(model, stops, rng);
+    const auto ctx = sim::SampleSession(model.num_joints(), stops, {}, rng);
+    const Effect periodic{EffectCause::kJointPeriodic, 2, 1};
+    std::vector<sim::TruthEffect> effects;
+    if (hidden)
+      effects.push_back(
+          sim::EffectOfSize(model, periodic, qs, ctx, x, 3 * noise.position_sigma, rng));
+    PoseData d;
+    d.measurements =
+        sim::MeasurePosesWithEffects(sim::MakeEffectTruth(model, effects), x, qs, ctx, noise, rng);
+    ASSERT_EQ(d.measurements.size(), 3u * stops);
+    for (size_t i = 0; i < d.measurements.size(); ++i) d.contexts.push_back(ctx[i / 3]);
+    const Analysis a = Analyze(model, d);
+    EXPECT_NE(a.gain.scheme.find("by configuration"), std::string::npos) << a.gain.scheme;
+    if (!hidden) {
+      EXPECT_NEAR(a.base_fit.position_sigma_m / noise.position_sigma, 1.0, 0.15);
+      EXPECT_TRUE(a.effects.empty()) << a.effects.size() << " effect(s) on clean data";
+      continue;
+    }
+    ASSERT_EQ(a.effects.size(), 1u);
+    EXPECT_EQ(a.effects[0].effect.cause, EffectCause::kJointPeriodic);
+    EXPECT_EQ(a.effects[0].effect.joint, 2);
+    EXPECT_GT(a.gain.relative_gain, 0.1);
+  }
+}
+
 TEST(Discrepancy, NamesTheHiddenCauseAndJoint) {
   struct Hidden {
     Effect effect;

@@ -118,6 +118,7 @@ int Run(const Options& o) {
   settings.stated_position_sigma_m = o.stated_position_sigma_mm / kMm;
   settings.stated_orientation_sigma_rad = o.stated_orientation_sigma_deg / kDeg;
   settings.gravity.link_density_kg_per_m = o.link_density;
+  spdlog::info("chain {}", ChainText(robot));
   spdlog::info("{}: {} poses{}, {}, robot {} with {} parameters", o.data, pd.measurements.size(),
                has_test ? " (with a cal/test split)" : "",
                data.has_orientation ? "position and orientation" : "positions only", model.name(),
@@ -271,25 +272,27 @@ int Run(const Options& o) {
       {"split", has_test ? "set column: selection on the cal rows, gain on the test rows"
                          : "none: selection on every row, gain by nested k-fold"},
       {"row_fingerprints", fingerprints}};
-  const json j = {{"data", o.data},
-                  {"robot", model.name()},
-                  {"num_poses", pd.measurements.size()},
-                  {"num_fit_poses", a.num_fit_poses},
-                  {"num_test_poses", a.num_test_poses},
-                  {"num_identified", a.base_fit.identified.size()},
-                  {"link_density_kg_per_m", o.link_density},
-                  {"position_noise_m", a.base_fit.position_sigma_m},
-                  {"orientation_noise_rad", a.base_fit.orientation_sigma_rad},
-                  {"position_noise_after_m", a.position_sigma_after_m},
-                  {"effects", jeffects},
-                  {"rejected_effects", jrejected},
-                  {"gain", jgain},
-                  {"selected_on", selected_on},
-                  {"noise_tests", jnoise},
-                  {"correlations", jcorr},
-                  {"selection", jrounds},
-                  {"alpha", settings.alpha},
-                  {"skipped", a.skipped}};
+  const json j = {
+      {"data", o.data},
+      {"robot", model.name()},
+      {"chain", {{"base_link", robot.spec.base_link}, {"tip_link", robot.spec.tip_link}}},
+      {"num_poses", pd.measurements.size()},
+      {"num_fit_poses", a.num_fit_poses},
+      {"num_test_poses", a.num_test_poses},
+      {"num_identified", a.base_fit.identified.size()},
+      {"link_density_kg_per_m", o.link_density},
+      {"position_noise_m", a.base_fit.position_sigma_m},
+      {"orientation_noise_rad", a.base_fit.orientation_sigma_rad},
+      {"position_noise_after_m", a.position_sigma_after_m},
+      {"effects", jeffects},
+      {"rejected_effects", jrejected},
+      {"gain", jgain},
+      {"selected_on", selected_on},
+      {"noise_tests", jnoise},
+      {"correlations", jcorr},
+      {"selection", jrounds},
+      {"alpha", settings.alpha},
+      {"skipped", a.skipped}};
   io::AtomicWriteFile(out / "analysis.json", j.dump(2));
   if (!o.json_path.empty()) io::AtomicWriteFile(o.json_path, j.dump(2));
 
@@ -299,8 +302,10 @@ int Run(const Options& o) {
      << a.num_fit_poses << " fitted, " << a.num_test_poses << " test), "
      << (data.has_orientation ? "position and orientation" : "positions only") << "\n- Robot: `"
      << o.robot << "` (" << model.name() << "), " << a.base_fit.identified.size()
-     << " geometric parameters identifiable at these poses\n- Noise estimated from the geometric "
-        "fit: "
+     << " geometric parameters identifiable at these poses\n- Chain: " << ChainText(robot)
+     << "; positions of the marker"
+     << (model.markers().size() > 1 ? "s (one offset each, tip-link frame)" : "")
+     << " in the world frame\n- Noise estimated from the geometric fit: "
      << Fmt(a.base_fit.position_sigma_m * kMm, 4) << " mm"
      << (data.has_orientation ? ", " + Fmt(a.base_fit.orientation_sigma_rad * kDeg, 4) + "°" : "")
      << " per axis\n\n## Finding\n\n";

@@ -142,21 +142,39 @@ struct Linearized {
   std::vector<Eigen::MatrixXd> Jp;  // position rows, unwhitened
   std::vector<int> fit, test;
   std::vector<std::vector<int>> fold_sets;  // per repeat: fold id per fit pose (index in fit)
+  std::vector<int> config;                  // configuration id per pose (all poses)
+  int groups = 0;                           // configurations among the fit poses
   int folds = 0;
 
-  // Seeded fold assignments over the fit poses (k-fold, repeated; leave-one-out when k ≥ n).
+  // Seeded fold assignments over the fit poses (k-fold, repeated; leave-one-out when k ≥ the
+  // configurations). The rows of one configuration (several markers measured at one stop, or a
+  // stop measured again) go to one fold together: they share its joint readings and whatever
+  // the model misses there, and a fold that fitted the others would flatter the one held out.
   void AssignFolds(int k, int repeats, unsigned seed) {
     const int nf = static_cast<int>(fit.size());
-    folds = std::min(std::max(2, k), nf);
+    std::vector<int> group(nf), first_of;  // group per fit pose; groups in order of appearance
+    for (int i = 0; i < nf; ++i) {
+      int g = -1;
+      for (size_t j = 0; j < first_of.size() && g < 0; ++j)
+        if (config[fit[first_of[j]]] == config[fit[i]]) g = static_cast<int>(j);
+      if (g < 0) {
+        g = static_cast<int>(first_of.size());
+        first_of.push_back(i);
+      }
+      group[i] = g;
+    }
+    groups = static_cast<int>(first_of.size());
+    folds = std::min(std::max(2, k), groups);
     fold_sets.clear();
     std::mt19937_64 rng(seed);
     for (int rep = 0; rep < std::max(1, repeats); ++rep) {
-      std::vector<int> order(nf), fold(nf);
+      std::vector<int> order(groups), fold_of(groups), fold(nf);
       std::iota(order.begin(), order.end(), 0);
       std::shuffle(order.begin(), order.end(), rng);
-      for (int i = 0; i < nf; ++i) fold[order[i]] = i % folds;
+      for (int i = 0; i < groups; ++i) fold_of[order[i]] = i % folds;
+      for (int i = 0; i < nf; ++i) fold[i] = fold_of[group[i]];
       fold_sets.push_back(fold);
-      if (folds == nf) break;  // leave-one-out: one assignment is all there is
+      if (folds == groups) break;  // leave-one-out: one assignment is all there is
     }
   }
 
@@ -303,6 +321,7 @@ Prepared Prepare(const kinematics::KinematicModel& model, const PoseData& data,
     L.rp.push_back(r.head<3>());
     L.Jp.push_back(Jfull.topRows(3));
   }
+  L.config = identification::ConfigurationGroups(data.measurements);
   L.AssignFolds(s.folds, s.repeats, s.seed);
   return p;
 }
@@ -572,9 +591,10 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
   // --- Judged on poses the selection did not fit: the split, else nested cross-validation.
   // With nothing selected both models are the geometry, gain 0.
   const std::string kfold_scheme =
-      L.folds == static_cast<int>(L.fit.size())
-          ? "leave-one-out"
-          : std::to_string(L.folds) + "-fold ×" + std::to_string(L.fold_sets.size());
+      (L.folds == L.groups
+           ? std::string("leave-one-out")
+           : std::to_string(L.folds) + "-fold ×" + std::to_string(L.fold_sets.size())) +
+      (L.groups < static_cast<int>(L.fit.size()) ? " (by configuration)" : "");
   Linearized::Eval before, after;
   std::vector<Linearized::Eval> without(selected.size());  // selected model less effect j
   std::vector<int> outer_count(selected.size(), -1);       // outer folds choosing effect j
@@ -606,9 +626,10 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
     }
     a.gain.nested = true;
     a.gain.scheme =
-        L.folds == static_cast<int>(L.fit.size())
-            ? "nested leave-one-out (selection redone per fold)"
-            : "nested " + std::to_string(L.folds) + "-fold (selection redone in each outer fold)";
+        (L.folds == L.groups ? std::string("nested leave-one-out (selection redone per fold)")
+                             : "nested " + std::to_string(L.folds) +
+                                   "-fold (selection redone in each outer fold)") +
+        (L.groups < static_cast<int>(L.fit.size()) ? ", by configuration" : "");
   }
 
   // --- Keep what gains there. The selected model must beat geometry on the held-out poses, and
