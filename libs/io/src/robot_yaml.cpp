@@ -13,7 +13,7 @@
 
 #include "rcal/geometry/so3.hpp"
 #include "rcal/io/atomic_file.hpp"
-#include "yaml_reader.hpp"
+#include "rcal/io/yaml_reader.hpp"
 
 namespace rcal::io {
 namespace {

@@ -1,5 +1,6 @@
-// The YAML reading shared by rcal's configuration files (robot_yaml.cpp: rcal.robot/1,
-// cell_yaml.cpp: rcal.cell/1). Internal to libs/io.
+// The YAML reading shared by rcal's own configuration parsers (robot_yaml.cpp: rcal.robot/1,
+// cell_yaml.cpp: rcal.cell/1, libs/cell's cell_sim_yaml.cpp: rcal.cell_sim/1). Not an API for
+// users: namespace detail, and it may change with those files.
 //
 // Every accessor knows the file and the key path, so every error names both:
 //   "SOURCE: KEY.PATH: what is wrong (line N)"
@@ -82,6 +83,12 @@ class Reader {
       if (m.line >= 0) msg += " (line " + std::to_string(m.line + 1) + ")";
     }
     throw std::runtime_error(msg);
+  }
+
+  /// Fail at a node that is a temporary (map[key], list[i]).
+  [[noreturn]] void FailAt(const std::string& path, const std::string& what,
+                           const YAML::Node& node) const {
+    Fail(path, what, &node);
   }
 
   /// The node must be a map whose keys are all in `allowed`, each at most once.
