@@ -23,30 +23,8 @@ using detail::Reader;
 constexpr const char* kSchema = "rcal.cell/1";
 constexpr double kTwoPi = 2.0 * std::numbers::pi;
 
-/// Shortest text of a number that reads back the same ("0.05", "1e+09").
-std::string Num(double v) {
-  char buf[64];
-  const auto [ptr, ec] = std::to_chars(buf, buf + sizeof(buf), v);
-  return ec == std::errc() ? std::string(buf, ptr) : std::to_string(v);
-}
-
-/// Reads a number in `unit` and checks lo ≤ v ≤ hi (lo_open: lo < v). Beyond hi, `above` (when
-/// not empty) names the likely unit mistake; below lo, `below` does.
-double Bounded(const Reader& r, const YAML::Node& n, const std::string& path,
-               const std::string& unit, double lo, double hi, const std::string& above = "",
-               const std::string& below = "", bool lo_open = false) {
-  const double v = r.Quantity(n, path, unit);
-  const std::string u = unit == "-" ? "" : " " + unit;
-  if (v > hi)
-    r.Fail(path, Num(v) + u + " is beyond " + Num(hi) + u + (above.empty() ? "" : ": " + above),
-           &n);
-  if (v < lo || (lo_open && v == lo))
-    r.Fail(path,
-           Num(v) + u + " is " + (lo_open ? "not above " : "below ") + Num(lo) + u +
-               (below.empty() ? "" : ": " + below),
-           &n);
-  return v;
-}
+using detail::Bounded;
+using detail::ShortNumber;
 
 /// A σ: one number for all three axes, or a list of three.
 Eigen::Vector3d Sigma3(const Reader& r, const YAML::Node& n, const std::string& path,
@@ -71,7 +49,7 @@ Eigen::Vector3d Rpy(const Reader& r, const YAML::Node& n, const std::string& pat
       const std::optional<double> v = a.IsScalar() ? ParseAngle(a.Scalar()) : std::nullopt;
       if (v && std::isfinite(*v) && std::abs(*v) > kTwoPi + 1e-12)
         r.FailAt(path + "[" + std::to_string(i) + "]",
-                 Num(*v) + " rad is beyond 2π: degrees? (write radians, e.g. pi/2)", a);
+                 ShortNumber(*v) + " rad is beyond 2π: degrees? (write radians, e.g. pi/2)", a);
     }
   return r.Vec3(n, path, true);
 }
@@ -111,8 +89,8 @@ SetupFrameSpec ReadSetupFrame(const Reader& r, const YAML::Node& n, const std::s
       f.xyz = r.Vec3(xyz, path + ".xyz", false);
       if (f.xyz.norm() > max_offset)
         r.Fail(path + ".xyz",
-               Num(f.xyz.norm()) + " m from its origin is beyond " + Num(max_offset) +
-                   " m: millimetres? (write metres)",
+               ShortNumber(f.xyz.norm()) + " m from its origin is beyond " +
+                   ShortNumber(max_offset) + " m: millimetres? (write metres)",
                &xyz);
     }
   }

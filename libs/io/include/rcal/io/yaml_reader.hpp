@@ -228,4 +228,32 @@ class Reader {
   std::string kind_;
 };
 
+/// Shortest text of a number that reads back the same ("0.05", "1e+09").
+/// The shortest text of a number that reads back the same ("0.05", "1e+09"), for messages.
+inline std::string ShortNumber(double v) {
+  char buf[64];
+  const auto [ptr, ec] = std::to_chars(buf, buf + sizeof(buf), v);
+  return ec == std::errc() ? std::string(buf, ptr) : std::to_string(v);
+}
+
+/// Reads a number in `unit` and checks lo ≤ v ≤ hi (lo_open: lo < v). Beyond hi, `above` (when
+/// not empty) names the likely unit mistake; below lo, `below` does.
+inline double Bounded(const Reader& r, const YAML::Node& n, const std::string& path,
+                      const std::string& unit, double lo, double hi, const std::string& above = "",
+                      const std::string& below = "", bool lo_open = false) {
+  const double v = r.Quantity(n, path, unit);
+  const std::string u = unit == "-" ? "" : " " + unit;
+  if (v > hi)
+    r.Fail(path,
+           ShortNumber(v) + u + " is beyond " + ShortNumber(hi) + u +
+               (above.empty() ? "" : ": " + above),
+           &n);
+  if (v < lo || (lo_open && v == lo))
+    r.Fail(path,
+           ShortNumber(v) + u + " is " + (lo_open ? "not above " : "below ") + ShortNumber(lo) + u +
+               (below.empty() ? "" : ": " + below),
+           &n);
+  return v;
+}
+
 }  // namespace rcal::io::detail
