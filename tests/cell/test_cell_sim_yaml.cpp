@@ -7,6 +7,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdio>
+#include <functional>
 #include <string>
 
 #include "../io/settings_eq.hpp"
@@ -296,6 +298,31 @@ INSTANTIATE_TEST_SUITE_P(
         BadCase{"  test_poses: 50", "  dropout: 10", "run.dropout: 10 is beyond"},
         BadCase{"  test_poses: 50", "  gyro_bias: on", "run.gyro_bias: expected true or false"},
         BadCase{"  test_poses: 50", "  noise: 2", "run.noise: unknown key"}));
+
+// Every shipped sim cell runs through today's simulated cell and calibrates: the shipped set-ups
+// are reachable, every stop gives a window, and the arm and set-up are identified. A short
+// programme (30 + 20 stops); the figures are printed (seed of each file: 0.029, 0.039, 0.050 mm).
+// SimulateWindows still simulates its own default sensors (SimSensorSettings is not wired in:
+// issue 13's sim source), and RunOnline the experiment's EKF (cell::MakeEkf).
+TEST(CellSimYaml, EveryShippedSimCellCalibrates) {
+  for (const std::string name : {"grb3016", "ur10", "panda"}) {
+    SCOPED_TRACE(name);
+    const Loaded d = Load(name);
+    const Cell c = MakeSimCell(d.cell, d.sim);
+    RunSettings rs = SimRunSettings(d.cell, d.sim);
+    rs.num_cal = 30;
+    rs.num_test = 20;
+    const Windows w = SimulateWindows(c, rs);
+    EXPECT_EQ(w.missing, 0);
+    std::vector<Eigen::VectorXd> test_q;
+    for (const auto& m : w.test) test_q.push_back(m.q);
+    const OnlineResult r = RunOnline(c, w.cal, test_q, d.cell.spec.identifier.guess_poses);
+    std::printf("%s: windows %.3f mm, %d accepted, %d rejected, test error %.3f mm\n", name.c_str(),
+                w.mean_position_error_m * 1e3, r.accepted, r.rejected,
+                r.test_error_after_pose_mm.back());
+    EXPECT_LT(r.test_error_after_pose_mm.back(), 0.2);  // before: millimetres
+  }
+}
 
 }  // namespace
 }  // namespace rcal::cell

@@ -605,6 +605,21 @@ INSTANTIATE_TEST_SUITE_P(
         BadCase{kG, "schema: rcal.cell/1", "schema: [rcal", "malformed YAML"},
         BadCase{kG, "identifier:", "channels: 5\nidentifier:", "channels: expected a map"}));
 
+// The README's annotated example is a valid cell.
+TEST(CellYaml, ReadmeExampleParses) {
+  const std::string readme = ReadFile(SourceDir() / "README.md");
+  const auto section = readme.find("### The cell file");
+  ASSERT_NE(section, std::string::npos);
+  const auto begin = readme.find("```yaml\n", section);
+  ASSERT_NE(begin, std::string::npos);
+  const auto end = readme.find("```", begin + 8);
+  const CellSpec s = ParseCellYaml(readme.substr(begin + 8, end - begin - 8), "README.md");
+  EXPECT_EQ(s.frames.markers.at(0).frame.mode, SetupMode::kFixed);
+  EXPECT_EQ(s.position.sigma, Eigen::Vector3d(5e-5, 5e-5, 1e-4));
+  ASSERT_TRUE(s.imu);
+  EXPECT_EQ(s.imu->R_IS * Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY());
+}
+
 TEST(CellYaml, EmptyAndNonMapFilesAreRefused) {
   EXPECT_NE(ErrorOf([] { ParseCellYaml("", "e.yaml"); }).find("e.yaml: empty file"),
             std::string::npos);
