@@ -43,18 +43,8 @@ FarSetup MakeFarSetup(unsigned seed, const sim::PoseNoise& noise, double joint_s
   FarSetup f;
   kinematics::ModelBuilder b("seven_far");
   b.BaseFrame({0, 0, 0}, {0, 0, 0});
-  const double pi = std::numbers::pi;
-  using kinematics::testing::Rev;
-  b.ModifiedDhLink(0.0, 0.0, 0.333, 0.0, Rev("j1", 2.8))
-      .ModifiedDhLink(0.0, -pi / 2, 0.0, 0.0, Rev("j2", 1.7))
-      .ModifiedDhLink(0.0, pi / 2, 0.316, 0.0, Rev("j3", 2.8))
-      .ModifiedDhLink(0.0825, pi / 2, 0.0, 0.0, Rev("j4", 3.0))
-      .ModifiedDhLink(-0.0825, -pi / 2, 0.384, 0.0, Rev("j5", 2.8))
-      .ModifiedDhLink(0.0, pi / 2, 0.0, 0.0, Rev("j6", 3.7))
-      .ModifiedDhLink(0.088, pi / 2, 0.107, 0.0, Rev("j7", 2.8))
-      .MarkerOffset({0, 0, 0})
-      .ImuMounting({0, 0, 0})
-      .EarthFrame({0, 0, 0});
+  kinematics::testing::SevenJointLinks(b).MarkerOffset({0, 0, 0}).ImuMounting({0, 0, 0}).EarthFrame(
+      {0, 0, 0});
   f.model = b.Build();
   sim::Rng rng(seed);
   f.x_true = sim::RandomErrors(f.model, rng, joint_sigma, joint_sigma * 3);

@@ -10,9 +10,6 @@
 namespace rcal::identification {
 namespace {
 
-using kinematics::testing::Rev;
-constexpr double kPi = kinematics::testing::kPi;
-
 // A 7-joint arm whose base stands 1.3 m away, turned 50°, three reflectors 5–13 cm off the
 // flange, an IMU mounted at 30° and magnetic north 50° off: far from any linearisation.
 struct Cell {
@@ -22,14 +19,8 @@ struct Cell {
 
 Cell MakeCell(unsigned seed, double arm_sigma) {
   kinematics::ModelBuilder b("seven_cell");
-  b.BaseFrame({0, 0, 0}, {0, 0, 0})
-      .ModifiedDhLink(0.0, 0.0, 0.333, 0.0, Rev("j1", 2.8))
-      .ModifiedDhLink(0.0, -kPi / 2, 0.0, 0.0, Rev("j2", 1.7))
-      .ModifiedDhLink(0.0, kPi / 2, 0.316, 0.0, Rev("j3", 2.8))
-      .ModifiedDhLink(0.0825, kPi / 2, 0.0, 0.0, Rev("j4", 3.0))
-      .ModifiedDhLink(-0.0825, -kPi / 2, 0.384, 0.0, Rev("j5", 2.8))
-      .ModifiedDhLink(0.0, kPi / 2, 0.0, 0.0, Rev("j6", 3.7))
-      .ModifiedDhLink(0.088, kPi / 2, 0.107, 0.0, Rev("j7", 2.8))
+  b.BaseFrame({0, 0, 0}, {0, 0, 0});
+  kinematics::testing::SevenJointLinks(b)
       .MarkerOffset({0, 0, 0})
       .MarkerOffset({0, 0, 0}, true, 1)
       .MarkerOffset({0, 0, 0}, true, 2)

@@ -117,14 +117,7 @@ TEST(Model, EachMarkerIsTheFlangeFrameAppliedToItsOwnOffset) {
   EXPECT_GE(m.FindParameter("marker2_y"), 0);
   EXPECT_GE(m.FindParameter("marker5_z"), 0);
   ModelBuilder fb("flange");
-  fb.BaseFrame({0.1, 0.2, 0.0}, {0.0, 0.0, 0.5})
-      .UrdfJoint({0, 0, 0.1273}, {0, 0, 0}, {0, 0, 1}, Rev("shoulder_pan"))
-      .UrdfJoint({0, 0.220941, 0}, {0, kPi / 2, 0}, {0, 1, 0}, Rev("shoulder_lift"))
-      .UrdfJoint({0, -0.1719, 0.612}, {0, 0, 0}, {0, 1, 0}, Rev("elbow"))
-      .UrdfJoint({0, 0, 0.5723}, {0, kPi / 2, 0}, {0, 1, 0}, Rev("wrist_1"))
-      .UrdfJoint({0, 0.1149, 0}, {0, 0, 0}, {0, 0, 1}, Rev("wrist_2"))
-      .UrdfJoint({0, 0, 0.1157}, {0, 0, 0}, {0, 1, 0}, Rev("wrist_3"));
-  const KinematicModel flange = fb.Build();  // parameters: the first 42 of m, in order
+  const KinematicModel flange = UrLikeChain(fb).Build();  // parameters: the first 42 of m, in order
   std::mt19937 rng(31);
   for (int trial = 0; trial < 10; ++trial) {
     const Eigen::VectorXd q = RandomJoints(m, rng);

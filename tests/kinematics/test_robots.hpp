@@ -30,33 +30,43 @@ inline KinematicModel Grb3016(double tool_a = 0.010, double tool_alpha = 0.1, do
 }
 
 /// A 7-joint arm (Panda-like, modified D–H) with base, marker, IMU and earth frames.
-inline KinematicModel SevenJointSetup() {
-  ModelBuilder b("seven");
-  b.BaseFrame({0.5, -0.2, 0.1}, {0.01, -0.02, 0.3})
-      .ModifiedDhLink(0.0, 0.0, 0.333, 0.0, Rev("j1", 2.8))
+/// The 7 links of a Panda-like arm (modified D–H), appended to `b`.
+inline ModelBuilder& SevenJointLinks(ModelBuilder& b) {
+  return b.ModifiedDhLink(0.0, 0.0, 0.333, 0.0, Rev("j1", 2.8))
       .ModifiedDhLink(0.0, -kPi / 2, 0.0, 0.0, Rev("j2", 1.7))
       .ModifiedDhLink(0.0, kPi / 2, 0.316, 0.0, Rev("j3", 2.8))
       .ModifiedDhLink(0.0825, kPi / 2, 0.0, 0.0, Rev("j4", 3.0))
       .ModifiedDhLink(-0.0825, -kPi / 2, 0.384, 0.0, Rev("j5", 2.8))
       .ModifiedDhLink(0.0, kPi / 2, 0.0, 0.0, Rev("j6", 3.7))
-      .ModifiedDhLink(0.088, kPi / 2, 0.107, 0.0, Rev("j7", 2.8))
+      .ModifiedDhLink(0.088, kPi / 2, 0.107, 0.0, Rev("j7", 2.8));
+}
+
+inline KinematicModel SevenJointSetup() {
+  ModelBuilder b("seven");
+  b.BaseFrame({0.5, -0.2, 0.1}, {0.01, -0.02, 0.3});
+  SevenJointLinks(b)
       .MarkerOffset({0.02, -0.01, 0.10})
       .ImuMounting({0.1, -0.05, 0.7})
       .EarthFrame({0.02, 0.03, 1.2});
   return b.Build();
 }
 
-/// A UR-like arm in URDF form (joint origins + axes), with 6-parameter joint errors.
-inline KinematicModel UrLikeUrdf() {
-  ModelBuilder b("ur_like");
-  b.BaseFrame({0.1, 0.2, 0.0}, {0.0, 0.0, 0.5})
+/// A UR-like arm's base frame and six joints in URDF form (joint origins + axes, 6-parameter
+/// joint errors), appended to `b`: the chain ends at the flange.
+inline ModelBuilder& UrLikeChain(ModelBuilder& b) {
+  return b.BaseFrame({0.1, 0.2, 0.0}, {0.0, 0.0, 0.5})
       .UrdfJoint({0, 0, 0.1273}, {0, 0, 0}, {0, 0, 1}, Rev("shoulder_pan"))
       .UrdfJoint({0, 0.220941, 0}, {0, kPi / 2, 0}, {0, 1, 0}, Rev("shoulder_lift"))
       .UrdfJoint({0, -0.1719, 0.612}, {0, 0, 0}, {0, 1, 0}, Rev("elbow"))
       .UrdfJoint({0, 0, 0.5723}, {0, kPi / 2, 0}, {0, 1, 0}, Rev("wrist_1"))
       .UrdfJoint({0, 0.1149, 0}, {0, 0, 0}, {0, 0, 1}, Rev("wrist_2"))
-      .UrdfJoint({0, 0, 0.1157}, {0, 0, 0}, {0, 1, 0}, Rev("wrist_3"))
-      .MarkerOffset({0.0, 0.15, 0.05});
+      .UrdfJoint({0, 0, 0.1157}, {0, 0, 0}, {0, 1, 0}, Rev("wrist_3"));
+}
+
+/// A UR-like arm in URDF form with a marker.
+inline KinematicModel UrLikeUrdf() {
+  ModelBuilder b("ur_like");
+  UrLikeChain(b).MarkerOffset({0.0, 0.15, 0.05});
   return b.Build();
 }
 
@@ -64,13 +74,7 @@ inline KinematicModel UrLikeUrdf() {
 /// measures them) and an IMU.
 inline KinematicModel UrLikeThreeMarkers() {
   ModelBuilder b("ur_like_3");
-  b.BaseFrame({0.1, 0.2, 0.0}, {0.0, 0.0, 0.5})
-      .UrdfJoint({0, 0, 0.1273}, {0, 0, 0}, {0, 0, 1}, Rev("shoulder_pan"))
-      .UrdfJoint({0, 0.220941, 0}, {0, kPi / 2, 0}, {0, 1, 0}, Rev("shoulder_lift"))
-      .UrdfJoint({0, -0.1719, 0.612}, {0, 0, 0}, {0, 1, 0}, Rev("elbow"))
-      .UrdfJoint({0, 0, 0.5723}, {0, kPi / 2, 0}, {0, 1, 0}, Rev("wrist_1"))
-      .UrdfJoint({0, 0.1149, 0}, {0, 0, 0}, {0, 0, 1}, Rev("wrist_2"))
-      .UrdfJoint({0, 0, 0.1157}, {0, 0, 0}, {0, 1, 0}, Rev("wrist_3"))
+  UrLikeChain(b)
       .MarkerOffset({0.0, 0.15, 0.05})
       .MarkerOffset({0.08, -0.02, 0.10}, true, 2)
       .MarkerOffset({-0.06, 0.04, 0.12}, true, 5)

@@ -15,34 +15,18 @@
 #include <string>
 #include <vector>
 
+#include "rcal_cli.hpp"
+
 namespace {
 
 namespace fs = std::filesystem;
-
-struct Result {
-  int exit_code;  // -1: killed by a signal (a crash)
-  std::string output;
-};
-
-// Runs rcal under a 30 s CPU limit, so that a runaway walk fails the test instead of stalling it
-// (no address-space limit: a sanitizer build of rcal reserves terabytes of it).
+using rcal::tool::testing::Result;
+// Under a 30 s CPU limit: a runaway walk fails the test instead of stalling it.
 Result RunRcal(const std::string& args) {
-  const std::string cmd = std::string("cd ") + RCAL_SOURCE_DIR + " && ulimit -t 30 && " + RCAL_EXE +
-                          " " + args + " 2>&1";
-  FILE* p = popen(cmd.c_str(), "r");
-  std::string out;
-  std::array<char, 4096> buf;
-  while (size_t n = fread(buf.data(), 1, buf.size(), p)) out.append(buf.data(), n);
-  const int status = pclose(p);
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+  return rcal::tool::testing::RunRcal(args, 30);
 }
-
-fs::path TempDir(const std::string& name) {
-  const fs::path d =
-      fs::temp_directory_path() / ("rcal_bad_files_" + name + "_" + std::to_string(getpid()));
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
+std::filesystem::path TempDir(const std::string& name) {
+  return rcal::tool::testing::TempDir("bad_files", name);
 }
 
 std::string Read(const fs::path& p) {

@@ -18,9 +18,17 @@
 #include <string>
 #include <vector>
 
+#include "rcal_cli.hpp"
+
 namespace {
 
 namespace fs = std::filesystem;
+using rcal::tool::testing::ReadJson;
+using rcal::tool::testing::Result;
+using rcal::tool::testing::RunRcal;
+std::filesystem::path TempDir(const std::string& name) {
+  return rcal::tool::testing::TempDir("sweep", name);
+}
 using nlohmann::json;
 using rcal::tool::CalibrationSeed;
 
@@ -36,35 +44,6 @@ const std::vector<Arm> kArms = {
     {"panda_like", "tests/data/arms/panda_like.urdf"},
     {"irb120_like", "tests/data/arms/irb120_like.urdf"},
 };
-
-struct Result {
-  int exit_code;
-  std::string output;
-};
-
-Result RunRcal(const std::string& args) {
-  const std::string cmd =
-      std::string("cd ") + RCAL_SOURCE_DIR + " && " + RCAL_EXE + " " + args + " 2>&1";
-  FILE* p = popen(cmd.c_str(), "r");
-  std::string out;
-  std::array<char, 4096> buf;
-  while (size_t n = fread(buf.data(), 1, buf.size(), p)) out.append(buf.data(), n);
-  const int status = pclose(p);
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
-}
-
-json ReadJson(const fs::path& p) {
-  std::ifstream in(p);
-  return json::parse(in);
-}
-
-fs::path TempDir(const std::string& name) {
-  const fs::path d =
-      fs::temp_directory_path() / ("rcal_sweep_" + name + "_" + std::to_string(getpid()));
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
-}
 
 double Median(std::vector<double> v) {
   std::sort(v.begin(), v.end());

@@ -23,13 +23,20 @@
 #include "rcal/io/plot.hpp"
 #include "rcal/transport/lcm_schema.hpp"
 #include "report.hpp"
+#include "significance_json.hpp"
 
 namespace rcal::tool {
 namespace {
 
 namespace fs = std::filesystem;
 namespace disc = rcal::discrepancy;
+
 using nlohmann::json;
+
+// "z = 3.1", but "z < -8.21" and "p < 1e-300" for bounds.
+std::string Is(const std::string& name, const std::string& value) {
+  return name + (value[0] == '<' || value[0] == '>' ? " " : " = ") + value;
+}
 
 double Relative(double before, double after) {
   return before > 0 ? (before - after) / before : 0.0;
@@ -180,10 +187,15 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
   auto cand_json = [&](const disc::ImuCandidate& c) {
     json values = json::object();
     for (const auto& v : c.values) values[v.name] = {{"value", v.value}, {"sigma", v.sigma}};
-    json j = {{"cause", c.cause},         {"axes", c.axes},
-              {"values", values},         {"statistic_z", c.statistic},
-              {"critical_z", c.critical}, {"significant", c.significant},
-              {"tested", c.tested},       {"note", c.note}};
+    json j = {{"cause", c.cause},
+              {"axes", c.axes},
+              {"values", values},
+              {"critical_z", c.critical},
+              {"significant", c.significant},
+              {"tested", c.tested},
+              {"note", c.note}};
+    PutZ(j, "statistic_z", c.statistic);  // an infinite z as a bound (significance.hpp)
+    if (!std::isnan(c.log_p)) PutP(j, "", c.log_p);
     if (a.has_truth) {
       j["before"] = ScoreJson(c.before);
       j["after"] = ScoreJson(c.after);
@@ -334,9 +346,10 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
     for (const auto* c : effects) {
       std::string axes;
       for (const auto& x : c->axes) axes += (axes.empty() ? "" : ",") + x;
-      rows.push_back({c->cause, axes, Fmt(c->statistic, 1), Fmt(c->critical, 1)});
+      rows.push_back({c->cause, axes, disc::ZText(c->statistic, 1), Fmt(c->critical, 1),
+                      std::isnan(c->log_p) ? "" : disc::PText(c->log_p)});
     }
-    md << MdTable({"cause", "axes", "z", "z critical"}, rows) << "\n";
+    md << MdTable({"cause", "axes", "z", "z critical", "p"}, rows) << "\n";
   }
   md << "## Candidates\n\n";
   for (const auto& c : a.candidates) {
@@ -344,8 +357,9 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
        << (!c.tested       ? "not tested"
            : c.significant ? "**found**"
                            : "not significant")
-       << "\n\nTest statistic z = " << Fmt(c.statistic, 2) << " (critical " << Fmt(c.critical, 2)
-       << ")." << (c.note.empty() ? "" : " " + c.note + ".") << "\n\n";
+       << "\n\nTest statistic " << Is("z", disc::ZText(c.statistic, 2))
+       << (std::isnan(c.log_p) ? "" : ", " + Is("p", disc::PText(c.log_p))) << " (critical "
+       << Fmt(c.critical, 2) << ")." << (c.note.empty() ? "" : " " + c.note + ".") << "\n\n";
     std::vector<std::vector<std::string>> rows;
     for (const auto& v : c.values) rows.push_back({v.name, ValueText(v.value, v.sigma)});
     md << MdTable({"figure [SI, unit in the name]", "value ± σ"}, rows) << "\n";
@@ -378,7 +392,9 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
 
   std::printf("\nrcal analyze — %s, IMU stream, %d samples\n", o.data.c_str(), a.samples);
   if (effects.empty()) std::printf("  no significant effect beyond the base sensor model\n");
-  for (const auto* c : effects) std::printf("  %s (z %.1f)\n", c->cause.c_str(), c->statistic);
+  for (const auto* c : effects)
+    std::printf("  %s (z %s%s)\n", c->cause.c_str(), disc::ZText(c->statistic, 1).c_str(),
+                std::isnan(c->log_p) ? "" : (", p " + disc::PText(c->log_p)).c_str());
   if (a.has_truth)
     std::printf("  total/heading/inclination RMSE [deg]: base %s -> extended %s\n",
                 Deg3(a.base_score).c_str(), Deg3(a.extended_score).c_str());

@@ -16,12 +16,14 @@
 #include "rcal/geometry/so3.hpp"
 #include "rcal/identification/calibration.hpp"
 #include "rcal/io/atomic_file.hpp"
+#include "rcal/io/effects_json.hpp"
 #include "rcal/io/plot.hpp"
 #include "rcal/io/pose_dataset.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/io/robot_yaml.hpp"
 #include "report.hpp"
 #include "robot_setup.hpp"
+#include "significance_json.hpp"
 
 namespace rcal::tool {
 namespace {
@@ -116,6 +118,7 @@ int Run(const Options& o) {
   settings.stated_position_sigma_m = o.stated_position_sigma_mm / kMm;
   settings.stated_orientation_sigma_rad = o.stated_orientation_sigma_deg / kDeg;
   settings.gravity.link_density_kg_per_m = o.link_density;
+  spdlog::info("chain {}", ChainText(robot));
   spdlog::info("{}: {} poses{}, {}, robot {} with {} parameters", o.data, pd.measurements.size(),
                has_test ? " (with a cal/test split)" : "",
                data.has_orientation ? "position and orientation" : "positions only", model.name(),
@@ -181,7 +184,12 @@ int Run(const Options& o) {
                         {"unit", f.parameters[i].unit},
                         {"value", f.values(i)},
                         {"sigma", f.sigma(i)}});
-    json je = {{"cause", f.cause}, {"joints", f.joints}, {"values", params}, {"selection_z", f.z}};
+    json je = {{"cause", f.cause},
+               {"joints", f.joints},
+               {"values", params},
+               {"heldout_rms_without_m", f.heldout_rms_without_m}};
+    PutZ(je, "selection_z", f.z);
+    if (f.outer_folds_selecting >= 0) je["outer_folds_selecting"] = f.outer_folds_selecting;
     if (f.effect.cause == kinematics::EffectCause::kThermal) {
       je["source"] = f.effect.thermal_source == kinematics::Effect::ThermalSource::kTime
                          ? "time"
@@ -192,51 +200,99 @@ int Run(const Options& o) {
       je["harmonic"] = f.effect.harmonic;
     jeffects.push_back(je);
   }
+  // Selected on the fit poses but not gaining on held-out ones: never under "effects" (so
+  // calibrate --effects and ik_corrector never use them), listed with the reason and figures.
+  json jrejected = json::array();
+  for (const auto& r : a.rejected) {
+    json jr = {{"effect", discrepancy::Describe(model, r.effect)},
+               {"cause", kinematics::ToString(r.effect.cause)},
+               {"joints", r.effect.joint >= 0 ? json::array({model.joints()[r.effect.joint].name})
+                                              : json::array()},
+               {"reason", r.reason},
+               {"heldout_rms_with_m", r.heldout_rms_with_m},
+               {"heldout_rms_without_m", r.heldout_rms_without_m}};
+    PutZ(jr, "selection_z", r.z);
+    if (r.outer_folds_selecting >= 0) jr["outer_folds_selecting"] = r.outer_folds_selecting;
+    jrejected.push_back(jr);
+  }
   json jnoise = json::array();
-  for (const auto& t : a.noise_tests)
-    jnoise.push_back({{"against", t.against},
-                      {"position_sigma_m", t.position_sigma_m},
-                      {"orientation_sigma_rad", t.orientation_sigma_rad},
-                      {"chi2", t.chi2},
-                      {"dof", t.dof},
-                      {"p_value", t.p_value}});
+  for (const auto& t : a.noise_tests) {
+    json jt = {{"against", t.against},
+               {"position_sigma_m", t.position_sigma_m},
+               {"orientation_sigma_rad", t.orientation_sigma_rad},
+               {"chi2", t.chi2},
+               {"dof", t.dof}};
+    PutP(jt, "", t.log_p);
+    jnoise.push_back(jt);
+  }
   json jcorr = json::array();
-  for (size_t k = 0; k < a.correlations.size() && k < 12; ++k)
-    jcorr.push_back({{"regressor", a.correlations[k].regressor},
-                     {"unit", a.correlations[k].unit},
-                     {"correlation", a.correlations[k].correlation},
-                     {"p_value", a.correlations[k].p_value}});
+  for (size_t k = 0; k < a.correlations.size() && k < 12; ++k) {
+    json jc = {{"regressor", a.correlations[k].regressor},
+               {"unit", a.correlations[k].unit},
+               {"correlation", a.correlations[k].correlation}};
+    PutP(jc, "", a.correlations[k].log_p);
+    jcorr.push_back(jc);
+  }
   json jrounds = json::array();
-  for (const auto& r : a.rounds)
-    jrounds.push_back({{"best", discrepancy::Describe(model, r.tried[r.best])},
-                       {"z", r.z[r.best]},
-                       {"z_critical", r.z_critical},
-                       {"candidates", r.tried.size()},
-                       {"accepted", r.accepted},
-                       {"heldout_rms_current_m", r.heldout_rms_current_m},
-                       {"heldout_rms_best_m", r.heldout_rms_best_m}});
-  const json j = {{"data", o.data},
-                  {"robot", model.name()},
-                  {"num_poses", pd.measurements.size()},
-                  {"num_fit_poses", a.num_fit_poses},
-                  {"num_test_poses", a.num_test_poses},
-                  {"num_identified", a.base_fit.identified.size()},
-                  {"link_density_kg_per_m", o.link_density},
-                  {"position_noise_m", a.base_fit.position_sigma_m},
-                  {"orientation_noise_rad", a.base_fit.orientation_sigma_rad},
-                  {"position_noise_after_m", a.position_sigma_after_m},
-                  {"effects", jeffects},
-                  {"gain",
-                   {{"heldout_rms_before_m", a.gain.heldout_rms_before_m},
-                    {"heldout_rms_after_m", a.gain.heldout_rms_after_m},
-                    {"relative_gain", a.gain.relative_gain},
-                    {"scheme", a.gain.scheme},
-                    {"z", a.gain.z}}},
-                  {"noise_tests", jnoise},
-                  {"correlations", jcorr},
-                  {"selection", jrounds},
-                  {"alpha", settings.alpha},
-                  {"skipped", a.skipped}};
+  for (const auto& r : a.rounds) {
+    json jr = {{"best", discrepancy::Describe(model, r.tried[r.best])},
+               {"z_critical", r.z_critical},
+               {"candidates", r.tried.size()},
+               {"accepted", r.accepted},
+               {"heldout_rms_current_m", r.heldout_rms_current_m},
+               {"heldout_rms_best_m", r.heldout_rms_best_m}};
+    PutZ(jr, "z", r.z[r.best]);
+    jrounds.push_back(jr);
+  }
+  json jgain = {{"heldout_rms_before_m", a.gain.heldout_rms_before_m},
+                {"heldout_rms_after_m", a.gain.heldout_rms_after_m},
+                {"relative_gain", a.gain.relative_gain},
+                {"scheme", a.gain.scheme},
+                {"nested", a.gain.nested}};
+  PutZ(jgain, "z", a.gain.z);
+  if (a.gain.nested) {
+    json outer = json::array();
+    for (const auto& c : a.gain.outer_selections) {
+      json names = json::array();
+      for (const auto& f : c) names.push_back(discrepancy::Describe(model, f));
+      outer.push_back(names);
+    }
+    jgain["outer_selections"] = outer;
+    jgain["heldout_rms_after_not_nested_m"] = a.gain.heldout_rms_after_not_nested_m;
+  }
+  // What the selection saw, so that calibrate --effects can tell whether its held-out rows were
+  // among them: the rows fitted (every row without a split, the cal rows with one).
+  json fingerprints = json::array();
+  for (size_t i = 0; i < pd.measurements.size(); ++i)
+    if (!pd.is_test[i]) fingerprints.push_back(io::PoseFingerprint(pd.measurements[i]));
+  const json selected_on = {
+      {"data", o.data},
+      {"rows", pd.measurements.size()},
+      {"rows_fitted", a.num_fit_poses},
+      {"split", has_test ? "set column: selection on the cal rows, gain on the test rows"
+                         : "none: selection on every row, gain by nested k-fold"},
+      {"row_fingerprints", fingerprints}};
+  const json j = {
+      {"data", o.data},
+      {"robot", model.name()},
+      {"chain", {{"base_link", robot.spec.base_link}, {"tip_link", robot.spec.tip_link}}},
+      {"num_poses", pd.measurements.size()},
+      {"num_fit_poses", a.num_fit_poses},
+      {"num_test_poses", a.num_test_poses},
+      {"num_identified", a.base_fit.identified.size()},
+      {"link_density_kg_per_m", o.link_density},
+      {"position_noise_m", a.base_fit.position_sigma_m},
+      {"orientation_noise_rad", a.base_fit.orientation_sigma_rad},
+      {"position_noise_after_m", a.position_sigma_after_m},
+      {"effects", jeffects},
+      {"rejected_effects", jrejected},
+      {"gain", jgain},
+      {"selected_on", selected_on},
+      {"noise_tests", jnoise},
+      {"correlations", jcorr},
+      {"selection", jrounds},
+      {"alpha", settings.alpha},
+      {"skipped", a.skipped}};
   io::AtomicWriteFile(out / "analysis.json", j.dump(2));
   if (!o.json_path.empty()) io::AtomicWriteFile(o.json_path, j.dump(2));
 
@@ -246,16 +302,21 @@ int Run(const Options& o) {
      << a.num_fit_poses << " fitted, " << a.num_test_poses << " test), "
      << (data.has_orientation ? "position and orientation" : "positions only") << "\n- Robot: `"
      << o.robot << "` (" << model.name() << "), " << a.base_fit.identified.size()
-     << " geometric parameters identifiable at these poses\n- Noise estimated from the geometric "
-        "fit: "
+     << " geometric parameters identifiable at these poses\n- Chain: " << ChainText(robot)
+     << "; positions of the marker"
+     << (model.markers().size() > 1 ? "s (one offset each, tip-link frame)" : "")
+     << " in the world frame\n- Noise estimated from the geometric fit: "
      << Fmt(a.base_fit.position_sigma_m * kMm, 4) << " mm"
      << (data.has_orientation ? ", " + Fmt(a.base_fit.orientation_sigma_rad * kDeg, 4) + "°" : "")
      << " per axis\n\n## Finding\n\n";
-  if (a.effects.empty()) {
+  if (a.effects.empty() && a.rejected.empty()) {
     md << "**No significant effect beyond geometry.** No candidate extension lowered the "
           "held-out error by more than its uncertainty (paired test, α = "
        << settings.alpha << " per round, Bonferroni over the " << a.candidates.size()
        << " candidates tried).\n\n";
+  } else if (a.effects.empty()) {
+    md << "**No effect beyond geometry that gains on held-out poses.** The selection chose "
+          "effects on the fitted poses, but they lose on poses they did not fit (below).\n\n";
   } else {
     std::vector<std::vector<std::string>> rows;
     for (const auto& f : a.effects)
@@ -263,16 +324,51 @@ int Run(const Options& o) {
         rows.push_back(
             {i == 0 ? f.cause : "", i == 0 ? (f.joints.empty() ? "arm" : f.joints[0]) : "",
              f.parameters[i].name, ValueText(f.values(i), f.sigma(i), f.parameters[i].unit),
-             i == 0 ? Fmt(f.z, 1) : ""});
+             i == 0 ? discrepancy::ZText(f.z, 1) : ""});
     md << MdTable({"cause", "joint", "parameter", "value ± σ [SI]", "selection z"}, rows) << "\n";
+  }
+  if (!a.rejected.empty()) {
+    md << "### Selected, then rejected on held-out poses\n\nChosen by the selection on the "
+          "fitted poses, but not gaining on poses it did not fit: not reported as effects, not "
+          "in `effects` of analysis.json (so `rcal calibrate --effects` does not fit them).\n\n";
+    std::vector<std::vector<std::string>> rows;
+    for (const auto& r : a.rejected)
+      rows.push_back({discrepancy::Describe(model, r.effect), discrepancy::ZText(r.z, 1),
+                      Fmt(r.heldout_rms_with_m * kMm, 4), Fmt(r.heldout_rms_without_m * kMm, 4),
+                      r.outer_folds_selecting >= 0 ? std::to_string(r.outer_folds_selecting) +
+                                                         " of " + std::to_string(settings.folds)
+                                                   : "–",
+                      r.reason});
+    md << MdTable({"effect", "selection z", "held-out RMS with [mm]", "without [mm]",
+                   "outer folds selecting", "reason"},
+                  rows)
+       << "\n";
   }
   md << "## Gain on held-out poses (" << a.gain.scheme << ")\n\n"
      << MdTable({"model", "held-out position RMS [mm]"},
                 {{"geometric", Fmt(a.gain.heldout_rms_before_m * kMm, 4)},
                  {"extended", Fmt(a.gain.heldout_rms_after_m * kMm, 4)}})
      << "\nRelative gain " << Fmt(100 * a.gain.relative_gain, 1) << " %"
-     << (a.effects.empty() ? "" : " (paired z " + Fmt(a.gain.z, 1) + ")") << ".\n\n"
-     << "![held-out errors](heldout_errors.png)\n\n## Residuals against the noise\n\n";
+     << (a.effects.empty() ? "" : " (paired z " + discrepancy::ZText(a.gain.z, 1) + ")") << ".\n\n";
+  if (a.gain.nested) {
+    md << "Nested: each outer fold redid the selection on its training poses alone and was judged "
+          "on its held-out poses. The outer folds chose:\n\n";
+    for (size_t f = 0; f < a.gain.outer_selections.size(); ++f) {
+      std::string names;
+      for (const auto& e : a.gain.outer_selections[f])
+        names += (names.empty() ? "" : ", ") + discrepancy::Describe(model, e);
+      md << "- fold " << f + 1 << ": " << (names.empty() ? "nothing" : names) << "\n";
+    }
+    if (!a.effects.empty())
+      md << "\nThe reported effects refitted in each outer fold but chosen on all poses (not "
+            "nested, flattered by the choice; what `rcal calibrate --effects` measures on the "
+            "same folds): "
+         << Fmt(a.gain.heldout_rms_after_not_nested_m * kMm, 4) << " mm, gain "
+         << Fmt(100 * (1 - a.gain.heldout_rms_after_not_nested_m / a.gain.heldout_rms_before_m), 1)
+         << " %.\n";
+    md << "\n";
+  }
+  md << "![held-out errors](heldout_errors.png)\n\n## Residuals against the noise\n\n";
   if (a.noise_tests.empty())
     md << "No stated noise (`--stated-position-sigma-mm`) and no repeated poses: the noise is "
           "estimated from the fit itself, so χ² cannot test it.\n\n";
@@ -280,7 +376,7 @@ int Run(const Options& o) {
     std::vector<std::vector<std::string>> rows;
     for (const auto& t : a.noise_tests)
       rows.push_back({t.against, Fmt(t.position_sigma_m * kMm, 4), Fmt(t.chi2, 1), Fmt(t.dof, 0),
-                      Fmt(t.p_value, 4)});
+                      discrepancy::PText(t.log_p)});
     md << MdTable({"against", "position σ [mm]", "χ²", "dof", "p"}, rows) << "\n";
   }
   md << "## Structure in the residuals\n\nResidual of the geometric fit along the direction "
@@ -289,7 +385,7 @@ int Run(const Options& o) {
     std::vector<std::vector<std::string>> rows;
     for (size_t k = 0; k < a.correlations.size() && k < 10; ++k)
       rows.push_back({a.correlations[k].regressor, Fmt(a.correlations[k].correlation, 3),
-                      Fmt(a.correlations[k].p_value, 4)});
+                      discrepancy::PText(a.correlations[k].log_p)});
     md << MdTable({"regressor", "r", "p (single test)"}, rows) << "\n";
   }
   for (size_t k = 0; k < shown.size(); ++k)
@@ -301,7 +397,7 @@ int Run(const Options& o) {
     for (size_t r = 0; r < a.rounds.size(); ++r) {
       const auto& R = a.rounds[r];
       rows.push_back({std::to_string(r + 1), discrepancy::Describe(model, R.tried[R.best]),
-                      Fmt(R.z[R.best], 2), Fmt(R.z_critical, 2),
+                      discrepancy::ZText(R.z[R.best], 2), Fmt(R.z_critical, 2),
                       Fmt(R.heldout_rms_current_m * kMm, 4), Fmt(R.heldout_rms_best_m * kMm, 4),
                       R.accepted ? "added" : "stop"});
     }
@@ -315,7 +411,13 @@ int Run(const Options& o) {
   io::AtomicWriteFile(out / "report.md", md.str());
 
   std::printf("\nrcal analyze — %s, %zu poses\n", o.data.c_str(), pd.measurements.size());
-  if (a.effects.empty()) std::printf("  no significant effect beyond geometry\n");
+  if (a.effects.empty())
+    std::printf(a.rejected.empty() ? "  no significant effect beyond geometry\n"
+                                   : "  no effect beyond geometry that gains on held-out poses\n");
+  for (const auto& r : a.rejected)
+    std::printf("  rejected %s (selection z %s): %s\n",
+                discrepancy::Describe(model, r.effect).c_str(), discrepancy::ZText(r.z, 1).c_str(),
+                r.reason.c_str());
   for (const auto& f : a.effects) {
     std::printf("  %s:", discrepancy::Describe(model, f.effect).c_str());
     for (size_t i = 0; i < f.parameters.size(); ++i)

@@ -7,6 +7,7 @@
 // `rcal calibrate --log LOG` is `rcal calibrate-log LOG` (the same code, calibrate_log.hpp).
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <limits>
@@ -83,6 +84,30 @@ struct ExtendedResult {
   identification::ExtendedFit fit;
   identification::PoseErrorStats fit_stats;
   identification::ExtendedHeldOutErrors held;
+  // Whether the analysis that selected the effects saw the held-out poses (analysis.json
+  // "selected_on"): if it did, the held-out gain of the fixed effect list is not nested (the
+  // choice was made on those poses) and flatters; analyze's own gain is the nested figure.
+  int heldout_poses = 0;
+  int heldout_seen = -1;  ///< held-out poses the selection fitted; −1: the file does not say
+  double analysis_gain = std::numeric_limits<double>::quiet_NaN();
+  std::string analysis_scheme;
+  bool Independent() const { return heldout_seen == 0; }
+  std::string Label(const std::string& effects_path) const {
+    const std::string own =
+        std::isfinite(analysis_gain)
+            ? "; the analysis' own gain, selection redone where it is judged: " +
+                  Fmt(100 * analysis_gain, 1) + " % (" + analysis_scheme + ")"
+            : "";
+    if (heldout_seen < 0)
+      return "not known to be nested: " + effects_path +
+             " does not record the rows it was selected on" + own;
+    if (heldout_seen == 0)
+      return "independent of the selection: none of the " + std::to_string(heldout_poses) +
+             " held-out poses was seen by the analysis that selected the effects";
+    return "NOT NESTED: the effects were selected on " + std::to_string(heldout_seen) +
+           " of these " + std::to_string(heldout_poses) +
+           " held-out poses, so the gain of this fixed list is flattered by the choice" + own;
+  }
 };
 
 // Every pose must carry what the effects depend on: temperature or time for thermal, the approach
@@ -149,7 +174,24 @@ ExtendedResult FitEffects(const Options& o, const kinematics::KinematicModel& mo
   spdlog::info("judging geometric and extended models on poses not fitted...");
   identification::ExtendedHeldOutErrors held =
       identification::HeldOutExtended(ext, ms, contexts, is_test, fit, ae.values, settings);
-  return {std::move(ext), std::move(ef), identification::Summarize(p, r_o), std::move(held)};
+  ExtendedResult out{std::move(ext),
+                     std::move(ef),
+                     identification::Summarize(p, r_o),
+                     std::move(held),
+                     0,
+                     -1,
+                     ae.analysis_relative_gain,
+                     ae.analysis_gain_scheme};
+  // Held-out poses: the test rows with a split, every row with k-fold.
+  const bool split = std::find(is_test.begin(), is_test.end(), true) != is_test.end();
+  out.heldout_seen = ae.has_selection_rows ? 0 : -1;
+  for (size_t i = 0; i < ms.size(); ++i)
+    if (!split || is_test[i]) {
+      ++out.heldout_poses;
+      if (ae.has_selection_rows && ae.selection_rows.count(io::PoseFingerprint(ms[i])))
+        ++out.heldout_seen;
+    }
+  return out;
 }
 
 // Every marker's offset comes from somewhere: fitted from its calibration rows, given
@@ -400,7 +442,9 @@ int Run(const Options& o) {
                   {Row("fitted poses, extended", ext->fit_stats),
                    Row("held-out (" + held.scheme + "), geometric", ext->held.geometric),
                    Row("held-out (" + held.scheme + "), extended", ext->held.extended)})
-       << "\n"
+       << "\nHeld-out gain of the extended model (RMS): "
+       << Fmt(100 * (1 - ext->held.extended.rms_position_m / ext->held.geometric.rms_position_m), 1)
+       << " %, " << ext->Label(o.effects_path) << ".\n\n"
        << MdTable({"effect parameter", "unit", "value", "σ"}, erows)
        << "\nGeometry of the extended model: `robot_calibrated_extended.yaml`.\n";
   }
@@ -446,6 +490,13 @@ int Run(const Options& o) {
     const double before = ext->held.geometric.rms_position_m;
     j["test_extended_relative_gain"] =
         before > 0 ? 1.0 - ext->held.extended.rms_position_m / before : 0.0;
+    j["test_extended_gain_independent_of_selection"] = ext->Independent();
+    j["test_extended_heldout_poses_seen_by_selection"] = ext->heldout_seen;
+    j["test_extended_gain_note"] = ext->Label(o.effects_path);
+    if (std::isfinite(ext->analysis_gain)) {
+      j["analysis_relative_gain"] = ext->analysis_gain;
+      j["analysis_gain_scheme"] = ext->analysis_scheme;
+    }
   }
   io::AtomicWriteFile(out / "results.json", j.dump(2));
   if (!o.json_path.empty()) io::AtomicWriteFile(o.json_path, j.dump(2));
@@ -466,6 +517,9 @@ int Run(const Options& o) {
   if (ext) {
     line("fit, extended", ext->fit_stats);
     line("held-out, extended", ext->held.extended);
+    std::printf("  held-out gain of the extended model %.1f %%: %s\n",
+                100 * (1 - ext->held.extended.rms_position_m / ext->held.geometric.rms_position_m),
+                ext->Label(o.effects_path).c_str());
     const auto params = ext->model.EffectParameters();
     for (size_t i = 0; i < params.size(); ++i)
       std::printf("  effect %-34s %+.4e ± %.2e %s\n", params[i].name.c_str(), ext->fit.e(i),

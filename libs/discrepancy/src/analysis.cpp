@@ -6,11 +6,13 @@
 #include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <numeric>
 #include <random>
 #include <stdexcept>
 
+#include "rcal/discrepancy/significance.hpp"
 #include "rcal/identification/chi_square.hpp"
 
 namespace rcal::discrepancy {
@@ -18,6 +20,8 @@ namespace {
 
 using kinematics::Effect;
 using kinematics::EffectCause;
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
 
 // Φ⁻¹(p) by bisection on erfc (accurate enough for critical values).
 double NormalQuantile(double p) {
@@ -49,7 +53,9 @@ double PairedZ(const std::vector<double>& a, const std::vector<double>& b) {
   double ss = 0;
   for (double x : d) ss += (x - m) * (x - m);
   const double sd = std::sqrt(ss / (n - 1));
-  if (sd <= 0) return m > 0 ? 1e9 : 0.0;
+  // Zero spread: every pose changed by the same amount, z = ±∞ (written as a bound,
+  // significance.hpp; was 1e9, a number that looked measured).
+  if (sd <= 0) return m > 0 ? kInf : m < 0 ? -kInf : 0.0;
   return m / (sd / std::sqrt(static_cast<double>(n)));
 }
 
@@ -136,21 +142,39 @@ struct Linearized {
   std::vector<Eigen::MatrixXd> Jp;  // position rows, unwhitened
   std::vector<int> fit, test;
   std::vector<std::vector<int>> fold_sets;  // per repeat: fold id per fit pose (index in fit)
+  std::vector<int> config;                  // configuration id per pose (all poses)
+  int groups = 0;                           // configurations among the fit poses
   int folds = 0;
 
-  // Seeded fold assignments over the fit poses (k-fold, repeated; leave-one-out when k ≥ n).
+  // Seeded fold assignments over the fit poses (k-fold, repeated; leave-one-out when k ≥ the
+  // configurations). The rows of one configuration (several markers measured at one stop, or a
+  // stop measured again) go to one fold together: they share its joint readings and whatever
+  // the model misses there, and a fold that fitted the others would flatter the one held out.
   void AssignFolds(int k, int repeats, unsigned seed) {
     const int nf = static_cast<int>(fit.size());
-    folds = std::min(std::max(2, k), nf);
+    std::vector<int> group(nf), first_of;  // group per fit pose; groups in order of appearance
+    for (int i = 0; i < nf; ++i) {
+      int g = -1;
+      for (size_t j = 0; j < first_of.size() && g < 0; ++j)
+        if (config[fit[first_of[j]]] == config[fit[i]]) g = static_cast<int>(j);
+      if (g < 0) {
+        g = static_cast<int>(first_of.size());
+        first_of.push_back(i);
+      }
+      group[i] = g;
+    }
+    groups = static_cast<int>(first_of.size());
+    folds = std::min(std::max(2, k), groups);
     fold_sets.clear();
     std::mt19937_64 rng(seed);
     for (int rep = 0; rep < std::max(1, repeats); ++rep) {
-      std::vector<int> order(nf), fold(nf);
+      std::vector<int> order(groups), fold_of(groups), fold(nf);
       std::iota(order.begin(), order.end(), 0);
       std::shuffle(order.begin(), order.end(), rng);
-      for (int i = 0; i < nf; ++i) fold[order[i]] = i % folds;
+      for (int i = 0; i < groups; ++i) fold_of[order[i]] = i % folds;
+      for (int i = 0; i < nf; ++i) fold[i] = fold_of[group[i]];
       fold_sets.push_back(fold);
-      if (folds == nf) break;  // leave-one-out: one assignment is all there is
+      if (folds == groups) break;  // leave-one-out: one assignment is all there is
     }
   }
 
@@ -297,6 +321,7 @@ Prepared Prepare(const kinematics::KinematicModel& model, const PoseData& data,
     L.rp.push_back(r.head<3>());
     L.Jp.push_back(Jfull.topRows(3));
   }
+  L.config = identification::ConfigurationGroups(data.measurements);
   L.AssignFolds(s.folds, s.repeats, s.seed);
   return p;
 }
@@ -387,14 +412,33 @@ Selection SelectGreedy(const Linearized& L, const std::vector<int>& pool, const 
 // over the fit poses (the first assignment); in each outer fold the whole greedy selection runs
 // again on the outer training poses alone (their own inner k-fold), and both models are fitted
 // there and judged on the outer held-out poses. So the gain is not flattered by having chosen
-// the effects on the poses it is measured on.
-std::pair<Linearized::Eval, Linearized::Eval> NestedCrossValidate(const Linearized& L,
-                                                                  const std::vector<int>& pool,
-                                                                  const AnalysisSettings& s) {
+// the effects on the poses it is measured on. `without[j]`: the same with effect
+// `judge[j]` (indices into L.ext.effects()) left out of every outer fold's choice, so that each
+// effect of the full selection is judged by what it adds where outer folds chose it (an effect no
+// outer fold chose adds nothing).
+struct Nested {
+  Linearized::Eval before, after;
+  std::vector<Linearized::Eval> without;
+  std::vector<std::vector<int>> chosen;  // per outer fold
+};
+Nested NestedCrossValidate(const Linearized& L, const std::vector<int>& pool,
+                           const AnalysisSettings& s, const std::vector<int>& judge) {
   const size_t n = L.fit.size();
-  Linearized::Eval before{std::vector<double>(n), std::vector<double>(n)};
-  Linearized::Eval after = before;
+  Nested out;
+  out.before = {std::vector<double>(n), std::vector<double>(n)};
+  out.after = out.before;
+  out.without.assign(judge.size(), out.before);
   const std::vector<int>& outer = L.fold_sets.front();
+  const auto store = [&](Linearized::Eval& e, const std::vector<int>& train,
+                         const std::vector<int>& held, const std::vector<int>& effects) {
+    const std::vector<int> cols = L.Columns(effects);
+    const Eigen::VectorXd d = L.Solve(train, cols);
+    for (int k : held) {
+      const auto [sc, p] = L.Score(L.fit[k], cols, d);
+      e.score[k] = sc;
+      e.position[k] = std::sqrt(p);
+    }
+  };
   for (int f = 0; f < L.folds; ++f) {
     std::vector<int> train, held;  // indices into L.fit
     for (size_t k = 0; k < n; ++k) (outer[k] == f ? held : train).push_back(k);
@@ -404,24 +448,25 @@ std::pair<Linearized::Eval, Linearized::Eval> NestedCrossValidate(const Lineariz
     for (int k : train) inner.fit.push_back(L.fit[k]);
     inner.AssignFolds(s.folds, s.repeats, s.seed + 7919u * (f + 1));
     const std::vector<int> chosen = SelectGreedy(inner, pool, s, nullptr).selected;
-    const std::vector<int> cols0 = L.Columns({}), cols1 = L.Columns(chosen);
-    const Eigen::VectorXd d0 = L.Solve(inner.fit, cols0), d1 = L.Solve(inner.fit, cols1);
-    for (int k : held) {
-      const auto [s0, p0] = L.Score(L.fit[k], cols0, d0);
-      const auto [s1, p1] = L.Score(L.fit[k], cols1, d1);
-      before.score[k] = s0;
-      before.position[k] = std::sqrt(p0);
-      after.score[k] = s1;
-      after.position[k] = std::sqrt(p1);
+    out.chosen.push_back(chosen);
+    store(out.before, inner.fit, held, {});
+    store(out.after, inner.fit, held, chosen);
+    for (size_t j = 0; j < judge.size(); ++j) {
+      std::vector<int> less;
+      for (int k : chosen)
+        if (k != judge[j]) less.push_back(k);
+      store(out.without[j], inner.fit, held, less);
     }
   }
-  return {before, after};
+  return out;
 }
 
-double FisherP(double r, int n) {
-  if (n < 4) return 1.0;
-  const double z = std::atanh(std::clamp(r, -0.999999, 0.999999)) * std::sqrt(n - 3.0);
-  return std::erfc(std::abs(z) / std::sqrt(2.0));
+// ln of the two-sided p of a correlation r over n poses (Fisher z). Kept as a log and not
+// clamped: |r| → 1 gives p far below what a double holds (significance.hpp).
+double LogFisherP(double r, int n) {
+  if (n < 4) return 0.0;
+  const double z = std::atanh(std::abs(r)) * std::sqrt(n - 3.0);
+  return std::min(0.0, std::log(2.0) + LogNormalUpper(z));
 }
 
 double Correlation(const std::vector<double>& a, const std::vector<double>& b) {
@@ -499,7 +544,8 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
       t.orientation_sigma_rad = so;
       t.chi2 = ssp / (sp * sp) + (no > 0 && so > 0 ? sso / (so * so) : 0.0);
       t.dof = no > 0 && so > 0 ? dof : dof - no;
-      t.p_value = 1.0 - identification::ChiSquareCdf(t.chi2, t.dof);
+      t.log_p = identification::ChiSquareLogUpper(t.chi2, t.dof);
+      t.p_value = std::exp(t.log_p);
       a.noise_tests.push_back(t);
     };
     if (s.stated_position_sigma_m > 0)
@@ -539,14 +585,127 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
     }
 
   // --- Greedy forward selection on k-fold held-out residuals.
-  Selection sel = SelectGreedy(L, pool, s, &a.rounds);
+  const Selection sel = SelectGreedy(L, pool, s, &a.rounds);
   const std::vector<int>& selected = sel.selected;
-  const std::vector<double>& selected_z = sel.z;
-  const Linearized::Eval& current = sel.eval;
 
-  // --- Final nonlinear fit of the selected model on the fit poses.
+  // --- Judged on poses the selection did not fit: the split, else nested cross-validation.
+  // With nothing selected both models are the geometry, gain 0.
+  const std::string kfold_scheme =
+      (L.folds == L.groups
+           ? std::string("leave-one-out")
+           : std::to_string(L.folds) + "-fold ×" + std::to_string(L.fold_sets.size())) +
+      (L.groups < static_cast<int>(L.fit.size()) ? " (by configuration)" : "");
+  Linearized::Eval before, after;
+  std::vector<Linearized::Eval> without(selected.size());  // selected model less effect j
+  std::vector<int> outer_count(selected.size(), -1);       // outer folds choosing effect j
+  if (!L.test.empty()) {
+    before = L.Split({});
+    after = L.Split(selected);
+    for (size_t j = 0; j < selected.size(); ++j) {
+      std::vector<int> less = selected;
+      less.erase(less.begin() + j);
+      without[j] = L.Split(less);
+    }
+    a.gain.scheme = "cal/test split";
+  } else if (selected.empty()) {
+    before = after = sel.eval;
+    a.gain.scheme = kfold_scheme;
+  } else {
+    Nested nested = NestedCrossValidate(L, pool, s, selected);
+    before = std::move(nested.before);
+    after = std::move(nested.after);
+    without = std::move(nested.without);
+    for (size_t j = 0; j < selected.size(); ++j) {
+      outer_count[j] = 0;
+      for (const auto& c : nested.chosen)
+        outer_count[j] += std::find(c.begin(), c.end(), selected[j]) != c.end();
+    }
+    for (const auto& c : nested.chosen) {
+      a.gain.outer_selections.emplace_back();
+      for (int k : c) a.gain.outer_selections.back().push_back(effects[k]);
+    }
+    a.gain.nested = true;
+    a.gain.scheme =
+        (L.folds == L.groups ? std::string("nested leave-one-out (selection redone per fold)")
+                             : "nested " + std::to_string(L.folds) +
+                                   "-fold (selection redone in each outer fold)") +
+        (L.groups < static_cast<int>(L.fit.size()) ? ", by configuration" : "");
+  }
+
+  // --- Keep what gains there. The selected model must beat geometry on the held-out poses, and
+  // each of its effects must beat its absence (for the nested scheme: in the outer folds'
+  // own selections). Ties lose: an effect is reported only when it gains on data it did not fit.
+  const double rms_before = Rms(before.position), rms_after = Rms(after.position);
+  const bool model_gains = rms_after < rms_before;
+  std::vector<int> kept;
+  std::vector<double> kept_z, kept_without;
+  std::vector<int> kept_outer;
+  for (size_t j = 0; j < selected.size(); ++j) {
+    const double rms_without = Rms(without[j].position);
+    const bool earns = rms_after < rms_without;
+    if (model_gains && earns) {
+      kept.push_back(selected[j]);
+      kept_z.push_back(sel.z[j]);
+      kept_without.push_back(rms_without);
+      kept_outer.push_back(outer_count[j]);
+      continue;
+    }
+    char buf[256];
+    if (!model_gains)
+      std::snprintf(buf, sizeof buf,
+                    "the selected model loses on held-out poses (%s): position RMS %.4f mm with "
+                    "geometry alone, %.4f mm with the selected effects",
+                    a.gain.scheme.c_str(), rms_before * 1e3, rms_after * 1e3);
+    else if (outer_count[j] == 0)
+      std::snprintf(buf, sizeof buf,
+                    "no outer fold's selection chose it (%s): it gains nothing on held-out poses",
+                    a.gain.scheme.c_str());
+    else
+      std::snprintf(buf, sizeof buf,
+                    "does not earn its place on held-out poses (%s): position RMS %.4f mm with "
+                    "it, %.4f mm without",
+                    a.gain.scheme.c_str(), rms_after * 1e3, rms_without * 1e3);
+    RejectedEffect r;
+    r.effect = effects[selected[j]];
+    r.reason = buf;
+    r.z = sel.z[j];
+    r.heldout_rms_with_m = rms_after;
+    r.heldout_rms_without_m = rms_without;
+    r.outer_folds_selecting = outer_count[j];
+    a.rejected.push_back(r);
+    spdlog::info("discrepancy: {} selected (z {:.2f}) but rejected: {}", Describe(model, r.effect),
+                 r.z, r.reason);
+  }
+  // The gain is that of the selection as made (never recomputed after the rejections above,
+  // which looked at these held-out poses). Nothing kept: the model is the geometry, gain 0.
+  if (kept.empty() && !selected.empty()) {
+    a.gain.nested = false;
+    a.gain.outer_selections.clear();
+    if (L.test.empty()) {
+      before = after = L.CrossValidate({});
+      a.gain.scheme = kfold_scheme;
+    } else {
+      after = before;
+    }
+  }
+  a.gain.heldout_rms_before_m = Rms(before.position);
+  a.gain.heldout_rms_after_m = Rms(after.position);
+  a.gain.relative_gain = a.gain.heldout_rms_before_m > 0
+                             ? 1.0 - a.gain.heldout_rms_after_m / a.gain.heldout_rms_before_m
+                             : 0.0;
+  a.gain.z = kept.empty() ? 0.0 : PairedZ(before.score, after.score);
+  a.gain.position_before_m = before.position;
+  a.gain.position_after_m = after.position;
+  if (a.gain.nested) {
+    // What a fixed list of the kept effects gains on the outer folds (calibrate --effects).
+    Linearized one = L;
+    one.fold_sets.resize(1);
+    a.gain.heldout_rms_after_not_nested_m = Rms(one.CrossValidate(kept).position);
+  }
+
+  // --- Final nonlinear fit of the kept effects on the fit poses.
   std::vector<Effect> chosen;
-  for (int k : selected) chosen.push_back(effects[k]);
+  for (int k : kept) chosen.push_back(effects[k]);
   const kinematics::ExtendedModel final_model(model, chosen, s.gravity);
   std::vector<kinematics::PoseMeasurement> fit_ms;
   std::vector<kinematics::EffectContext> fit_ctx;
@@ -556,7 +715,7 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
   }
   Eigen::VectorXd e0 = final_model.NoEffects();
   {
-    const std::vector<int> cols = L.Columns(selected);
+    const std::vector<int> cols = L.Columns(kept);
     const Eigen::VectorXd delta = L.Solve(L.fit, cols);
     e0 = delta.tail(e0.size());
   }
@@ -575,38 +734,11 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
     fe.parameters.assign(params.begin() + o, params.begin() + o + np);
     fe.values = ff.e.segment(o, np);
     fe.sigma = ff.sigma_e.segment(o, np);
-    fe.z = selected_z[k];
+    fe.z = kept_z[k];
+    fe.heldout_rms_without_m = kept_without[k];
+    fe.outer_folds_selecting = kept_outer[k];
     a.effects.push_back(fe);
   }
-
-  // --- Gain on data the selection never fitted (the split) or by the same k-fold.
-  // Without a split: nested cross-validation when something was selected (the selection is redone
-  // inside every outer fold); with nothing selected both models are the geometry, gain 0.
-  Linearized::Eval before, after;
-  if (!L.test.empty()) {
-    before = L.Split({});
-    after = L.Split(selected);
-    a.gain.scheme = "cal/test split";
-  } else if (selected.empty()) {
-    before = after = current;
-    a.gain.scheme = L.folds == static_cast<int>(L.fit.size())
-                        ? "leave-one-out"
-                        : std::to_string(L.folds) + "-fold ×" + std::to_string(L.fold_sets.size());
-  } else {
-    std::tie(before, after) = NestedCrossValidate(L, pool, s);
-    a.gain.scheme =
-        L.folds == static_cast<int>(L.fit.size())
-            ? "nested leave-one-out (selection redone per fold)"
-            : "nested " + std::to_string(L.folds) + "-fold (selection redone in each outer fold)";
-  }
-  a.gain.heldout_rms_before_m = Rms(before.position);
-  a.gain.heldout_rms_after_m = Rms(after.position);
-  a.gain.relative_gain = a.gain.heldout_rms_before_m > 0
-                             ? 1.0 - a.gain.heldout_rms_after_m / a.gain.heldout_rms_before_m
-                             : 0.0;
-  a.gain.z = selected.empty() ? 0.0 : PairedZ(before.score, after.score);
-  a.gain.position_before_m = before.position;
-  a.gain.position_after_m = after.position;
 
   // --- Correlations: each candidate's regressor against the residual along its direction.
   for (size_t k = 0; k < effects.size(); ++k) {
@@ -672,12 +804,13 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
             u.dot(m.p_WM_W - final_model.ForMarker(m.marker).Forward(m.q, ctx, a.x, a.e).p_WM_W));
       }
       rc.correlation = Correlation(rc.values, rc.residual_before_m);
-      rc.p_value = FisherP(rc.correlation, rc.values.size());
+      rc.log_p = LogFisherP(rc.correlation, rc.values.size());
+      rc.p_value = std::exp(rc.log_p);
       a.correlations.push_back(std::move(rc));
     }
   }
   std::stable_sort(a.correlations.begin(), a.correlations.end(),
-                   [](const auto& x, const auto& y) { return x.p_value < y.p_value; });
+                   [](const auto& x, const auto& y) { return x.log_p < y.log_p; });
   return a;
 }
 

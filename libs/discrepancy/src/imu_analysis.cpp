@@ -11,6 +11,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "rcal/discrepancy/significance.hpp"
 #include "rcal/geometry/so3.hpp"
 
 namespace rcal::discrepancy {
@@ -34,12 +35,14 @@ double NormalQuantileUpper(double p) {
   }
   return 0.5 * (lo + hi);
 }
-// P(X ≥ k), X ~ Binomial(n, p), summed in log space.
-double BinomialUpper(long k, long n, double p) {
-  if (k <= 0) return 1.0;
-  if (k > n) return 0.0;
-  if (p <= 0.0) return 0.0;
-  if (p >= 1.0) return 1.0;
+// ln P(X ≥ k), X ~ Binomial(n, p), summed in log space: ln p stays finite where p itself
+// underflows (thousands of samples outside a 1e-3 band), so the z derived from it is exact.
+double LogBinomialUpper(long k, long n, double p) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  if (k <= 0) return 0.0;
+  if (k > n) return -kInf;
+  if (p <= 0.0) return -kInf;
+  if (p >= 1.0) return 0.0;
   const double lp = std::log(p), lq = std::log1p(-p);
   auto log_pmf = [&](long i) {
     return std::lgamma(n + 1.0) - std::lgamma(i + 1.0) - std::lgamma(n - i + 1.0) + i * lp +
@@ -53,11 +56,7 @@ double BinomialUpper(long k, long n, double p) {
     sum += std::exp(l - lmax);
     if (i > mode && l - lmax < -40.0) break;
   }
-  return std::min(1.0, std::exp(lmax) * sum);
-}
-// A p-value as the equivalent one-sided z.
-double ZOf(double p) {
-  return NormalQuantileUpper(std::max(p, 1e-300));
+  return std::min(0.0, lmax + std::log(sum));
 }
 
 double Mean(const std::vector<double>& v) {
@@ -603,9 +602,10 @@ ImuCandidate TestMagneticDisturbance(const Context& c, const std::vector<Eigen::
   const long n_all = static_cast<long>(f.dn.size());
   const GateCounts g = CountOutsideGate(c, f, gate_n, gate_d, a);
   const double p_band = std::max(4.0 * NormalUpper(s.band_z), s.outlier_rate);
-  const double p_noise = BinomialUpper(g.out_noise, n_all, p_band);
-  const double p_gate = BinomialUpper(g.out_gate, n_all, p_band);
-  md.statistic = ZOf(p_gate);
+  const double p_noise = std::exp(LogBinomialUpper(g.out_noise, n_all, p_band));
+  md.log_p = LogBinomialUpper(g.out_gate, n_all, p_band);
+  const double p_gate = std::exp(md.log_p);
+  md.statistic = NormalUpperQuantileLog(md.log_p);
   md.critical = NormalQuantileUpper(alpha_c);
   md.significant = n_all > 0 && p_gate < alpha_c;
   a.mag_gate_norm_uT = gate_n;
@@ -658,8 +658,9 @@ ImuCandidate TestAccelMotion(const Context& c, const std::vector<Eigen::Vector4d
     }
   }
   const double p0 = std::max(2.0 * NormalUpper(s.band_z), s.outlier_rate);
-  const double p = BinomialUpper(out, n_mov, p0);
-  am.statistic = ZOf(p);
+  am.log_p = LogBinomialUpper(out, n_mov, p0);
+  const double p = std::exp(am.log_p);
+  am.statistic = NormalUpperQuantileLog(am.log_p);
   am.critical = NormalQuantileUpper(alpha_c);
   am.significant = n_mov > 0 && p < alpha_c;
   const double frac = n_mov ? static_cast<double>(out) / n_mov : 0.0;

@@ -1,6 +1,8 @@
 #include "rcal/io/effects_json.hpp"
 
 #include <cmath>
+#include <cstdint>
+#include <cstdio>
 #include <fstream>
 #include <stdexcept>
 
@@ -81,6 +83,23 @@ AnalysisEffects ParseAnalysisEffects(const json& analysis,
     out.effects.push_back(f);
   }
   out.values = Eigen::Map<const Eigen::VectorXd>(values.data(), values.size());
+  if (analysis.contains("selected_on")) {
+    const json& rows = Key(Key(analysis, "selected_on", ""), "row_fingerprints", "selected_on.");
+    if (!rows.is_array()) throw std::runtime_error("selected_on.row_fingerprints: not a list");
+    for (const json& r : rows) {
+      if (!r.is_string()) throw std::runtime_error("selected_on.row_fingerprints: not strings");
+      out.selection_rows.insert(r.get<std::string>());
+    }
+    out.has_selection_rows = true;
+  }
+  // The analysis' own gain, only to print beside calibrate's: taken when readable, never refused.
+  if (analysis.contains("gain") && analysis["gain"].is_object()) {
+    const json& g = analysis["gain"];
+    if (g.contains("relative_gain") && g["relative_gain"].is_number())
+      out.analysis_relative_gain = g["relative_gain"].get<double>();
+    if (g.contains("scheme") && g["scheme"].is_string())
+      out.analysis_gain_scheme = g["scheme"].get<std::string>();
+  }
   if (analysis.contains("link_density_kg_per_m")) {
     out.link_density_kg_per_m = Number(analysis, "link_density_kg_per_m", "");
     if (out.link_density_kg_per_m < 0) throw std::runtime_error("link_density_kg_per_m: negative");
@@ -126,6 +145,23 @@ json EffectsJson(const kinematics::ExtendedModel& model, const Eigen::VectorXd& 
     list.push_back(entry);
   }
   return list;
+}
+
+std::string PoseFingerprint(const kinematics::PoseMeasurement& m) {
+  std::uint64_t h = 0xcbf29ce484222325ull;  // FNV-1a 64
+  const auto add = [&h](const double* v, size_t n) {
+    const auto* b = reinterpret_cast<const unsigned char*>(v);
+    for (size_t i = 0; i < n * sizeof(double); ++i) {
+      h ^= b[i];
+      h *= 0x100000001b3ull;
+    }
+  };
+  add(m.q.data(), m.q.size());
+  add(m.p_WM_W.data(), 3);
+  if (m.has_orientation) add(m.R_EI.data(), 9);
+  char buf[17];
+  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(h));
+  return buf;
 }
 
 std::vector<kinematics::EffectContext> ToContexts(const PoseDataset& data) {

@@ -4,6 +4,7 @@
 #include <numbers>
 #include <string>
 
+#include "draw3.hpp"
 #include "rcal/geometry/so3.hpp"
 
 namespace rcal::sim {
@@ -68,15 +69,14 @@ kinematics::PoseMeasurement MeasureTruePose(const kinematics::ToolPose& truth,
   std::normal_distribution<double> n(0.0, 1.0);
   kinematics::PoseMeasurement m;
   m.q = q;
-  m.p_WM_W = truth.p_WM_W + noise.position_sigma * Eigen::Vector3d(n(rng), n(rng), n(rng));
+  m.p_WM_W = truth.p_WM_W + noise.position_sigma * Draw3(n, rng);
   m.has_orientation = noise.orientation;
   const int dim = noise.orientation ? 6 : 3;
   m.covariance = Eigen::MatrixXd::Zero(dim, dim);
   m.covariance.topLeftCorner<3, 3>().diagonal().setConstant(noise.position_sigma *
                                                             noise.position_sigma);
   if (noise.orientation) {
-    const Eigen::Vector3d dtheta =
-        noise.orientation_sigma * Eigen::Vector3d(n(rng), n(rng), n(rng));
+    const Eigen::Vector3d dtheta = noise.orientation_sigma * Draw3(n, rng);
     m.R_EI = geometry::Exp(dtheta) * truth.R_EI;  // left error, earth frame (measurement.hpp)
     m.covariance.bottomRightCorner<3, 3>().diagonal().setConstant(noise.orientation_sigma *
                                                                   noise.orientation_sigma);

@@ -1,5 +1,7 @@
 #include "rcal/sim/position_sensor_model.hpp"
 
+#include "draw3.hpp"
+
 namespace rcal::sim {
 
 PositionSensorModel::PositionSensorModel(const PositionSensorSettings& settings, std::uint64_t seed)
@@ -26,7 +28,7 @@ std::optional<PositionSample> PositionSensorModel::Sample(double t, const Eigen:
   next_t_ += period;
   if (t >= next_t_) next_t_ = t + period;  // the truth skipped a period: restart the clock
   // Draw both random numbers every firing so that switching effects keeps the others' noise.
-  const Eigen::Vector3d n(normal_(rng_), normal_(rng_), normal_(rng_));
+  const Eigen::Vector3d n = Draw3(normal_, rng_);
   const double u = uniform_(rng_);
   if (settings_.dropouts && u < settings_.dropout_probability) {
     ++dropped_;

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "draw3.hpp"
 #include "rcal/geometry/so3.hpp"
 
 namespace rcal::sim {
@@ -73,7 +74,7 @@ SensorSim::SensorSim(const ToolMotionTruth& truth, const SensorSimSettings& sett
     std::normal_distribution<double> normal(0.0, 1.0);
     for (int k = 0; k < n; ++k) {
       const bool on = u(rng) < settings_.mag_disturbance_fraction;
-      Eigen::Vector3d d(normal(rng), normal(rng), normal(rng));
+      const Eigen::Vector3d d = Draw3(normal, rng);
       if (!on) continue;
       disturbed_.push_back(k);
       disturbance_E_[k] = settings_.mag_disturbance_uT * d.normalized();

@@ -17,10 +17,18 @@
 //    poses is significant: one-sided z = mean(d)/(sd(d)/√n) > Φ⁻¹(1 − α/m), d the per-pose drop of
 //    the whitened squared residual, m the candidates tried that round (Bonferroni), so an effect
 //    that is not there is reported with probability ≲ α.
-// 5. The selected model is refitted (nonlinear, batch: identification::FitExtended) on all
+// 5. Judged on poses the selection did not fit: the `set` test poses when there are any, else
+//    nested cross-validation (the whole greedy selection redone inside each outer fold, judged on
+//    the outer held-out poses). The selected model is reported only if it gains there (held-out
+//    position RMS below geometry's) and each of its effects only if leaving it out would lose
+//    there (split: the selected model without it; nested: each outer fold's own selection
+//    without it, so an effect no outer fold selects contributes nothing). Effects that fail are
+//    listed as rejected with the figures, never as effects. The gain reported is that of the
+//    selection as made (split: the selected model; nested: the outer folds' selections), never
+//    recomputed after the rejections, which were decided on those same held-out poses.
+// 6. The reported effects are refitted (nonlinear, batch: identification::FitExtended) on all
 //    calibration poses: values with σ.
-//    Gain: held-out position RMS of geometry alone and of the selected model, on the `set` test
-//    poses when there are any (selection then never saw them), else by the same k-fold.
+// p-values and z beyond what a double holds: significance.hpp.
 #pragma once
 
 #include <Eigen/Core>
@@ -65,7 +73,8 @@ struct NoiseTest {
   double orientation_sigma_rad = 0;
   double chi2 = 0;
   double dof = 0;
-  double p_value = 1;  ///< P(χ² ≥ observed) if the model were right
+  double p_value = 1;  ///< P(χ² ≥ observed) if the model were right (0 after underflow)
+  double log_p = 0;    ///< ln p_value, finite where p_value underflows
 };
 
 /// Correlation of a regressor with the residual along the direction its effect moves the pose.
@@ -75,7 +84,8 @@ struct RegressorCorrelation {
   kinematics::Effect effect;   ///< the candidate the regressor belongs to
   int column = 0;              ///< which of the effect's parameters (periodic: 0 sin, 1 cos)
   double correlation = 0;      ///< Pearson r, all calibration poses
-  double p_value = 1;          ///< two-sided, Fisher z
+  double p_value = 1;          ///< two-sided, Fisher z (0 after underflow)
+  double log_p = 0;            ///< ln p_value, finite where p_value underflows
   std::vector<double> values;  ///< regressor per calibration pose [unit]
   std::vector<double> residual_before_m;  ///< projected residual per pose, geometric fit [m]
   std::vector<double> residual_after_m;   ///< the same after the selected model [m]
@@ -84,7 +94,8 @@ struct RegressorCorrelation {
 /// One selection round.
 struct SelectionRound {
   std::vector<kinematics::Effect> tried;
-  std::vector<double> z;  ///< paired z of each tried candidate against the current model
+  std::vector<double> z;  ///< paired z of each tried candidate against the current model (±∞:
+                          ///< zero spread of the paired differences)
   int best = -1;          ///< index into tried
   double z_critical = 0;  ///< Φ⁻¹(1 − α/m)
   bool accepted = false;
@@ -101,15 +112,36 @@ struct FoundEffect {
   Eigen::VectorXd values;  ///< [SI, parameters' units]
   Eigen::VectorXd sigma;   ///< 1σ
   double z = 0;            ///< selection statistic when it was added
+  /// Held-out position RMS of the judged model without this effect (Gain's poses and scheme) [m]
+  double heldout_rms_without_m = 0;
+  int outer_folds_selecting = -1;  ///< nested: outer folds whose selection chose it; split: −1
+};
+
+/// An effect the greedy selection chose on the fit poses that does not gain on held-out poses
+/// (step 5 of the file comment): not reported as an effect, not in Analysis::x/e.
+struct RejectedEffect {
+  kinematics::Effect effect;
+  std::string reason;
+  double z = 0;                      ///< selection statistic when it was added
+  double heldout_rms_with_m = 0;     ///< held-out position RMS of the judged model [m]
+  double heldout_rms_without_m = 0;  ///< the same without this effect [m]
+  int outer_folds_selecting = -1;    ///< nested: outer folds whose selection chose it; split: −1
 };
 
 struct Gain {
-  std::string scheme;               ///< "cal/test split" or "5-fold ×2"
+  std::string scheme;               ///< "cal/test split", "nested 5-fold (...)" or "5-fold ×2"
+  bool nested = false;              ///< the selection was redone in each outer fold
   double heldout_rms_before_m = 0;  ///< geometric model, held-out position RMS
   double heldout_rms_after_m = 0;   ///< selected model
   double relative_gain = 0;         ///< (before − after) / before
   double z = 0;                     ///< paired z of the improvement (whitened squared residual)
   std::vector<double> position_before_m, position_after_m;  ///< per held-out pose [m]
+  /// Nested: the effects each outer fold's selection chose.
+  std::vector<std::vector<kinematics::Effect>> outer_selections;
+  /// Nested, with effects reported: held-out RMS of the reported effects' structure fitted in
+  /// each outer fold but chosen on all fit poses: not nested, so flattered by the choice. This
+  /// is what `rcal calibrate --effects` measures on the same folds (it fits a fixed list) [m].
+  double heldout_rms_after_not_nested_m = 0;
 };
 
 struct Analysis {
@@ -119,10 +151,11 @@ struct Analysis {
   std::vector<kinematics::Effect> candidates;      ///< tried (eligible and identifiable)
   std::vector<std::string> skipped;                ///< candidates not tried, with the reason
   std::vector<SelectionRound> rounds;
-  std::vector<FoundEffect> effects;   ///< empty: geometry suffices
-  Eigen::VectorXd x;                  ///< geometric errors of the final fit [m|rad]
-  Eigen::VectorXd e;                  ///< effect parameters of the final fit [SI]
-  double position_sigma_after_m = 0;  ///< noise re-estimated with the effects
+  std::vector<FoundEffect> effects;      ///< empty: geometry suffices
+  std::vector<RejectedEffect> rejected;  ///< selected on the fit poses, lost on held-out poses
+  Eigen::VectorXd x;                     ///< geometric errors of the final fit [m|rad]
+  Eigen::VectorXd e;                     ///< effect parameters of the final fit [SI]
+  double position_sigma_after_m = 0;     ///< noise re-estimated with the effects
   Gain gain;
   int num_fit_poses = 0, num_test_poses = 0;
 };

@@ -52,6 +52,7 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -121,8 +122,11 @@ struct ImuCandidate {
   std::string cause;              ///< gyro_bias | magnetic_disturbance | accel_motion | time_offset
   std::vector<std::string> axes;  ///< axes found ("x","y","z") or the sensor
   std::vector<ImuValue> values;   ///< fitted figures with σ (SI, unit in the name)
-  double statistic = 0.0;         ///< z (or −Φ⁻¹(p) for a binomial test)
-  double critical = 0.0;          ///< its critical value after Bonferroni
+  double statistic = 0.0;  ///< z (or Φ̄⁻¹(p) for a binomial test; ±∞: significance.hpp)
+  /// ln p of a binomial test, finite where p underflows a double (z is derived from it); NaN
+  /// when the statistic is a z itself (gyro_bias, time_offset).
+  double log_p = std::numeric_limits<double>::quiet_NaN();
+  double critical = 0.0;  ///< its critical value after Bonferroni
   bool significant = false;
   bool tested = false;  ///< false: not testable on this stream (reason in note)
   std::string note;

@@ -1,0 +1,40 @@
+// Test statistics whose p-value a double cannot hold.
+//
+// A strong effect gives p-values far below the smallest double (4.9e-324): a binomial count of
+// 5000 samples outside a 1e-3 band has p ≈ 1e-9000. Computed as a double, such a p underflows to
+// 0, and a z derived from it (z = Φ̄⁻¹(p)) was clamped to the z of the clamp (37.05 for p = 1e-300):
+// a number that looks measured and is not. So the tests here carry ln p, which a double holds for
+// any p > 0, derive z from ln p (exact for any finite z), and write what still cannot be held as a
+// bound:
+//   - a p below 1e-300 is written "p < 1e-300" (text) and, in JSON, as "p_value": the double
+//     value (0 after underflow) with "p_value_bound": "< 1e-300" and the exact "log10_p_value";
+//   - a z that is infinite (p exactly 0: zero spread of a paired difference; p exactly 1: no count
+//     beyond the band) is written as the bound a double p could still express: "z > 38.47" (p =
+//     4.9e-324, the smallest double) or "z < -8.21" (p = 1 − 1.1e-16, the largest below 1); in JSON
+//     the bound is the number and "<key>_bound" is ">" or "<". Finite z are written as they are.
+#pragma once
+
+#include <string>
+
+namespace rcal::discrepancy {
+
+/// p below which a p-value is written as the bound "< 1e-300".
+inline constexpr double kPBound = 1e-300;
+
+/// ln P(Z > z), Z standard normal: accurate for any z (ln p = −805 at z = 40, where p underflows).
+double LogNormalUpper(double z);
+/// The z with ln P(Z > z) = log_p (log_p ≤ 0): +∞ for log_p = −∞ (p = 0), −∞ for log_p = 0.
+double NormalUpperQuantileLog(double log_p);
+
+/// A z as written: finite z as they are; ±∞ as the bound a double p can express (text above).
+struct WrittenZ {
+  double value = 0;   ///< z, or the bound
+  std::string bound;  ///< "" (exact), ">" or "<": the true z lies beyond `value` this way
+};
+WrittenZ WriteZ(double z);
+/// "3.7", "> 38.47", "< -8.21" (`decimals` after the point).
+std::string ZText(double z, int decimals = 1);
+/// "0.0123", "3.4e-12", "< 1e-300" from ln p; "1" for p = 1.
+std::string PText(double log_p);
+
+}  // namespace rcal::discrepancy
