@@ -5,7 +5,8 @@
 // carrying a unit, "100 Hz", "5 mm", is refused); angles may be written as multiples of π
 // (`pi/2`, robot_yaml.hpp). Unknown keys, missing required keys, wrong types, non-finite values
 // and implausible values are errors naming the file and the key path, e.g.
-//   `grb3016.yaml: sensors.position.sigma[0]: 0.5 m is beyond 0.01 m: millimetres? (line 31)`.
+//   `grb3016.yaml: sensors.position.sigma[0]: 0.05 m is beyond 0.01 m: millimetres? (write
+//   metres: 0.05 mm = 5e-5) (line 33)`.
 // Paths inside the file are relative to the file's folder (LoadCellSpec).
 //
 //   schema: rcal.cell/1                    # required, exactly this
