@@ -46,24 +46,34 @@ Cell MakeCell(io::RobotSpec arm, unsigned seed) {
     const int i = m.FindParameter(name);
     if (i >= 0) c.x_true(i) = v;
   }
+  return MakeCell(std::move(c.model), std::move(c.x_true), seed,
+                  kinematics::MeasurementKind::kFullPose);
+}
+
+Cell MakeCell(kinematics::KinematicModel model, Eigen::VectorXd x_true, unsigned seed,
+              kinematics::MeasurementKind kind) {
+  Cell c;
+  c.model = std::move(model);
+  c.x_true = std::move(x_true);
+  const auto& m = c.model;
   sim::Rng rng_id(seed * 1000 + 1), rng_truth(seed * 1000 + 2);
   // Identifiability is a property of the drawing's structure, judged where a user can evaluate
   // it: link errors at zero (the truth's α2 error would tilt the parallel axes 2 and 3 and make
   // d2 − d3 look weakly identifiable, σ ≈ 35 mm), set-up frames where they stand.
   Eigen::VectorXd x_structure = m.Nominal();
   for (int i : identification::SetupParameters(m)) x_structure(i) = c.x_true(i);
-  c.ident = kinematics::AnalyzeIdentifiability(m, sim::SampleJoints(m, 200, rng_id), x_structure,
-                                               kinematics::MeasurementKind::kFullPose);
+  c.ident =
+      kinematics::AnalyzeIdentifiability(m, sim::SampleJoints(m, 200, rng_id), x_structure, kind);
   // The base set, by preference: set-up frames first (what a user mounts and must know).
   sim::Rng rng_b(seed * 1000 + 5);
-  c.base = identification::PreferredBaseSet(m, sim::SampleJoints(m, 100, rng_b), x_structure,
-                                            kinematics::MeasurementKind::kFullPose);
+  c.base = identification::PreferredBaseSet(m, sim::SampleJoints(m, 100, rng_b), x_structure, kind);
   c.setup = identification::SetupParameters(m);
   // The truth on the base set: LM on dense noise-free poses from the truth with the dropped
   // parameters at nominal.
   sim::PoseNoise exact;
   exact.position_sigma = 1e-9;
   exact.orientation_sigma = 1e-9;
+  exact.orientation = kind == kinematics::MeasurementKind::kFullPose;
   const auto dense =
       sim::MeasurePoses(m, c.x_true, sim::SampleJoints(m, 400, rng_truth), exact, rng_truth);
   Eigen::VectorXd start = m.Nominal();

@@ -13,6 +13,7 @@
 
 #include "rcal/geometry/so3.hpp"
 #include "rcal/io/atomic_file.hpp"
+#include "rcal/io/yaml_reader.hpp"
 
 namespace rcal::io {
 namespace {
@@ -21,142 +22,8 @@ using kinematics::Joint;
 using kinematics::JointType;
 
 constexpr const char* kSchema = "rcal.robot/1";
-/// Bounds of every length [m] and angle [rad] in a file (robot_yaml.hpp).
-constexpr double kMaxLength = 100.0;
-constexpr double kMaxAngle = 100.0;
 
-/// YAML's spellings of the non-finite numbers (.nan, .inf, -.Inf, ...), or nullopt.
-std::optional<double> YamlSpecial(const std::string& s) {
-  std::string t = s;
-  double sign = 1.0;
-  if (!t.empty() && (t[0] == '-' || t[0] == '+')) {
-    sign = t[0] == '-' ? -1.0 : 1.0;
-    t.erase(0, 1);
-  }
-  for (const char* nan : {".nan", ".NaN", ".NAN"})
-    if (t == nan) return std::numeric_limits<double>::quiet_NaN();
-  for (const char* inf : {".inf", ".Inf", ".INF"})
-    if (t == inf) return sign * std::numeric_limits<double>::infinity();
-  return std::nullopt;
-}
-
-// ---------------------------------------------------------------------------------------------
-// Reading: every accessor knows the file and the key path, so every error names both.
-
-class Reader {
- public:
-  explicit Reader(std::string source) : source_(std::move(source)) {}
-
-  [[noreturn]] void Fail(const std::string& path, const std::string& what,
-                         const YAML::Node* node = nullptr) const {
-    std::string msg = source_ + ": " + (path.empty() ? std::string("<top>") : path) + ": " + what;
-    if (node != nullptr && node->IsDefined()) {
-      const YAML::Mark m = node->Mark();
-      if (m.line >= 0) msg += " (line " + std::to_string(m.line + 1) + ")";
-    }
-    throw std::runtime_error(msg);
-  }
-
-  /// The node must be a map whose keys are all in `allowed`, each at most once.
-  void CheckMap(const YAML::Node& node, const std::string& path,
-                const std::set<std::string>& allowed) const {
-    if (!node.IsMap()) Fail(path, "expected a map (key: value ...), got " + Kind(node), &node);
-    std::set<std::string> seen;
-    for (auto it = node.begin(); it != node.end(); ++it) {
-      if (!it->first.IsScalar()) Fail(path, "keys must be plain words", &it->first);
-      const std::string key = it->first.Scalar();
-      const std::string sub = Join(path, key);
-      if (!seen.insert(key).second) Fail(sub, "duplicate key", &it->first);
-      if (!allowed.count(key)) {
-        if (path.empty() && key == "units")
-          Fail(sub, "unknown key (robot files are SI only: m, rad; there is no units setting)",
-               &it->first);
-        Fail(sub, "unknown key", &it->first);
-      }
-    }
-  }
-
-  static std::string Join(const std::string& path, const std::string& key) {
-    return path.empty() ? key : path + "." + key;
-  }
-
-  YAML::Node Require(const YAML::Node& map, const std::string& path, const std::string& key) const {
-    const YAML::Node n = map[key];
-    if (!n.IsDefined()) Fail(Join(path, key), "missing key", &map);
-    return n;
-  }
-
-  std::string String(const YAML::Node& n, const std::string& path) const {
-    if (!n.IsScalar() || n.Scalar().empty()) Fail(path, "expected a text, got " + Kind(n), &n);
-    return n.Scalar();
-  }
-
-  bool Bool(const YAML::Node& n, const std::string& path) const {
-    if (n.IsScalar()) {
-      if (n.Scalar() == "true") return true;
-      if (n.Scalar() == "false") return false;
-    }
-    Fail(path, "expected true or false, got " + Kind(n), &n);
-  }
-
-  /// A length [m] (plain number) or, with `angle`, an angle [rad] (number or multiple of pi).
-  double Number(const YAML::Node& n, const std::string& path, bool angle) const {
-    if (!n.IsScalar() || n.Scalar().empty())
-      Fail(path,
-           std::string("expected ") + (angle ? "an angle [rad]" : "a number") + ", got " + Kind(n),
-           &n);
-    const std::string& s = n.Scalar();
-    std::optional<double> v = YamlSpecial(s);
-    if (v) {
-      // .nan / .inf: reported as not finite below
-    } else if (angle) {
-      v = ParseAngle(s);
-    } else {
-      double d = 0;
-      const char* first = s.data();
-      const char* last = s.data() + s.size();
-      if (first != last && *first == '+') ++first;
-      const auto [ptr, ec] = std::from_chars(first, last, d);
-      if (ec == std::errc() && ptr == last) v = d;
-    }
-    if (!v) {
-      if (!angle && ParseAngle(s))
-        Fail(path, "expected a number [m], got '" + s + "' (pi is for angles only)", &n);
-      Fail(
-          path,
-          std::string("expected ") +
-              (angle ? "an angle [rad] (a number or a multiple of pi such as -pi/2)" : "a number") +
-              ", got '" + s + "'",
-          &n);
-    }
-    if (!std::isfinite(*v)) Fail(path, "value is not finite: '" + s + "'", &n);
-    if (!angle && std::abs(*v) > kMaxLength)
-      Fail(path, "'" + s + "' is beyond 100 m: not an arm's dimension", &n);
-    if (angle && std::abs(*v) > kMaxAngle) Fail(path, "'" + s + "' is beyond 100 rad", &n);
-    return *v;
-  }
-
-  Eigen::Vector3d Vec3(const YAML::Node& n, const std::string& path, bool angle) const {
-    if (!n.IsSequence() || n.size() != 3)
-      Fail(path, "expected a list of 3 numbers [x, y, z], got " + Kind(n), &n);
-    Eigen::Vector3d v;
-    for (int i = 0; i < 3; ++i) v(i) = Number(n[i], path + "[" + std::to_string(i) + "]", angle);
-    return v;
-  }
-
-  static std::string Kind(const YAML::Node& n) {
-    if (!n.IsDefined() || n.IsNull()) return "nothing";
-    if (n.IsScalar()) return "'" + n.Scalar() + "'";
-    if (n.IsSequence()) return "a list of " + std::to_string(n.size());
-    if (n.IsMap()) return "a map";
-    return "something else";
-  }
-
-  const std::string& source() const { return source_; }
-
- private:
-  std::string source_;
-};
+using detail::Reader;
 
 Joint ReadJoint(const Reader& r, const YAML::Node& n, const std::string& path) {
   r.CheckMap(n, path, {"name", "type", "lower", "upper"});
@@ -359,17 +226,7 @@ std::optional<double> ParseAngle(const std::string& text) {
 
 RobotSpec ParseRobotYaml(const std::string& text, const std::string& source) {
   const Reader r(source);
-  YAML::Node root;
-  try {
-    root = YAML::Load(text);
-  } catch (const YAML::ParserException& e) {
-    throw std::runtime_error(source + ": malformed YAML: " + e.msg + " (line " +
-                             std::to_string(e.mark.line + 1) + ", column " +
-                             std::to_string(e.mark.column + 1) + ")");
-  } catch (const YAML::Exception& e) {
-    throw std::runtime_error(source + ": malformed YAML: " + e.what());
-  }
-  if (!root.IsDefined() || root.IsNull()) throw std::runtime_error(source + ": empty file");
+  const YAML::Node root = detail::LoadYaml(text, source);
   r.CheckMap(root, "",
              {"schema", "name", "convention", "base", "links", "tool", "marker", "markers", "imu",
               "earth"});

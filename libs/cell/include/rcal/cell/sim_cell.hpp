@@ -39,6 +39,13 @@ struct Cell {
 /// The truth cell for the arm of `arm` (its base/marker/imu/earth entries are replaced).
 Cell MakeCell(io::RobotSpec arm, unsigned seed);
 
+/// The truth cell of any model (arm + set-up frames) at the truth `x_true` [m | rad]: the
+/// identifiability, base set and truth on the base set as MakeCell(arm, seed) computes them
+/// (draws seeded by `seed`), for measurements of `kind`. MakeCell(arm, seed) is this with its
+/// model, its truth and full poses.
+Cell MakeCell(kinematics::KinematicModel model, Eigen::VectorXd x_true, unsigned seed,
+              kinematics::MeasurementKind kind);
+
 struct RunSettings {
   unsigned seed = 1;
   int num_cal = 50, num_test = 50;

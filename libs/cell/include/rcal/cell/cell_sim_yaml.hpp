@@ -1,0 +1,112 @@
+// The simulated counterpart of a cell file (config/cells/*.sim.yaml): the cell file it simulates
+// plus the truth only the simulator knows (the seed, the arm's errors, the true set-up frames, the
+// sensor switches). The production side (io/cell_yaml.hpp) never reads it.
+//
+// Schema `rcal.cell_sim/1`. SI units (m, rad, s); errors name the file and the key path as the
+// cell file's do (io/cell_yaml.hpp, io/yaml_reader.hpp).
+//
+//   schema: rcal.cell_sim/1                # required, exactly this
+//   cell: grb3016.yaml                     # required: the cell file simulated (relative to this
+//                                          #   file)
+//   seed: 1                                # required, 0 to 4294967295: seeds every draw (the
+//                                          #   random arm errors, the trajectory, the sensors)
+//   arm_errors: table3                     # required: none | table3 (the paper's Table 3, D–H
+//                                          #   links 1–6: sim::Table3Errors) |
+//                                          #   {sigma_length: 5e-4, sigma_angle: 1e-3} [m, rad]
+//                                          #   (sim::RandomErrors, seeded by seed·1000 + 4)
+//   truth:                                 # required: the true value of every set-up frame the
+//                                          #   cell identifies (mode prior or guess); a fixed
+//                                          #   frame is simulated at its nominal (no entry)
+//     world_from_base: {xyz: [1.6, -0.35, 0.42], rpy: [-0.02, 0.012, 0.61]}   # T_WB [m, rad]
+//     earth_from_world: {rpy: [-0.01, 0.017, 0.87]}                            # R_EW [rad]
+//     flange_to_imu: {rpy: [-0.02, 0.035, 0.35]}                               # R_FI [rad]
+//     markers: [{id: 0, xyz: [0.034, -0.003, 0.122]}]                          # p_FM [m]
+//   run:                                   # optional, every key optional (defaults: RunSettings)
+//     calibration_poses: 50                # still stops used for calibration, 1 to 100000
+//     test_poses: 50                       # then test stops, 0 to 100000
+//     extra_poses: 0                       # then extra stops (peg-in-hole phase), 0 to 100000
+//     still_time: 1.5                      # [s] at each stop, (0, 600]
+//     noise_scale: 1                       # multiplies every simulated sensor noise, [0, 100]
+//                                          #   (the offline experiment scales its filters' σ too)
+//     gyro_bias: false                     # constant + random-walk gyro bias
+//     mag_disturbance: false               # 15 µT at 20 % of the stops
+//     dropout: 0                           # position samples lost, probability per sample [0, 1)
+//
+// The rpy of a frame follow the model's convention R = Rz(yaw)·Ry(pitch)·Rx(roll); the truth's
+// parameter errors are truth − nominal per coordinate (each angle wrapped to (−π, π]).
+#pragma once
+
+#include <Eigen/Core>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "rcal/cell/sim_cell.hpp"
+#include "rcal/io/cell_yaml.hpp"
+#include "rcal/sim/sensor_sim.hpp"
+
+namespace rcal::cell {
+
+enum class ArmErrorsKind {
+  kNone,    ///< the arm is its drawing
+  kTable3,  ///< the paper's Table 3 (GRB3016 D–H links 1–6)
+  kRandom,  ///< independent Gaussian errors of σ sigma_length [m], sigma_angle [rad]
+};
+
+/// A true set-up frame: position [m] (frames with one) and roll-pitch-yaw [rad].
+struct TrueFrame {
+  Eigen::Vector3d xyz = Eigen::Vector3d::Zero();
+  Eigen::Vector3d rpy = Eigen::Vector3d::Zero();
+};
+
+struct CellSimSpec {
+  std::string source;  ///< the file, for messages
+  /// The cell file; LoadCellSimSpec makes a relative path absolute against the sim file's folder.
+  std::filesystem::path cell;
+  unsigned seed = 1;
+  ArmErrorsKind arm_errors = ArmErrorsKind::kNone;
+  double sigma_length = 0.0;  ///< [m] (kRandom)
+  double sigma_angle = 0.0;   ///< [rad] (kRandom)
+  std::optional<TrueFrame> world_from_base, earth_from_world, flange_to_imu;
+  std::vector<std::pair<int, Eigen::Vector3d>> markers;  ///< marker id, true p_FM [m]
+  // The run; defaults: RunSettings{}.
+  int num_cal = 50, num_test = 50, num_extra = 0;
+  double still_time = 1.5;   ///< [s]
+  double noise_scale = 1.0;  ///< [-]
+  bool gyro_bias = false, mag_disturbance = false;
+  double dropout = 0.0;  ///< [-]
+};
+
+/// Parses YAML text of schema rcal.cell_sim/1 (the cell path kept as written). Throws
+/// std::runtime_error "SOURCE: KEY.PATH: what (line N)".
+CellSimSpec ParseCellSimYaml(const std::string& text, const std::string& source = "<text>");
+/// Reads and parses a sim file; a relative `cell` is resolved against the file's folder.
+CellSimSpec LoadCellSimSpec(const std::filesystem::path& path);
+
+/// The true parameter errors of `cell.model` [m | rad]: the arm's errors and, for every set-up
+/// parameter, truth − nominal. Throws std::runtime_error naming the sim file and the key when the
+/// truth does not fit the cell (a frame the cell identifies without a truth, a truth for a frame
+/// the cell fixes or lacks, table3 on an arm without the GRB3016's D–H links).
+Eigen::VectorXd TrueErrors(const io::BuiltCell& cell, const CellSimSpec& sim);
+
+/// The simulated cell sim_cell works on (SimulateWindows, RunOnline): cell.model at
+/// TrueErrors(cell, sim), its base set for the cell's measurements (full poses with an
+/// orientation source, else positions), seeded by sim.seed (MakeCell).
+Cell MakeSimCell(const io::BuiltCell& cell, const CellSimSpec& sim);
+
+/// The run's settings: sim's seed, poses, still time and switches; orientation = the cell has an
+/// IMU (the pose pipeline's orientation source).
+RunSettings SimRunSettings(const io::BuiltCell& cell, const CellSimSpec& sim);
+
+/// The simulated sensors the cell declares (what SimulateWindows builds from SensorSimSettings{}
+/// today, for the demo's cell exactly that): the clock at the IMU's rate (the position sensor's
+/// without an IMU), the IMU's noise densities (magnetometer in µT, the simulator's unit) and
+/// mounting (R_SI = R_ISᵀ), gravity and the earth field in the cell's earth frame (NED:
+/// (20, 0, 44) µT, ENU: (0, 20, −44) µT), the position sensor's rate and largest σ (the simulator
+/// draws one σ for all axes), each noise × noise_scale, and the run's bias, disturbance and
+/// dropout switches (RunSettings' values).
+sim::SensorSimSettings SimSensorSettings(const io::BuiltCell& cell, const CellSimSpec& sim);
+
+}  // namespace rcal::cell

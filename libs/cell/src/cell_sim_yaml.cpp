@@ -1,0 +1,305 @@
+#include "rcal/cell/cell_sim_yaml.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <numbers>
+#include <set>
+#include <stdexcept>
+
+#include "rcal/io/atomic_file.hpp"
+#include "rcal/io/yaml_reader.hpp"
+#include "rcal/sim/pose_sim.hpp"
+
+namespace rcal::cell {
+namespace {
+
+using io::detail::Reader;
+
+constexpr const char* kSchema = "rcal.cell_sim/1";
+
+using io::detail::Bounded;
+
+Eigen::Vector3d Rpy(const Reader& r, const YAML::Node& n, const std::string& path) {
+  const Eigen::Vector3d v = r.Vec3(n, path, true);
+  for (int i = 0; i < 3; ++i)
+    if (std::abs(v(i)) > 2.0 * std::numbers::pi + 1e-12)
+      r.FailAt(path + "[" + std::to_string(i) + "]", "beyond 2π: degrees? (write radians)", n[i]);
+  return v;
+}
+
+TrueFrame ReadTrueFrame(const Reader& r, const YAML::Node& n, const std::string& path, bool xyz,
+                        bool rpy) {
+  std::set<std::string> keys;
+  if (xyz) keys.insert("xyz");
+  if (rpy) keys.insert("rpy");
+  r.CheckMap(n, path, keys);
+  TrueFrame f;
+  if (xyz) f.xyz = r.Vec3(r.Require(n, path, "xyz"), path + ".xyz", false);
+  if (rpy) f.rpy = Rpy(r, r.Require(n, path, "rpy"), path + ".rpy");
+  return f;
+}
+
+/// An angle error wrapped to (−π, π]: each rotation ET is periodic in its own angle.
+double Wrap(double a) {
+  const double w = std::remainder(a, 2.0 * std::numbers::pi);
+  return w == -std::numbers::pi ? std::numbers::pi : w;
+}
+
+}  // namespace
+
+CellSimSpec ParseCellSimYaml(const std::string& text, const std::string& source) {
+  const Reader r(source, "cell sim files");
+  const YAML::Node root = io::detail::LoadYaml(text, source);
+  r.CheckMap(root, "", {"schema", "cell", "seed", "arm_errors", "truth", "run"});
+  const YAML::Node schema = r.Require(root, "", "schema");
+  if (r.String(schema, "schema") != kSchema)
+    r.Fail("schema", std::string("expected ") + kSchema + ", got '" + schema.Scalar() + "'",
+           &schema);
+  CellSimSpec s;
+  s.source = source;
+  s.cell = r.String(r.Require(root, "", "cell"), "cell");
+  s.seed = static_cast<unsigned>(r.Integer(r.Require(root, "", "seed"), "seed", 0, 4294967295LL));
+  {
+    const YAML::Node e = r.Require(root, "", "arm_errors");
+    if (e.IsScalar() && e.Scalar() == "none") {
+      s.arm_errors = ArmErrorsKind::kNone;
+    } else if (e.IsScalar() && e.Scalar() == "table3") {
+      s.arm_errors = ArmErrorsKind::kTable3;
+    } else if (e.IsMap()) {
+      r.CheckMap(e, "arm_errors", {"sigma_length", "sigma_angle"});
+      s.arm_errors = ArmErrorsKind::kRandom;
+      s.sigma_length =
+          Bounded(r, r.Require(e, "arm_errors", "sigma_length"), "arm_errors.sigma_length", "m",
+                  0.0, 0.01, "millimetres? (write metres)");
+      s.sigma_angle =
+          Bounded(r, r.Require(e, "arm_errors", "sigma_angle"), "arm_errors.sigma_angle", "rad",
+                  0.0, 0.1, "degrees? (write radians)");
+    } else {
+      r.Fail("arm_errors",
+             "expected none, table3 or {sigma_length: [m], sigma_angle: [rad]}, got " +
+                 Reader::Kind(e),
+             &e);
+    }
+  }
+  {
+    const YAML::Node t = r.Require(root, "", "truth");
+    r.CheckMap(t, "truth", {"world_from_base", "earth_from_world", "flange_to_imu", "markers"});
+    if (t["world_from_base"])
+      s.world_from_base =
+          ReadTrueFrame(r, t["world_from_base"], "truth.world_from_base", true, true);
+    if (t["earth_from_world"])
+      s.earth_from_world =
+          ReadTrueFrame(r, t["earth_from_world"], "truth.earth_from_world", false, true);
+    if (t["flange_to_imu"])
+      s.flange_to_imu = ReadTrueFrame(r, t["flange_to_imu"], "truth.flange_to_imu", false, true);
+    if (t["markers"]) {
+      const YAML::Node list = t["markers"];
+      if (!list.IsSequence())
+        r.Fail("truth.markers", "expected a list of markers, got " + Reader::Kind(list), &list);
+      for (size_t i = 0; i < list.size(); ++i) {
+        const std::string path = "truth.markers[" + std::to_string(i) + "]";
+        const YAML::Node n = list[i];
+        r.CheckMap(n, path, {"id", "xyz"});
+        const int id =
+            static_cast<int>(r.Integer(r.Require(n, path, "id"), path + ".id", 0, 1000000));
+        const YAML::Node xyz = r.Require(n, path, "xyz");
+        const Eigen::Vector3d p = r.Vec3(xyz, path + ".xyz", false);
+        if (p.norm() > 2.0)
+          r.Fail(path + ".xyz", "beyond 2 m from the flange: millimetres? (write metres)", &xyz);
+        for (const auto& [other, unused] : s.markers)
+          if (other == id)
+            r.FailAt(path + ".id", "marker id " + std::to_string(id) + " twice", n["id"]);
+        s.markers.emplace_back(id, p);
+      }
+    }
+  }
+  if (const YAML::Node n = root["run"]) {
+    const std::string p = "run";
+    r.CheckMap(n, p,
+               {"calibration_poses", "test_poses", "extra_poses", "still_time", "noise_scale",
+                "gyro_bias", "mag_disturbance", "dropout"});
+    auto count = [&](const char* key, int lo, int* out) {
+      if (n[key]) *out = static_cast<int>(r.Integer(n[key], p + "." + key, lo, 100000));
+    };
+    count("calibration_poses", 1, &s.num_cal);
+    count("test_poses", 0, &s.num_test);
+    count("extra_poses", 0, &s.num_extra);
+    if (n["still_time"])
+      s.still_time = Bounded(r, n["still_time"], "run.still_time", "s", 0.0, 600.0,
+                             "milliseconds? (write seconds)", "", true);
+    if (n["noise_scale"])
+      s.noise_scale = Bounded(r, n["noise_scale"], "run.noise_scale", "-", 0.0, 100.0);
+    if (n["dropout"]) {
+      s.dropout = Bounded(r, n["dropout"], "run.dropout", "-", 0.0, 1.0,
+                          "a percentage? (write a probability)");
+      if (s.dropout == 1.0) r.Fail("run.dropout", "1: every position sample lost", &n);
+    }
+    if (n["gyro_bias"]) s.gyro_bias = r.Bool(n["gyro_bias"], "run.gyro_bias");
+    if (n["mag_disturbance"])
+      s.mag_disturbance = r.Bool(n["mag_disturbance"], "run.mag_disturbance");
+  }
+  return s;
+}
+
+CellSimSpec LoadCellSimSpec(const std::filesystem::path& path) {
+  CellSimSpec s = ParseCellSimYaml(io::ReadFile(path), path.string());
+  if (s.cell.is_relative())
+    s.cell =
+        (path.parent_path().empty() ? std::filesystem::path(".") : path.parent_path()) / s.cell;
+  s.cell = s.cell.lexically_normal();
+  return s;
+}
+
+Eigen::VectorXd TrueErrors(const io::BuiltCell& cell, const CellSimSpec& sim) {
+  const auto& model = cell.model;
+  const auto& frames = cell.spec.frames;
+  const std::string& src = sim.source;
+  auto fail = [&](const std::string& key, const std::string& what) {
+    throw std::runtime_error(src + ": " + key + ": " + what);
+  };
+  // Which frames the cell identifies, and the truth the sim file gives for each.
+  auto check = [&](const char* name, const io::SetupFrameSpec* frame,
+                   const std::optional<TrueFrame>& truth) {
+    const bool identified = frame != nullptr && frame->mode != io::SetupMode::kFixed;
+    const std::string key = std::string("truth.") + name;
+    if (identified && !truth)
+      fail(key,
+           std::string("missing: the cell (") + cell.spec.source + ") identifies frames." + name);
+    if (!identified && truth)
+      fail(key, std::string("the cell (") + cell.spec.source + ") " +
+                    (frame ? "fixes frames." + std::string(name) + " at its nominal"
+                           : "has no frames." + std::string(name)));
+  };
+  check("world_from_base", &frames.world_from_base, sim.world_from_base);
+  check("earth_from_world", frames.earth_from_world ? &*frames.earth_from_world : nullptr,
+        sim.earth_from_world);
+  check("flange_to_imu", frames.flange_to_imu ? &*frames.flange_to_imu : nullptr,
+        sim.flange_to_imu);
+  std::set<int> identified_markers, true_markers;
+  for (const auto& m : frames.markers)
+    if (m.frame.mode != io::SetupMode::kFixed) identified_markers.insert(m.id);
+  for (const auto& [id, p] : sim.markers) true_markers.insert(id);
+  for (int id : identified_markers)
+    if (!true_markers.count(id))
+      fail("truth.markers", "marker " + std::to_string(id) + " is identified by the cell (" +
+                                cell.spec.source + ") but has no truth");
+  for (int id : true_markers)
+    if (!identified_markers.count(id))
+      fail("truth.markers", "marker " + std::to_string(id) + " is not identified by the cell (" +
+                                cell.spec.source + "): fixed or absent");
+
+  Eigen::VectorXd x = model.Nominal();
+  switch (sim.arm_errors) {
+    case ArmErrorsKind::kNone:
+      break;
+    case ArmErrorsKind::kTable3:
+      for (const char* p : {"a1", "alpha1", "d1", "theta1", "a6", "alpha6", "theta6"})
+        if (model.FindParameter(p) < 0)
+          fail("arm_errors",
+               std::string("table3 is the GRB3016's D–H table, and the cell's arm has no "
+                           "parameter ") +
+                   p);
+      x = sim::Table3Errors(model);
+      break;
+    case ArmErrorsKind::kRandom: {
+      sim::Rng rng(static_cast<std::uint64_t>(sim.seed) * 1000 + 4);
+      x = sim::RandomErrors(model, rng, sim.sigma_length, sim.sigma_angle);
+      break;
+    }
+  }
+  // Set-up parameters: truth − nominal (the parameters' nominal values are the cell's).
+  const auto& params = model.parameters();
+  auto axis_of = [](const std::string& name) {
+    const std::string s = name.substr(name.rfind('_') + 1);
+    if (s == "x" || s == "rx") return 0;
+    if (s == "y" || s == "ry") return 1;
+    return 2;
+  };
+  for (int i = 0; i < model.num_params(); ++i) {
+    const auto& p = params[i];
+    if (!kinematics::IsSetupGroup(p.group)) continue;
+    const TrueFrame* t = nullptr;
+    if (p.group == "base") t = &*sim.world_from_base;
+    if (p.group == "earth") t = &*sim.earth_from_world;
+    if (p.group == "imu") t = &*sim.flange_to_imu;
+    Eigen::Vector3d marker_truth;
+    if (p.group == "marker") {
+      for (const auto& mk : model.markers())
+        for (int a = 0; a < 3; ++a)
+          if (mk.param[a] == i)
+            for (const auto& [id, pt] : sim.markers)
+              if (id == mk.id) x(i) = pt(a) - p.nominal;
+      continue;
+    }
+    if (t == nullptr) fail("truth", "no truth for parameter '" + p.name + "'");
+    const int a = axis_of(p.name);
+    x(i) = p.is_angle ? Wrap(t->rpy(a) - p.nominal) : t->xyz(a) - p.nominal;
+  }
+  return x;
+}
+
+Cell MakeSimCell(const io::BuiltCell& cell, const CellSimSpec& sim) {
+  return MakeCell(cell.model, TrueErrors(cell, sim), sim.seed,
+                  cell.spec.measures_orientation() ? kinematics::MeasurementKind::kFullPose
+                                                   : kinematics::MeasurementKind::kPositionOnly);
+}
+
+RunSettings SimRunSettings(const io::BuiltCell& cell, const CellSimSpec& sim) {
+  RunSettings s;
+  s.seed = sim.seed;
+  s.num_cal = sim.num_cal;
+  s.num_test = sim.num_test;
+  s.num_extra = sim.num_extra;
+  s.noise_scale = sim.noise_scale;
+  s.still_time = sim.still_time;
+  s.gyro_bias = sim.gyro_bias;
+  s.mag_disturbance = sim.mag_disturbance;
+  s.dropout = sim.dropout;
+  s.orientation = cell.spec.imu.has_value();
+  return s;
+}
+
+sim::SensorSimSettings SimSensorSettings(const io::BuiltCell& cell, const CellSimSpec& sim) {
+  sim::SensorSimSettings ss;
+  const auto& spec = cell.spec;
+  const double k = sim.noise_scale;
+  ss.rate_hz = spec.imu ? spec.imu->rate : spec.position.rate;
+  if (spec.imu) {
+    const io::ImuSensorSpec& imu = *spec.imu;
+    ss.imu.rate_hz = imu.rate;
+    ss.imu.gyro_noise_density = imu.gyro_noise_density;
+    ss.imu.accel_noise_density = imu.accel_noise_density;
+    ss.imu.mag_noise_density = imu.mag_noise_density * 1e6;  // [T/√Hz] → the simulator's µT
+    const bool ned = imu.earth == estimation::EarthFrame::kNed;
+    ss.imu.g_W = Eigen::Vector3d(0, 0, ned ? imu.gravity : -imu.gravity);
+    // The default field (20 µT north, 44 µT down) in the cell's earth frame.
+    ss.imu.m_W = ned ? Eigen::Vector3d(20.0, 0.0, 44.0) : Eigen::Vector3d(0.0, 20.0, -44.0);
+    if (!imu.R_IS.isIdentity()) {
+      ss.imu.mounting = true;
+      ss.imu.R_SI = imu.R_IS.transpose();
+    }
+  }
+  ss.imu.gyro_noise_density *= k;
+  ss.imu.accel_noise_density *= k;
+  ss.imu.mag_noise_density *= k;
+  ss.position.rate_hz = spec.position.rate;
+  if (ss.position.rate_hz > ss.rate_hz)
+    throw std::runtime_error(sim.source + ": the simulator samples the position sensor on the " +
+                             "IMU's clock: sensors.position.rate " +
+                             std::to_string(ss.position.rate_hz) + " Hz above sensors.imu.rate " +
+                             std::to_string(ss.rate_hz) + " Hz (" + spec.source + ")");
+  ss.position.sigma = spec.position.sigma.maxCoeff() * k;
+  // The run's switches, with SimulateWindows' values.
+  if (sim.gyro_bias) {
+    ss.imu.constant_bias = true;
+    ss.imu.gyro_bias = Eigen::Vector3d(0.004, -0.003, 0.005);  // [rad/s]
+    ss.imu.bias_random_walk = true;
+  }
+  ss.mag_disturbance = sim.mag_disturbance;
+  ss.position.dropouts = sim.dropout > 0;
+  ss.position.dropout_probability = sim.dropout;
+  return ss;
+}
+
+}  // namespace rcal::cell

@@ -1,0 +1,328 @@
+// The simulated counterpart of a cell (cell/cell_sim_yaml.hpp): the demo's sim file is exactly
+// today's MakeCell(GRB3016, seed 1), run settings and simulated sensors; the pipeline the demo's
+// cell builds is the one still_window builds today; every shipped sim file puts the set-up frames
+// where it says (checked on a second model whose nominal frames are the truth); bad files and
+// truths that do not fit their cell are refused naming the key.
+#include "rcal/cell/cell_sim_yaml.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <functional>
+#include <string>
+
+#include "../io/settings_eq.hpp"
+#include "rcal/io/atomic_file.hpp"
+#include "rcal/sim/pose_sim.hpp"
+
+namespace rcal::cell {
+namespace {
+
+std::filesystem::path CellsDir() {
+  return std::filesystem::path(RCAL_SOURCE_DIR) / "config" / "cells";
+}
+
+std::string ErrorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const std::runtime_error& e) {
+    return e.what();
+  }
+  return "<no error>";
+}
+
+void Replace(std::string& text, const std::string& from, const std::string& to) {
+  const auto at = text.find(from);
+  ASSERT_NE(at, std::string::npos) << from;
+  text.replace(at, from.size(), to);
+}
+
+struct Loaded {
+  io::BuiltCell cell;
+  CellSimSpec sim;
+};
+
+Loaded Load(const std::string& name) {
+  CellSimSpec sim = LoadCellSimSpec(CellsDir() / (name + ".sim.yaml"));
+  EXPECT_EQ(sim.cell, (CellsDir() / (name + ".yaml")).lexically_normal());
+  return {io::LoadCell(sim.cell), sim};
+}
+
+TEST(CellSimYaml, DemoSimFileIsTodaysSimulatedCell) {
+  const Loaded d = Load("grb3016");
+  const Cell a = MakeSimCell(d.cell, d.sim);
+  const Cell b = MakeCell(d.cell.robot.spec, 1);  // today's: ekf_identifier --cell-seed 1
+  ASSERT_EQ(a.model.num_params(), b.model.num_params());
+  for (int i = 0; i < a.model.num_params(); ++i) {
+    EXPECT_EQ(a.model.parameters()[i].name, b.model.parameters()[i].name);
+    EXPECT_EQ(a.model.parameters()[i].nominal, b.model.parameters()[i].nominal);
+    // The truth written as frames: truth − nominal, exact to a rounding.
+    EXPECT_NEAR(a.x_true(i), b.x_true(i), 1e-15) << a.model.parameters()[i].name;
+  }
+  EXPECT_EQ(a.base, b.base);
+  EXPECT_EQ(a.setup, b.setup);
+  EXPECT_EQ(a.ident.rank, b.ident.rank);
+  EXPECT_LT((a.x_eq - b.x_eq).cwiseAbs().maxCoeff(), 1e-12);
+
+  // The run: RunSettings{} (the demo's programme, seed 1).
+  const RunSettings rs = SimRunSettings(d.cell, d.sim), today;
+  EXPECT_EQ(rs.seed, today.seed);
+  EXPECT_EQ(rs.num_cal, today.num_cal);
+  EXPECT_EQ(rs.num_test, today.num_test);
+  EXPECT_EQ(rs.num_extra, today.num_extra);
+  EXPECT_EQ(rs.noise_scale, today.noise_scale);
+  EXPECT_EQ(rs.still_time, today.still_time);
+  EXPECT_EQ(rs.gyro_bias, today.gyro_bias);
+  EXPECT_EQ(rs.mag_disturbance, today.mag_disturbance);
+  EXPECT_EQ(rs.dropout, today.dropout);
+  EXPECT_EQ(rs.orientation, today.orientation);
+
+  // The sensors: what SimulateWindows builds for RunSettings{} (SensorSimSettings{}, no dropout).
+  const sim::SensorSimSettings s = SimSensorSettings(d.cell, d.sim), t;
+  EXPECT_EQ(s.rate_hz, t.rate_hz);
+  EXPECT_EQ(s.imu.rate_hz, t.imu.rate_hz);
+  EXPECT_EQ(s.imu.g_W, t.imu.g_W);
+  EXPECT_EQ(s.imu.m_W, t.imu.m_W);
+  EXPECT_EQ(s.imu.white_noise, t.imu.white_noise);
+  EXPECT_EQ(s.imu.gyro_noise_density, t.imu.gyro_noise_density);
+  EXPECT_EQ(s.imu.accel_noise_density, t.imu.accel_noise_density);
+  EXPECT_DOUBLE_EQ(s.imu.mag_noise_density, t.imu.mag_noise_density);  // T → µT
+  EXPECT_EQ(s.imu.constant_bias, t.imu.constant_bias);
+  EXPECT_EQ(s.imu.bias_random_walk, t.imu.bias_random_walk);
+  EXPECT_EQ(s.imu.mounting, t.imu.mounting);
+  EXPECT_EQ(s.position.rate_hz, t.position.rate_hz);
+  EXPECT_EQ(s.position.noise, t.position.noise);
+  EXPECT_EQ(s.position.sigma, t.position.sigma);
+  EXPECT_EQ(s.position.dropouts, false);
+  EXPECT_EQ(s.position.dropout_probability, 0.0);
+  EXPECT_EQ(s.mag_disturbance, t.mag_disturbance);
+
+  // The pose pipeline of the demo's cell is still_window's today (services/still_window/main.cpp:
+  // PosePipelineSettings{} with the simulator's position σ and gyro noise density).
+  estimation::PosePipelineSettings ps;
+  ps.position.position_sigma = t.position.sigma;
+  ps.orientation.gyro_noise_density = t.imu.gyro_noise_density;
+  ps.use_orientation = true;
+  rcal::testing::ExpectSameSettings(d.cell.pipeline, ps);
+}
+
+TEST(CellSimYaml, SwitchesReachTheSensors) {
+  Loaded d = Load("grb3016");
+  d.sim.noise_scale = 2.0;
+  d.sim.gyro_bias = true;
+  d.sim.mag_disturbance = true;
+  d.sim.dropout = 0.1;
+  const sim::SensorSimSettings s = SimSensorSettings(d.cell, d.sim), t;
+  EXPECT_EQ(s.imu.gyro_noise_density, 2.0 * t.imu.gyro_noise_density);
+  EXPECT_EQ(s.imu.accel_noise_density, 2.0 * t.imu.accel_noise_density);
+  EXPECT_DOUBLE_EQ(s.imu.mag_noise_density, 2.0 * t.imu.mag_noise_density);
+  EXPECT_EQ(s.position.sigma, 2.0 * t.position.sigma);
+  EXPECT_TRUE(s.imu.constant_bias && s.imu.bias_random_walk);
+  EXPECT_EQ(s.imu.gyro_bias, Eigen::Vector3d(0.004, -0.003, 0.005));  // SimulateWindows' bias
+  EXPECT_TRUE(s.mag_disturbance);
+  EXPECT_TRUE(s.position.dropouts);
+  EXPECT_EQ(s.position.dropout_probability, 0.1);
+  const RunSettings rs = SimRunSettings(d.cell, d.sim);
+  EXPECT_EQ(rs.noise_scale, 2.0);
+  EXPECT_TRUE(rs.gyro_bias && rs.mag_disturbance);
+  EXPECT_EQ(rs.dropout, 0.1);
+}
+
+// The panda's IMU has turned axes, the UR10 none: the simulator's mounting and the run's
+// orientation follow.
+TEST(CellSimYaml, ImuAxesAndPositionOnlyCells) {
+  const Loaded p = Load("panda");
+  const sim::SensorSimSettings s = SimSensorSettings(p.cell, p.sim);
+  EXPECT_TRUE(s.imu.mounting);
+  // axes [-y, x, z]: a vector along the mounting frame's x reads along the sensor's −y.
+  EXPECT_EQ(s.imu.R_SI * Eigen::Vector3d::UnitX(), -Eigen::Vector3d::UnitY());
+  EXPECT_EQ(s.imu.gyro_noise_density, 1.5e-4);
+  EXPECT_EQ(s.position.sigma, 3e-5);
+  EXPECT_TRUE(SimRunSettings(p.cell, p.sim).orientation);
+  const Loaded u = Load("ur10");
+  EXPECT_FALSE(SimRunSettings(u.cell, u.sim).orientation);
+  // The tracker's worst axis (the simulator draws one σ for all three).
+  EXPECT_EQ(SimSensorSettings(u.cell, u.sim).position.sigma, 2e-4);
+  EXPECT_EQ(SimRunSettings(u.cell, u.sim).num_cal, 40);
+}
+
+// Independent truth: a second model whose nominal set-up frames are the sim file's truth, at the
+// arm's errors only, must put every marker and the IMU where the cell's model at TrueErrors does.
+TEST(CellSimYaml, TruthFramesAreWhereTheSimFileSaysThem) {
+  for (const std::string name : {"grb3016", "ur10", "panda"}) {
+    SCOPED_TRACE(name);
+    const Loaded d = Load(name);
+    const Eigen::VectorXd x = TrueErrors(d.cell, d.sim);
+    io::RobotSpec truth = d.cell.robot_spec;
+    truth.base->xyz = d.sim.world_from_base->xyz;
+    truth.base->rpy = d.sim.world_from_base->rpy;
+    for (auto& m : truth.markers)
+      for (const auto& [id, p] : d.sim.markers)
+        if (id == m.id) m.xyz = p;
+    if (truth.imu) truth.imu->rpy = d.sim.flange_to_imu->rpy;
+    if (truth.earth) truth.earth->rpy = d.sim.earth_from_world->rpy;
+    const kinematics::KinematicModel other = io::BuildModel(truth);
+    ASSERT_EQ(other.num_params(), d.cell.model.num_params());
+    Eigen::VectorXd x_other = other.Nominal();
+    for (int i = 0; i < other.num_params(); ++i)
+      if (!kinematics::IsSetupGroup(other.parameters()[i].group)) x_other(i) = x(i);
+    // The arm's errors are what the file asks for.
+    if (d.sim.arm_errors == ArmErrorsKind::kTable3) {
+      EXPECT_DOUBLE_EQ(x(d.cell.model.FindParameter("a1")), 3.596e-3);
+    } else {
+      double sum2 = 0;
+      int n = 0;
+      for (int i = 0; i < x.size(); ++i)
+        if (!kinematics::IsSetupGroup(other.parameters()[i].group) &&
+            !other.parameters()[i].is_angle) {
+          sum2 += x(i) * x(i);
+          ++n;
+        }
+      EXPECT_GT(std::sqrt(sum2 / n), 0.3 * d.sim.sigma_length);
+      EXPECT_LT(std::sqrt(sum2 / n), 3.0 * d.sim.sigma_length);
+    }
+    sim::Rng rng(5);
+    for (const Eigen::VectorXd& q : sim::SampleJoints(d.cell.model, 10, rng))
+      for (size_t slot = 0; slot < d.cell.model.markers().size(); ++slot) {
+        const auto a = d.cell.model.ForMarker(static_cast<int>(slot)).Forward(q, x);
+        const auto b = other.ForMarker(static_cast<int>(slot)).Forward(q, x_other);
+        EXPECT_LT((a.p_WM_W - b.p_WM_W).norm(), 1e-12);
+        EXPECT_LT((a.R_EI - b.R_EI).norm(), 1e-12);
+      }
+  }
+}
+
+// The truth on the base set reproduces the truth robot for every shipped sim cell, full poses
+// (Panda) or positions only (UR10), and the set-up frames are in the base set. Except marker 2 of
+// the UR10: today's simulated cell measures the model's first marker only (MakeCell's
+// identifiability over joints, SimulateWindows' windows), so a second marker's offset is not seen.
+// Measuring every marker is for the sim source's integration; this test then loses its exception.
+TEST(CellSimYaml, EveryShippedSimCellHasItsSetUpInTheBaseSet) {
+  for (const std::string name : {"ur10", "panda"}) {
+    SCOPED_TRACE(name);
+    const Loaded d = Load(name);
+    const Cell c = MakeSimCell(d.cell, d.sim);
+    EXPECT_EQ(static_cast<int>(c.base.size()), c.ident.rank);
+    EXPECT_LT(c.eq_residual_m, 1e-6);
+    std::vector<std::string> unseen;
+    for (int i : c.setup)
+      if (!std::binary_search(c.base.begin(), c.base.end(), i))
+        unseen.push_back(c.model.parameters()[i].name);
+    const std::vector<std::string> expected =
+        name == "ur10" ? std::vector<std::string>{"marker2_x", "marker2_y", "marker2_z"}
+                       : std::vector<std::string>{};
+    EXPECT_EQ(unseen, expected);
+  }
+}
+
+TEST(CellSimYaml, TruthMustFitTheCell) {
+  Loaded d = Load("grb3016");
+  CellSimSpec s = d.sim;
+  s.flange_to_imu.reset();
+  EXPECT_NE(ErrorOf([&] {
+              TrueErrors(d.cell, s);
+            }).find("grb3016.sim.yaml: truth.flange_to_imu: missing: the cell"),
+            std::string::npos);
+  s = d.sim;
+  s.markers.push_back({5, Eigen::Vector3d::Zero()});
+  EXPECT_NE(ErrorOf([&] {
+              TrueErrors(d.cell, s);
+            }).find("truth.markers: marker 5 is not identified by the cell"),
+            std::string::npos);
+  s = d.sim;
+  s.markers.clear();
+  EXPECT_NE(ErrorOf([&] {
+              TrueErrors(d.cell, s);
+            }).find("truth.markers: marker 0 is identified by the cell"),
+            std::string::npos);
+  const Loaded u = Load("ur10");
+  s = u.sim;
+  s.arm_errors = ArmErrorsKind::kTable3;
+  EXPECT_NE(ErrorOf([&] {
+              TrueErrors(u.cell, s);
+            }).find("ur10.sim.yaml: arm_errors: table3 is the GRB3016's D–H table"),
+            std::string::npos);
+  s = u.sim;
+  s.earth_from_world = TrueFrame{};
+  EXPECT_NE(ErrorOf([&] { TrueErrors(u.cell, s); }).find("truth.earth_from_world: the cell"),
+            std::string::npos);
+}
+
+struct BadCase {
+  std::string replace, with, expected;
+};
+
+void PrintTo(const BadCase& c, std::ostream* os) {
+  *os << "'" << c.with << "'";
+}
+
+class CellSimYamlBadInput : public ::testing::TestWithParam<BadCase> {};
+
+TEST_P(CellSimYamlBadInput, ErrorNamesFileAndKey) {
+  const BadCase& c = GetParam();
+  std::string text = io::ReadFile(CellsDir() / "grb3016.sim.yaml");
+  Replace(text, c.replace, c.with);
+  const std::string msg = ErrorOf([&] { ParseCellSimYaml(text, "grb3016.sim.yaml"); });
+  EXPECT_EQ(msg.rfind("grb3016.sim.yaml: ", 0), 0u) << msg;
+  EXPECT_NE(msg.find(c.expected), std::string::npos) << msg;
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Cases, CellSimYamlBadInput,
+    ::testing::Values(
+        BadCase{"seed: 1", "seed: 1\nsede: 2", "sede: unknown key"},
+        BadCase{"schema: rcal.cell_sim/1", "schema: rcal.cell/1",
+                "schema: expected rcal.cell_sim/1"},
+        BadCase{"seed: 1\n", "", "seed: missing key"},
+        BadCase{"cell: grb3016.yaml\n", "", "cell: missing key"},
+        BadCase{"seed: 1", "seed: -3", "seed: expected an integer from 0 to 4294967295"},
+        BadCase{"arm_errors: table3", "arm_errors: table4",
+                "arm_errors: expected none, table3 or {sigma_length"},
+        BadCase{"arm_errors: table3", "arm_errors: {sigma_length: 0.5, sigma_angle: 1e-3}",
+                "arm_errors.sigma_length: 0.5 m is beyond"},
+        BadCase{"arm_errors: table3", "arm_errors: {sigma_length: 5e-4, sigma_angle: 2}",
+                "arm_errors.sigma_angle: 2 rad is beyond"},
+        BadCase{"arm_errors: table3", "arm_errors: {sigma_length: 5e-4}",
+                "arm_errors.sigma_angle: missing key"},
+        BadCase{"rpy: [-0.01, 0.017, 0.87]", "rpy: [-0.01, 0.017, 50]",
+                "truth.earth_from_world.rpy[2]: beyond 2π: degrees?"},
+        BadCase{"{xyz: [1.6, -0.35, 0.42],", "{xyz: [1600, -0.35, 0.42],",
+                "truth.world_from_base.xyz[0]: '1600' is beyond 100 m"},
+        BadCase{"{id: 0, xyz: [0.034, -0.003, 0.122]}", "{id: 0, xyz: [34, -3, 22]}",
+                "truth.markers[0].xyz: beyond 2 m from the flange: millimetres?"},
+        BadCase{"flange_to_imu: {rpy:", "flange_to_imu: {xyz: [0, 0, 0], rpy:",
+                "truth.flange_to_imu.xyz: unknown key"},
+        BadCase{"  still_time: 1.5 ", "  still_time: 1500 ", "run.still_time: 1500 s is beyond"},
+        BadCase{"  test_poses: 50", "  test_poses: 50.5",
+                "run.test_poses: expected an integer from 0 to 100000"},
+        BadCase{"  test_poses: 50", "  dropout: 10", "run.dropout: 10 is beyond"},
+        BadCase{"  test_poses: 50", "  gyro_bias: on", "run.gyro_bias: expected true or false"},
+        BadCase{"  test_poses: 50", "  noise: 2", "run.noise: unknown key"}));
+
+// Every shipped sim cell runs through today's simulated cell and calibrates: the shipped set-ups
+// are reachable, every stop gives a window, and the arm and set-up are identified. A short
+// programme (30 + 20 stops); the figures are printed (seed of each file: 0.029, 0.039, 0.050 mm).
+// SimulateWindows still simulates its own default sensors (SimSensorSettings is not wired in:
+// issue 13's sim source), and RunOnline the experiment's EKF (cell::MakeEkf).
+TEST(CellSimYaml, EveryShippedSimCellCalibrates) {
+  for (const std::string name : {"grb3016", "ur10", "panda"}) {
+    SCOPED_TRACE(name);
+    const Loaded d = Load(name);
+    const Cell c = MakeSimCell(d.cell, d.sim);
+    RunSettings rs = SimRunSettings(d.cell, d.sim);
+    rs.num_cal = 30;
+    rs.num_test = 20;
+    const Windows w = SimulateWindows(c, rs);
+    EXPECT_EQ(w.missing, 0);
+    std::vector<Eigen::VectorXd> test_q;
+    for (const auto& m : w.test) test_q.push_back(m.q);
+    const OnlineResult r = RunOnline(c, w.cal, test_q, d.cell.spec.identifier.guess_poses);
+    std::printf("%s: windows %.3f mm, %d accepted, %d rejected, test error %.3f mm\n", name.c_str(),
+                w.mean_position_error_m * 1e3, r.accepted, r.rejected,
+                r.test_error_after_pose_mm.back());
+    EXPECT_LT(r.test_error_after_pose_mm.back(), 0.2);  // before: millimetres
+  }
+}
+
+}  // namespace
+}  // namespace rcal::cell
