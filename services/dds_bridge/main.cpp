@@ -23,6 +23,7 @@
 
 #include "rcal/dds/convert.hpp"
 #include "rcal/dds/dds_common.hpp"
+#include "rcal/io/cell_yaml.hpp"
 #include "rcal/services/common.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/health.hpp"
@@ -31,10 +32,10 @@
 namespace {
 
 using namespace rcal;
-namespace ch = transport::channels;
 
 struct Options {
   std::string robot_id;
+  io::CellChannels channels;  // the LCM channels it subscribes (the cell's, else the table's)
   std::string lcm_url;
   int dds_domain = -1;  // -1: Cyclone's default (DDS_DOMAIN_DEFAULT)
   std::string name = "dds_bridge";
@@ -59,15 +60,16 @@ class Bridge {
       Reject(e);
     };
     t_.Subscribe<kinematic_params_t>(
-        ch::kKinematicParams, [this](const kinematic_params_t& m) { OnParams(m); }, undecodable);
+        o_.channels.kinematic_params, [this](const kinematic_params_t& m) { OnParams(m); },
+        undecodable);
     t_.Subscribe<calibration_status_t>(
-        ch::kCalibrationStatus, [this](const calibration_status_t& m) { OnStatus(m); },
+        o_.channels.calibration_status, [this](const calibration_status_t& m) { OnStatus(m); },
         undecodable);
     t_.Subscribe<orientation_estimate_t>(
-        ch::kOrientation, [this](const orientation_estimate_t& m) { OnOrientation(m); },
+        o_.channels.orientation, [this](const orientation_estimate_t& m) { OnOrientation(m); },
         undecodable);
     t_.Subscribe<tool_position_estimate_t>(
-        ch::kToolPosition, [this](const tool_position_estimate_t& m) { OnToolPosition(m); },
+        o_.channels.tool_position, [this](const tool_position_estimate_t& m) { OnToolPosition(m); },
         undecodable);
     health_.Tick(0, t_);  // "up": the subscriptions are in place
   }
@@ -161,16 +163,30 @@ int main(int argc, char** argv) {
       "(topics rt/rcal/kinematic_params, rt/rcal/calibration_status, rt/rcal/tool_pose; ROS 2\n"
       "types rcal_msgs/msg/*). Cyclone DDS: $CYCLONEDDS_URI, else config/cyclonedds-loopback.xml.\n"
       "LCM URL: --lcm-url, else $RCAL_LCM_URL, else udpm://239.255.76.67:7667?ttl=0."};
+  std::string cell_path;
+  auto* cell_opt = app.add_option("--cell", cell_path,
+                                  "cell file (schema rcal.cell/1): the robot id (the identifier's, "
+                                  "its robot file's name) and the LCM channels");
   app.add_option("--robot-id", o.robot_id,
-                 "robot id on every DDS message; KINEMATIC_PARAMS of other robots are rejected")
-      ->required();
+                 "robot id on every DDS message (default: the cell's); KINEMATIC_PARAMS of other "
+                 "robots are rejected");
   app.add_option("--lcm-url", o.lcm_url, "LCM URL");
   app.add_option("--dds-domain", o.dds_domain, "DDS domain id (-1: Cyclone's default, 0)")
       ->capture_default_str();
   app.add_option("--name", o.name, "process name in HEALTH")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
+  if (cell_opt->count() > 0) {
+    try {
+      const io::BuiltCell cell = io::LoadCell(rcal::services::RepoPath(cell_path));
+      if (o.robot_id.empty()) o.robot_id = cell.model.name();
+      o.channels = cell.spec.channels;
+    } catch (const std::exception& e) {
+      spdlog::error("--cell: {}", e.what());
+      return 2;
+    }
+  }
   if (o.robot_id.empty()) {
-    spdlog::error("--robot-id: empty");
+    spdlog::error("--robot-id: empty (give --cell or --robot-id)");
     return 2;
   }
 

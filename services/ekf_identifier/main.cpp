@@ -18,14 +18,16 @@
 // counted in HEALTH gaps. Joints beyond the model's limits by more than --joint-margin and
 // positions beyond transport::SensorRanges::position are refused naming the field.
 //
-// --cell-seed S (sensor level): the model, base set and start of the offline
-// `rcal experiment paper --sensors --seed S` (rcal::cell::MakeCell: the arm plus the set-up
-// frames base/earth/marker/IMU). The first --guess-poses poses are held back, the set-up guess is
-// fitted to them (SetupGuess), the EKF is started there (MakeEkf) and then updated with them and
-// every later pose, exactly as the offline RunOnline. The pose-by-pose logic is
-// rcal::cell::OnlineIdentification, which `rcal calibrate --log` runs offline on a recorded log.
-// The held poses are checkpointed too (schema rcal.ekf_checkpoint/2, `held`), so a restart during
-// the guess phase keeps them.
+// --cell FILE (schema rcal.cell/1, config/cells/): the arm, its set-up frames (world ← base,
+// flange → marker per marker id, flange → IMU, earth ← world), what the cell measures, the priors
+// and the identifier settings. Frames the cell file says to guess: the first
+// identifier.guess_poses poses are held back, the set-up guessed from them
+// (identification::GuessSetup), the EKF started there and then updated with them and every later
+// pose. The pose-by-pose logic is rcal::cell::OnlineIdentification, which
+// `rcal calibrate --log LOG --cell FILE` runs offline on a recorded log: the same parameters. No
+// simulator is involved: a simulated cell is a source of data like any driver. The held poses
+// are checkpointed too (schema rcal.ekf_checkpoint/3, `held`), so a restart during the guess
+// phase keeps them.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -40,7 +42,7 @@
 #include "rcal/estimation/time_gate.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
 #include "rcal/identification/metrics.hpp"
-#include "rcal/io/robot_urdf.hpp"
+#include "rcal/io/cell_yaml.hpp"
 #include "rcal/kinematics/identifiability.hpp"
 #include "rcal/services/common.hpp"
 #include "rcal/services/time_options.hpp"
@@ -67,16 +69,11 @@ estimation::TimeGateSettings PoseTimeGate() {
 }
 
 struct Options {
-  std::string robot = "config/robots/grb3016.yaml";
+  std::string cell = "config/cells/grb3016.yaml";
   std::string checkpoint;  // empty: no checkpoint
   std::string lcm_url;
-  unsigned ident_seed = 1;
-  unsigned cell_seed = 0;  // > 0: the sensor-level experiment's cell
-  int guess_poses = 6;
-  bool position_only = false;
   std::string name = "ekf_identifier";
   estimation::TimeGateSettings time = PoseTimeGate();
-  double joint_margin = 0.1;  // [rad | m] beyond the joint limits
 };
 
 class Identifier {
@@ -84,21 +81,21 @@ class Identifier {
   Identifier(const Options& o, transport::Transport& t)
       : o_(o),
         t_(t),
-        robot_(io::LoadRobot(services::RepoPath(o.robot))),
-        id_(robot_.spec, robot_.model, {o.ident_seed, o.cell_seed, o.guess_poses, o.position_only}),
+        id_(io::LoadCell(services::RepoPath(o.cell))),
+        channels_(id_.cell().spec.channels),
         model_id_(transport::ModelId(id_.model())),
         health_(o.name),
         gate_(o.time) {
-    if (id_.cell())
-      spdlog::info(
-          "cell of seed {}: {} parameters, base set of {}; set-up guess from the first {} poses",
-          o.cell_seed, id_.model().num_params(), id_.base().size(), o.guess_poses);
-    else
-      spdlog::info("{}: {} of {} parameters identifiable", id_.model().name(), id_.base().size(),
-                   id_.model().num_params());
+    const io::BuiltCell& cell = id_.cell();
+    spdlog::info("cell {} ({}): chain {} → {}, {} of {} parameters identifiable{}", cell.spec.name,
+                 cell.spec.source, cell.robot_spec.base_link, cell.robot_spec.tip_link,
+                 id_.base().size(), id_.model().num_params(),
+                 id_.started() ? std::string()
+                               : "; set-up guess from the first " +
+                                     std::to_string(cell.spec.identifier.guess_poses) + " poses");
     if (!o.checkpoint.empty() && std::filesystem::exists(o.checkpoint)) Resume();
     t_.Subscribe<pose_measurement_t>(
-        ch::kPoseMeasurement, [this](const pose_measurement_t& m) { OnPose(m); },
+        channels_.pose_measurement, [this](const pose_measurement_t& m) { OnPose(m); },
         [this](const std::string& e) {
           health_.Received();
           Reject(e);
@@ -110,10 +107,11 @@ class Identifier {
   void PublishCurrent() {
     const auto& ekf = id_.ekf();
     const int64_t utime = ekf.accepted() > 0 ? id_.last_utime() : 0;
-    if (ekf.accepted() > 0 && t_.Publish(ch::kKinematicParams, transport::ToKinematicParams(
-                                                                   ekf, id_.model().name(), utime)))
+    if (ekf.accepted() > 0 &&
+        t_.Publish(channels_.kinematic_params,
+                   transport::ToKinematicParams(ekf, id_.model().name(), utime)))
       health_.Published();
-    if (t_.Publish(ch::kCalibrationStatus, transport::ToCalibrationStatus(ekf, {}, utime)))
+    if (t_.Publish(channels_.calibration_status, transport::ToCalibrationStatus(ekf, {}, utime)))
       health_.Published();
   }
 
@@ -154,15 +152,16 @@ class Identifier {
     if (gate_.last()) health_.Tick(*gate_.last(), t_);
   }
 
-  // Joints within the model's limits (+ margin) and the position within the sensor's range.
+  // Joints within the model's limits (+ the cell's margin) and the position within the sensor's
+  // range.
   std::string Implausible(const kinematics::PoseMeasurement& z) const {
     const auto& joints = id_.model().joints();
+    const double margin = id_.cell().spec.identifier.joint_margin;
     for (int i = 0; i < z.q.size() && i < static_cast<int>(joints.size()); ++i)
-      if (z.q(i) < joints[i].lower - o_.joint_margin || z.q(i) > joints[i].upper + o_.joint_margin)
+      if (z.q(i) < joints[i].lower - margin || z.q(i) > joints[i].upper + margin)
         return "pose_measurement.q[" + std::to_string(i) + "]: " + std::to_string(z.q(i)) +
                " is beyond the joint's limits [" + std::to_string(joints[i].lower) + ", " +
-               std::to_string(joints[i].upper) + "] by more than " +
-               std::to_string(o_.joint_margin);
+               std::to_string(joints[i].upper) + "] by more than " + std::to_string(margin);
     if (const double r = z.p_WM_W.norm(); r > transport::SensorRanges{}.position)
       return "pose_measurement.p: " + std::to_string(r) +
              " m from the sensor is beyond the position sensor's range";
@@ -204,11 +203,12 @@ class Identifier {
       return;
     }
     if (out.held) {
+      const int guess_poses = id_.cell().spec.identifier.guess_poses;
       if (!out.started) SaveState();  // before the log line: a logged held pose survives a kill
-      spdlog::info("pose {}: held for the set-up guess ({} of {})", msg.pose_index,
-                   out.started ? o_.guess_poses : static_cast<int>(id_.held().size()),
-                   o_.guess_poses);
-      if (out.started) spdlog::info("set-up guess from {} poses; EKF started", o_.guess_poses);
+      spdlog::info("pose {} (pose_index {}): held for the set-up guess ({} of {})",
+                   msg.pose_index + 1, msg.pose_index,
+                   out.started ? guess_poses : static_cast<int>(id_.held().size()), guess_poses);
+      if (out.started) spdlog::info("set-up guess from {} poses; EKF started", guess_poses);
       if (!out.started) health_.Tick(msg.utime, t_);
     }
   }
@@ -228,9 +228,10 @@ class Identifier {
                     u.max_step_sigma < 0.1;
     Publish(u.utime, fig);
     health_.Tick(u.utime, t_);
-    spdlog::info("pose {}: {} (accepted {}, rejected {}, NIS {:.2f})", u.pose_index,
-                 u.result.accepted ? "accepted" : "rejected", ekf.accepted(), ekf.rejected(),
-                 u.result.nis);
+    // Poses are numbered from 1 as `rcal watch` numbers them (pose_index counts from 0).
+    spdlog::info("pose {} (pose_index {}): {} (accepted {}, rejected {}, NIS {:.2f})",
+                 u.pose_index + 1, u.pose_index, u.result.accepted ? "accepted" : "rejected",
+                 ekf.accepted(), ekf.rejected(), u.result.nis);
   }
 
   // The EKF state and the poses held for the set-up guess, atomically (--checkpoint).
@@ -248,30 +249,25 @@ class Identifier {
   void Publish(int64_t utime, transport::StatusFigures fig) {
     const auto& ekf = id_.ekf();
     const auto& model = id_.model();
-    if (t_.Publish(ch::kKinematicParams, transport::ToKinematicParams(ekf, model.name(), utime)))
+    if (t_.Publish(channels_.kinematic_params,
+                   transport::ToKinematicParams(ekf, model.name(), utime)))
       health_.Published();
     const auto history = ekf.Checkpoint().history;
     if (!history.empty()) {
       const auto stats = identification::ErrorsAgainstMeasurements(model, ekf.x(), history);
       fig.rms_position_residual = stats.rms_position_m;
       fig.rms_orientation_residual = stats.rms_orientation_rad;
-      std::vector<Eigen::VectorXd> qs;
-      for (const auto& m : history) qs.push_back(m.q);
       fig.condition_number =
-          kinematics::AnalyzeIdentifiability(model, qs, ekf.x(),
-                                             history.front().has_orientation
-                                                 ? kinematics::MeasurementKind::kFullPose
-                                                 : kinematics::MeasurementKind::kPositionOnly)
-              .condition_number;
+          kinematics::AnalyzeIdentifiability(model, history, ekf.x()).condition_number;
     }
-    if (t_.Publish(ch::kCalibrationStatus, transport::ToCalibrationStatus(ekf, fig, utime)))
+    if (t_.Publish(channels_.calibration_status, transport::ToCalibrationStatus(ekf, fig, utime)))
       health_.Published();
   }
 
   Options o_;
   transport::Transport& t_;
-  io::LoadedRobot robot_;
   cell::OnlineIdentification id_;
+  io::CellChannels channels_;
   std::string model_id_;
   transport::Health health_;
   estimation::TimeGate gate_;
@@ -286,28 +282,16 @@ int main(int argc, char** argv) {
       "ekf_identifier: online EKF identification of the kinematic parameter errors.\n"
       "Subscribes POSE_MEASUREMENT; publishes KINEMATIC_PARAMS, CALIBRATION_STATUS and HEALTH.\n"
       "LCM URL: --lcm-url, else $RCAL_LCM_URL, else udpm://239.255.76.67:7667?ttl=0."};
-  app.add_option("--robot", o.robot, "robot YAML or URDF")->capture_default_str();
+  app.add_option("--cell", o.cell,
+                 "cell file (schema rcal.cell/1): the robot, set-up frames, sensors, priors and "
+                 "channels")
+      ->capture_default_str();
   app.add_option("--checkpoint", o.checkpoint,
                  "state file, written atomically after every accepted pose and resumed from at "
                  "start (empty: none)");
   app.add_option("--lcm-url", o.lcm_url, "LCM URL");
-  app.add_option("--ident-seed", o.ident_seed,
-                 "seed of the joint sample that selects the identifiable parameter set")
-      ->capture_default_str();
-  app.add_flag("--position-only", o.position_only, "identify from positions only");
-  app.add_option("--cell-seed", o.cell_seed,
-                 "> 0: the model, base set and set-up guess of `rcal experiment paper --sensors "
-                 "--seed S` (arm + set-up frames)")
-      ->capture_default_str();
-  app.add_option("--guess-poses", o.guess_poses,
-                 "with --cell-seed: poses the set-up guess is fitted to before the EKF starts")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
   app.add_option("--name", o.name, "process name in HEALTH")->capture_default_str();
   services::AddTimeGateOptions(app, &o.time, "pose");
-  app.add_option("--joint-margin", o.joint_margin,
-                 "joints beyond the model's limits by more than this are refused [rad | m]")
-      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
   try {

@@ -4,7 +4,9 @@
 // With --effects (an `rcal analyze` analysis.json or an `rcal calibrate --effects` result) the
 // calibrated answer is solved on the extended model: joint compliance, gear errors, backlash,
 // thermal growth as identified. The node (checks, conversions, HEALTH) is
-// rcal::transport::IkCorrectorNode.
+// rcal::transport::IkCorrectorNode. The model is the cell's (--cell FILE: the arm with its set-up
+// frames, the model ekf_identifier estimates), so a target is in the world (position sensor)
+// frame and places the cell's first marker.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -12,20 +14,23 @@
 #include <cmath>
 #include <cstring>
 
+#include "rcal/io/cell_yaml.hpp"
 #include "rcal/io/effects_json.hpp"
-#include "rcal/io/robot_urdf.hpp"
 #include "rcal/services/common.hpp"
 #include "rcal/transport/ik_corrector_node.hpp"
 #include "rcal/transport/lcm_transport.hpp"
 
 int main(int argc, char** argv) {
   using namespace rcal;
-  std::string robot_path = "config/robots/grb3016.yaml", lcm_url, effects_path;
+  std::string cell_path = "config/cells/grb3016.yaml", lcm_url, effects_path;
   transport::IkCorrectorNode::Options options;
   CLI::App app{
       "ik_corrector: IK_REQUEST -> IK_COMMAND on the calibrated model (latest KINEMATIC_PARAMS).\n"
       "LCM URL: --lcm-url, else $RCAL_LCM_URL, else udpm://239.255.76.67:7667?ttl=0."};
-  app.add_option("--robot", robot_path, "robot YAML or URDF")->capture_default_str();
+  app.add_option("--cell", cell_path,
+                 "cell file (schema rcal.cell/1): the arm and its set-up frames, as the "
+                 "identifier's")
+      ->capture_default_str();
   app.add_option("--name", options.name, "process name in HEALTH")->capture_default_str();
   app.add_option("--lcm-url", lcm_url, "LCM URL");
   app.add_option("--effects", effects_path,
@@ -42,20 +47,21 @@ int main(int argc, char** argv) {
   try {
     services::InstallStopHandlers();
     transport::LcmTransport t(lcm_url);
-    const auto robot = io::LoadRobot(services::RepoPath(robot_path));
+    const io::BuiltCell cell = io::LoadCell(services::RepoPath(cell_path));
+    const kinematics::KinematicModel& model = cell.model;
     if (!effects_path.empty()) {
       const io::AnalysisEffects ae =
-          io::ReadAnalysisEffects(services::RepoPath(effects_path), robot.model);
+          io::ReadAnalysisEffects(services::RepoPath(effects_path), model);
       options.effects = ae.effects;
       options.effect_values = ae.values;
       // The gravity model the compliance was fitted with, unless given here.
       if (std::isfinite(ae.link_density_kg_per_m) && app.count("--link-density") == 0)
         options.gravity.link_density_kg_per_m = ae.link_density_kg_per_m;
     }
-    transport::IkCorrectorNode node(t, robot.model, options);
+    transport::IkCorrectorNode node(t, model, options);
     node.Announce();
-    spdlog::info("ik_corrector on {} ({}, {} non-geometric effects)", t.url(), robot.model.name(),
-                 options.effects.size());
+    spdlog::info("ik_corrector on {}: cell {} ({}), {} non-geometric effects", t.url(),
+                 cell.spec.name, model.name(), options.effects.size());
     if (const int rc =
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
         rc != 0)

@@ -27,6 +27,7 @@
 #include <tuple>
 
 #include "rcal/io/atomic_file.hpp"
+#include "rcal/io/cell_yaml.hpp"
 #include "rcal/services/common.hpp"
 #include "rcal/services/time_options.hpp"
 #include "rcal/transport/channels.hpp"
@@ -88,10 +89,31 @@ int main(int argc, char** argv) {
   app.add_option("--state", state_path,
                  "file keeping the learned magnetic reference across restarts (JSON, written "
                  "atomically); a restart starts from it instead of learning it while moving");
+  std::string cell_path;
+  app.add_option("--cell", cell_path,
+                 "cell file (schema rcal.cell/1): the IMU's earth frame, gravity and ranges and "
+                 "the channels; --earth and --gravity, when given, override it");
   CLI11_PARSE(app, argc, argv);
   settings.earth = earth == "enu" ? estimation::EarthFrame::kEnu : estimation::EarthFrame::kNed;
 
   try {
+    if (!cell_path.empty()) {
+      const io::CellSpec cell = io::LoadCellSpec(services::RepoPath(cell_path));
+      if (!cell.imu)
+        throw std::runtime_error(cell.source +
+                                 ": sensors.imu: absent, the cell has no IMU for orientation_kf");
+      if (app.count("--earth") == 0) {
+        settings.earth = cell.imu->earth;
+        earth = cell.imu->earth == estimation::EarthFrame::kEnu ? "enu" : "ned";
+      }
+      if (app.count("--gravity") == 0) settings.gravity = cell.imu->gravity;
+      options.ranges.gyro = cell.imu->gyro_range;
+      options.ranges.accel = cell.imu->accel_range;
+      options.ranges.mag = cell.imu->mag_range;
+      options.imu_channel = cell.channels.imu;
+      options.orientation_channel = cell.channels.orientation;
+      options.health_channel = cell.channels.health;
+    }
     services::InstallStopHandlers();
     if (!state_path.empty() && std::filesystem::exists(state_path)) {
       std::tie(settings.mag_ref_norm, settings.mag_ref_dip) = LoadMagReference(state_path);
@@ -105,7 +127,7 @@ int main(int argc, char** argv) {
     transport::LcmTransport t(lcm_url);
     if (settings.mag_ref_norm > 0) {
       // A restart: wait for the sensor to be at rest (see the file comment).
-      t.Subscribe<imu_sample_t>(transport::channels::kImu, [&](const imu_sample_t& m) {
+      t.Subscribe<imu_sample_t>(options.imu_channel, [&](const imu_sample_t& m) {
         std::string error;
         const auto s = transport::ImuFromMessage(m, &error);
         if (!s) return;

@@ -9,7 +9,9 @@
 #include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <stdexcept>
 
+#include "rcal/io/cell_yaml.hpp"
 #include "rcal/services/common.hpp"
 #include "rcal/services/time_options.hpp"
 #include "rcal/transport/filter_nodes.hpp"
@@ -41,11 +43,38 @@ int main(int argc, char** argv) {
   services::AddTimeGateOptions(app, &options.time, "sample");
   app.add_option("--name", options.name, "process name in HEALTH")->capture_default_str();
   app.add_option("--lcm-url", lcm_url, "LCM URL");
+  std::string cell_path;
+  app.add_option("--cell", cell_path,
+                 "cell file (schema rcal.cell/1): the IMU's earth frame, gravity and ranges, the "
+                 "position sensor's σ (its largest per axis) and first marker, the channels; "
+                 "--earth, --gravity, --position-sigma and --marker-id, when given, override it");
   CLI11_PARSE(app, argc, argv);
   settings.earth = earth == "enu" ? estimation::EarthFrame::kEnu : estimation::EarthFrame::kNed;
   options.orientation_wait_us = static_cast<int64_t>(orientation_wait * 1e6);
 
   try {
+    if (!cell_path.empty()) {
+      const io::CellSpec cell = io::LoadCellSpec(services::RepoPath(cell_path));
+      if (!cell.imu)
+        throw std::runtime_error(cell.source +
+                                 ": sensors.imu: absent, the cell has no IMU for position_kf");
+      if (app.count("--earth") == 0) {
+        settings.earth = cell.imu->earth;
+        earth = cell.imu->earth == estimation::EarthFrame::kEnu ? "enu" : "ned";
+      }
+      if (app.count("--gravity") == 0) settings.gravity = cell.imu->gravity;
+      if (app.count("--position-sigma") == 0)
+        settings.position_sigma = cell.position.sigma.maxCoeff();
+      if (app.count("--marker-id") == 0) options.marker_id = cell.position.markers.front();
+      options.ranges.gyro = cell.imu->gyro_range;
+      options.ranges.accel = cell.imu->accel_range;
+      options.ranges.mag = cell.imu->mag_range;
+      options.imu_channel = cell.channels.imu;
+      options.orientation_channel = cell.channels.orientation;
+      options.position_channel = cell.channels.position;
+      options.tool_position_channel = cell.channels.tool_position;
+      options.health_channel = cell.channels.health;
+    }
     services::InstallStopHandlers();
     transport::LcmTransport t(lcm_url);
     transport::PositionKfNode node(t, settings, options);

@@ -9,12 +9,15 @@
 // generator. Sensor time starts at --start-utime and advances 1/rate per pose; --speed paces
 // it against the wall clock (1: real time, 0: as fast as possible).
 //
-// Source `sim --level sensors`: the truth cell of the offline `rcal experiment paper --sensors`
-// (the arm's Table 3 errors plus the set-up frames: position-sensor base, earth, marker, IMU;
-// rcal::cell::MakeCell) moves through the same programme (home, then --poses calibration
-// stops drawn with the --test-poses test stops from mt19937_64(S·1000 + 3), 1.5 s still at each)
-// and rcal::sim::SensorSim publishes every 100 Hz tick as JOINTS, IMU (magnetic field in T) and
-// POSITION (when the sensor fired, covariance σ² I), utime = --start-utime + t_sim. The programme
+// Source `sim --level sensors --sim FILE.sim.yaml`: a simulated cell (schema rcal.cell_sim/1: the
+// cell file it simulates, plus the truth only the simulator knows: the arm's errors and the true
+// set-up frames; rcal::cell::MakeSimCell) moves through the programme of the offline
+// `rcal experiment paper --sensors` (home, then --poses calibration stops drawn with the
+// --test-poses test stops from mt19937_64(S·1000 + 3), the sim file's still time at each) and
+// rcal::sim::SensorSim, with the sensors the cell file declares (cell::SimSensorSettings),
+// publishes every tick as JOINTS, IMU (magnetic field in T) and POSITION (when the sensor fired,
+// covariance σ² I) on the cell's channels, utime = --start-utime + t_sim. The demo's sim file
+// (config/cells/grb3016.sim.yaml) is the experiment's cell of seed 1. The programme
 // ends with the move to the first test stop, so the last calibration window closes exactly as
 // offline and no test window follows. Paced by --speed (0: as fast as possible).
 //
@@ -45,7 +48,9 @@
 #include <optional>
 #include <thread>
 
+#include "rcal/cell/cell_sim_yaml.hpp"
 #include "rcal/cell/sim_cell.hpp"
+#include "rcal/io/cell_yaml.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/services/common.hpp"
 #include "rcal/sim/pose_sim.hpp"
@@ -166,14 +171,15 @@ class Lease {
   bool finished_ = false;
 };
 
-// The sensor-level simulation of the offline experiment's cell (see the file comment).
-int RunSensorSim(const rcal::io::LoadedRobot& robot, unsigned seed, int num_cal, int num_test,
-                 bool linger, int64_t start_utime, double speed, const Resume& resume,
-                 rcal::transport::LcmTransport& t) {
+// The sensor-level simulation of a cell (see the file comment): the cell file's model and sensors,
+// the sim file's truth.
+int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec& sim_spec,
+                 unsigned seed, int num_cal, int num_test, bool linger, int64_t start_utime,
+                 double speed, const Resume& resume, rcal::transport::LcmTransport& t) {
   using namespace rcal;
-  namespace ch = transport::channels;
-  const cell::Cell cell = cell::MakeCell(robot.spec, seed);
+  const cell::Cell cell = cell::MakeSimCell(built, sim_spec);
   const auto& model = cell.model;
+  const io::CellChannels& channels = built.spec.channels;
   // SimulateWindows' programme: the home pose, then the calibration and test stops.
   sim::Rng rng(seed * 1000 + 3);
   std::vector<Eigen::VectorXd> waypoints;
@@ -181,17 +187,18 @@ int RunSensorSim(const rcal::io::LoadedRobot& robot, unsigned seed, int num_cal,
   const auto stops = sim::SampleJoints(model, num_cal + num_test, rng);
   for (int k = 0; k < num_cal + std::min(num_test, 1); ++k) waypoints.push_back(stops[k]);
   sim::TrajectorySettings ts;
-  ts.still_time = 1.5;
+  ts.still_time = cell::SimRunSettings(built, sim_spec).still_time;
   const sim::ToolMotionTruth truth(model, cell.x_true, sim::JointTrajectory(waypoints, ts));
-  sim::SensorSimSettings ss;
+  const sim::SensorSimSettings ss = cell::SimSensorSettings(built, sim_spec);
   sim::SensorSim sensors(truth, ss, seed);
   const Eigen::Matrix3d pos_cov =
       ss.position.sigma * ss.position.sigma * Eigen::Matrix3d::Identity();
   transport::Health health("sensor_acquisition");
   spdlog::info(
-      "sensor_acquisition sim sensors on {}: seed {}, {} calibration stops, {} ticks "
-      "({:.1f} s of sensor time), speed {}",
-      t.url(), seed, num_cal, sensors.num_ticks(), truth.trajectory().duration(), speed);
+      "sensor_acquisition sim sensors on {}: cell {} ({}), seed {}, {} calibration stops, {} "
+      "ticks ({:.1f} s of sensor time), speed {}",
+      t.url(), built.spec.name, sim_spec.source, seed, num_cal, sensors.num_ticks(),
+      truth.trajectory().duration(), speed);
   const sensors::SimProgramme programme{"sensors", seed,        num_cal,
                                         num_test,  start_utime, ss.rate_hz};
   auto tick_utime = [&](int64_t k) {
@@ -223,20 +230,20 @@ int RunSensorSim(const rcal::io::LoadedRobot& robot, unsigned seed, int num_cal,
     Pace(utime, utime0, wall0, speed);
     if (services::StopRequested()) break;
     lease.Before(k++);
-    count(t.Publish(ch::kJoints, transport::ToJointState(model, f->q, utime)));
+    count(t.Publish(channels.joints, transport::ToJointState(model, f->q, utime)));
     transport::ImuSample imu;
     imu.utime = utime;
     imu.gyro_B = f->imu.gyro_S;
     imu.f_B = f->imu.accel_S;
     imu.has_mag = true;
     imu.m_B = f->imu.mag_S * 1e-6;  // µT → T
-    count(t.Publish(ch::kImu, transport::ToMessage(imu)));
+    count(t.Publish(channels.imu, transport::ToMessage(imu)));
     if (f->position) {
       transport::PositionSample pos;
       pos.utime = start_utime + std::llround(f->position->t * 1e6);
       pos.p = f->position->p_M;
       pos.covariance = pos_cov;
-      count(t.Publish(ch::kPosition, transport::ToMessage(pos)));
+      count(t.Publish(channels.position, transport::ToMessage(pos)));
     }
     health.Tick(utime, t);
     t.HandleTimeout(0);  // keeps LCM's receive queue empty
@@ -261,7 +268,6 @@ int main(int argc, char** argv) {
   unsigned seed = 1;
   int poses = 0;
   double rate = 2.0, speed = 1.0, position_noise = 5e-5, orientation_noise = 1.745e-3;
-  bool position_only = false;
   int64_t start_utime = 1'000'000;
   CLI::App app{
       "sensor_acquisition: publishes the pipeline's sensor streams.\n"
@@ -288,8 +294,17 @@ int main(int argc, char** argv) {
                  "experiment's --test; not driven to)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
-  app.add_option("--robot", robot_path, "robot YAML or URDF")->capture_default_str();
-  app.add_option("--seed", seed, "random seed (the offline experiment's)")->capture_default_str();
+  app.add_option("--robot", robot_path,
+                 "replay of a pose dataset: the robot (YAML or URDF) its rows are checked against");
+  std::string sim_path;
+  app.add_option("--sim", sim_path,
+                 "sim: the simulated cell (schema rcal.cell_sim/1: the cell file it simulates and "
+                 "the truth only the simulator knows); default config/cells/grb3016_poses.sim.yaml "
+                 "(poses), config/cells/grb3016.sim.yaml (sensors)");
+  app.add_option("--seed", seed,
+                 "random seed (sim poses: the offline experiment's; sim sensors: default the sim "
+                 "file's)")
+      ->capture_default_str();
   app.add_option("--poses", poses, "poses to publish, then exit (0: unlimited)")
       ->capture_default_str();
   app.add_option("--rate", rate, "poses per second of sensor time")
@@ -300,10 +315,12 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--start-utime", start_utime, "sensor time of the first pose [µs]")
       ->capture_default_str();
-  app.add_option("--position-noise", position_noise, "σ per axis [m]")->capture_default_str();
-  app.add_option("--orientation-noise", orientation_noise, "σ per axis [rad]")
+  app.add_option("--position-noise", position_noise,
+                 "replay of a pose dataset: σ per axis in the POSE_MEASUREMENT covariance [m]")
       ->capture_default_str();
-  app.add_flag("--position-only", position_only, "position-only measurements");
+  app.add_option("--orientation-noise", orientation_noise,
+                 "replay of a pose dataset: σ per axis [rad]")
+      ->capture_default_str();
   app.add_option("--lcm-url", lcm_url, "LCM URL");
   app.add_option("file", replay_file,
                  "replay: the raw-stream CSV (t_s, gyr_*, acc_*, mag_*, pos_*)");
@@ -367,16 +384,27 @@ int main(int argc, char** argv) {
       sensors::PoseDatasetReplaySource src(path, ps);
       return RunSource(src, t, speed);
     }
-    const auto robot = io::LoadRobot(services::RepoPath(robot_path));
+    if (sim_path.empty())
+      sim_path = level == "sensors" ? "config/cells/grb3016.sim.yaml"
+                                    : "config/cells/grb3016_poses.sim.yaml";
+    const cell::CellSimSpec sim_spec = cell::LoadCellSimSpec(services::RepoPath(sim_path));
+    const io::BuiltCell built = io::LoadCell(sim_spec.cell);
+    if (app.get_option("--seed")->count() == 0) seed = sim_spec.seed;
     if (level == "sensors")
-      return RunSensorSim(robot, seed, poses > 0 ? poses : 50, test_poses, linger, start_utime,
-                          speed, resume, t);
-    const auto& model = robot.model;
-    const Eigen::VectorXd x_true = sim::Table3Errors(model);
+      return RunSensorSim(built, sim_spec, seed, poses > 0 ? poses : sim_spec.num_cal, test_poses,
+                          linger, start_utime, speed, resume, t);
+    // Pose level: the cell's model at the sim file's truth, measured as the cell's position sensor
+    // measures (its largest σ per axis; orientation when it is a 6-DoF tracker), one pose per stop.
+    const auto& model = built.model;
+    const Eigen::VectorXd x_true = cell::TrueErrors(built, sim_spec);
     sim::PoseNoise noise;
-    noise.position_sigma = position_noise;
-    noise.orientation_sigma = orientation_noise;
-    noise.orientation = !position_only;
+    noise.position_sigma = built.spec.position.sigma.maxCoeff();
+    noise.orientation_sigma = built.spec.position.orientation_sigma;
+    noise.orientation = built.spec.position.orientation;
+    if (built.spec.imu)
+      throw std::runtime_error(sim_path +
+                               ": --level poses simulates a pose-level cell (a 6-DoF tracker or "
+                               "positions, no IMU); this cell has an IMU: use --level sensors");
     sim::Rng rng(seed * 1000 + 3);
     transport::Health health("sensor_acquisition");
     spdlog::info("sensor_acquisition sim on {}: {} poses at {} Hz, speed {}", t.url(),
@@ -419,8 +447,10 @@ int main(int argc, char** argv) {
       if (services::StopRequested()) break;
       lease.Before(k);
       const auto z = sim::MeasurePose(model, x_true, q, noise, rng);
-      if (t.Publish(ch::kJoints, transport::ToJointState(model, q, utime))) health.Published();
-      if (t.Publish(ch::kPoseMeasurement, transport::ToMessage(z, utime, k))) health.Published();
+      if (t.Publish(built.spec.channels.joints, transport::ToJointState(model, q, utime)))
+        health.Published();
+      if (t.Publish(built.spec.channels.pose_measurement, transport::ToMessage(z, utime, k)))
+        health.Published();
       health.Tick(utime, t);
       t.HandleTimeout(0);  // keeps LCM's receive queue empty
     }

@@ -21,8 +21,11 @@
 // Warm-up: the pose pipeline starts its filters at the first stop (the joints standing still) and
 // drops that stop's window (estimation::PosePipelineSettings::rest_from_joints), so a process
 // started or restarted anywhere, in a move or inside a stop, publishes only windows of filters
-// that converged at rest (as the offline experiment drops the home stop). --warmup S drops, in
-// addition, the windows that begin within S seconds of the first sample (0: none).
+// that converged at rest (as the offline experiment drops the home stop). still_window.warmup S
+// drops, in addition, the windows that begin within S seconds of the first sample (0: none).
+// Settings (--cell FILE, schema rcal.cell/1): the pipeline's noise model from the cell's sensors
+// (io::BuiltCell::pipeline), the still-window settings, the IMU's axes (samples turned into the
+// mounting frame, v_I = R_IS·v_S) and the channel names. No simulator is involved.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -31,11 +34,10 @@
 #include <optional>
 
 #include "rcal/estimation/pose_pipeline.hpp"
+#include "rcal/io/cell_yaml.hpp"
 #include "rcal/kinematics/measurement.hpp"
 #include "rcal/services/common.hpp"
 #include "rcal/services/time_options.hpp"
-#include "rcal/sim/imu_model.hpp"
-#include "rcal/sim/sensor_sim.hpp"
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/filter_nodes.hpp"
@@ -49,24 +51,25 @@ namespace ch = transport::channels;
 
 class StillWindowNode {
  public:
-  StillWindowNode(const estimation::PosePipelineSettings& ps, double warmup,
-                  const estimation::TimeGateSettings& time, transport::Transport& t,
-                  const std::string& name)
-      : pipeline_(ps),
-        warmup_(warmup),
+  StillWindowNode(const io::BuiltCell& cell, const estimation::TimeGateSettings& time,
+                  transport::Transport& t, const std::string& name)
+      : pipeline_(cell.pipeline),
+        warmup_(cell.spec.still_window.warmup),
+        R_IS_(cell.spec.imu ? cell.spec.imu->R_IS : Eigen::Matrix3d::Identity()),
+        channels_(cell.spec.channels),
         t_(t),
         health_(name),
         joints_gate_(time),
         imu_gate_(time),
         position_gate_(time) {
     t_.Subscribe<joint_state_t>(
-        ch::kJoints, [this](const joint_state_t& m) { OnJoints(m); },
+        channels_.joints, [this](const joint_state_t& m) { OnJoints(m); },
         [this](const std::string& e) { Bad(e); });
     t_.Subscribe<imu_sample_t>(
-        ch::kImu, [this](const imu_sample_t& m) { OnImu(m); },
+        channels_.imu, [this](const imu_sample_t& m) { OnImu(m); },
         [this](const std::string& e) { Bad(e); });
     t_.Subscribe<position_sample_t>(
-        ch::kPosition, [this](const position_sample_t& m) { OnPosition(m); },
+        channels_.position, [this](const position_sample_t& m) { OnPosition(m); },
         [this](const std::string& e) { Bad(e); });
   }
   int emitted() const { return emitted_; }
@@ -136,7 +139,9 @@ class StillWindowNode {
     if (!s) return Bad(error);
     if (!s->has_mag) return Bad("imu_sample: no magnetic field");
     if (!Admit(imu_gate_, m.utime, "imu_sample.utime")) return;
-    Done(s->utime, pipeline_.AddImu(Seconds(s->utime), s->gyro_B, s->f_B, s->m_B * 1e6));
+    // The sensor's axes turned into the mounting frame (the cell's imu.axes).
+    Done(s->utime, pipeline_.AddImu(Seconds(s->utime), R_IS_ * s->gyro_B, R_IS_ * s->f_B,
+                                    R_IS_ * s->m_B * 1e6));
   }
   void OnPosition(const position_sample_t& m) {
     health_.Received();
@@ -153,7 +158,7 @@ class StillWindowNode {
     }
     const kinematics::PoseMeasurement z = p.ToMeasurement();
     const int64_t utime = std::llround(p.t_end * 1e6);
-    if (t_.Publish(ch::kPoseMeasurement, transport::ToMessage(z, utime, emitted_))) {
+    if (t_.Publish(channels_.pose_measurement, transport::ToMessage(z, utime, emitted_))) {
       health_.Published();
       spdlog::info("pose {}: window {:.3f}–{:.3f} s, {} IMU / {} position samples", emitted_,
                    p.t_begin, p.t_end, p.imu_samples, p.position_samples);
@@ -165,6 +170,8 @@ class StillWindowNode {
 
   estimation::PosePipeline pipeline_;
   double warmup_;
+  Eigen::Matrix3d R_IS_;
+  io::CellChannels channels_;
   transport::Transport& t_;
   transport::Health health_;
   std::optional<double> t_first_;
@@ -176,40 +183,28 @@ class StillWindowNode {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string lcm_url, name = "still_window";
-  const sim::SensorSimSettings sim_defaults;
-  double position_sigma = sim_defaults.position.sigma;
-  double gyro_noise = sim_defaults.imu.gyro_noise_density;
-  double warmup = 0.0;
-  bool position_only = false;
+  std::string lcm_url, name = "still_window", cell_path = "config/cells/grb3016.yaml";
   estimation::TimeGateSettings time;
   CLI::App app{
       "still_window: still-window pose measurements from the raw sensor streams.\n"
       "Subscribes JOINTS, IMU, POSITION; runs the pose pipeline (orientation + position KF, "
       "still windows); publishes POSE_MEASUREMENT per window and HEALTH.\n"
       "LCM URL: --lcm-url, else $RCAL_LCM_URL, else udpm://239.255.76.67:7667?ttl=0."};
+  app.add_option("--cell", cell_path,
+                 "cell file (schema rcal.cell/1): sensors, still-window settings, channels")
+      ->capture_default_str();
   app.add_option("--lcm-url", lcm_url, "LCM URL");
-  app.add_option("--position-sigma", position_sigma, "position sensor σ per axis [m]")
-      ->capture_default_str();
-  app.add_option("--gyro-noise-density", gyro_noise, "gyro noise density [rad/s/√Hz]")
-      ->capture_default_str();
-  app.add_option("--warmup", warmup,
-                 "windows beginning within this time of the first sample are dropped [s]")
-      ->capture_default_str();
-  app.add_flag("--position-only", position_only, "position-only measurements");
   services::AddTimeGateOptions(app, &time, "sample");
   app.add_option("--name", name, "process name in HEALTH")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
   try {
     services::InstallStopHandlers();
+    const io::BuiltCell cell = io::LoadCell(services::RepoPath(cell_path));
     transport::LcmTransport t(lcm_url);
-    estimation::PosePipelineSettings ps;
-    ps.position.position_sigma = position_sigma;
-    ps.orientation.gyro_noise_density = gyro_noise;
-    ps.use_orientation = !position_only;
-    spdlog::info("still_window on {}", t.url());
-    StillWindowNode node(ps, warmup, time, t, name);
+    spdlog::info("still_window on {}: cell {} ({}), {}", t.url(), cell.spec.name, cell.spec.source,
+                 cell.pipeline.use_orientation ? "position and orientation" : "positions only");
+    StillWindowNode node(cell, time, t, name);
     if (const int rc =
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
         rc != 0)

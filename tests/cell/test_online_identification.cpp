@@ -1,37 +1,45 @@
-// The online identification (what ekf_identifier and `rcal calibrate --log` run) against the
-// offline experiment of the same cell: pose by pose it reaches RunOnline's parameters bit for bit;
-// restored mid-guess or mid-run it ends where an uninterrupted run ends; bad poses are refused
-// naming the field and change nothing.
+// The online identification of a cell file (what ekf_identifier --cell and
+// `rcal calibrate --log --cell` run), fed with the still windows of its simulated counterpart
+// (the truth only the simulator knows): it guesses the set-up from the first poses with no
+// knowledge of the simulator and reaches what the noise allows against the truth; restored
+// mid-guess or mid-run it ends where an uninterrupted run ends; bad poses are refused naming the
+// field and change nothing; a cell with nothing to guess starts at once.
 #include "rcal/cell/online_identification.hpp"
 
 #include <gtest/gtest.h>
 
 #include <limits>
 
-#include "rcal/io/robot_urdf.hpp"
+#include "rcal/cell/cell_sim_yaml.hpp"
+#include "rcal/cell/sim_cell.hpp"
+#include "rcal/identification/batch_lm.hpp"
+#include "rcal/identification/metrics.hpp"
+#include "rcal/io/cell_yaml.hpp"
 #include "rcal/sim/pose_sim.hpp"
 
 namespace rcal::cell {
 namespace {
 
-const io::LoadedRobot& Grb3016() {
-  static const io::LoadedRobot robot = io::LoadRobot(RCAL_SOURCE_DIR "/config/robots/grb3016.yaml");
-  return robot;
+const io::BuiltCell& DemoCell() {
+  static const io::BuiltCell cell = io::LoadCell(RCAL_SOURCE_DIR "/config/cells/grb3016.yaml");
+  return cell;
 }
 
-struct CellRun {
-  Cell cell;
+// The demo cell's simulated counterpart (config/cells/grb3016.sim.yaml) with its truth, and the
+// windows of `num_cal` calibration and 30 test stops.
+struct SimRun {
+  Cell truth;
   Windows w;
 };
 
-const CellRun& Cal20() {
-  static const CellRun run = [] {
-    CellRun r{MakeCell(Grb3016().spec, 3), {}};
-    RunSettings rs;
-    rs.seed = 3;
-    rs.num_cal = 20;
-    rs.num_test = 0;
-    r.w = SimulateWindows(r.cell, rs);
+const SimRun& Run50() {
+  static const SimRun run = [] {
+    const CellSimSpec sim = LoadCellSimSpec(RCAL_SOURCE_DIR "/config/cells/grb3016.sim.yaml");
+    SimRun r{MakeSimCell(DemoCell(), sim), {}};
+    RunSettings rs = SimRunSettings(DemoCell(), sim);
+    rs.num_cal = 50;
+    rs.num_test = 30;
+    r.w = SimulateWindows(r.truth, rs);
     return r;
   }();
   return run;
@@ -41,19 +49,16 @@ TimedPose At(const kinematics::PoseMeasurement& z, int k) {
   return {z, 1'000'000 * (k + 1), k};
 }
 
-OnlineIdentificationSettings CellSettings() {
-  OnlineIdentificationSettings s;
-  s.cell_seed = 3;
-  return s;
-}
-
-TEST(OnlineIdentification, CellModeReachesTheOfflineRunBitForBit) {
-  const CellRun& r = Cal20();
-  ASSERT_EQ(r.w.cal.size(), 20u);
-  OnlineIdentification id(Grb3016().spec, Grb3016().model, CellSettings());
-  EXPECT_EQ(id.base(), r.cell.base);
+TEST(OnlineIdentification, TheCellFileAloneReachesWhatTheNoiseAllows) {
+  const SimRun& r = Run50();
+  ASSERT_EQ(r.w.cal.size(), 50u);
+  OnlineIdentification id(DemoCell());
+  EXPECT_FALSE(id.started());  // every set-up frame of the demo cell is guessed
+  // The same model as the simulator's truth cell (the cell file builds it), its rank.
+  ASSERT_EQ(id.model().num_params(), r.truth.model.num_params());
+  EXPECT_EQ(id.base().size(), r.truth.base.size());
   int held = 0, updates = 0;
-  for (int k = 0; k < 20; ++k) {
+  for (int k = 0; k < 50; ++k) {
     const auto out = id.Add(At(r.w.cal[k], k));
     EXPECT_TRUE(out.rejected.empty()) << out.rejected;
     held += out.held;
@@ -61,40 +66,56 @@ TEST(OnlineIdentification, CellModeReachesTheOfflineRunBitForBit) {
     EXPECT_EQ(out.started, k == 5);  // the sixth pose completes the guess
   }
   EXPECT_EQ(held, 6);
-  EXPECT_EQ(updates, 20);
-  const OnlineResult offline = RunOnline(r.cell, r.w.cal, {});
-  EXPECT_EQ(id.ekf().x(), offline.x);
-  EXPECT_EQ(id.ekf().accepted(), offline.accepted);
-  EXPECT_EQ(id.last_pose_index(), 19);
+  EXPECT_EQ(updates, 50);
+  EXPECT_EQ(id.last_pose_index(), 49);
+  // Against the truth on the test stops: within 1.5× the error the noise allows (Cramér–Rao of
+  // the windows' covariances at the truth), as the offline experiment reaches it.
+  std::vector<Eigen::VectorXd> test_q;
+  for (const auto& m : r.w.test) test_q.push_back(m.q);
+  const double error =
+      identification::ErrorsAgainstTruth(id.model(), id.ekf().x(), r.truth.x_true, test_q)
+          .mean_position_m;
+  const Eigen::MatrixXd C =
+      identification::CramerRaoBound(id.model(), id.base(), r.w.cal, r.truth.x_true);
+  const double cr =
+      identification::PredictedMeanErrors(id.model(), id.base(), C, r.truth.x_true, test_q).first;
+  std::printf("test error %.4f mm, Cramér–Rao %.4f mm\n", error * 1e3, cr * 1e3);
+  EXPECT_LT(error, 1.5 * cr);
+  // The start was the set-up guess: the frames within centimetres and degrees of the truth.
+  for (int i : DemoCell().Guessed()) {
+    const auto& P = id.model().parameters()[i];
+    EXPECT_NEAR(id.start()(i), r.truth.x_true(i), P.is_angle ? 0.05 : 0.05) << P.name;
+  }
 }
 
 TEST(OnlineIdentification, RestoredDuringTheGuessOrAfterEndsAsAnUninterruptedRun) {
-  const CellRun& r = Cal20();
-  OnlineIdentification ref(Grb3016().spec, Grb3016().model, CellSettings());
+  const SimRun& r = Run50();
+  OnlineIdentification ref(DemoCell());
   for (int k = 0; k < 20; ++k) ref.Add(At(r.w.cal[k], k));
   for (const int stop : {3, 12}) {  // 3: three poses held; 12: the EKF running
-    OnlineIdentification a(Grb3016().spec, Grb3016().model, CellSettings());
+    OnlineIdentification a(DemoCell());
     for (int k = 0; k < stop; ++k) a.Add(At(r.w.cal[k], k));
     EXPECT_EQ(a.started(), stop >= 6);
     EXPECT_EQ(a.held().size(), stop >= 6 ? 0u : static_cast<size_t>(stop));
-    OnlineIdentification b(Grb3016().spec, Grb3016().model, CellSettings());
+    OnlineIdentification b(DemoCell());
     b.Restore(a.ekf().Checkpoint(), a.held(), a.last_utime(), a.last_pose_index());
     // The last pose again (a replay after the restart): refused by time, nothing changes.
     const auto again = b.Add(At(r.w.cal[stop - 1], stop - 1));
     EXPECT_NE(again.rejected.find("pose_measurement.utime"), std::string::npos) << again.rejected;
     for (int k = stop; k < 20; ++k) b.Add(At(r.w.cal[k], k));
     EXPECT_EQ(b.ekf().x(), ref.ekf().x()) << "stopped after " << stop;
+    EXPECT_EQ(b.start(), ref.start()) << "stopped after " << stop;
   }
-  // Held poses cannot be restored into an identification without a cell.
-  OnlineIdentification generic(Grb3016().spec, Grb3016().model, {});
-  OnlineIdentification a(Grb3016().spec, Grb3016().model, CellSettings());
+  // Held poses cannot be restored into a cell that guesses nothing.
+  OnlineIdentification poses(io::LoadCell(RCAL_SOURCE_DIR "/config/cells/grb3016_poses.yaml"));
+  OnlineIdentification a(DemoCell());
   a.Add(At(r.w.cal[0], 0));
-  EXPECT_THROW(generic.Restore(generic.ekf().Checkpoint(), a.held(), 1, 0), std::runtime_error);
+  EXPECT_THROW(poses.Restore(poses.ekf().Checkpoint(), a.held(), 1, 0), std::runtime_error);
 }
 
 TEST(OnlineIdentification, BadPosesAreRefusedNamingTheFieldAndChangeNothing) {
-  const CellRun& r = Cal20();
-  OnlineIdentification id(Grb3016().spec, Grb3016().model, CellSettings());
+  const SimRun& r = Run50();
+  OnlineIdentification id(DemoCell());
   for (int k = 0; k < 8; ++k) id.Add(At(r.w.cal[k], k));
   const Eigen::VectorXd x = id.ekf().x();
   auto nan = At(r.w.cal[8], 8);
@@ -105,18 +126,21 @@ TEST(OnlineIdentification, BadPosesAreRefusedNamingTheFieldAndChangeNothing) {
   EXPECT_NE(id.Add(short_q).rejected.find("q: 5 joints"), std::string::npos);
   auto early = At(r.w.cal[8], 2);  // sensor time before the last pose
   EXPECT_NE(id.Add(early).rejected.find("not after the last pose"), std::string::npos);
+  auto marker = At(r.w.cal[8], 8);
+  marker.z.marker = 3;  // the demo cell has one marker
+  EXPECT_NE(id.Add(marker).rejected.find("marker: slot 3"), std::string::npos);
   EXPECT_EQ(id.ekf().x(), x);
   EXPECT_EQ(id.last_pose_index(), 7);
-  EXPECT_THROW(OnlineIdentification(Grb3016().spec, Grb3016().model, {1, 3, 0, false}),
-               std::invalid_argument);
 }
 
-// Without a cell: the robot file's model on its identifiable set, the EKF from the first pose.
-TEST(OnlineIdentification, GenericModeUsesTheIdentifiableSetAndStartsAtOnce) {
-  OnlineIdentification id(Grb3016().spec, Grb3016().model, {});
+// The pose-level cell (config/cells/grb3016_poses.yaml: the tool frame measured in the base
+// frame, every set-up frame fixed): the arm's identifiable set (25 for the GRB3016 with the D–H
+// tool, full poses), the EKF from the first pose at the drawing.
+TEST(OnlineIdentification, ACellWithNothingToGuessStartsAtOnce) {
+  OnlineIdentification id(io::LoadCell(RCAL_SOURCE_DIR "/config/cells/grb3016_poses.yaml"));
   EXPECT_TRUE(id.started());
-  EXPECT_EQ(id.model().num_params(), Grb3016().model.num_params());
-  EXPECT_EQ(id.base().size(), 25u);  // GRB3016 with the D–H tool, full poses
+  EXPECT_EQ(id.model().num_params(), 28);  // 4(N+1): the set-up frames are fixed, no parameters
+  EXPECT_EQ(id.base().size(), 25u);
   sim::Rng rng(9);
   const auto& m = id.model();
   const auto ms = sim::MeasurePoses(m, sim::Table3Errors(m), sim::SampleJoints(m, 3, rng), {}, rng);

@@ -385,9 +385,13 @@ TEST_F(DdsBridge, ForwardsTheRealIdentifierAcrossItsRestart) {
   const auto poses = sim::MeasurePoses(model, sim::Table3Errors(model),
                                        sim::SampleJoints(model, 8, rng), sim::PoseNoise{}, rng);
   const fs::path checkpoint = dir_ / "ekf.checkpoint.json";
-  const std::vector<std::string> identifier = {
-      RCAL_EKF_IDENTIFIER, "--robot",   robot_yaml, "--checkpoint",
-      checkpoint.string(), "--lcm-url", kUrl};
+  const std::vector<std::string> identifier = {RCAL_EKF_IDENTIFIER,
+                                               "--cell",
+                                               RCAL_SOURCE_DIR "/config/cells/grb3016_poses.yaml",
+                                               "--checkpoint",
+                                               checkpoint.string(),
+                                               "--lcm-url",
+                                               kUrl};
   // Starts the identifier, waits for its start-up CALIBRATION_STATUS (it is listening then),
   // feeds poses [from, to) one at a time, each after the previous one was published.
   auto run = [&](size_t from, size_t to, const std::string& log) {

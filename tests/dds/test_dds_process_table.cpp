@@ -1,6 +1,7 @@
 // config/processes.dds.yaml (the process table with the DDS bridge) is a valid table for the
 // supervisor: it parses with the supervisor's own parser, starts the bridge before the
-// identifier, gives the bridge the robot id the identifier publishes (the robot YAML's name), and
+// identifier, gives the bridge the identifier's cell file (so the robot id it expects is the one
+// the identifier publishes: the cell's robot file's name), and
 // every dds_bridge option in it is one the bridge accepts (checked by running `dds_bridge --help`).
 #include <gtest/gtest.h>
 
@@ -11,7 +12,7 @@
 #include <string>
 
 #include "process_table.hpp"
-#include "rcal/io/robot_urdf.hpp"
+#include "rcal/io/cell_yaml.hpp"
 
 namespace {
 
@@ -36,15 +37,19 @@ TEST(DdsProcessTable, StartsTheBridgeForTheIdentifiersRobot) {
   ASSERT_FALSE(bridge->argv.empty());
   EXPECT_EQ(bridge->argv[0], "dds_bridge");
 
-  // --robot-id equals the name of the identifier's robot (its KINEMATIC_PARAMS robot_id).
+  // The bridge's --cell is the identifier's (the robot id its KINEMATIC_PARAMS carry), and no
+  // --robot-id overrides it.
   const auto& a = bridge->argv;
-  const auto id = std::find(a.begin(), a.end(), "--robot-id");
-  ASSERT_NE(id, a.end());
-  ASSERT_NE(id + 1, a.end());
   const auto& b = identifier->argv;
-  const auto robot = std::find(b.begin(), b.end(), "--robot");
-  ASSERT_NE(robot + 1, b.end());
-  EXPECT_EQ(*(id + 1), rcal::io::LoadRobot(RCAL_SOURCE_DIR "/" + *(robot + 1)).model.name());
+  const auto cell_a = std::find(a.begin(), a.end(), "--cell");
+  const auto cell_b = std::find(b.begin(), b.end(), "--cell");
+  ASSERT_NE(cell_a, a.end());
+  ASSERT_NE(cell_a + 1, a.end());
+  ASSERT_NE(cell_b, b.end());
+  ASSERT_NE(cell_b + 1, b.end());
+  EXPECT_EQ(*(cell_a + 1), *(cell_b + 1));
+  EXPECT_EQ(std::find(a.begin(), a.end(), "--robot-id"), a.end());
+  EXPECT_EQ(rcal::io::LoadCell(RCAL_SOURCE_DIR "/" + *(cell_a + 1)).model.name(), "grb3016");
 
   const std::string help = Output(RCAL_DDS_BRIDGE " --help");
   for (const auto& arg : a) {

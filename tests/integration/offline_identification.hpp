@@ -16,7 +16,7 @@
 #include <vector>
 
 #include "rcal/cell/online_identification.hpp"
-#include "rcal/io/robot_urdf.hpp"
+#include "rcal/io/cell_yaml.hpp"
 #include "rcal/kinematic_params_t.hpp"
 #include "rcal/pose_measurement_t.hpp"
 #include "rcal/transport/adapters.hpp"
@@ -54,14 +54,19 @@ inline std::vector<pose_measurement_t> UsedPoses(const std::filesystem::path& ch
   return used;
 }
 
-/// The identifier's final estimate `params` against OnlineIdentification(`settings`) on `used` in
+/// The demo's cell file (config/cells/grb3016.yaml), as the processes under test load it.
+inline const io::BuiltCell& DemoCell() {
+  static const io::BuiltCell cell = io::LoadCell(RCAL_SOURCE_DIR "/config/cells/grb3016.yaml");
+  return cell;
+}
+
+/// The identifier's final estimate `params` against OnlineIdentification(`cell`) on `used` in
 /// order: equal to kSameAsOffline, value by value and σ by σ.
-inline void ExpectIdentifierEqualsOffline(const io::LoadedRobot& robot,
-                                          const cell::OnlineIdentificationSettings& settings,
+inline void ExpectIdentifierEqualsOffline(const io::BuiltCell& cell,
                                           const std::vector<pose_measurement_t>& used,
                                           const kinematic_params_t& params,
                                           const std::string& what) {
-  cell::OnlineIdentification id(robot.spec, robot.model, settings);
+  cell::OnlineIdentification id(cell);
   for (const auto& m : used) {
     std::string error;
     const auto z = transport::FromMessage(m, &error);

@@ -14,6 +14,7 @@
 #include "rcal/estimation/orientation_kf.hpp"
 #include "rcal/estimation/position_kf.hpp"
 #include "rcal/health_t.hpp"
+#include "rcal/io/atomic_file.hpp"
 #include "rcal/io/csv_table.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/filter_nodes.hpp"
@@ -89,12 +90,14 @@ struct Listener {
   std::map<std::string, health_t> health;  // latest per process
   int duplicates = 0;
   std::chrono::steady_clock::time_point last_arrival = std::chrono::steady_clock::now();
-  Listener() {
-    t.Subscribe<orientation_estimate_t>(ch::kOrientation, [this](const orientation_estimate_t& m) {
-      last_arrival = std::chrono::steady_clock::now();
-      if (!orientation.emplace(m.utime, m).second) ++duplicates;
-    });
-    t.Subscribe<tool_position_estimate_t>(ch::kToolPosition,
+  explicit Listener(const std::string& orientation_channel = ch::kOrientation,
+                    const std::string& tool_position_channel = ch::kToolPosition) {
+    t.Subscribe<orientation_estimate_t>(orientation_channel,
+                                        [this](const orientation_estimate_t& m) {
+                                          last_arrival = std::chrono::steady_clock::now();
+                                          if (!orientation.emplace(m.utime, m).second) ++duplicates;
+                                        });
+    t.Subscribe<tool_position_estimate_t>(tool_position_channel,
                                           [this](const tool_position_estimate_t& m) {
                                             last_arrival = std::chrono::steady_clock::now();
                                             tool.emplace_back(m.utime, m);
@@ -288,6 +291,82 @@ TEST_F(Filters, PositionKfSurvivesASigkilledOrientationKf) {
               static_cast<long long>(first->first), compared);
   EXPECT_EQ(Stop(okf), 0);
   EXPECT_EQ(Stop(pkf), 0);
+}
+
+// --cell FILE: both filters take the IMU's earth frame, the position sensor's σ (its largest per
+// axis) and the channels from the cell file. A cell saying ENU, σ (0.5, 1, 0.2) mm and its own
+// ORIENTATION/TOOL_POSITION channel names gives exactly the reference (ENU, 1 mm) on those
+// channels; the defaults (NED, other channels) would give nothing there. A cell without an IMU is
+// refused by both, naming the key.
+TEST_F(Filters, TheCellFileGivesEarthFrameSigmaAndChannels) {
+  RCAL_IN_NAMESPACE("Filters.TheCellFileGivesEarthFrameSigmaAndChannels");
+  std::string text = io::ReadFile(RCAL_SOURCE_DIR "/config/cells/grb3016.yaml");
+  auto replace = [&](const std::string& from, const std::string& to) {
+    const auto at = text.find(from);
+    ASSERT_NE(at, std::string::npos) << from;
+    text.replace(at, from.size(), to);
+  };
+  replace("    earth: ned", "    earth: enu");
+  replace("../robots/grb3016.yaml", RCAL_SOURCE_DIR "/config/robots/grb3016.yaml");
+  const auto sigma = text.find("    sigma: [");
+  ASSERT_NE(sigma, std::string::npos);
+  text.replace(sigma, text.find('\n', sigma) - sigma, "    sigma: [5e-4, 1e-3, 2e-4]");
+  text += "channels: {orientation: ORIENTATION_C, tool_position: TOOL_POSITION_C}\n";
+  const std::string cell = (dir_ / "cell.yaml").string();
+  io::AtomicWriteFile(cell, text);
+
+  const Offline& ref = Reference();
+  Listener l("ORIENTATION_C", "TOOL_POSITION_C");
+  const pid_t okf = Start({RCAL_ORIENTATION_KF, "--cell", cell, "--lcm-url", kUrl}, "okf.log");
+  const pid_t pkf = Start({RCAL_POSITION_KF, "--cell", cell, "--lcm-url", kUrl}, "pkf.log");
+  ASSERT_TRUE(
+      l.WaitFor([&] { return l.health.count("orientation_kf") && l.health.count("position_kf"); }));
+  constexpr int kCellRows = 1000;
+  const pid_t src = Start({RCAL_SENSOR_ACQUISITION, "--source", "replay", kTrial, "--max-rows",
+                           std::to_string(kCellRows), "--speed", "4", "--lcm-url", kUrl},
+                          "sensor_acquisition.log");
+  // Read while the replay runs (each HandleTimeout takes one message), until it has finished and
+  // nothing came for a second.
+  bool src_done = false;
+  ASSERT_TRUE(l.WaitFor([&] {
+    if (!src_done && !Running(src)) {
+      src_done = true;
+      Reaped(src);
+    }
+    return src_done && std::chrono::steady_clock::now() - l.last_arrival > 1s;
+  }));
+  ASSERT_GT(l.orientation.size(), 500u) << l.Counts();
+  for (const auto& [utime, m] : l.orientation) {
+    const auto r = ref.orientation.find(utime);
+    ASSERT_NE(r, ref.orientation.end()) << utime;
+    ExpectSame(m.q_EI, r->second.q_EI, 4, "q_EI", utime);
+  }
+  ASSERT_GT(l.tool.size(), 500u) << l.Counts();
+  if (l.Dropped() == 0) {
+    ASSERT_LE(l.tool.size(), ref.tool.size());
+    for (size_t k = 0; k < l.tool.size(); ++k) {
+      ASSERT_EQ(l.tool[k].first, ref.tool[k].first) << "update " << k;
+      ExpectSame(l.tool[k].second.p, ref.tool[k].second.p, 3, "p", ref.tool[k].first);
+      ExpectSame(l.tool[k].second.covariance, ref.tool[k].second.covariance, 36, "covariance",
+                 ref.tool[k].first);
+    }
+  } else {
+    std::printf("datagrams dropped and counted (%s): tool sequence not compared\n",
+                l.Counts().c_str());
+  }
+  EXPECT_EQ(Stop(okf), 0);
+  EXPECT_EQ(Stop(pkf), 0);
+
+  for (const char* exe : {RCAL_ORIENTATION_KF, RCAL_POSITION_KF}) {
+    const std::string log = std::string("no_imu_") + std::filesystem::path(exe).filename().string();
+    const pid_t p = Start(
+        {exe, "--cell", RCAL_SOURCE_DIR "/config/cells/grb3016_poses.yaml", "--lcm-url", kUrl},
+        log);
+    EXPECT_EQ(Wait(p), 1) << exe;
+    Reaped(p);
+    EXPECT_NE(io::ReadFile((dir_ / log).string()).find("sensors.imu: absent"), std::string::npos)
+        << exe;
+  }
 }
 
 imu_sample_t Imu(int64_t utime) {

@@ -90,6 +90,8 @@ constexpr const char* kSpeedWithFilters = "10";
 constexpr double kAfterKillSigmas = 0.25;
 constexpr int kGuessPoses = 6;  // ekf_identifier's default --guess-poses
 constexpr const char* kRobot = RCAL_SOURCE_DIR "/config/robots/grb3016.yaml";
+constexpr const char* kCell = RCAL_SOURCE_DIR "/config/cells/grb3016.yaml";
+constexpr const char* kSim = RCAL_SOURCE_DIR "/config/cells/grb3016.sim.yaml";
 
 enum class Victim {
   kNone,
@@ -249,13 +251,12 @@ class Kill : public integration::ProcessFixture, public ::testing::WithParamInte
     const std::vector<std::string> ekf_cmd = {RCAL_EKF_IDENTIFIER,
                                               "--lcm-url",
                                               kUrl,
-                                              "--robot",
-                                              kRobot,
-                                              "--cell-seed",
-                                              std::to_string(kSeed),
+                                              "--cell",
+                                              kCell,
                                               "--checkpoint",
                                               (d / "ekf_identifier.checkpoint.json").string()};
-    const std::vector<std::string> sw_cmd = {RCAL_STILL_WINDOW, "--lcm-url", kUrl};
+    const std::vector<std::string> sw_cmd = {RCAL_STILL_WINDOW, "--lcm-url", kUrl, "--cell",
+                                             RCAL_SOURCE_DIR "/config/cells/grb3016.yaml"};
     const std::vector<std::string> sa_cmd = {RCAL_SENSOR_ACQUISITION,
                                              "--lcm-url",
                                              kUrl,
@@ -263,8 +264,8 @@ class Kill : public integration::ProcessFixture, public ::testing::WithParamInte
                                              "sim",
                                              "--level",
                                              "sensors",
-                                             "--robot",
-                                             kRobot,
+                                             "--sim",
+                                             kSim,
                                              "--seed",
                                              std::to_string(kSeed),
                                              "--poses",
@@ -569,8 +570,8 @@ TEST_P(Kill, SurvivedAndParametersMatchTheUninterruptedRun) {
   const bool filters = victim == Victim::kFilters;
   const RunResult ref = Pipeline(prog, Victim::kNone, "uninterrupted", filters);
   ASSERT_FALSE(HasFailure()) << "the uninterrupted run failed";
-  integration::ExpectIdentifierEqualsOffline(prog.robot, {1, kSeed, kGuessPoses, false}, ref.used,
-                                             *ref.params, "uninterrupted");
+  integration::ExpectIdentifierEqualsOffline(integration::DemoCell(), ref.used, *ref.params,
+                                             "uninterrupted");
   const RunResult run = Pipeline(prog, victim, Name(victim), filters);
   ASSERT_FALSE(HasFailure());
   ASSERT_EQ(run.x.size(), ref.x.size());
@@ -578,8 +579,8 @@ TEST_P(Kill, SurvivedAndParametersMatchTheUninterruptedRun) {
 
   // 1. The identifier: exactly what an uninterrupted identification of its poses gives.
   ASSERT_TRUE(run.params);
-  integration::ExpectIdentifierEqualsOffline(prog.robot, {1, kSeed, kGuessPoses, false}, run.used,
-                                             *run.params, Name(victim) + " killed");
+  integration::ExpectIdentifierEqualsOffline(integration::DemoCell(), run.used, *run.params,
+                                             Name(victim) + " killed");
 
   // 2. It used every published pose, in order; when it was the victim, all but a contiguous run
   // (those published while it was down).

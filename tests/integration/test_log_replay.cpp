@@ -41,7 +41,7 @@ struct Listener {
 };
 
 std::vector<std::string> Identifier() {
-  return {RCAL_EKF_IDENTIFIER, "--robot", RCAL_SOURCE_DIR "/config/robots/grb3016.yaml",
+  return {RCAL_EKF_IDENTIFIER, "--cell", RCAL_SOURCE_DIR "/config/cells/grb3016_poses.yaml",
           "--lcm-url", kUrl};
 }
 
@@ -77,8 +77,8 @@ TEST_F(LogReplay, LogPlayerThroughIdentifierAndCalibrateLogEqualTheLiveRun) {
           });
     };
     ASSERT_TRUE(probe_in_log("PROBE_START"));
-    const pid_t src = Start({RCAL_SENSOR_ACQUISITION, "--source", "sim", "--robot",
-                             RCAL_SOURCE_DIR "/config/robots/grb3016.yaml", "--poses",
+    const pid_t src = Start({RCAL_SENSOR_ACQUISITION, "--source", "sim", "--sim",
+                             RCAL_SOURCE_DIR "/config/cells/grb3016_poses.sim.yaml", "--poses",
                              std::to_string(kPoses), "--rate", std::to_string(kRate), "--speed",
                              "1", "--start-utime", std::to_string(kStartUtime), "--lcm-url", kUrl},
                             "sensor_acquisition.log");
@@ -120,7 +120,7 @@ TEST_F(LogReplay, LogPlayerThroughIdentifierAndCalibrateLogEqualTheLiveRun) {
   // The same log offline.
   const fs::path json = dir_ / "calibrate_log.json";
   const std::string cmd = std::string(RCAL_TOOL) + " calibrate-log " + log.string() +
-                          " --robot " RCAL_SOURCE_DIR "/config/robots/grb3016.yaml --json " +
+                          " --cell " RCAL_SOURCE_DIR "/config/cells/grb3016_poses.yaml --json " +
                           json.string() + " > " + (dir_ / "calibrate_log.out").string();
   ASSERT_EQ(std::system(cmd.c_str()), 0);
   const auto j = nlohmann::json::parse(std::ifstream(json));

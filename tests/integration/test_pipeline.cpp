@@ -105,8 +105,8 @@ struct Listener {
 
 std::vector<std::string> Identifier(const fs::path& checkpoint) {
   return {RCAL_EKF_IDENTIFIER,
-          "--robot",
-          RCAL_SOURCE_DIR "/config/robots/grb3016.yaml",
+          "--cell",
+          RCAL_SOURCE_DIR "/config/cells/grb3016_poses.yaml",
           "--checkpoint",
           checkpoint.string(),
           "--lcm-url",
@@ -117,8 +117,8 @@ std::vector<std::string> Sensor(int poses, double rate) {
   return {RCAL_SENSOR_ACQUISITION,
           "--source",
           "sim",
-          "--robot",
-          RCAL_SOURCE_DIR "/config/robots/grb3016.yaml",
+          "--sim",
+          RCAL_SOURCE_DIR "/config/cells/grb3016_poses.sim.yaml",
           "--seed",
           std::to_string(kSeed),
           "--poses",
@@ -225,7 +225,7 @@ TEST_F(Pipeline, IdentifierSurvivesSigkillAndResumesFromItsCheckpoint) {
   const auto used = integration::UsedPoses(checkpoint, l.poses);
   EXPECT_EQ(static_cast<int>(used.size()), final_accepted);
   integration::ExpectIdentifierEqualsOffline(
-      io::LoadRobot(RCAL_SOURCE_DIR "/config/robots/grb3016.yaml"), {}, used, *l.params,
+      io::LoadCell(RCAL_SOURCE_DIR "/config/cells/grb3016_poses.yaml"), used, *l.params,
       "identifier killed and resumed");
   // For people: against the uninterrupted offline run (fewer poses: not asserted).
   const Eigen::VectorXd x_online = Values(*l.params);

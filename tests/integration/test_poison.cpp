@@ -129,11 +129,13 @@ TEST_F(Poison, PoisonMessagesAreRefusedCountedAndChangeNoCalibration) {
   });
 
   const auto checkpoint = dir_ / "ekf_identifier.checkpoint.json";
-  const pid_t ekf = Start(
-      {RCAL_EKF_IDENTIFIER, "--lcm-url", kUrl, "--cell-seed", std::to_string(kSeed), "--robot",
-       RCAL_SOURCE_DIR "/config/robots/grb3016.yaml", "--checkpoint", checkpoint.string()},
-      "ekf_identifier.log");
-  const pid_t sw = Start({RCAL_STILL_WINDOW, "--lcm-url", kUrl}, "still_window.log");
+  const pid_t ekf =
+      Start({RCAL_EKF_IDENTIFIER, "--lcm-url", kUrl, "--cell",
+             RCAL_SOURCE_DIR "/config/cells/grb3016.yaml", "--checkpoint", checkpoint.string()},
+            "ekf_identifier.log");
+  const pid_t sw = Start({RCAL_STILL_WINDOW, "--lcm-url", kUrl, "--cell",
+                          RCAL_SOURCE_DIR "/config/cells/grb3016.yaml"},
+                         "still_window.log");
   const pid_t ok = Start({RCAL_ORIENTATION_KF, "--lcm-url", kUrl}, "orientation_kf.log");
   ASSERT_TRUE(
       integration::Until([&] { return status.has_value() && health.count("orientation_kf"); },
@@ -142,7 +144,7 @@ TEST_F(Poison, PoisonMessagesAreRefusedCountedAndChangeNoCalibration) {
   const pid_t sa = Start({RCAL_SENSOR_ACQUISITION, "--lcm-url", kUrl, "--source", "sim", "--level",
                           "sensors", "--seed", std::to_string(kSeed), "--poses",
                           std::to_string(kCal), "--test-poses", std::to_string(kTest), "--speed",
-                          "5", "--robot", RCAL_SOURCE_DIR "/config/robots/grb3016.yaml"},
+                          "5", "--sim", RCAL_SOURCE_DIR "/config/cells/grb3016.sim.yaml"},
                          "sensor_acquisition.log");
   ASSERT_TRUE(integration::Until(
       [&] { return status && status->poses_accepted + status->poses_rejected >= kCal; },
@@ -203,7 +205,7 @@ TEST_F(Poison, PoisonMessagesAreRefusedCountedAndChangeNoCalibration) {
   EXPECT_EQ(status->poses_rejected, 0);
   const auto used = integration::UsedPoses(checkpoint, poses);
   EXPECT_EQ(used.size(), poses.size());
-  integration::ExpectIdentifierEqualsOffline(robot, {1, kSeed, 6, false}, used, *params,
+  integration::ExpectIdentifierEqualsOffline(integration::DemoCell(), used, *params,
                                              "poisoned sensor pipeline");
   ASSERT_EQ(poses.size(), w.cal.size());
   std::string error;
@@ -231,6 +233,7 @@ TEST_F(Poison, IkCorrectorKeepsTheNewestEstimateAndCountsTheCopies) {
   RCAL_IN_NAMESPACE("Poison.IkCorrectorKeepsTheNewestEstimateAndCountsTheCopies");
   constexpr int kPoses = 20;
   const std::string robot_file = RCAL_SOURCE_DIR "/config/robots/grb3016.yaml";
+  const std::string cell_file = RCAL_SOURCE_DIR "/config/cells/grb3016_poses.yaml";
   const auto robot = io::LoadRobot(robot_file);
   transport::LcmTransport t(kUrl);
   std::optional<kinematic_params_t> first, latest;
@@ -263,17 +266,18 @@ TEST_F(Poison, IkCorrectorKeepsTheNewestEstimateAndCountsTheCopies) {
                                     [&](const calibration_status_t&) { status_seen = true; });
 
   const pid_t ik =
-      Start({RCAL_IK_CORRECTOR, "--robot", robot_file, "--lcm-url", kUrl}, "ik_corrector.log");
-  const pid_t ekf = Start({RCAL_EKF_IDENTIFIER, "--robot", robot_file, "--checkpoint",
+      Start({RCAL_IK_CORRECTOR, "--cell", cell_file, "--lcm-url", kUrl}, "ik_corrector.log");
+  const pid_t ekf = Start({RCAL_EKF_IDENTIFIER, "--cell", cell_file, "--checkpoint",
                            (dir_ / "ekf.json").string(), "--lcm-url", kUrl},
                           "ekf_identifier.log");
   // Both up: ik_corrector announces itself, the identifier publishes its (empty) status.
   ASSERT_TRUE(integration::Until([&] { return health.count("ik_corrector") && status_seen; },
                                  [&] { t.HandleTimeout(100); }));
-  const pid_t sa = Start({RCAL_SENSOR_ACQUISITION, "--source", "sim", "--robot", robot_file,
-                          "--seed", std::to_string(kSeed), "--poses", std::to_string(kPoses),
-                          "--rate", "20", "--speed", "1", "--lcm-url", kUrl},
-                         "sensor_acquisition.log");
+  const pid_t sa = Start(
+      {RCAL_SENSOR_ACQUISITION, "--source", "sim", "--sim",
+       RCAL_SOURCE_DIR "/config/cells/grb3016_poses.sim.yaml", "--seed", std::to_string(kSeed),
+       "--poses", std::to_string(kPoses), "--rate", "20", "--speed", "1", "--lcm-url", kUrl},
+      "sensor_acquisition.log");
   ASSERT_TRUE(integration::Until([&] { return latest && latest->poses_used == kPoses; },
                                  [&] { t.HandleTimeout(100); }));
   EXPECT_EQ(integration::Wait(sa), 0);

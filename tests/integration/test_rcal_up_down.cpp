@@ -58,7 +58,7 @@ TEST_F(Supervisor, RestartsAKilledProcessAndRcalDownStopsAllInReverseOrder) {
                         << "  - name: orientation_kf\n    command: [orientation_kf, --earth, enu]\n"
                         << "  - name: position_kf\n    command: [position_kf, --earth, enu]\n"
                         << "  - name: ik_corrector\n"
-                        << "    command: [ik_corrector, --robot, config/robots/grb3016.yaml]\n";
+                        << "    command: [ik_corrector, --cell, config/cells/grb3016_poses.yaml]\n";
   const std::string env = "RCAL_BUILD_DIR=" RCAL_BINARY_DIR " RCAL_RUN_DIR=" + dir_.string();
   StateListener l;
   ASSERT_EQ(std::system(

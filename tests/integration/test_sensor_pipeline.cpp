@@ -70,11 +70,13 @@ TEST_F(SensorPipeline, CalibratesToTheOfflineFigure) {
   t.Subscribe<calibration_status_t>(transport::channels::kCalibrationStatus,
                                     [&](const calibration_status_t& s) { status = s; });
   const auto checkpoint = dir_ / "ekf_identifier.checkpoint.json";
-  const pid_t ekf = Start(
-      {RCAL_EKF_IDENTIFIER, "--lcm-url", kUrl, "--cell-seed", std::to_string(kSeed), "--robot",
-       RCAL_SOURCE_DIR "/config/robots/grb3016.yaml", "--checkpoint", checkpoint.string()},
-      "ekf_identifier.log");
-  const pid_t sw = Start({RCAL_STILL_WINDOW, "--lcm-url", kUrl}, "still_window.log");
+  const pid_t ekf =
+      Start({RCAL_EKF_IDENTIFIER, "--lcm-url", kUrl, "--cell",
+             RCAL_SOURCE_DIR "/config/cells/grb3016.yaml", "--checkpoint", checkpoint.string()},
+            "ekf_identifier.log");
+  const pid_t sw = Start({RCAL_STILL_WINDOW, "--lcm-url", kUrl, "--cell",
+                          RCAL_SOURCE_DIR "/config/cells/grb3016.yaml"},
+                         "still_window.log");
   // Both listening (the identifier announces itself with a CALIBRATION_STATUS).
   ASSERT_TRUE(
       integration::Until([&] { return status.has_value(); }, [&] { t.HandleTimeout(100); }));
@@ -82,7 +84,7 @@ TEST_F(SensorPipeline, CalibratesToTheOfflineFigure) {
   const pid_t sa = Start({RCAL_SENSOR_ACQUISITION, "--lcm-url", kUrl, "--source", "sim", "--level",
                           "sensors", "--seed", std::to_string(kSeed), "--poses",
                           std::to_string(kCal), "--test-poses", std::to_string(kTest), "--speed",
-                          "20", "--robot", RCAL_SOURCE_DIR "/config/robots/grb3016.yaml"},
+                          "20", "--sim", RCAL_SOURCE_DIR "/config/cells/grb3016.sim.yaml"},
                          "sensor_acquisition.log");
   ASSERT_TRUE(integration::Until(
       [&] { return status && status->poses_accepted + status->poses_rejected >= kCal; },
@@ -96,7 +98,7 @@ TEST_F(SensorPipeline, CalibratesToTheOfflineFigure) {
   ASSERT_TRUE(params.has_value());
   const auto used = integration::UsedPoses(checkpoint, poses);
   EXPECT_EQ(used.size(), poses.size());
-  integration::ExpectIdentifierEqualsOffline(robot, {1, kSeed, 6, false}, used, *params,
+  integration::ExpectIdentifierEqualsOffline(integration::DemoCell(), used, *params,
                                              "sensor pipeline");
   EXPECT_EQ(status->poses_accepted, kCal);
   EXPECT_EQ(status->poses_rejected, 0);
@@ -188,11 +190,13 @@ TEST_F(SensorPipeline, CalibratesThroughTwentyPercentPacketLoss) {
   t.Subscribe<health_t>(transport::channels::kHealth,
                         [&](const health_t& h) { health[h.process] = h; });
   const auto checkpoint = dir_ / "ekf_identifier.checkpoint.json";
-  const pid_t ekf = Start(
-      {RCAL_EKF_IDENTIFIER, "--lcm-url", kUrl, "--cell-seed", std::to_string(kSeed), "--robot",
-       RCAL_SOURCE_DIR "/config/robots/grb3016.yaml", "--checkpoint", checkpoint.string()},
-      "ekf_identifier.log");
-  const pid_t sw = Start({RCAL_STILL_WINDOW, "--lcm-url", kUrl}, "still_window.log");
+  const pid_t ekf =
+      Start({RCAL_EKF_IDENTIFIER, "--lcm-url", kUrl, "--cell",
+             RCAL_SOURCE_DIR "/config/cells/grb3016.yaml", "--checkpoint", checkpoint.string()},
+            "ekf_identifier.log");
+  const pid_t sw = Start({RCAL_STILL_WINDOW, "--lcm-url", kUrl, "--cell",
+                          RCAL_SOURCE_DIR "/config/cells/grb3016.yaml"},
+                         "still_window.log");
   ASSERT_TRUE(
       integration::Until([&] { return status.has_value(); }, [&] { t.HandleTimeout(100); }));
   usleep(300'000);
@@ -207,7 +211,7 @@ TEST_F(SensorPipeline, CalibratesThroughTwentyPercentPacketLoss) {
   const pid_t sa =
       Start({RCAL_SENSOR_ACQUISITION, "--lcm-url", kUrl, "--source", "sim", "--level", "sensors",
              "--seed", std::to_string(kSeed), "--poses", std::to_string(kLossCal), "--test-poses",
-             "0", "--speed", "20", "--robot", RCAL_SOURCE_DIR "/config/robots/grb3016.yaml"},
+             "0", "--speed", "20", "--sim", RCAL_SOURCE_DIR "/config/cells/grb3016.sim.yaml"},
             "sensor_acquisition.log");
   ASSERT_TRUE(integration::Until([&] { return !integration::Running(sa); },
                                  [&] { t.HandleTimeout(100); }, 600));
@@ -233,10 +237,9 @@ TEST_F(SensorPipeline, CalibratesThroughTwentyPercentPacketLoss) {
   // The estimate the identifier published last is the offline identification of the poses it
   // had used by then (its very last message may itself be among the dropped).
   const std::vector<pose_measurement_t> prefix(used.begin(), used.begin() + params->poses_used);
-  integration::ExpectIdentifierEqualsOffline(robot, {1, kSeed, 6, false}, prefix, *params,
-                                             "20 % loss");
+  integration::ExpectIdentifierEqualsOffline(integration::DemoCell(), prefix, *params, "20 % loss");
   // Judged on what the identifier holds at the end: every pose it used.
-  cell::OnlineIdentification id(robot.spec, robot.model, {1, kSeed, 6, false});
+  cell::OnlineIdentification id(integration::DemoCell());
   for (const auto& p : used) {
     std::string error;
     const auto z = transport::FromMessage(p, &error);

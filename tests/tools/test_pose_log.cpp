@@ -14,8 +14,11 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
+#include "rcal/cell/cell_sim_yaml.hpp"
+#include "rcal/cell/online_identification.hpp"
 #include "rcal/cell/sim_cell.hpp"
 #include "rcal/imu_sample_t.hpp"
+#include "rcal/io/cell_yaml.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/pose_measurement_t.hpp"
 #include "rcal/sim/effects.hpp"
@@ -252,18 +255,20 @@ TEST(PoseLog, RcalAnalyzeImuNamesAMagneticDisturbanceInALog) {
   EXPECT_NE(text.find("2 of"), std::string::npos) << text;  // the two bad events counted
 }
 
-// The demo's log, offline: the still windows of the simulated cell (seed 2) as POSE_MEASUREMENT
-// events; `rcal calibrate --log LOG --cell-seed 2` holds the first six back for the set-up
-// guess, as ekf_identifier --cell-seed does, and reaches the offline experiment's parameters
-// (cell::RunOnline) to 1e-9 (the messages carry R_EI as a quaternion: rounding only).
-TEST(PoseLog, RcalCalibrateLogWithTheCellReachesTheOfflineRun) {
-  const auto robot = io::LoadRobot(RCAL_SOURCE_DIR "/config/robots/grb3016.yaml");
-  const cell::Cell c = cell::MakeCell(robot.spec, 2);
-  cell::RunSettings rs;
-  rs.seed = 2;
+// The demo's log, offline: the still windows of the demo's simulated cell
+// (config/cells/grb3016.sim.yaml, here 15 stops) as POSE_MEASUREMENT events;
+// `rcal calibrate --log LOG --cell config/cells/grb3016.yaml` holds the first six back for the
+// set-up guess, as ekf_identifier --cell does, and reaches cell::OnlineIdentification on the same
+// poses to 1e-9 (the messages carry R_EI as a quaternion: rounding only). Without a pose to
+// accept it exits non-zero, saying what to check (was: every parameter 0, exit 0).
+TEST(PoseLog, RcalCalibrateLogWithTheCellReachesTheOnlineIdentification) {
+  const io::BuiltCell built = io::LoadCell(RCAL_SOURCE_DIR "/config/cells/grb3016.yaml");
+  const cell::CellSimSpec sim =
+      cell::LoadCellSimSpec(RCAL_SOURCE_DIR "/config/cells/grb3016.sim.yaml");
+  cell::RunSettings rs = cell::SimRunSettings(built, sim);
   rs.num_cal = 15;
   rs.num_test = 0;
-  const auto w = cell::SimulateWindows(c, rs);
+  const auto w = cell::SimulateWindows(cell::MakeSimCell(built, sim), rs);
   ASSERT_EQ(w.cal.size(), 15u);
   const fs::path dir = TempDir("calibrate_cell");
   {
@@ -272,28 +277,48 @@ TEST(PoseLog, RcalCalibrateLogWithTheCellReachesTheOfflineRun) {
       WritePose(log, transport::ToMessage(w.cal[k], 1'000'000 * (k + 1), k));
   }
   const std::string cmd = std::string(RCAL_EXE) + " calibrate --log " +
-                          (dir / "run.lcmlog").string() + " --cell-seed 2 --json " +
-                          (dir / "out.json").string() + " > " + (dir / "stdout.txt").string() +
-                          " 2>&1";
+                          (dir / "run.lcmlog").string() + " --cell " + RCAL_SOURCE_DIR +
+                          "/config/cells/grb3016.yaml --json " + (dir / "out.json").string() +
+                          " > " + (dir / "stdout.txt").string() + " 2>&1";
   ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
   std::ifstream in(dir / "out.json");
   const auto j = nlohmann::json::parse(in);
-  const cell::OnlineResult offline = cell::RunOnline(c, w.cal, {});
-  EXPECT_EQ(j.at("poses_accepted").get<int>(), offline.accepted);
-  EXPECT_EQ(j.at("model_id"), transport::ModelId(c.model));
+  cell::OnlineIdentification online(built);
+  for (int k = 0; k < 15; ++k) {
+    // Through the message, as the process receives it.
+    std::string error;
+    const auto z =
+        transport::FromMessage(transport::ToMessage(w.cal[k], 1'000'000 * (k + 1), k), &error);
+    ASSERT_TRUE(z) << error;
+    online.Add({*z, 1'000'000 * (k + 1), k});
+  }
+  const Eigen::VectorXd x = online.ekf().x(), sigma = online.ekf().sigma();
+  EXPECT_EQ(j.at("poses_accepted").get<int>(), online.ekf().accepted());
+  EXPECT_EQ(j.at("model_id"), transport::ModelId(built.model));
+  EXPECT_EQ(j.at("cell"), "grb3016_demo");
   // One entry per parameter in model order, the unit in the key (value_m / value_rad), the frame
   // its value is in named.
   const auto& params = j.at("parameters");
-  ASSERT_EQ(params.size(), static_cast<size_t>(offline.x.size()));
-  for (int i = 0; i < offline.x.size(); ++i) {
-    const auto& P = c.model.parameters()[i];
+  ASSERT_EQ(params.size(), static_cast<size_t>(x.size()));
+  for (int i = 0; i < x.size(); ++i) {
+    const auto& P = built.model.parameters()[i];
     const std::string unit = P.is_angle ? "rad" : "m";
     EXPECT_EQ(params[i].at("name"), P.name);
     EXPECT_EQ(params[i].size(), 4u) << params[i].dump();
     EXPECT_FALSE(params[i].at("frame").get<std::string>().empty()) << P.name;
-    EXPECT_NEAR(params[i].at("value_" + unit).get<double>(), offline.x(i), 1e-9) << P.name;
-    EXPECT_NEAR(params[i].at("sigma_" + unit).get<double>(), offline.sigma(i), 1e-9) << P.name;
+    EXPECT_NEAR(params[i].at("value_" + unit).get<double>(), x(i), 1e-9) << P.name;
+    EXPECT_NEAR(params[i].at("sigma_" + unit).get<double>(), sigma(i), 1e-9) << P.name;
   }
+  // The wrong cell for this log: the pose-level GRB3016 (no set-up frames) rejects every pose.
+  const std::string wrong = std::string(RCAL_EXE) + " calibrate --log " +
+                            (dir / "run.lcmlog").string() + " --cell " + RCAL_SOURCE_DIR +
+                            "/config/cells/grb3016_poses.yaml > " + (dir / "wrong.txt").string() +
+                            " 2>&1";
+  const int status = std::system(wrong.c_str());
+  EXPECT_NE(status, 0);
+  std::ifstream wrong_in(dir / "wrong.txt");
+  const std::string text((std::istreambuf_iterator<char>(wrong_in)), {});
+  EXPECT_NE(text.find("no pose accepted"), std::string::npos) << text;
 }
 
 }  // namespace

@@ -80,15 +80,23 @@ TEST(Checkpoint, HeldPosesRoundTrip) {
   EXPECT_EQ(back.checkpoint.accepted, 0);
 }
 
-// A schema-1 file (written before `held` existed) still loads, with nothing held; a schema-2
-// file without `held` is an error naming the key.
+// A schema-1 file (written before `held` existed) still loads, with nothing held; a schema-3
+// file without `held` is an error naming the key. A schema-2 file (before `x_fixed` and the
+// measurements' marker) loads with the identifier's own fixed values and marker 0.
 TEST(Checkpoint, SchemaOneStillLoads) {
   const Grb3016 g(10);
   identification::EkfIdentifier ekf(g.model, g.base);
   for (int k = 0; k < 10; ++k) ekf.Update(g.poses[k]);
   std::string text = CheckpointText({ModelId(g.model), 42, 9, ekf.Checkpoint(), {}});
-  const auto v2 = text.find("rcal.ekf_checkpoint/2");
-  ASSERT_NE(v2, std::string::npos);
+  const auto v3 = text.find("rcal.ekf_checkpoint/3");
+  ASSERT_NE(v3, std::string::npos);
+  {
+    std::string v2 = text;
+    v2.replace(v3, 21, "rcal.ekf_checkpoint/2");
+    const CheckpointFile back = ParseCheckpoint(v2);
+    EXPECT_EQ(back.checkpoint.x_fixed.size(), 0);  // schema 2 has none: not read
+    ASSERT_EQ(ParseCheckpoint(text).checkpoint.x_fixed, ekf.Checkpoint().x_fixed);
+  }
   const auto held = text.find(",\"held\":[]");
   ASSERT_NE(held, std::string::npos) << text.substr(0, 200);
   std::string v1 = text;
@@ -99,7 +107,7 @@ TEST(Checkpoint, SchemaOneStillLoads) {
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("held"), std::string::npos) << e.what();
   }
-  v1.replace(v1.find("rcal.ekf_checkpoint/2"), 21, "rcal.ekf_checkpoint/1");
+  v1.replace(v1.find("rcal.ekf_checkpoint/3"), 21, "rcal.ekf_checkpoint/1");
   const CheckpointFile back = ParseCheckpoint(v1);
   EXPECT_TRUE(back.held.empty());
   EXPECT_EQ(back.last_pose_index, 9);

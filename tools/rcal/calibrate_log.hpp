@@ -9,19 +9,14 @@ namespace rcal::tool {
 
 struct CalibrateLogOptions {
   std::string log;
-  std::string robot = "config/robots/grb3016.yaml";
-  std::string channel;  ///< empty: POSE_MEASUREMENT (transport::channels::kPoseMeasurement)
-  unsigned ident_seed = 1;
-  bool position_only = false;
-  unsigned cell_seed = 0;  ///< > 0: the simulated cell (ekf_identifier --cell-seed)
-  int guess_poses = 6;     ///< with a cell: poses held back for the set-up guess
+  std::string cell = "config/cells/grb3016.yaml";  ///< the cell file (ekf_identifier --cell)
+  std::string channel;                             ///< empty: the cell's channels.pose_measurement
   std::string json_path;
   bool allow_gaps = false;  ///< go on when the log lost data (CheckLogGaps); else exit non-zero
 };
 
-/// The options calibrate-log has besides LOG, --robot and --json (which `calibrate` shares):
-/// --channel, --ident-seed, --position-only, --cell-seed, --guess-poses, --allow-gaps. `suffix` is
-/// appended to each description.
+/// The options calibrate-log has besides LOG, --cell and --json (which `calibrate` shares):
+/// --channel, --allow-gaps. `suffix` is appended to each description.
 void AddCalibrateLogOptions(CLI::App& sub, CalibrateLogOptions& o, const std::string& suffix);
 
 /// Runs the identification over the log; returns the exit code. Throws std::runtime_error

@@ -254,7 +254,10 @@ int Run(const Options& o) {
     if (!o.effects_path.empty())
       throw std::runtime_error("rcal calibrate: --effects needs DATA, not --log");
     CalibrateLogOptions lo = o.log;
-    if (!o.robot.empty()) lo.robot = o.robot;
+    if (!o.robot.empty())
+      throw std::runtime_error(
+          "rcal calibrate --log: the robot comes from --cell (a cell file "
+          "names its robot file), not --robot");
     lo.json_path = o.json_path;
     return RunCalibrateLog(lo);
   }
@@ -570,9 +573,12 @@ const RegisterCommand kCalibrate(
                      "[kg/m] gravity model of joint_compliance (default: the analysis.json's "
                      "link_density_kg_per_m, else 10)");
       sub.add_option("--log", o->log.log,
-                     "LCM event log: identify from its POSE_MEASUREMENT events instead of DATA, "
-                     "exactly as `rcal calibrate-log LOG` (alias; --robot, --json and the options "
-                     "marked [--log] apply)");
+                     "LCM event log: identify from its pose measurements instead of DATA, exactly "
+                     "as `rcal calibrate-log LOG` and ekf_identifier (alias; --cell, --json and "
+                     "the options marked [--log] apply)");
+      sub.add_option("--cell", o->log.cell,
+                     "[--log] cell file (schema rcal.cell/1), as ekf_identifier's")
+          ->capture_default_str();
       AddCalibrateLogOptions(sub, o->log, " [--log]");
       return [o]() { return Run(*o); };
     });

@@ -1,9 +1,9 @@
-// rcal calibrate-log LOG --robot R: the online identification run offline on a recorded LCM
-// event log (lcm-logger or the logger service). Reads the POSE_MEASUREMENT events in log order
-// with io::LcmLogReader and runs them through the same checks and the same EKF, on the same
-// identifiable base set (--ident-seed), or the same simulated cell and set-up guess (--cell-seed),
-// as the ekf_identifier process (both run cell::OnlineIdentification): a log replayed through
-// the pipeline with lcm-logplayer and this command give the same parameters (a tested property).
+// rcal calibrate-log LOG --cell FILE: the online identification run offline on a recorded LCM
+// event log (lcm-logger or the logger service). Reads the pose measurements in log order with
+// io::LcmLogReader and runs them through the same checks and the same EKF, on the same base set
+// and set-up guess, as `ekf_identifier --cell FILE` (both run cell::OnlineIdentification): a log
+// replayed through the pipeline with lcm-logplayer and this command give the same parameters (a
+// tested property). A run in which no pose was accepted exits non-zero, saying why.
 // Events that fail to decode or to validate, and poses not after the last accepted one, are
 // skipped and counted, as the process rejects them. `rcal calibrate --log LOG` runs this same code.
 // Every event is checked against its schema before it is decoded; a log that lost data (broken
@@ -16,6 +16,7 @@
 #include "pose_log.hpp"
 #include "rcal/cell/online_identification.hpp"
 #include "rcal/io/atomic_file.hpp"
+#include "rcal/io/cell_yaml.hpp"
 #include "rcal/io/lcm_log.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/pose_measurement_t.hpp"
@@ -27,24 +28,9 @@
 namespace rcal::tool {
 
 void AddCalibrateLogOptions(CLI::App& sub, CalibrateLogOptions& o, const std::string& suffix) {
-  o.channel = transport::channels::kPoseMeasurement;
-  sub.add_option("--channel", o.channel, "channel of the pose measurements" + suffix)
-      ->capture_default_str();
   sub.add_option(
-         "--ident-seed", o.ident_seed,
-         "seed of the joint sample that selects the identifiable set (ekf_identifier's)" + suffix)
-      ->capture_default_str();
-  sub.add_flag("--position-only", o.position_only, "identify from positions only" + suffix);
-  sub.add_option(
-         "--cell-seed", o.cell_seed,
-         "> 0: the simulated cell of that seed, as `ekf_identifier --cell-seed` (the demo's "
-         "log: 1)" +
-             suffix)
-      ->capture_default_str();
-  sub.add_option("--guess-poses", o.guess_poses,
-                 "with --cell-seed: poses held back for the set-up guess" + suffix)
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
+      "--channel", o.channel,
+      "channel of the pose measurements (default: the cell's channels.pose_measurement)" + suffix);
   sub.add_flag("--allow-gaps", o.allow_gaps,
                "an LCM log that lost data (broken frames, undecodable events): go on with what "
                "could be read (default: refuse, exit non-zero)");
@@ -52,11 +38,9 @@ void AddCalibrateLogOptions(CLI::App& sub, CalibrateLogOptions& o, const std::st
 
 int RunCalibrateLog(const CalibrateLogOptions& o_in) {
   CalibrateLogOptions o = o_in;
-  if (o.channel.empty()) o.channel = transport::channels::kPoseMeasurement;
-  const auto robot = io::LoadRobot(ResolvePath(o.robot));
   // The identification exactly as ekf_identifier runs it (same base set, set-up guess, checks).
-  cell::OnlineIdentification id(robot.spec, robot.model,
-                                {o.ident_seed, o.cell_seed, o.guess_poses, o.position_only});
+  cell::OnlineIdentification id(io::LoadCell(ResolvePath(o.cell)));
+  if (o.channel.empty()) o.channel = id.cell().spec.channels.pose_measurement;
   const auto& model = id.model();
   const auto& base = id.base();
 
@@ -94,7 +78,8 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
       ekf.rejected(), static_cast<long long>(skipped));
   // Every parameter in model order, its unit in the key: value_m and sigma_m, or value_rad and
   // sigma_rad.
-  io::LoadedRobot cell_robot = robot;  // the identifier's model: the arm and its set-up frames
+  io::LoadedRobot cell_robot = id.cell().robot;  // the arm with the cell's set-up frames
+  cell_robot.spec = id.cell().robot_spec;
   cell_robot.model = model;
   std::printf("  chain %s\n", ChainText(cell_robot).c_str());
   nlohmann::json names = nlohmann::json::array(), parameters = nlohmann::json::array();
@@ -115,7 +100,9 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
     nlohmann::json j = {
         {"log", o.log},
         {"robot", model.name()},
-        {"chain", {{"base_link", robot.spec.base_link}, {"tip_link", robot.spec.tip_link}}},
+        {"cell", id.cell().spec.name},
+        {"chain",
+         {{"base_link", cell_robot.spec.base_link}, {"tip_link", cell_robot.spec.tip_link}}},
         {"model_id", transport::ModelId(model)},
         {"events", events},
         {"skipped", skipped},
@@ -132,6 +119,19 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
         {"parameters", parameters}};
     io::AtomicWriteFile(o.json_path, j.dump(2));
   }
+  if (ekf.accepted() == 0) {
+    // Never a silent nominal: say what happened and what to check.
+    std::fprintf(stderr,
+                 "rcal calibrate-log: no pose accepted (%lld %s events, %d held for the set-up "
+                 "guess of %d, %d rejected by the EKF%s); is %s the cell that was recorded, and "
+                 "%s its pose channel?\n",
+                 static_cast<long long>(events), o.channel.c_str(),
+                 static_cast<int>(id.held().size()), id.cell().spec.identifier.guess_poses,
+                 ekf.rejected(),
+                 ekf.last_rejection().empty() ? "" : (": " + ekf.last_rejection()).c_str(),
+                 o.cell.c_str(), o.channel.c_str());
+    return 3;
+  }
   return 0;
 }
 
@@ -143,7 +143,8 @@ const RegisterCommand kCalibrateLog(
     [](CLI::App& sub) -> std::function<int()> {
       auto o = std::make_shared<CalibrateLogOptions>();
       sub.add_option("log", o->log, "LCM event log (lcm-logger, logger service)")->required();
-      sub.add_option("--robot", o->robot, "robot YAML or URDF")->capture_default_str();
+      sub.add_option("--cell", o->cell, "cell file (schema rcal.cell/1), as ekf_identifier's")
+          ->capture_default_str();
       AddCalibrateLogOptions(sub, *o, "");
       sub.add_option("--json", o->json_path, "write the parameters here (SI units)");
       return [o]() { return RunCalibrateLog(*o); };

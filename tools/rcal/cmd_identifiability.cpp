@@ -23,6 +23,7 @@
 #include "command.hpp"
 #include "pose_log.hpp"
 #include "rcal/identification/calibration.hpp"
+#include "rcal/identification/setup_guess.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/io/robot_yaml.hpp"
@@ -47,17 +48,6 @@ struct Options {
   bool allow_gaps = false;
   std::string json_path;
 };
-
-// The set-up frames of x0 at a generic placement (file comment).
-Eigen::VectorXd GenericSetup(const kinematics::KinematicModel& model, const Eigen::VectorXd& x0,
-                             unsigned seed) {
-  sim::Rng rng(seed);
-  std::normal_distribution<double> n(0.0, 1.0);
-  Eigen::VectorXd x = x0;
-  for (int i : identification::SetupParameters(model))
-    x(i) += n(rng) * (model.parameters()[i].group == "marker" ? 0.05 : 1e-3);
-  return x;
-}
 
 int Run(const Options& o) {
   io::LoadedRobot robot = LoadRobotForCell(o.robot, o.tip_link, o.base_link, o.frames);
@@ -105,7 +95,7 @@ int Run(const Options& o) {
     where = std::to_string(o.poses) + " random poses inside the limits";
   }
   const kinematics::KinematicModel& model = robot.model;
-  const Eigen::VectorXd x = GenericSetup(model, x0, o.seed);
+  const Eigen::VectorXd x = identification::GenericSetupPlacement(model, x0, o.seed);
   const bool full = !ms.empty() && ms.front().has_orientation;
   const auto r = kinematics::AnalyzeIdentifiability(model, ms, x);
   std::printf("%s: %d parameters, %s, %zu marker(s), %s\n", model.name().c_str(),

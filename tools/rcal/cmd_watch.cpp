@@ -2,9 +2,10 @@
 // KINEMATIC_PARAMS and CALIBRATION_STATUS (published in that order after every pose by
 // ekf_identifier) and prints, per pose: poses used, the largest parameter change of that pose
 // (in its σ, and the change's norm over lengths [mm] and angles [mrad]), the RMS residuals, and —
-// with --seed S — the mean position error on the test poses against the simulator's truth, as the
-// offline `rcal experiment paper --sensors --seed S` reports it (the same truth cell, MakeCell,
-// and the same test stops: drawn after the --poses calibration stops from mt19937_64(S·1000+3)).
+// with --sim FILE (a simulated cell, schema rcal.cell_sim/1: what sensor_acquisition --sim runs)
+// — the mean position error on the test poses against the simulator's truth, as the offline
+// experiment reports it (the same truth cell, cell::MakeSimCell, and the same test stops: drawn
+// after the --poses calibration stops from mt19937_64(S·1000+3), S the sim file's seed).
 // Ends after --poses poses (0: never), on Ctrl-C, or when nothing was heard for --idle seconds
 // after the first pose (wall clock: a viewer, not a filter).
 #include <atomic>
@@ -17,8 +18,9 @@
 #include "command.hpp"
 #include "experiment_sensors.hpp"
 #include "rcal/calibration_status_t.hpp"
+#include "rcal/cell/cell_sim_yaml.hpp"
 #include "rcal/identification/metrics.hpp"
-#include "rcal/io/robot_urdf.hpp"
+#include "rcal/io/cell_yaml.hpp"
 #include "rcal/kinematic_params_t.hpp"
 #include "rcal/sim/pose_sim.hpp"
 #include "rcal/transport/adapters.hpp"
@@ -35,8 +37,7 @@ void OnSignal(int) {
 
 struct Options {
   std::string lcm_url;
-  std::string robot = "config/robots/grb3016.yaml";
-  unsigned seed = 0;
+  std::string sim;  ///< empty: no truth to judge against
   int poses = 0, test_poses = 50;
   double idle_s = 30.0;
 };
@@ -45,11 +46,14 @@ int Run(const Options& o) {
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);
   transport::LcmTransport t(o.lcm_url);
-  std::optional<exp::Cell> cell;
+  std::optional<cell::Cell> cell;
   std::vector<Eigen::VectorXd> test_q;
-  if (o.seed > 0) {
-    cell = exp::MakeCell(io::LoadRobot(ResolvePath(o.robot)).spec, o.seed);
-    sim::Rng rng(o.seed * 1000 + 3);
+  unsigned seed = 0;
+  if (!o.sim.empty()) {
+    const cell::CellSimSpec sim_spec = cell::LoadCellSimSpec(ResolvePath(o.sim));
+    seed = sim_spec.seed;
+    cell = cell::MakeSimCell(io::LoadCell(sim_spec.cell), sim_spec);
+    sim::Rng rng(seed * 1000 + 3);
     sim::SampleJoints(cell->model, 1, rng);  // home
     const auto stops = sim::SampleJoints(cell->model, o.poses + o.test_poses, rng);
     test_q.assign(stops.begin() + o.poses, stops.end());
@@ -108,9 +112,8 @@ int Run(const Options& o) {
         last_poses = p.poses_used;
         previous = p;
       });
-  std::printf(
-      "rcal watch on %s%s\n", t.url().c_str(),
-      cell ? (" (truth: sensor-level cell of seed " + std::to_string(o.seed) + ")").c_str() : "");
+  std::printf("rcal watch on %s%s\n", t.url().c_str(),
+              cell ? (" (truth: " + o.sim + ", seed " + std::to_string(seed) + ")").c_str() : "");
   std::fflush(stdout);
   while (!g_stop && (o.poses <= 0 || last_poses < o.poses)) {
     t.HandleTimeout(100);
@@ -133,10 +136,9 @@ const RegisterCommand kWatch(
       auto o = std::make_shared<Options>();
       sub.add_option("--lcm-url", o->lcm_url,
                      "LCM URL (default $RCAL_LCM_URL, else udpm://239.255.76.67:7667?ttl=0)");
-      sub.add_option("--robot", o->robot, "robot YAML or URDF")->capture_default_str();
-      sub.add_option("--seed", o->seed,
-                     "sim seed: show the test error against the sensor-level sim's truth (0: no)")
-          ->capture_default_str();
+      sub.add_option("--sim", o->sim,
+                     "simulated cell (schema rcal.cell_sim/1, as sensor_acquisition --sim): show "
+                     "the test error against its truth");
       sub.add_option("--poses", o->poses, "stop after this many poses used (0: Ctrl-C)")
           ->capture_default_str();
       sub.add_option("--test-poses", o->test_poses, "test stops (as the sim's --test-poses)")

@@ -4,56 +4,75 @@
 
 #include <algorithm>
 #include <cmath>
+#include <random>
 #include <stdexcept>
 
+#include "rcal/identification/setup_guess.hpp"
 #include "rcal/kinematics/identifiability.hpp"
-#include "rcal/sim/pose_sim.hpp"
 
 namespace rcal::cell {
-namespace {
 
-// The identifiable base set at a seeded joint sample around the nominal (`rcal experiment
-// paper`'s choice).
-std::vector<int> GenericBaseSet(const kinematics::KinematicModel& model,
-                                const OnlineIdentificationSettings& s) {
-  sim::Rng rng_id(s.ident_seed * 1000 + 1);
-  const auto report = kinematics::AnalyzeIdentifiability(
-      model, sim::SampleJoints(model, 200, rng_id), model.Nominal(),
-      s.position_only ? kinematics::MeasurementKind::kPositionOnly
-                      : kinematics::MeasurementKind::kFullPose);
-  spdlog::debug("identifiable: rank {} of {} (condition number {:.1f})", report.rank,
-                model.num_params(), report.condition_number);
-  return report.identifiable;
+std::vector<int> CellBaseSet(const io::BuiltCell& cell) {
+  const kinematics::KinematicModel& model = cell.model;
+  const unsigned seed = cell.spec.identifier.base_set_seed;
+  // The measurements the cell makes: every marker its position sensor measures, at each of 200
+  // joint vectors spread over the limits, with orientation when the cell measures it.
+  std::mt19937_64 rng(seed * 1000 + 1);
+  std::vector<int> slots;
+  for (int id : cell.spec.position.markers)
+    if (const int slot = model.MarkerSlot(id); slot >= 0) slots.push_back(slot);
+  if (slots.empty()) slots.push_back(0);
+  std::vector<kinematics::PoseMeasurement> ms;
+  for (const Eigen::VectorXd& q : kinematics::SampleJointsInLimits(model, 200, rng))
+    for (int slot : slots) {
+      kinematics::PoseMeasurement m;
+      m.q = q;
+      m.marker = slot;
+      m.has_orientation = cell.spec.measures_orientation();
+      ms.push_back(m);
+    }
+  const Eigen::VectorXd x = identification::GenericSetupPlacement(model, model.Nominal(), seed);
+  return kinematics::AnalyzeIdentifiability(model, ms, x).identifiable;
 }
 
-}  // namespace
+OnlineIdentification::OnlineIdentification(io::BuiltCell cell)
+    : cell_(std::move(cell)),
+      guessed_(cell_.Guessed()),
+      base_(CellBaseSet(cell_)),
+      start_(cell_.model.Nominal()),
+      ekf_(MakeEkf(start_)),
+      started_(guessed_.empty()) {
+  const int guess_poses = cell_.spec.identifier.guess_poses;
+  if (!guessed_.empty() && guess_poses < 3)
+    throw std::invalid_argument(cell_.spec.source +
+                                ": identifier.guess_poses: " + std::to_string(guess_poses) +
+                                ", at least 3 to guess the set-up frames");
+  spdlog::debug("cell {}: {} parameters, base set of {}; {}", cell_.spec.name,
+                cell_.model.num_params(), base_.size(),
+                guessed_.empty()
+                    ? std::string("no frame to guess")
+                    : "set-up guess from the first " + std::to_string(guess_poses) + " poses");
+}
 
-OnlineIdentification::OnlineIdentification(const io::RobotSpec& robot,
-                                           const kinematics::KinematicModel& robot_model,
-                                           const OnlineIdentificationSettings& settings)
-    : settings_(settings),
-      cell_(settings.cell_seed > 0 ? std::optional<Cell>(MakeCell(robot, settings.cell_seed))
-                                   : std::nullopt),
-      model_(cell_ ? cell_->model : robot_model),
-      base_(cell_ ? cell_->base : GenericBaseSet(model_, settings)),
-      ekf_(cell_
-               ? std::make_unique<identification::EkfIdentifier>(MakeEkf(*cell_, model_.Nominal()))
-               : std::make_unique<identification::EkfIdentifier>(model_, base_)),
-      started_(!cell_) {
-  if (settings.guess_poses < 1)
-    throw std::invalid_argument("guess_poses: " + std::to_string(settings.guess_poses) +
-                                ", at least 1");
-  if (cell_)
-    spdlog::debug(
-        "cell of seed {}: {} parameters, base set of {}; set-up guess from the first {} "
-        "poses",
-        settings.cell_seed, model_.num_params(), base_.size(), settings.guess_poses);
+std::unique_ptr<identification::EkfIdentifier> OnlineIdentification::MakeEkf(
+    const Eigen::VectorXd& x0) const {
+  // Parameters outside the base set stay at x0: the guess for a set-up frame, the drawing for the
+  // arm.
+  auto ekf = std::make_unique<identification::EkfIdentifier>(cell_.model, base_, cell_.ekf, x0);
+  const Eigen::VectorXd sigma = cell_.PriorSigma();
+  Eigen::VectorXd start(base_.size()), var(base_.size());
+  for (size_t i = 0; i < base_.size(); ++i) {
+    start(i) = x0(base_[i]);
+    var(i) = sigma(base_[i]) * sigma(base_[i]);
+  }
+  ekf->SetState(start, var.asDiagonal());
+  return ekf;
 }
 
 OnlineIdentification::Outcome OnlineIdentification::Add(
     const TimedPose& pose, const std::function<void(const Update&)>& on_update) {
   Outcome out;
-  std::string error = kinematics::Validate(model_, pose.z);
+  std::string error = kinematics::Validate(model(), pose.z);
   if (error.empty() && pose.utime <= last_utime_)
     error = "pose_measurement.utime: " + std::to_string(pose.utime) +
             " is not after the last pose (" + std::to_string(last_utime_) + ")";
@@ -74,10 +93,15 @@ OnlineIdentification::Outcome OnlineIdentification::Add(
   last_pose_index_ = pose.pose_index;
   held_.push_back(pose);
   out.held = true;
-  if (static_cast<int>(held_.size()) < settings_.guess_poses) return out;
+  if (static_cast<int>(held_.size()) < cell_.spec.identifier.guess_poses) return out;
   std::vector<kinematics::PoseMeasurement> ms;
   for (const auto& h : held_) ms.push_back(h.z);
-  ekf_ = std::make_unique<identification::EkfIdentifier>(MakeEkf(*cell_, SetupGuess(*cell_, ms)));
+  const identification::SetupGuess guess = identification::GuessSetup(model(), ms);
+  for (int i : guessed_) start_(i) = guess.x(i);  // frames of mode prior/fixed stay nominal
+  if (!guess.outliers.empty())
+    spdlog::warn("set-up guess: {} of {} poses left out as outliers", guess.outliers.size(),
+                 ms.size());
+  ekf_ = MakeEkf(start_);
   started_ = true;
   out.started = true;
   const std::vector<TimedPose> held = std::move(held_);
@@ -105,15 +129,17 @@ OnlineIdentification::Update OnlineIdentification::Apply(const TimedPose& pose) 
 void OnlineIdentification::Restore(const identification::EkfCheckpoint& checkpoint,
                                    std::vector<TimedPose> held, int64_t last_utime,
                                    int64_t last_pose_index) {
-  if (!held.empty() && (!cell_ || checkpoint.accepted > 0))
-    throw std::runtime_error("held: " + std::to_string(held.size()) +
-                             " poses held for a set-up guess, but " +
-                             (cell_ ? "the EKF has started" : "there is no cell"));
+  if (!held.empty() && (guessed_.empty() || checkpoint.accepted > 0))
+    throw std::runtime_error(
+        "held: " + std::to_string(held.size()) + " poses held for a set-up guess, but " +
+        (guessed_.empty() ? "the cell guesses no frame" : "the EKF has started"));
   ekf_->Restore(checkpoint);
+  // The start it ran from (its parameters outside the base set are fixed there).
+  if (checkpoint.x_fixed.size() == start_.size()) start_ = checkpoint.x_fixed;
   held_ = std::move(held);
   last_utime_ = last_utime;
   last_pose_index_ = last_pose_index;
-  if (ekf_->accepted() > 0) started_ = true;
+  if (ekf_->accepted() > 0 || guessed_.empty()) started_ = true;
 }
 
 }  // namespace rcal::cell

@@ -118,7 +118,8 @@ void EkfIdentifier::SetState(const Eigen::VectorXd& state, const Eigen::MatrixXd
 }
 
 EkfCheckpoint EkfIdentifier::Checkpoint() const {
-  EkfCheckpoint c{x0_, x_, x_lin_, P0_, P_, history_, accepted_, rejected_, relinearizations_, {}};
+  EkfCheckpoint c{x0_, x_,      x_lin_, P0_, P_, history_, accepted_, rejected_, relinearizations_,
+                  {},  x_fixed_};
   if (ext_.num_effect_params() > 0) c.contexts = contexts_;
   return c;
 }
@@ -133,6 +134,8 @@ void EkfIdentifier::Restore(const EkfCheckpoint& c) {
     if (M.rows() != n || M.cols() != n || !M.allFinite())
       throw std::invalid_argument(std::string(name) + ": wrong size or not finite");
   };
+  if (c.x_fixed.size() != 0 && (c.x_fixed.size() != model().num_params() || !c.x_fixed.allFinite()))
+    throw std::invalid_argument("x_fixed: wrong size or not finite");
   check_vec(c.x0, "x0");
   check_vec(c.x, "x");
   check_vec(c.x_lin, "x_lin");
@@ -150,6 +153,7 @@ void EkfIdentifier::Restore(const EkfCheckpoint& c) {
     const std::string why = ValidateContext(ext_, c.contexts[k]);
     if (!why.empty()) throw std::invalid_argument("contexts[" + std::to_string(k) + "]." + why);
   }
+  if (c.x_fixed.size() != 0) x_fixed_ = c.x_fixed;
   x0_ = c.x0;
   x_ = c.x;
   x_lin_ = c.x_lin;

@@ -5,6 +5,7 @@
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
+#include <random>
 #include <stdexcept>
 
 #include "rcal/geometry/so3.hpp"
@@ -356,6 +357,16 @@ SetupGuess GuessSetup(const KinematicModel& model, const std::vector<PoseMeasure
   }
   out.covariance = info.ldlt().solve(Eigen::MatrixXd::Identity(k, k));
   return out;
+}
+
+Eigen::VectorXd GenericSetupPlacement(const KinematicModel& model, const Eigen::VectorXd& x0,
+                                      unsigned seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> n(0.0, 1.0);
+  Eigen::VectorXd x = x0;
+  for (int i : SetupParameters(model))
+    x(i) += n(rng) * (model.parameters()[i].group == "marker" ? 0.05 : 1e-3);
+  return x;
 }
 
 }  // namespace rcal::identification

@@ -43,6 +43,22 @@ std::string Explain(const KinematicModel& m, const std::vector<int>& params,
 
 }  // namespace
 
+std::vector<Eigen::VectorXd> SampleJointsInLimits(const KinematicModel& model, int count,
+                                                  std::mt19937_64& rng, double margin) {
+  std::vector<Eigen::VectorXd> qs;
+  qs.reserve(std::max(0, count));
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (int k = 0; k < count; ++k) {
+    Eigen::VectorXd q(model.num_joints());
+    for (int j = 0; j < model.num_joints(); ++j) {
+      const auto& J = model.joints()[j];
+      q(j) = J.lower + (J.upper - J.lower) * (margin + (1.0 - 2.0 * margin) * u(rng));
+    }
+    qs.push_back(q);
+  }
+  return qs;
+}
+
 Eigen::MatrixXd StackedJacobian(const KinematicModel& model, const std::vector<Eigen::VectorXd>& qs,
                                 const Eigen::VectorXd& x, MeasurementKind kind) {
   const int rows_per = kind == MeasurementKind::kFullPose ? 6 : 3;

@@ -6,6 +6,7 @@
 
 #include "draw3.hpp"
 #include "rcal/geometry/so3.hpp"
+#include "rcal/kinematics/identifiability.hpp"
 
 namespace rcal::sim {
 
@@ -42,19 +43,7 @@ Eigen::VectorXd RandomErrors(const kinematics::KinematicModel& model, Rng& rng, 
 
 std::vector<Eigen::VectorXd> SampleJoints(const kinematics::KinematicModel& model, int count,
                                           Rng& rng, double margin) {
-  std::vector<Eigen::VectorXd> qs;
-  qs.reserve(count);
-  std::uniform_real_distribution<double> u(0.0, 1.0);
-  for (int k = 0; k < count; ++k) {
-    Eigen::VectorXd q(model.num_joints());
-    for (int j = 0; j < model.num_joints(); ++j) {
-      const auto& J = model.joints()[j];
-      const double span = J.upper - J.lower;
-      q(j) = J.lower + span * (margin + (1.0 - 2.0 * margin) * u(rng));
-    }
-    qs.push_back(q);
-  }
-  return qs;
+  return kinematics::SampleJointsInLimits(model, count, rng, margin);
 }
 
 kinematics::PoseMeasurement MeasurePose(const kinematics::KinematicModel& model,

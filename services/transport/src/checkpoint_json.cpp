@@ -9,8 +9,9 @@ namespace rcal::transport {
 namespace {
 
 using nlohmann::json;
-constexpr const char* kSchema = "rcal.ekf_checkpoint/2";
-constexpr const char* kSchemaV1 = "rcal.ekf_checkpoint/1";  // no `held`; still loads
+constexpr const char* kSchema = "rcal.ekf_checkpoint/3";
+constexpr const char* kSchemaV2 = "rcal.ekf_checkpoint/2";  // no x_fixed, no marker; still loads
+constexpr const char* kSchemaV1 = "rcal.ekf_checkpoint/1";  // no `held` either; still loads
 
 json Vec(const Eigen::VectorXd& v) {
   return std::vector<double>(v.data(), v.data() + v.size());
@@ -55,11 +56,9 @@ Eigen::MatrixXd ToMat(const json& j, const std::string& key) {
 }
 
 json MeasurementJson(const kinematics::PoseMeasurement& m) {
-  return {{"q", Vec(m.q)},
-          {"p_WM_W", Vec(m.p_WM_W)},
-          {"has_orientation", m.has_orientation},
-          {"R_EI", Mat(m.R_EI)},
-          {"covariance", Mat(m.covariance)}};
+  return {{"q", Vec(m.q)},       {"p_WM_W", Vec(m.p_WM_W)},
+          {"marker", m.marker},  {"has_orientation", m.has_orientation},
+          {"R_EI", Mat(m.R_EI)}, {"covariance", Mat(m.covariance)}};
 }
 
 kinematics::PoseMeasurement MeasurementFromJson(const json& h, const std::string& path) {
@@ -68,6 +67,7 @@ kinematics::PoseMeasurement MeasurementFromJson(const json& h, const std::string
   const Eigen::VectorXd p = ToVec(At(h, "p_WM_W", path), path + "p_WM_W");
   if (p.size() != 3) throw std::runtime_error("checkpoint: " + path + "p_WM_W: not 3 values");
   m.p_WM_W = p;
+  if (h.contains("marker")) m.marker = At(h, "marker", path).get<int>();  // schema 3
   m.has_orientation = At(h, "has_orientation", path).get<bool>();
   const Eigen::MatrixXd R = ToMat(At(h, "R_EI", path), path + "R_EI");
   if (R.rows() != 3 || R.cols() != 3)
@@ -87,13 +87,21 @@ std::string CheckpointText(const CheckpointFile& f) {
   for (const auto& h : f.held)
     held.push_back(
         {{"utime", h.utime}, {"pose_index", h.pose_index}, {"measurement", MeasurementJson(h.z)}});
-  json j = {{"schema", kSchema},      {"model_id", f.model_id},
-            {"utime", f.utime},       {"last_pose_index", f.last_pose_index},
-            {"x0", Vec(c.x0)},        {"x", Vec(c.x)},
-            {"x_lin", Vec(c.x_lin)},  {"P0", Mat(c.P0)},
-            {"P", Mat(c.P)},          {"accepted", c.accepted},
-            {"rejected", c.rejected}, {"relinearizations", c.relinearizations},
-            {"history", history},     {"held", held}};
+  json j = {{"schema", kSchema},
+            {"model_id", f.model_id},
+            {"utime", f.utime},
+            {"last_pose_index", f.last_pose_index},
+            {"x0", Vec(c.x0)},
+            {"x", Vec(c.x)},
+            {"x_lin", Vec(c.x_lin)},
+            {"P0", Mat(c.P0)},
+            {"P", Mat(c.P)},
+            {"accepted", c.accepted},
+            {"rejected", c.rejected},
+            {"relinearizations", c.relinearizations},
+            {"history", history},
+            {"held", held},
+            {"x_fixed", Vec(c.x_fixed)}};
   return j.dump() + "\n";
 }
 
@@ -105,9 +113,9 @@ CheckpointFile ParseCheckpoint(const std::string& text) {
     throw std::runtime_error(std::string("checkpoint: not JSON: ") + e.what());
   }
   const std::string schema = j.is_object() ? j.value("schema", "") : "";
-  if (schema != kSchema && schema != kSchemaV1)
+  if (schema != kSchema && schema != kSchemaV2 && schema != kSchemaV1)
     throw std::runtime_error(std::string("checkpoint: schema: expected ") + kSchema + " (or " +
-                             kSchemaV1 + ")");
+                             kSchemaV2 + ", " + kSchemaV1 + ")");
   try {
     CheckpointFile f;
     f.model_id = At(j, "model_id", "").get<std::string>();
@@ -127,7 +135,8 @@ CheckpointFile ParseCheckpoint(const std::string& text) {
       const std::string path = "history[" + std::to_string(i) + "].";
       c.history.push_back(MeasurementFromJson(history[i], path));
     }
-    if (schema == kSchema) {
+    if (schema == kSchema) c.x_fixed = ToVec(At(j, "x_fixed", ""), "x_fixed");
+    if (schema != kSchemaV1) {
       const json& held = At(j, "held", "");
       if (!held.is_array()) throw std::runtime_error("checkpoint: held: not an array");
       for (size_t i = 0; i < held.size(); ++i) {

@@ -1,15 +1,22 @@
-// The online identification as the ekf_identifier process runs it, pose by pose, and as
-// `rcal calibrate --log` runs it offline on a recorded log, so the two give the same parameters:
+// The online identification of a cell as the ekf_identifier process runs it, pose by pose, and as
+// `rcal calibrate --log LOG --cell FILE` runs it offline on a recorded log, so the two give the
+// same parameters. Everything comes from the cell file (io::BuiltCell): no simulator.
 //
-//   model and base set  generic: the robot file's model, the identifiable set at a seeded joint
-//                       sample (ident_seed) around the nominal; cell (cell_seed > 0): the
-//                       simulated cell of `rcal experiment paper --sensors --seed S` (arm + set-up
-//                       frames, its preferred base set)
-//   start               generic: the EKF at the nominal; cell: the first `guess_poses` poses are
-//                       held back, the set-up frames guessed from them (cell::SetupGuess), then the
-//                       EKF starts there and takes the held poses in order
-//   each pose           checked (kinematics::Validate), strictly after the last accepted (or held)
-//                       pose in sensor time, then the EKF update (which may reject it by its gate)
+//   model and base set  the arm with the cell's set-up frames; the identifiable (base) set of the
+//                       cell's measurements (its markers, orientation when it measures it) at a
+//                       seeded joint sample (identifier.base_set_seed) with the set-up frames at a
+//                       generic placement (identification::GenericSetupPlacement): the rank a real
+//                       cell has, chosen before any pose arrives
+//   start               frames of mode `guess`: the first identifier.guess_poses poses are held
+//                       back, the set-up guessed from them (identification::GuessSetup: the
+//                       tracker frame and marker offsets registered, the IMU mounting and earth
+//                       frame hand–eye, a bad pose left out); frames of mode `prior` and `fixed`
+//                       stay at their nominal. The EKF then starts there with the cell's prior σ
+//                       per parameter, and takes the held poses in order. Without guessed frames it
+//                       starts at the nominal with the first pose.
+//   each pose           checked (kinematics::Validate), strictly after the last accepted (or
+//                       held) pose in sensor time, then the EKF update (which may reject it by its
+//                       gate)
 //
 // Pure: no transport, no files. State worth keeping (the EKF checkpoint and the held poses) is
 // exposed for the caller to save and restore.
@@ -20,22 +27,13 @@
 #include <functional>
 #include <limits>
 #include <memory>
-#include <optional>
 #include <string>
 #include <vector>
 
-#include "rcal/cell/sim_cell.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
-#include "rcal/io/robot_yaml.hpp"
+#include "rcal/io/cell_yaml.hpp"
 
 namespace rcal::cell {
-
-struct OnlineIdentificationSettings {
-  unsigned ident_seed = 1;  ///< generic: seed of the joint sample that selects the base set
-  unsigned cell_seed = 0;   ///< > 0: the simulated cell of this seed
-  int guess_poses = 6;      ///< cell: poses held back for the set-up guess (≥ 1)
-  bool position_only = false;
-};
 
 /// A pose given to the identification: the measurement, its sensor time [µs] and source index.
 struct TimedPose {
@@ -43,6 +41,10 @@ struct TimedPose {
   int64_t utime = 0;
   int64_t pose_index = -1;
 };
+
+/// The identifiable (base) parameter set of `cell`'s measurements at a seeded joint sample, the
+/// set-up frames at a generic placement (file comment). Ascending.
+std::vector<int> CellBaseSet(const io::BuiltCell& cell);
 
 class OnlineIdentification {
  public:
@@ -62,9 +64,9 @@ class OnlineIdentification {
     std::vector<Update> updates;
   };
 
-  /// Throws std::invalid_argument for guess_poses < 1.
-  OnlineIdentification(const io::RobotSpec& robot, const kinematics::KinematicModel& robot_model,
-                       const OnlineIdentificationSettings& settings);
+  /// Throws std::invalid_argument when the cell's identifier settings cannot be used
+  /// (guess_poses < 3 with guessed frames).
+  explicit OnlineIdentification(io::BuiltCell cell);
 
   /// One pose in arrival order. `on_update`, when given, is called after each EKF update with the
   /// identification in its state right after that update (to publish the estimate pose by pose,
@@ -72,15 +74,17 @@ class OnlineIdentification {
   Outcome Add(const TimedPose& pose, const std::function<void(const Update&)>& on_update = {});
 
   /// Resume: the EKF state, the poses held for the guess and the last pose's time and index.
-  /// Throws std::runtime_error when they do not fit (held poses with the EKF started, or without
-  /// a cell).
+  /// Throws std::runtime_error when they do not fit (held poses with the EKF started, or in a cell
+  /// that guesses nothing).
   void Restore(const identification::EkfCheckpoint& checkpoint, std::vector<TimedPose> held,
                int64_t last_utime, int64_t last_pose_index);
 
-  const kinematics::KinematicModel& model() const { return model_; }
+  const io::BuiltCell& cell() const { return cell_; }
+  const kinematics::KinematicModel& model() const { return cell_.model; }
   const std::vector<int>& base() const { return base_; }
   const identification::EkfIdentifier& ekf() const { return *ekf_; }
-  const std::optional<Cell>& cell() const { return cell_; }
+  /// The start the EKF was given (the set-up guess), full length [m | rad].
+  const Eigen::VectorXd& start() const { return start_; }
   bool started() const { return started_; }
   const std::vector<TimedPose>& held() const { return held_; }
   int64_t last_utime() const { return last_utime_; }
@@ -88,11 +92,13 @@ class OnlineIdentification {
 
  private:
   Update Apply(const TimedPose& pose);
+  /// An EKF on the base set starting at x0 (full length) with the cell's prior σ.
+  std::unique_ptr<identification::EkfIdentifier> MakeEkf(const Eigen::VectorXd& x0) const;
 
-  OnlineIdentificationSettings settings_;
-  std::optional<Cell> cell_;
-  kinematics::KinematicModel model_;
+  io::BuiltCell cell_;
+  std::vector<int> guessed_;
   std::vector<int> base_;
+  Eigen::VectorXd start_;
   std::unique_ptr<identification::EkfIdentifier> ekf_;
   std::vector<TimedPose> held_;
   bool started_ = true;

@@ -89,6 +89,9 @@ struct EkfCheckpoint {
   /// The contexts of the accepted poses, one per history entry; empty: all default (what a
   /// geometric model needs).
   std::vector<kinematics::EffectContext> contexts;
+  /// Values of the parameters not identified, full length [m | rad] (the start the identifier
+  /// was given, e.g. a set-up guess); empty: keep the identifier's own.
+  Eigen::VectorXd x_fixed;
 };
 
 class EkfIdentifier {

@@ -64,4 +64,12 @@ SetupGuess GuessSetup(const kinematics::KinematicModel& model,
                       const SetupGuessSettings& settings = {},
                       const Eigen::VectorXd& x0 = Eigen::VectorXd());
 
+/// The set-up frames of x0 at a generic placement, for asking what a cell can identify before its
+/// frames are known: a set-up frame at its nominal can sit where part of the model is invisible
+/// (a marker at the flange origin lies on the last joint's axis, whose tilt then moves no
+/// measured point), yet in any real cell those directions are seen. Seeded offsets: 5 cm on each
+/// marker coordinate, 1 mm / 1 mrad on the other set-up parameters; the arm stays at x0.
+Eigen::VectorXd GenericSetupPlacement(const kinematics::KinematicModel& model,
+                                      const Eigen::VectorXd& x0, unsigned seed);
+
 }  // namespace rcal::identification

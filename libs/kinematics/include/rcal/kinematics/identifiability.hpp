@@ -13,6 +13,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -49,6 +50,12 @@ struct IdentifiabilityReport {
   std::vector<UnidentifiableCombination> unidentifiable;
   double condition_number = 0;  ///< of the column-scaled Jacobian restricted to `identifiable`
 };
+
+/// `count` joint vectors uniform inside the limits shrunk by `margin` (a fraction of each range
+/// kept free at both ends), drawn from `rng`: the generic poses an identifiability question is
+/// asked at (sim::SampleJoints is this).
+std::vector<Eigen::VectorXd> SampleJointsInLimits(const KinematicModel& model, int count,
+                                                  std::mt19937_64& rng, double margin = 0.05);
 
 /// Stacks the identification Jacobians at joint vectors `qs` around parameter errors `x`.
 Eigen::MatrixXd StackedJacobian(const KinematicModel& model, const std::vector<Eigen::VectorXd>& qs,

@@ -1,9 +1,11 @@
-// The identifier's checkpoint as a JSON document (schema `rcal.ekf_checkpoint/2`), written
+// The identifier's checkpoint as a JSON document (schema `rcal.ekf_checkpoint/3`), written
 // atomically by the process so that a restart resumes where it stopped. Doubles are written in
 // their shortest exact form: Restore(Parse(Text(c))) reproduces the state bit for bit.
-// Schema 2 adds `held`: the poses held back for the set-up guess before the EKF starts
-// (ekf_identifier --cell-seed), so a restart during the guess phase keeps them. Files of schema
-// `rcal.ekf_checkpoint/1` (no `held`) still load, with no held poses.
+// Schema 2 added `held`: the poses held back for the set-up guess before the EKF starts, so a
+// restart during the guess phase keeps them. Schema 3 adds `x_fixed` (the values of the
+// parameters outside the identified set: the set-up guess the EKF started from) and each
+// measurement's `marker` slot. Files of schema 2 (no x_fixed: the identifier's own) and 1 (no
+// `held` either) still load.
 #pragma once
 
 #include <cstdint>
