@@ -171,7 +171,7 @@ class Identifier {
   void OnPose(const pose_measurement_t& msg) {
     health_.Received();
     std::string error;
-    auto z = transport::FromMessage(msg, &error);
+    auto z = transport::FromMessage(msg, &error, &id_.model());
     if (z) error = Implausible(*z);
     if (!z || !error.empty()) {
       Reject(error);

@@ -405,6 +405,10 @@ int main(int argc, char** argv) {
       throw std::runtime_error(sim_path +
                                ": --level poses simulates a pose-level cell (a 6-DoF tracker or "
                                "positions, no IMU); this cell has an IMU: use --level sensors");
+    // The markers the cell's position sensor measures, as slots of the model.
+    std::vector<int> slots;
+    for (int id : built.spec.position.markers)
+      slots.push_back(model.markers().empty() ? 0 : model.MarkerSlot(id));
     sim::Rng rng(seed * 1000 + 3);
     transport::Health health("sensor_acquisition");
     spdlog::info("sensor_acquisition sim on {}: {} poses at {} Hz, speed {}", t.url(),
@@ -433,7 +437,7 @@ int main(int argc, char** argv) {
       const int64_t utime = pose_utime(k);
       if (k < first) {
         // Fast-forward: the same random numbers as the uninterrupted programme.
-        sim::MeasurePose(model, x_true, q, noise, rng);
+        for (int slot : slots) sim::MeasurePose(model.ForMarker(slot), x_true, q, noise, rng);
         continue;
       }
       if (speed > 0) {
@@ -446,11 +450,20 @@ int main(int argc, char** argv) {
       }
       if (services::StopRequested()) break;
       lease.Before(k);
-      const auto z = sim::MeasurePose(model, x_true, q, noise, rng);
       if (t.Publish(built.spec.channels.joints, transport::ToJointState(model, q, utime)))
         health.Published();
-      if (t.Publish(built.spec.channels.pose_measurement, transport::ToMessage(z, utime, k)))
-        health.Published();
+      // Each marker the tracker measures at this stop, in the cell's order, 1 µs apart (a tracker
+      // measures its reflectors one after the other); pose_index counts the measurements.
+      const int n = static_cast<int>(slots.size());
+      for (int j = 0; j < n; ++j) {
+        auto z = sim::MeasurePose(model.ForMarker(slots[j]), x_true, q, noise, rng);
+        z.marker = slots[j];
+        const auto index = static_cast<int32_t>(k * n + j);
+        if (t.Publish(
+                built.spec.channels.pose_measurement,
+                transport::ToMessage(z, utime + j, index, transport::MarkerId(model, slots[j]))))
+          health.Published();
+      }
       health.Tick(utime, t);
       t.HandleTimeout(0);  // keeps LCM's receive queue empty
     }

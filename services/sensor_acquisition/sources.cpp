@@ -120,7 +120,7 @@ PoseDatasetReplaySource::PoseDatasetReplaySource(const std::string& path,
     js.q.assign(s.q.data(), s.q.data() + s.q.size());
     js.dq.assign(s.q.size(), 0.0);
     events_.push_back(js);
-    events_.push_back(transport::ToMessage(z, utime, static_cast<int32_t>(k)));
+    events_.push_back(transport::ToMessage(z, utime, static_cast<int32_t>(k), s.marker));
     ++poses_;
   }
 }

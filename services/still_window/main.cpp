@@ -57,6 +57,7 @@ class StillWindowNode {
         warmup_(cell.spec.still_window.warmup),
         R_IS_(cell.spec.imu ? cell.spec.imu->R_IS : Eigen::Matrix3d::Identity()),
         channels_(cell.spec.channels),
+        marker_id_(cell.spec.position.markers.front()),
         t_(t),
         health_(name),
         joints_gate_(time),
@@ -148,6 +149,7 @@ class StillWindowNode {
     std::string error;
     const auto s = transport::PositionFromMessage(m, &error);
     if (!s) return Bad(error);
+    if (m.marker_id != marker_id_) return;
     if (!Admit(position_gate_, m.utime, "position_sample.utime")) return;
     Done(s->utime, pipeline_.AddPosition(Seconds(s->utime), s->p));
   }
@@ -158,7 +160,8 @@ class StillWindowNode {
     }
     const kinematics::PoseMeasurement z = p.ToMeasurement();
     const int64_t utime = std::llround(p.t_end * 1e6);
-    if (t_.Publish(channels_.pose_measurement, transport::ToMessage(z, utime, emitted_))) {
+    if (t_.Publish(channels_.pose_measurement,
+                   transport::ToMessage(z, utime, emitted_, marker_id_))) {
       health_.Published();
       spdlog::info("pose {}: window {:.3f}–{:.3f} s, {} IMU / {} position samples", emitted_,
                    p.t_begin, p.t_end, p.imu_samples, p.position_samples);
@@ -172,6 +175,9 @@ class StillWindowNode {
   double warmup_;
   Eigen::Matrix3d R_IS_;
   io::CellChannels channels_;
+  // The marker whose samples form the windows: the cell's first (a window per marker for
+  // several is not built yet; other markers' samples are ignored, as position_kf ignores them).
+  int32_t marker_id_ = 0;
   transport::Transport& t_;
   transport::Health health_;
   std::optional<double> t_first_;

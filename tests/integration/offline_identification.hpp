@@ -8,6 +8,11 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdlib>
+#include <fstream>
+#include <lcm/lcm-cpp.hpp>
+#include <nlohmann/json.hpp>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -20,6 +25,7 @@
 #include "rcal/kinematic_params_t.hpp"
 #include "rcal/pose_measurement_t.hpp"
 #include "rcal/transport/adapters.hpp"
+#include "rcal/transport/channels.hpp"
 #include "rcal/transport/checkpoint_json.hpp"
 
 namespace rcal::integration {
@@ -44,9 +50,11 @@ inline std::vector<pose_measurement_t> UsedPoses(const std::filesystem::path& ch
     const auto& h = f.checkpoint.history[k];
     const pose_measurement_t* match = nullptr;
     for (const auto& m : published) {
-      std::string error;
-      const auto z = transport::FromMessage(m, &error);
-      if (z && z->q == h.q && z->p_WM_W == h.p_WM_W) match = &m;
+      // The message's own fields (its marker id is the cell's, which only the model maps).
+      if (m.num_joints == h.q.size() && m.q.size() == static_cast<size_t>(h.q.size()) &&
+          Eigen::Map<const Eigen::VectorXd>(m.q.data(), m.num_joints) == h.q &&
+          Eigen::Vector3d(m.p[0], m.p[1], m.p[2]) == h.p_WM_W)
+        match = &m;
     }
     EXPECT_NE(match, nullptr) << "accepted pose " << k << " is none of the published poses";
     if (match) used.push_back(*match);
@@ -69,7 +77,7 @@ inline void ExpectIdentifierEqualsOffline(const io::BuiltCell& cell,
   cell::OnlineIdentification id(cell);
   for (const auto& m : used) {
     std::string error;
-    const auto z = transport::FromMessage(m, &error);
+    const auto z = transport::FromMessage(m, &error, &cell.model);
     ASSERT_TRUE(z) << error;
     const auto out = id.Add({*z, m.utime, m.pose_index});
     ASSERT_TRUE(out.rejected.empty()) << what << ": " << out.rejected;
@@ -90,6 +98,49 @@ inline void ExpectIdentifierEqualsOffline(const io::BuiltCell& cell,
   }
   std::printf("%s: identifier vs offline identification of its %zu poses: max difference %.3g\n",
               what.c_str(), used.size(), worst);
+}
+
+/// `poses` written as an LCM log (the real file format: one POSE_MEASUREMENT event each, in order)
+/// in `dir`, read by `rcal calibrate-log LOG --cell CELL` (the command at `rcal`): its poses and
+/// every parameter value equal the identifier's final `params` (kSameAsOffline).
+inline void ExpectCalibrateLogEqualsIdentifier(const std::string& rcal,
+                                               const std::filesystem::path& dir,
+                                               const std::string& cell_file,
+                                               const std::vector<pose_measurement_t>& poses,
+                                               const kinematic_params_t& params) {
+  const std::filesystem::path log = dir / "poses.lcmlog";
+  {
+    lcm::LogFile f(log.string(), "w");
+    int64_t event = 0;
+    for (const auto& m : poses) {
+      std::vector<uint8_t> buf(static_cast<size_t>(m.getEncodedSize()));
+      m.encode(buf.data(), 0, static_cast<int>(buf.size()));
+      lcm::LogEvent ev;
+      ev.eventnum = event++;
+      ev.timestamp = m.utime;
+      ev.channel = transport::channels::kPoseMeasurement;
+      ev.datalen = static_cast<int32_t>(buf.size());
+      ev.data = buf.data();
+      ASSERT_EQ(f.writeEvent(&ev), 0);
+    }
+  }
+  const std::filesystem::path json = dir / "calibrate_log.json";
+  const std::string cmd = rcal + " calibrate-log " + log.string() + " --cell " + cell_file +
+                          " --json " + json.string() + " > " + (dir / "calibrate_log.out").string();
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  const auto j = nlohmann::json::parse(std::ifstream(json));
+  EXPECT_EQ(j["poses_accepted"].get<int>(), params.poses_used);
+  ASSERT_EQ(static_cast<int>(j["parameters"].size()), params.num_params);
+  double worst = 0;
+  for (int i = 0; i < params.num_params; ++i) {
+    const auto& p = j["parameters"][i];
+    EXPECT_EQ(p["name"].get<std::string>(), params.names[i]);
+    const auto& value = p.contains("value_m") ? p["value_m"] : p["value_rad"];
+    EXPECT_NEAR(value.get<double>(), params.values[i], kSameAsOffline) << params.names[i];
+    worst = std::max(worst, std::abs(value.get<double>() - params.values[i]));
+  }
+  std::printf("rcal calibrate-log on the %zu poses vs the identifier: max difference %.3g\n",
+              poses.size(), worst);
 }
 
 }  // namespace rcal::integration

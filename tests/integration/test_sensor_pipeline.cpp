@@ -220,36 +220,7 @@ TEST_F(SensorPipeline, ThePandaCellCalibratesLiveAndItsLogGivesTheSameOffline) {
   EXPECT_GT(start_m, 100 * online_m);
 
 #ifdef RCAL_TOOL
-  // An LCM log of the poses (the real file format, written here) through `rcal calibrate-log`.
-  const std::filesystem::path log = dir_ / "panda.lcmlog";
-  {
-    lcm::LogFile f(log.string(), "w");
-    int64_t event = 0;
-    for (const auto& m : poses) {
-      std::vector<uint8_t> buf(static_cast<size_t>(m.getEncodedSize()));
-      m.encode(buf.data(), 0, static_cast<int>(buf.size()));
-      lcm::LogEvent ev;
-      ev.eventnum = event++;
-      ev.timestamp = m.utime;
-      ev.channel = transport::channels::kPoseMeasurement;
-      ev.datalen = static_cast<int32_t>(buf.size());
-      ev.data = buf.data();
-      ASSERT_EQ(f.writeEvent(&ev), 0);
-    }
-  }
-  const std::filesystem::path json = dir_ / "calibrate_log.json";
-  const std::string cmd = std::string(RCAL_TOOL) + " calibrate-log " + log.string() + " --cell " +
-                          cell_file + " --json " + json.string() + " > " +
-                          (dir_ / "calibrate_log.out").string();
-  ASSERT_EQ(std::system(cmd.c_str()), 0);
-  const auto j = nlohmann::json::parse(std::ifstream(json));
-  EXPECT_EQ(j["poses_accepted"].get<int>(), params->poses_used);
-  ASSERT_EQ(static_cast<int>(j["parameters"].size()), params->num_params);
-  for (int i = 0; i < params->num_params; ++i) {
-    const auto& p = j["parameters"][i];
-    const auto& value = p.contains("value_m") ? p["value_m"] : p["value_rad"];
-    EXPECT_NEAR(value.get<double>(), params->values[i], 1e-9) << params->names[i];
-  }
+  integration::ExpectCalibrateLogEqualsIdentifier(RCAL_TOOL, dir_, cell_file, poses, *params);
 #endif
 }
 

@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "fixture.hpp"
+#include "rcal/io/cell_yaml.hpp"
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/lcm_transport.hpp"
 
@@ -99,6 +100,46 @@ TEST(PoseMeasurementAdapter, MalformedFieldsAreRejectedByName) {
     EXPECT_NE(error.find(std::string("pose_measurement.") + c.field), std::string::npos)
         << c.field << ": " << error;
   }
+}
+
+// marker_id carries the cell's marker id; FromMessage with the model turns it into the model's
+// slot (the UR10 cell: markers 1 and 2 are slots 0 and 1) and refuses an id the model lacks,
+// naming the field. Without a model only 0 passes (a single-marker cell).
+TEST(PoseMeasurementAdapter, MarkerIdIsTheCellsAndBecomesTheModelsSlot) {
+  const io::BuiltCell cell = io::LoadCell(RCAL_SOURCE_DIR "/config/cells/ur10.yaml");
+  const auto& model = cell.model;
+  ASSERT_EQ(model.markers().size(), 2u);
+  EXPECT_EQ(MarkerId(model, 0), 1);
+  EXPECT_EQ(MarkerId(model, 1), 2);
+  kinematics::PoseMeasurement z;
+  z.q = Eigen::VectorXd::Constant(model.num_joints(), 0.3);
+  z.p_WM_W = {1.0, 0.5, 0.2};
+  z.covariance = Eigen::Matrix3d::Identity() * 1e-8;
+  for (int slot : {0, 1}) {
+    z.marker = slot;
+    const auto msg = ThroughLcm(ToMessage(z, 10, 4, MarkerId(model, slot)));
+    EXPECT_EQ(msg.marker_id, slot + 1);
+    std::string error;
+    const auto back = FromMessage(msg, &error, &model);
+    ASSERT_TRUE(back) << error;
+    EXPECT_EQ(back->marker, slot);
+    // Without the model a marker other than 0 cannot be placed.
+    EXPECT_FALSE(FromMessage(msg, &error));
+    EXPECT_NE(error.find("pose_measurement.marker_id: " + std::to_string(slot + 1)),
+              std::string::npos)
+        << error;
+  }
+  std::string error;
+  EXPECT_FALSE(FromMessage(ToMessage(z, 10, 4, 0), &error, &model));
+  EXPECT_NE(error.find("pose_measurement.marker_id: 0 is not a marker of"), std::string::npos)
+      << error;
+  EXPECT_NE(error.find("markers: 1, 2"), std::string::npos) << error;
+  // A model without markers (the pose-level GRB3016 cell measures its tool frame): id 0, slot 0.
+  const Grb3016 g(1);
+  const auto back = FromMessage(ToMessage(g.poses[0], 10, 0), &error, &g.model);
+  ASSERT_TRUE(back) << error;
+  EXPECT_EQ(back->marker, 0);
+  EXPECT_FALSE(FromMessage(ToMessage(g.poses[0], 10, 0, 3), &error, &g.model));
 }
 
 TEST(KinematicParamsAdapter, RoundTripAndModelChecks) {

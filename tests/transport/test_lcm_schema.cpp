@@ -57,7 +57,7 @@ pose_measurement_t Pose6() {
   m.covariance.assign(36, 1e-6);
   return m;
 }
-constexpr size_t kNumJointsAt = 8 + 8 + 4;  // fingerprint, utime, pose_index
+constexpr size_t kNumJointsAt = 8 + 8 + 4 + 4;  // fingerprint, utime, pose_index, marker_id
 
 joint_state_t Joints() {
   joint_state_t m{};

@@ -20,6 +20,7 @@ pose_measurement_t Sample() {
   pose_measurement_t m;
   m.utime = 123456789;
   m.pose_index = 7;
+  m.marker_id = 0;
   m.num_joints = 2;
   m.q = {0.1, -0.2};
   m.p[0] = 1;

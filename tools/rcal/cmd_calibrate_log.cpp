@@ -63,7 +63,7 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
       continue;
     }
     std::string error;
-    auto z = transport::FromMessage(msg, &error);
+    auto z = transport::FromMessage(msg, &error, &id.model());
     if (!z || !id.Add({std::move(*z), msg.utime, msg.pose_index}).rejected.empty()) ++skipped;
   }
   const io::LcmLogStats stats = log->stats();

@@ -55,7 +55,7 @@ PoseLog ReadPoseLog(const std::filesystem::path& path, const kinematics::Kinemat
     std::string error;
     // Invalid values (not finite, wrong dimension, not for this robot) are refused as
     // ekf_identifier refuses them: counted here, not a loss of the log's.
-    auto z = transport::FromMessage(msg, &error);
+    auto z = transport::FromMessage(msg, &error, &model);
     if (z) error = kinematics::Validate(model, *z);
     if (!error.empty()) {
       skip(error);

@@ -32,10 +32,11 @@ std::string ModelId(const kinematics::KinematicModel& model) {
 }
 
 pose_measurement_t ToMessage(const kinematics::PoseMeasurement& m, int64_t utime,
-                             int32_t pose_index) {
+                             int32_t pose_index, int32_t marker_id) {
   pose_measurement_t msg;
   msg.utime = utime;
   msg.pose_index = pose_index;
+  msg.marker_id = marker_id;
   msg.num_joints = static_cast<int32_t>(m.q.size());
   msg.q.assign(m.q.data(), m.q.data() + m.q.size());
   for (int i = 0; i < 3; ++i) msg.p[i] = m.p_WM_W(i);
@@ -54,9 +55,28 @@ pose_measurement_t ToMessage(const kinematics::PoseMeasurement& m, int64_t utime
   return msg;
 }
 
+int32_t MarkerId(const kinematics::KinematicModel& model, int slot) {
+  return model.markers().empty() ? 0 : model.markers().at(static_cast<size_t>(slot)).id;
+}
+
 std::optional<kinematics::PoseMeasurement> FromMessage(const pose_measurement_t& msg,
-                                                       std::string* error) {
+                                                       std::string* error,
+                                                       const kinematics::KinematicModel* model) {
   using R = kinematics::PoseMeasurement;
+  int slot = msg.marker_id == 0 ? 0 : -1;
+  if (model && !model->markers().empty()) slot = model->MarkerSlot(msg.marker_id);
+  if (slot < 0) {
+    std::string known;
+    if (model)
+      for (const auto& mk : model->markers())
+        known += (known.empty() ? "" : ", ") + std::to_string(mk.id);
+    return Fail<R>(
+        error,
+        "pose_measurement.marker_id: " + std::to_string(msg.marker_id) + " is not a marker of " +
+            (model
+                 ? model->name() + " (markers: " + (known.empty() ? std::string("0") : known) + ")"
+                 : std::string("a single-marker cell (0)")));
+  }
   if (msg.num_joints < 1 || static_cast<size_t>(msg.num_joints) != msg.q.size())
     return Fail<R>(error, "pose_measurement.num_joints: " + std::to_string(msg.num_joints) +
                               " does not match q (" + std::to_string(msg.q.size()) + ")");
@@ -74,6 +94,7 @@ std::optional<kinematics::PoseMeasurement> FromMessage(const pose_measurement_t&
   if (!AllFinite(msg.covariance.data(), msg.covariance.size()))
     return Fail<R>(error, "pose_measurement.covariance: not finite");
   R m;
+  m.marker = slot;
   m.q = Eigen::Map<const Eigen::VectorXd>(msg.q.data(), msg.num_joints);
   m.p_WM_W = Eigen::Vector3d(msg.p[0], msg.p[1], msg.p[2]);
   m.has_orientation = msg.has_orientation;

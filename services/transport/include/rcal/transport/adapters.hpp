@@ -31,16 +31,22 @@ std::string ModelId(const kinematics::KinematicModel& model);
 
 // ---- pose measurements ------------------------------------------------------------------------
 
-/// Pose measurement → message. `utime` [µs]: sensor time of the still window's end.
+/// Pose measurement → message. `utime` [µs]: sensor time of the still window's end. `marker_id`:
+/// the measured marker's id (the cell's, the dataset's `marker`), not its slot m.marker.
 pose_measurement_t ToMessage(const kinematics::PoseMeasurement& m, int64_t utime,
-                             int32_t pose_index);
+                             int32_t pose_index, int32_t marker_id = 0);
+
+/// The message's marker id for marker slot `slot` of `model` (0 for a model without markers).
+int32_t MarkerId(const kinematics::KinematicModel& model, int slot);
 
 /// Message → pose measurement. Checks: num_joints ≥ 1 and == q size, dimension ∈ {3, 6} and
 /// consistent with has_orientation, num_covariance == dimension², finite values, quaternion norm
-/// within 1e-6 of 1 (renormalised), symmetric covariance. Does not check against a model (see
-/// kinematics::Validate).
-std::optional<kinematics::PoseMeasurement> FromMessage(const pose_measurement_t& msg,
-                                                       std::string* error);
+/// within 1e-6 of 1 (renormalised), symmetric covariance, and marker_id: with `model`, one of its
+/// markers (0 for a model without markers), turned into its slot (PoseMeasurement::marker);
+/// without, 0 (slot 0). Does not check the values against a model (see kinematics::Validate).
+std::optional<kinematics::PoseMeasurement> FromMessage(
+    const pose_measurement_t& msg, std::string* error,
+    const kinematics::KinematicModel* model = nullptr);
 
 // ---- joints -----------------------------------------------------------------------------------
 
