@@ -107,8 +107,8 @@ TEST(RcalCli, IdentifiabilityRanksOfTheGrb3016) {
 // `rcal calibrate` on it (the real UR10: 30, tests/tools/golden/calibrate_ur10.json).
 TEST(RcalCli, IdentifiabilityCountsWhatCalibrateIdentifies) {
   const fs::path d = TempDir("ident_cell");
-  const std::string urdf = std::string(RCAL_SHARED_DIR) + "/data/figaroh_ur10/robot.urdf";
-  const std::string data = std::string(RCAL_SHARED_DIR) + "/data/figaroh_ur10/calibration.csv";
+  const std::string urdf = RCAL_SOURCE_DIR "/config/robots/ur10.urdf";
+  const std::string data = RCAL_SOURCE_DIR "/data/figaroh_ur10/calibration.csv";
   struct Case {
     std::string args;
     int rank;
@@ -132,8 +132,8 @@ TEST(RcalCli, IdentifiabilityCountsWhatCalibrateIdentifies) {
 
 TEST(RcalCli, CalibrateTheRealUr10) {
   const fs::path d = TempDir("ur10");
-  const std::string data = std::string(RCAL_SHARED_DIR) + "/data/figaroh_ur10/calibration.csv";
-  const std::string urdf = std::string(RCAL_SHARED_DIR) + "/data/figaroh_ur10/robot.urdf";
+  const std::string data = RCAL_SOURCE_DIR "/data/figaroh_ur10/calibration.csv";
+  const std::string urdf = RCAL_SOURCE_DIR "/config/robots/ur10.urdf";
   json by_method;
   for (const std::string method : {"lm", "ekf"}) {
     const Result r =
@@ -197,7 +197,7 @@ std::vector<std::vector<std::string>> ReadCsvRows(const fs::path& p,
 
 TEST(RcalCli, CalibrateThreeReflectorsFromTheMarkerColumn) {
   const fs::path d = TempDir("markers");
-  const std::string urdf = std::string(RCAL_SHARED_DIR) + "/data/figaroh_ur10/robot.urdf";
+  const std::string urdf = RCAL_SOURCE_DIR "/config/robots/ur10.urdf";
   const double truth[3][3] = {{0.10, 0.02, 0.05}, {-0.03, 0.09, 0.06}, {0.01, -0.07, 0.11}};
   std::string markers;
   for (int k = 0; k < 3; ++k)
@@ -762,9 +762,10 @@ TEST(RcalCli, AnalyzeImuStreamNamesTheMagneticDisturbanceAndMeasuresItsGain) {
 // gain exactly 0 (geometry is the selected model).
 TEST(RcalCli, AnalyzeTheRealUr10FindsNoEffectBeyondGeometry) {
   const fs::path d = TempDir("analyze_ur10");
-  const Result r = RunRcal(std::string("analyze ") + RCAL_SHARED_DIR +
-                           "/data/figaroh_ur10/calibration.csv --robot " + RCAL_SHARED_DIR +
-                           "/data/figaroh_ur10/robot.urdf --out " + (d / "out").string());
+  const Result r = RunRcal("analyze " RCAL_SOURCE_DIR
+                           "/data/figaroh_ur10/calibration.csv --robot " RCAL_SOURCE_DIR
+                           "/config/robots/ur10.urdf --out " +
+                           (d / "out").string());
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const json j = ReadJson(d / "out" / "analysis.json");
   EXPECT_TRUE(j.at("effects").empty()) << j.at("effects").dump();
