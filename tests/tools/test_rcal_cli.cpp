@@ -298,6 +298,32 @@ TEST(RcalCli, CalibrateThreeReflectorsFromTheMarkerColumn) {
   EXPECT_NE(r.output.find("has calibration rows"), std::string::npos) << r.output;
 }
 
+// Positions only (a tracker without orientation): no orientation was measured, so calibrate
+// prints no orientation error (it printed 0.000 / 0.000 on every line), the report's table says
+// n/a, and the JSON has no orientation noise or errors.
+TEST(RcalCli, CalibratePositionsOnlyPrintsNoOrientation) {
+  const fs::path d = TempDir("positions_only");
+  Result r = RunRcal("simulate --robot config/robots/ur10.urdf --poses 40 --seed 2 --out " +
+                     (d / "data.csv").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = RunRcal("calibrate " + (d / "data.csv").string() + " --robot config/robots/ur10.urdf --out " +
+              (d / "out").string() + " --json " + (d / "r.json").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::string summary = r.output.substr(r.output.find("rcal calibrate —"));
+  EXPECT_NE(summary.find("positions only: no orientation"), std::string::npos) << summary;
+  EXPECT_EQ(summary.find("orientation mean/max"), std::string::npos) << summary;
+  EXPECT_EQ(summary.find("0.000 / 0.000"), std::string::npos) << summary;
+  EXPECT_EQ(r.output.find("0.000°"), std::string::npos) << r.output;
+  const json j = ReadJson(d / "r.json");
+  EXPECT_FALSE(j.contains("orientation_noise_rad"));
+  EXPECT_FALSE(j.contains("test_mean_orientation_error_rad"));
+  EXPECT_TRUE(j.contains("test_mean_position_error_m"));
+  std::ifstream md(d / "out" / "report.md");
+  const std::string report((std::istreambuf_iterator<char>(md)), {});
+  EXPECT_NE(report.find("| n/a |"), std::string::npos) << report;
+  EXPECT_NE(report.find("positions only: no orientation measured"), std::string::npos);
+}
+
 TEST(RcalCli, CalibrateRejectsBadFilesNamingTheProblem) {
   const fs::path d = TempDir("bad");
   {
