@@ -107,7 +107,8 @@ TEST(LogFiles, EachStartWritesItsOwnNumberedSet) {
     ASSERT_TRUE(run.AppendParams("utime,poses_used,a\n", "1,1,0.5\n"));
     ASSERT_TRUE(run.AppendParams("utime,poses_used,a\n", "2,2,0.25\n"));
   }
-  EXPECT_EQ(ReadFile(d / "rcal.0000.kinematic_params.csv"), "utime,poses_used,a\n1,1,0.5\n2,2,0.25\n");
+  EXPECT_EQ(ReadFile(d / "rcal.0000.kinematic_params.csv"),
+            "utime,poses_used,a\n1,1,0.5\n2,2,0.25\n");
   // What a kill in the middle of a write leaves.
   std::ofstream(d / "rcal.0000.kinematic_params.csv", std::ios::app) << "3,3,0.1";
   {
@@ -162,8 +163,8 @@ TEST(LogFiles, TwoRunsOfTheLoggerWriteTwoNumberedSets) {
   ASSERT_TRUE(lcm.good());
   for (int run = 1; run <= 2; ++run) {
     const fs::path csv = d / ParamsCsvName("rcal", run - 1);
-    const pid_t pid = integration::Spawn(
-        {LOGGER_EXE, "--dir", d.string(), "--lcm-url", url}, d / ("logger_" + std::to_string(run) + ".log"));
+    const pid_t pid = integration::Spawn({LOGGER_EXE, "--dir", d.string(), "--lcm-url", url},
+                                         d / ("logger_" + std::to_string(run) + ".log"));
     ASSERT_GT(pid, 0);
     // Publish this run's parameters (poses_used = run) until the logger has written three rows.
     kinematic_params_t m{};
@@ -176,14 +177,14 @@ TEST(LogFiles, TwoRunsOfTheLoggerWriteTwoNumberedSets) {
     m.identified = {true};
     m.poses_used = run;
     std::string header;
-    const bool written = integration::Until(
-        [&] { return CsvRows(csv, &header).size() >= 3; },
-        [&] {
-          m.utime += 1000;
-          lcm.publish("KINEMATIC_PARAMS", &m);
-          std::this_thread::sleep_for(std::chrono::milliseconds(20));
-        },
-        60);
+    const bool written =
+        integration::Until([&] { return CsvRows(csv, &header).size() >= 3; },
+                           [&] {
+                             m.utime += 1000;
+                             lcm.publish("KINEMATIC_PARAMS", &m);
+                             std::this_thread::sleep_for(std::chrono::milliseconds(20));
+                           },
+                           60);
     EXPECT_TRUE(written) << csv;
     ::kill(pid, SIGINT);
     EXPECT_EQ(integration::Wait(pid), 0);
@@ -193,7 +194,8 @@ TEST(LogFiles, TwoRunsOfTheLoggerWriteTwoNumberedSets) {
     EXPECT_TRUE(fs::exists(d / LogFileName("rcal", run - 1)));
     std::string header;
     const auto rows = CsvRows(d / ParamsCsvName("rcal", run - 1), &header);
-    EXPECT_EQ(header, "utime,poses_used,a" + std::to_string(run) + ",sigma_a" + std::to_string(run));
+    EXPECT_EQ(header,
+              "utime,poses_used,a" + std::to_string(run) + ",sigma_a" + std::to_string(run));
     EXPECT_GE(rows.size(), 3u);
     for (const auto& [utime, poses] : rows) EXPECT_EQ(poses, run) << "row of utime " << utime;
   }

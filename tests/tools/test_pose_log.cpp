@@ -10,8 +10,8 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
-#include <map>
 #include <lcm/lcm-cpp.hpp>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <random>
 

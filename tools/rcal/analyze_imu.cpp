@@ -20,12 +20,12 @@
 #include "pose_log.hpp"
 #include "rcal/estimation/pose_pipeline.hpp"
 #include "rcal/imu_sample_t.hpp"
-#include "rcal/joint_state_t.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/csv_table.hpp"
 #include "rcal/io/imu_csv.hpp"
 #include "rcal/io/lcm_log.hpp"
 #include "rcal/io/plot.hpp"
+#include "rcal/joint_state_t.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/lcm_schema.hpp"
 #include "report.hpp"
@@ -121,8 +121,8 @@ ImuLog LoadImuStreamLog(const std::string& path, const std::string& channel, boo
       if (!transport::DecodeLcm(e->data.data(), e->data.size(), &j).empty()) continue;
       bool finite = true;
       for (double q : j.q) finite &= std::isfinite(q);
-      if (!finite || (last_joints && (j.utime <= last_joints->first ||
-                                      j.q.size() != last_joints->second.size())))
+      if (!finite || (last_joints &&
+                      (j.utime <= last_joints->first || j.q.size() != last_joints->second.size())))
         continue;
       if (last_joints) {
         double rate = 0.0;
@@ -224,9 +224,9 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
   // Rests from the joints mark the arm's stops exactly: cut only the pose pipeline's settle time
   // from each end, not the 0.5 s that a movement column's coarse transitions need.
   if (log.joint_readings > 0) settings.rest_trim_s = estimation::PosePipelineSettings{}.settle_time;
-  const std::string rest_source = log.joint_readings > 0 ? "the joints (" + o.joints_channel + ")"
-                                  : !data.movement.empty()     ? "movement column"
-                                                         : "detected still";
+  const std::string rest_source = log.joint_readings > 0   ? "the joints (" + o.joints_channel + ")"
+                                  : !data.movement.empty() ? "movement column"
+                                                           : "detected still";
   const disc::ImuAnalysis a = disc::AnalyzeImuStream(data, settings);
   const fs::path out(o.out);
   fs::create_directories(out);
@@ -385,15 +385,13 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
   md << "# rcal analyze (IMU stream)\n\n- Data: `" << o.data << "`, " << a.samples << " samples at "
      << Fmt(a.rate_hz, 1) << " Hz, " << a.rests.size() << " rest segments (" << rest_source
      << "), truth orientation " << (a.has_truth ? "present" : "absent")
-     << (a.short_rests ? "\n- **Short rests**: " + a.rest_note : std::string())
-     << "\n- Reference ("
+     << (a.short_rests ? "\n- **Short rests**: " + a.rest_note : std::string()) << "\n- Reference ("
      << (a.reference_rests > 1 ? "first " + std::to_string(a.reference_rests) + " rests, " +
                                      Fmt(a.reference_s, 2) + " s"
                                : std::string("first rest"))
-     << "): |m| = " << Fmt(a.mag_ref_norm_uT, 2) << " µT (σ "
-     << Fmt(a.sigma_mag_norm_uT, 2) << "), dip " << Fmt(a.mag_ref_dip_rad * kDeg, 2) << "° (σ "
-     << Fmt(a.sigma_dip_rad * kDeg, 2) << "°), |f| = " << Fmt(a.gravity_ref, 3) << " m/s² (σ "
-     << Fmt(a.sigma_accel_norm, 3)
+     << "): |m| = " << Fmt(a.mag_ref_norm_uT, 2) << " µT (σ " << Fmt(a.sigma_mag_norm_uT, 2)
+     << "), dip " << Fmt(a.mag_ref_dip_rad * kDeg, 2) << "° (σ " << Fmt(a.sigma_dip_rad * kDeg, 2)
+     << "°), |f| = " << Fmt(a.gravity_ref, 3) << " m/s² (σ " << Fmt(a.sigma_accel_norm, 3)
      << ")\n- Base model: white noise at the stated densities, constant gyro bias, constant "
         "field, accelerometer = gravity; base filter trusts every sample.\n\n## Finding\n\n";
   const auto effects = a.effects();

@@ -47,7 +47,7 @@ struct AnalyzeImuOptions {
   std::string channel = "IMU";  ///< for an LCM log: the imu_sample_t channel
   /// For an LCM log: the joint_state_t channel the rests come from ("" or absent: detected).
   std::string joints_channel = "JOINTS";
-  bool allow_gaps = false;      ///< for an LCM log: go on when it lost data (CheckLogGaps)
+  bool allow_gaps = false;  ///< for an LCM log: go on when it lost data (CheckLogGaps)
 };
 
 /// `rcal analyze` on an IMU stream: DIR/report.md with plots and DIR/analysis.json.

@@ -517,9 +517,8 @@ ImuCandidate TestGyroBias(const Context& c, double alpha_c, ImuAnalysis& a) {
   gb.note = "white line from the data's short-τ level (stated " +
             std::to_string(s.gyro_noise_density) + " rad/s/√Hz)";
   if (A.tau_s.empty() || test_idx.empty()) {
-    gb.note = "rests too short for the long-τ Allan test (τ ≥ " +
-              Fixed(s.allan_test_tau_min_s, 1) + " s needs rests of " +
-              Fixed(2 * s.allan_test_tau_min_s, 1) + " s)";
+    gb.note = "rests too short for the long-τ Allan test (τ ≥ " + Fixed(s.allan_test_tau_min_s, 1) +
+              " s needs rests of " + Fixed(2 * s.allan_test_tau_min_s, 1) + " s)";
     if (a.rests.size() >= 2)
       gb.note += ": tested only by the drift between the first and the last rest";
     else
@@ -936,9 +935,9 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
   if (a.short_rests) {
     int longest = 0;
     for (auto [b, e] : a.rests) longest = std::max(longest, e - b);
-    a.rest_note = "no rest of " + Fixed(s.min_rest_s, 1) + " s: " +
-                  std::to_string(a.rests.size()) + " short rests used (longest " +
-                  Fixed(longest / c.rate, 2) + " s, after cutting " + Fixed(s.rest_trim_s, 1) +
+    a.rest_note = "no rest of " + Fixed(s.min_rest_s, 1) + " s: " + std::to_string(a.rests.size()) +
+                  " short rests used (longest " + Fixed(longest / c.rate, 2) +
+                  " s, after cutting " + Fixed(s.rest_trim_s, 1) +
                   " s from each end); the reference field and noise pooled over the first " +
                   std::to_string(a.reference_rests) + " (" + Fixed(a.reference_s, 2) +
                   " s); the Allan deviation reaches τ = " + Fixed(longest / 2 / c.rate, 2) +
