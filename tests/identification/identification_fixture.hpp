@@ -12,8 +12,8 @@
 
 namespace rcal::identification::testing {
 
-/// The real UR10 of ../shared/data/figaroh_ur10, loaded from its URDF, with the set-up a cell has
-/// (world ← base frame and a marker offset, both identified).
+/// The real UR10 (FIGAROH, config/robots/ur10.urdf), loaded from its URDF, with the set-up a cell
+/// has (world ← base frame and a marker offset, both identified).
 inline kinematics::KinematicModel Ur10FromUrdf() {
   io::UrdfOptions o;
   o.tip_link = "wrist_3_link";
@@ -21,7 +21,7 @@ inline kinematics::KinematicModel Ur10FromUrdf() {
   o.base_xyz = Eigen::Vector3d(0.3, -0.2, 0.1);
   o.add_marker = true;
   o.marker_xyz = Eigen::Vector3d(0.02, 0.05, 0.1);
-  return io::LoadRobotUrdf(std::string(RCAL_SHARED_DIR) + "/data/figaroh_ur10/robot.urdf", o);
+  return io::LoadRobotUrdf(RCAL_SOURCE_DIR "/config/robots/ur10.urdf", o);
 }
 
 struct Scenario {

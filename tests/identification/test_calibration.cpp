@@ -119,7 +119,7 @@ TEST(Calibration, PositionOnlyBaseSetIsTheRankAtTheTruthNotAtTheGuess) {
   uo.add_base_frame = true;
   uo.add_marker = true;
   const kinematics::KinematicModel model =
-      io::LoadRobot(RCAL_SHARED_DIR "/data/figaroh_ur10/robot.urdf", uo).model;
+      io::LoadRobot(RCAL_SOURCE_DIR "/config/robots/ur10.urdf", uo).model;
   sim::PoseNoise noise;
   noise.position_sigma = 2e-5;
   noise.orientation = false;
@@ -185,7 +185,7 @@ TEST(Calibration, HeldOutShowsTheGainOnlyWhenThereIsOne) {
 }
 
 // Issue 12, item 2: a laser tracker measuring three reflectors on the tool at every stop,
-// positions only (the UR10 of ../shared/data, its base 1.5 m away and turned). Each reflector has
+// positions only (the real UR10 of FIGAROH, its base 1.5 m away and turned). Each reflector has
 // its own flange → marker offset, identified with the arm from rows of the `marker` column.
 struct Reflectors {
   kinematics::KinematicModel model;
@@ -200,7 +200,7 @@ Reflectors MakeReflectors(unsigned seed, int configurations) {
   io::UrdfOptions uo;
   uo.add_base_frame = true;
   uo.add_marker = true;
-  io::RobotSpec spec = io::LoadRobot(RCAL_SHARED_DIR "/data/figaroh_ur10/robot.urdf", uo).spec;
+  io::RobotSpec spec = io::LoadRobot(RCAL_SOURCE_DIR "/config/robots/ur10.urdf", uo).spec;
   spec.markers = {{0, Eigen::Vector3d::Zero(), true},
                   {1, Eigen::Vector3d::Zero(), true},
                   {2, Eigen::Vector3d::Zero(), true}};

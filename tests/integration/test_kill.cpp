@@ -362,7 +362,8 @@ class Kill : public integration::ProcessFixture, public ::testing::WithParamInte
         EXPECT_EQ(integration::Wait(logger), -SIGKILL);
         Reaped(logger);
         // What a kill in the middle of a write leaves: a CSV row and an event cut short.
-        std::ofstream(d / "lcm" / "kinematic_params.csv", std::ios::app) << "123456,7,0.001,0.0";
+        std::ofstream(d / "lcm" / "rcal.0000.kinematic_params.csv", std::ios::app)
+            << "123456,7,0.001,0.0";
         std::ofstream(d / "lcm" / "rcal.0000.lcmlog", std::ios::app | std::ios::binary)
             << std::string("\xED\xA1\xDA\x01\x00\x00", 6);
         logger = start("logger", logger_cmd);
@@ -450,7 +451,7 @@ class Kill : public integration::ProcessFixture, public ::testing::WithParamInte
   }
 
   // The earlier event log holds the poses up to the kill, readable to its end; the new file the
-  // rest; the CSV history is whole rows, the last one the final estimate.
+  // rest; each file's CSV history is whole rows, the last one the final estimate.
   void CheckLogs(const path& d, const RunResult& run) {
     auto read = [&](const path& p) {
       std::vector<pose_measurement_t> poses;
@@ -484,26 +485,32 @@ class Kill : public integration::ProcessFixture, public ::testing::WithParamInte
     const size_t off = run.poses.size() - after.size();
     for (size_t k = 0; k < after.size(); ++k) EXPECT_TRUE(same(after[k], run.poses[off + k])) << k;
 
-    std::ifstream csv(d / "lcm" / "kinematic_params.csv");
-    std::string line;
-    ASSERT_TRUE(std::getline(csv, line));
-    const auto columns = std::count(line.begin(), line.end(), ',') + 1;
-    EXPECT_EQ(columns, 2 + 2 * run.params->num_params);
+    // The parameter history beside each log: the first run's up to the kill (the row the kill
+    // cut short removed at the restart), the restarted logger's from then on, each with its
+    // header; their rows in time order.
     int rows = 0;
     int64_t last_utime = 0;
     std::vector<double> last;
-    while (std::getline(csv, line)) {
-      ++rows;
-      std::vector<double> v;
-      std::stringstream s(line);
-      std::string cell;
-      while (std::getline(s, cell, ',')) v.push_back(std::stod(cell));
-      ASSERT_EQ(static_cast<long>(v.size()), columns) << "row " << rows << ": " << line;
-      EXPECT_GT(static_cast<int64_t>(v[0]), last_utime) << "row " << rows;
-      last_utime = static_cast<int64_t>(v[0]);
-      last = v;
+    for (const char* name : {"rcal.0000.kinematic_params.csv", "rcal.0001.kinematic_params.csv"}) {
+      std::ifstream csv(d / "lcm" / name);
+      std::string line;
+      ASSERT_TRUE(std::getline(csv, line)) << name;
+      const auto columns = std::count(line.begin(), line.end(), ',') + 1;
+      EXPECT_EQ(columns, 2 + 2 * run.params->num_params) << name;
+      while (std::getline(csv, line)) {
+        ++rows;
+        std::vector<double> v;
+        std::stringstream s(line);
+        std::string cell;
+        while (std::getline(s, cell, ',')) v.push_back(std::stod(cell));
+        ASSERT_EQ(static_cast<long>(v.size()), columns) << name << " row " << rows << ": " << line;
+        EXPECT_GT(static_cast<int64_t>(v[0]), last_utime) << name << " row " << rows;
+        last_utime = static_cast<int64_t>(v[0]);
+        last = v;
+      }
     }
-    std::printf("kinematic_params.csv: %d rows\n", rows);
+    EXPECT_FALSE(fs::exists(d / "lcm" / "kinematic_params.csv"));
+    std::printf("rcal.000[01].kinematic_params.csv: %d rows\n", rows);
     EXPECT_GE(rows, 10);
     ASSERT_FALSE(last.empty());
     EXPECT_EQ(static_cast<int64_t>(last[0]), run.params->utime);

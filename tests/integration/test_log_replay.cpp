@@ -2,7 +2,8 @@
 // private network namespace on a non-default port: sensor_acquisition (sim) → ekf_identifier,
 // recorded by lcm-logger; then the log's POSE_MEASUREMENT events played with lcm-logplayer into
 // a fresh ekf_identifier, and read offline by `rcal calibrate-log`. Both must give the live run's
-// final KINEMATIC_PARAMS to 1e-9.
+// final KINEMATIC_PARAMS to 1e-9. The README's replay recipe ("The live pipeline") is this replay:
+// keep the two in step.
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>

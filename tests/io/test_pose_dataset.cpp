@@ -22,7 +22,7 @@ using testing::ErrorOf;
 using testing::ScratchDir;
 
 std::filesystem::path FigarohCsv() {
-  return testing::SharedDir() / "data/figaroh_ur10/calibration.csv";
+  return testing::SourceDir() / "data/figaroh_ur10/calibration.csv";
 }
 
 /// Captures what spdlog logs while it lives.
@@ -310,7 +310,7 @@ TEST(PosePlausibility, TheRealUr10DataPassesAndOnePositionOf1e12DoesNot) {
   UrdfOptions o;
   o.add_base_frame = true;
   o.add_marker = true;
-  const LoadedRobot r = LoadRobot(testing::SharedDir() / "data/figaroh_ur10/robot.urdf", o);
+  const LoadedRobot r = LoadRobot(testing::SourceDir() / "config/robots/ur10.urdf", o);
   PoseDataset d = LoadFigarohUr10(FigarohCsv());
   EXPECT_EQ(ErrorOf([&] { CheckPosesPlausible(d, r.model, "ur10.csv"); }), "<no error>");
   d.samples[7].p_WM_W.z() = 1e12;

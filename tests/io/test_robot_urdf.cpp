@@ -23,7 +23,7 @@ using testing::ScratchDir;
 constexpr double kPi = std::numbers::pi;
 
 std::filesystem::path Ur10Urdf() {
-  return testing::SharedDir() / "data/figaroh_ur10/robot.urdf";
+  return testing::SourceDir() / "config/robots/ur10.urdf";
 }
 
 const std::vector<std::string> kUrJoints{"shoulder_pan_joint", "shoulder_lift_joint",

@@ -1,6 +1,8 @@
-// The logger's log file names (services/logger/log_files.hpp): the index of
-// `<prefix>.NNNN.lcmlog`, and the next index in a directory, which a name whose number does not
-// parse or overflows must never keep from starting.
+// The logger's file names (services/logger/log_files.hpp): the index of `<prefix>.NNNN.lcmlog`
+// and of the parameter history beside it, `<prefix>.NNNN.kinematic_params.csv`; the next index in
+// a directory, which a name whose number does not parse or overflows must never keep from
+// starting; each start of the logger (a run) writing its own numbered set, never appending to an
+// earlier run's files.
 #include "log_files.hpp"
 
 #include <gtest/gtest.h>
@@ -9,13 +11,18 @@
 #include <unistd.h>
 
 #include <chrono>
-#include <thread>
-
 #include <climits>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <lcm/lcm-cpp.hpp>
+#include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
+
+#include "netns.hpp"
+#include "rcal/kinematic_params_t.hpp"
 
 namespace rcal::logger {
 namespace {
@@ -28,6 +35,17 @@ TEST(LogFiles, ParsesTheIndexOfALogOfThePrefix) {
   EXPECT_EQ(ParseLogFileIndex("rcal.123456.lcmlog", "rcal"), 123456);
   EXPECT_EQ(ParseLogFileIndex("cell.a.0007.lcmlog", "cell.a"), 7);
   EXPECT_EQ(ParseLogFileIndex("rcal.2147483646.lcmlog", "rcal"), INT_MAX - 1);
+}
+
+TEST(LogFiles, TheParameterHistoryIsNumberedAsItsLog) {
+  EXPECT_EQ(LogFileName("rcal", 0), "rcal.0000.lcmlog");
+  EXPECT_EQ(LogFileName("rcal", 12), "rcal.0012.lcmlog");
+  EXPECT_EQ(ParamsCsvName("rcal", 12), "rcal.0012.kinematic_params.csv");
+  EXPECT_EQ(ParamsCsvName("cell.a", 12345), "cell.a.12345.kinematic_params.csv");
+  EXPECT_EQ(ParseLogFileIndex("rcal.0012.kinematic_params.csv", "rcal"), 12);
+  std::string problem;
+  EXPECT_FALSE(ParseLogFileIndex("rcal.x1.kinematic_params.csv", "rcal", &problem).has_value());
+  EXPECT_NE(problem, "");
 }
 
 TEST(LogFiles, OtherNamesAreNotLogsAndNeedNoWarning) {
@@ -63,6 +81,126 @@ TEST(LogFiles, NextIndexSkipsNamesItCannotUse) {
   EXPECT_EQ(NextFileIndex(d, "rcal"), 4);
   EXPECT_EQ(NextFileIndex(d, "other"), 101);
   EXPECT_EQ(NextFileIndex(d, "none"), 0);
+  // A history without its log still holds its number: it is never appended to.
+  std::ofstream(d / "rcal.0006.kinematic_params.csv") << "x\n";
+  EXPECT_EQ(NextFileIndex(d, "rcal"), 7);
+  fs::remove_all(d);
+}
+
+std::string ReadFile(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// Two starts in one directory (two runs, or a run and its restart after a kill), the second
+// with a rotation: each writes its own numbered history beside its own log, with its header; the
+// first run's history is left as it was, but for the row a kill cut short.
+TEST(LogFiles, EachStartWritesItsOwnNumberedSet) {
+  const fs::path d = fs::temp_directory_path() / ("rcal_log_sets_" + std::to_string(::getpid()));
+  fs::remove_all(d);
+  fs::create_directories(d);
+  {
+    LogFiles run(d, "rcal");
+    EXPECT_EQ(run.index(), 0);
+    EXPECT_EQ(run.log_path(), d / "rcal.0000.lcmlog");
+    std::ofstream(run.log_path()) << "log";  // the logger opens its log at start
+    ASSERT_TRUE(run.AppendParams("utime,poses_used,a\n", "1,1,0.5\n"));
+    ASSERT_TRUE(run.AppendParams("utime,poses_used,a\n", "2,2,0.25\n"));
+  }
+  EXPECT_EQ(ReadFile(d / "rcal.0000.kinematic_params.csv"),
+            "utime,poses_used,a\n1,1,0.5\n2,2,0.25\n");
+  // What a kill in the middle of a write leaves.
+  std::ofstream(d / "rcal.0000.kinematic_params.csv", std::ios::app) << "3,3,0.1";
+  {
+    LogFiles run(d, "rcal");
+    EXPECT_EQ(run.index(), 1);
+    EXPECT_EQ(ReadFile(d / "rcal.0000.kinematic_params.csv"),
+              "utime,poses_used,a\n1,1,0.5\n2,2,0.25\n");
+    std::ofstream(run.log_path()) << "log";
+    ASSERT_TRUE(run.AppendParams("utime,poses_used,b\n", "10,1,7\n"));
+    run.Next();  // rotation past --max-bytes
+    EXPECT_EQ(run.log_path(), d / "rcal.0002.lcmlog");
+    std::ofstream(run.log_path()) << "log";
+    ASSERT_TRUE(run.AppendParams("utime,poses_used,b\n", "11,2,8\n"));
+  }
+  EXPECT_EQ(ReadFile(d / "rcal.0001.kinematic_params.csv"), "utime,poses_used,b\n10,1,7\n");
+  EXPECT_EQ(ReadFile(d / "rcal.0002.kinematic_params.csv"), "utime,poses_used,b\n11,2,8\n");
+  EXPECT_FALSE(fs::exists(d / "kinematic_params.csv"));
+  EXPECT_EQ(RemoveTornLastRow(d / "rcal.0002.kinematic_params.csv"), 0u);
+  EXPECT_EQ(RemoveTornLastRow(d / "missing.csv"), 0u);
+  fs::remove_all(d);
+}
+
+// Rows of a parameter history CSV (after its header), as (utime, poses_used) pairs.
+std::vector<std::pair<long, int>> CsvRows(const fs::path& p, std::string* header) {
+  std::ifstream in(p);
+  std::vector<std::pair<long, int>> rows;
+  std::string line;
+  if (!std::getline(in, line)) return rows;
+  *header = line;
+  while (std::getline(in, line)) {
+    std::stringstream s(line);
+    long utime = 0;
+    int poses = 0;
+    char comma = 0;
+    s >> utime >> comma >> poses;
+    rows.emplace_back(utime, poses);
+  }
+  return rows;
+}
+
+// The logger itself, run twice in one directory as `deploy/demo` twice would (inside a private
+// network namespace, KINEMATIC_PARAMS over UDP multicast): the second run writes rcal.0001.lcmlog
+// and rcal.0001.kinematic_params.csv with its own parameters only; the first run's history holds
+// only the first run's. (The logger used to append every run to one kinematic_params.csv.)
+TEST(LogFiles, TwoRunsOfTheLoggerWriteTwoNumberedSets) {
+  RCAL_IN_NAMESPACE("LogFiles.TwoRunsOfTheLoggerWriteTwoNumberedSets");
+  const fs::path d = fs::temp_directory_path() / ("rcal_logger_runs_" + std::to_string(::getpid()));
+  fs::remove_all(d);
+  fs::create_directories(d);
+  const std::string url = "udpm://239.255.76.67:7741?ttl=0";
+  lcm::LCM lcm(url);
+  ASSERT_TRUE(lcm.good());
+  for (int run = 1; run <= 2; ++run) {
+    const fs::path csv = d / ParamsCsvName("rcal", run - 1);
+    const pid_t pid = integration::Spawn({LOGGER_EXE, "--dir", d.string(), "--lcm-url", url},
+                                         d / ("logger_" + std::to_string(run) + ".log"));
+    ASSERT_GT(pid, 0);
+    // Publish this run's parameters (poses_used = run) until the logger has written three rows.
+    kinematic_params_t m{};
+    m.robot_id = "test";
+    m.model_id = "test";
+    m.num_params = 1;
+    m.names = {"a" + std::to_string(run)};
+    m.values = {0.5 * run};
+    m.sigmas = {0.1};
+    m.identified = {true};
+    m.poses_used = run;
+    std::string header;
+    const bool written =
+        integration::Until([&] { return CsvRows(csv, &header).size() >= 3; },
+                           [&] {
+                             m.utime += 1000;
+                             lcm.publish("KINEMATIC_PARAMS", &m);
+                             std::this_thread::sleep_for(std::chrono::milliseconds(20));
+                           },
+                           60);
+    EXPECT_TRUE(written) << csv;
+    ::kill(pid, SIGINT);
+    EXPECT_EQ(integration::Wait(pid), 0);
+  }
+  for (int run = 1; run <= 2; ++run) {
+    SCOPED_TRACE("run " + std::to_string(run));
+    EXPECT_TRUE(fs::exists(d / LogFileName("rcal", run - 1)));
+    std::string header;
+    const auto rows = CsvRows(d / ParamsCsvName("rcal", run - 1), &header);
+    EXPECT_EQ(header,
+              "utime,poses_used,a" + std::to_string(run) + ",sigma_a" + std::to_string(run));
+    EXPECT_GE(rows.size(), 3u);
+    for (const auto& [utime, poses] : rows) EXPECT_EQ(poses, run) << "row of utime " << utime;
+  }
+  EXPECT_FALSE(fs::exists(d / LogFileName("rcal", 2)));
+  EXPECT_FALSE(fs::exists(d / "kinematic_params.csv"));
   fs::remove_all(d);
 }
 

@@ -64,11 +64,13 @@ std::string SetCell(const std::string& line, int column, const std::string& valu
   return s;
 }
 
-const std::string kUr10 = RCAL_SHARED_DIR "/data/figaroh_ur10";
+// The real UR10 (FIGAROH) shipped in the repository: its poses and its robot.
+const std::string kUr10Data = RCAL_SOURCE_DIR "/data/figaroh_ur10/calibration.csv";
+const std::string kUr10 = RCAL_SOURCE_DIR "/config/robots/ur10.urdf";
 
 // The UR10 data with one cell of data row `row` (1 = first) in `column` replaced.
 fs::path Ur10With(const fs::path& dir, int row, int column, const std::string& value) {
-  std::vector<std::string> lines = Lines(Read(kUr10 + "/calibration.csv"));
+  std::vector<std::string> lines = Lines(Read(kUr10Data));
   lines.at(row) = SetCell(lines.at(row), column, value);
   const fs::path p = dir / "poses.csv";
   Write(p, Join(lines));
@@ -86,7 +88,7 @@ TEST(BadFiles, CalibrateRefusesAnAbsurdJointValueNamingRowAndColumn) {
   const fs::path d = TempDir("q");
   for (const std::string v : {"1e308", "1e6"}) {
     const Result r = RunRcal("calibrate " + Ur10With(d, 3, 6, v).string() + " --robot " + kUr10 +
-                             "/robot.urdf --out " + (d / "out").string());
+                             " --out " + (d / "out").string());
     ExpectRefused(r, "row 3 column 'shoulder_pan_joint'", d / "out");
   }
 }
@@ -95,11 +97,11 @@ TEST(BadFiles, CalibrateRefusesAPositionBeyondTheArmsReach) {
   // x1 = 1000 m (was: exit 0, held-out 172 mm... mean of metres) and z1 = 1e12 m (σ = null).
   const fs::path d = TempDir("x");
   Result r = RunRcal("calibrate " + Ur10With(d, 3, 0, "1000").string() + " --robot " + kUr10 +
-                     "/robot.urdf --out " + (d / "out").string());
+                     " --out " + (d / "out").string());
   ExpectRefused(r, "row 3 column 'x1' is 1000 m: the marker is", d / "out");
   EXPECT_NE(r.output.find("beyond the arm's reach"), std::string::npos) << r.output;
-  r = RunRcal("calibrate " + Ur10With(d, 5, 2, "1e12").string() + " --robot " + kUr10 +
-              "/robot.urdf --out " + (d / "out").string());
+  r = RunRcal("calibrate " + Ur10With(d, 5, 2, "1e12").string() + " --robot " + kUr10 + " --out " +
+              (d / "out").string());
   ExpectRefused(r, "row 5 column 'z1' is 1e12", d / "out");
 }
 
@@ -108,8 +110,8 @@ TEST(BadFiles, CalibrateRefusesAPositionBeyondTheArmsReach) {
 // fitted): refused for any id but 0.
 TEST(BadFiles, CalibrateRefusesAMarkerColumnOfTooManyIds) {
   const fs::path d = TempDir("markers");
-  Result r = RunRcal("simulate --robot " + kUr10 + "/robot.urdf --poses 150 --out " +
-                     (d / "sim.csv").string());
+  Result r =
+      RunRcal("simulate --robot " + kUr10 + " --poses 150 --out " + (d / "sim.csv").string());
   ASSERT_EQ(r.exit_code, 0) << r.output;
   std::vector<std::string> lines = Lines(Read(d / "sim.csv"));
   int row = 0;
@@ -119,8 +121,8 @@ TEST(BadFiles, CalibrateRefusesAMarkerColumnOfTooManyIds) {
     ++row;
   }
   Write(d / "poses.csv", Join(lines));
-  r = RunRcal("calibrate " + (d / "poses.csv").string() + " --robot " + kUr10 +
-              "/robot.urdf --out " + (d / "out").string());
+  r = RunRcal("calibrate " + (d / "poses.csv").string() + " --robot " + kUr10 + " --out " +
+              (d / "out").string());
   ExpectRefused(r, "column 'marker': 150 distinct ids; rcal fits at most 100 markers", d / "out");
 }
 

@@ -1,8 +1,8 @@
-// The arm test matrix of issue 12, item 1: on every arm of tests/data/arms (and the UR10 of
-// ../shared/data), full pose and positions only, calibration reaches the noise floor against the
-// simulator's truth, and `rcal analyze` names nothing on clean data. Runs the commands as a user
-// runs them (`rcal calibration-sweep`, `rcal detection-sweep`) and reads their --json figures;
-// and checks the sweep's seeding (tools/rcal/calibration_sweep).
+// The arm test matrix of issue 12, item 1: on every arm of tests/data/arms (and the real UR10,
+// config/robots/ur10.urdf), full pose and positions only, calibration reaches the noise floor
+// against the simulator's truth, and `rcal analyze` names nothing on clean data. Runs the commands
+// as a user runs them (`rcal calibration-sweep`, `rcal detection-sweep`) and reads their --json
+// figures; and checks the sweep's seeding (tools/rcal/calibration_sweep).
 #include "calibration_sweep.hpp"
 
 #include <gtest/gtest.h>
@@ -38,7 +38,7 @@ struct Arm {
 // The matrix: published geometry, hand-written (each file's comment gives its source).
 const std::vector<Arm> kArms = {
     {"grb3016", "tests/data/arms/grb3016.urdf"},
-    {"ur10", "../shared/data/figaroh_ur10/robot.urdf"},
+    {"ur10", "config/robots/ur10.urdf"},
     {"kr6_like", "tests/data/arms/kr6_like.urdf"},
     {"ur5e_like", "tests/data/arms/ur5e_like.urdf"},
     {"panda_like", "tests/data/arms/panda_like.urdf"},

@@ -107,8 +107,8 @@ TEST(RcalCli, IdentifiabilityRanksOfTheGrb3016) {
 // `rcal calibrate` on it (the real UR10: 30, tests/tools/golden/calibrate_ur10.json).
 TEST(RcalCli, IdentifiabilityCountsWhatCalibrateIdentifies) {
   const fs::path d = TempDir("ident_cell");
-  const std::string urdf = std::string(RCAL_SHARED_DIR) + "/data/figaroh_ur10/robot.urdf";
-  const std::string data = std::string(RCAL_SHARED_DIR) + "/data/figaroh_ur10/calibration.csv";
+  const std::string urdf = RCAL_SOURCE_DIR "/config/robots/ur10.urdf";
+  const std::string data = RCAL_SOURCE_DIR "/data/figaroh_ur10/calibration.csv";
   struct Case {
     std::string args;
     int rank;
@@ -132,8 +132,8 @@ TEST(RcalCli, IdentifiabilityCountsWhatCalibrateIdentifies) {
 
 TEST(RcalCli, CalibrateTheRealUr10) {
   const fs::path d = TempDir("ur10");
-  const std::string data = std::string(RCAL_SHARED_DIR) + "/data/figaroh_ur10/calibration.csv";
-  const std::string urdf = std::string(RCAL_SHARED_DIR) + "/data/figaroh_ur10/robot.urdf";
+  const std::string data = RCAL_SOURCE_DIR "/data/figaroh_ur10/calibration.csv";
+  const std::string urdf = RCAL_SOURCE_DIR "/config/robots/ur10.urdf";
   json by_method;
   for (const std::string method : {"lm", "ekf"}) {
     const Result r =
@@ -197,7 +197,7 @@ std::vector<std::vector<std::string>> ReadCsvRows(const fs::path& p,
 
 TEST(RcalCli, CalibrateThreeReflectorsFromTheMarkerColumn) {
   const fs::path d = TempDir("markers");
-  const std::string urdf = std::string(RCAL_SHARED_DIR) + "/data/figaroh_ur10/robot.urdf";
+  const std::string urdf = RCAL_SOURCE_DIR "/config/robots/ur10.urdf";
   const double truth[3][3] = {{0.10, 0.02, 0.05}, {-0.03, 0.09, 0.06}, {0.01, -0.07, 0.11}};
   std::string markers;
   for (int k = 0; k < 3; ++k)
@@ -296,6 +296,32 @@ TEST(RcalCli, CalibrateThreeReflectorsFromTheMarkerColumn) {
   r = RunRcal(split + " --marker-reference 1=2");
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("has calibration rows"), std::string::npos) << r.output;
+}
+
+// Positions only (a tracker without orientation): no orientation was measured, so calibrate
+// prints no orientation error (it printed 0.000 / 0.000 on every line), the report's table says
+// n/a, and the JSON has no orientation noise or errors.
+TEST(RcalCli, CalibratePositionsOnlyPrintsNoOrientation) {
+  const fs::path d = TempDir("positions_only");
+  Result r = RunRcal("simulate --robot config/robots/ur10.urdf --poses 40 --seed 2 --out " +
+                     (d / "data.csv").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = RunRcal("calibrate " + (d / "data.csv").string() + " --robot config/robots/ur10.urdf --out " +
+              (d / "out").string() + " --json " + (d / "r.json").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::string summary = r.output.substr(r.output.find("rcal calibrate —"));
+  EXPECT_NE(summary.find("positions only: no orientation"), std::string::npos) << summary;
+  EXPECT_EQ(summary.find("orientation mean/max"), std::string::npos) << summary;
+  EXPECT_EQ(summary.find("0.000 / 0.000"), std::string::npos) << summary;
+  EXPECT_EQ(r.output.find("0.000°"), std::string::npos) << r.output;
+  const json j = ReadJson(d / "r.json");
+  EXPECT_FALSE(j.contains("orientation_noise_rad"));
+  EXPECT_FALSE(j.contains("test_mean_orientation_error_rad"));
+  EXPECT_TRUE(j.contains("test_mean_position_error_m"));
+  std::ifstream md(d / "out" / "report.md");
+  const std::string report((std::istreambuf_iterator<char>(md)), {});
+  EXPECT_NE(report.find("| n/a |"), std::string::npos) << report;
+  EXPECT_NE(report.find("positions only: no orientation measured"), std::string::npos);
 }
 
 TEST(RcalCli, CalibrateRejectsBadFilesNamingTheProblem) {
@@ -764,9 +790,10 @@ TEST(RcalCli, AnalyzeImuStreamNamesTheMagneticDisturbanceAndMeasuresItsGain) {
 // gain exactly 0 (geometry is the selected model).
 TEST(RcalCli, AnalyzeTheRealUr10FindsNoEffectBeyondGeometry) {
   const fs::path d = TempDir("analyze_ur10");
-  const Result r = RunRcal(std::string("analyze ") + RCAL_SHARED_DIR +
-                           "/data/figaroh_ur10/calibration.csv --robot " + RCAL_SHARED_DIR +
-                           "/data/figaroh_ur10/robot.urdf --out " + (d / "out").string());
+  const Result r = RunRcal("analyze " RCAL_SOURCE_DIR
+                           "/data/figaroh_ur10/calibration.csv --robot " RCAL_SOURCE_DIR
+                           "/config/robots/ur10.urdf --out " +
+                           (d / "out").string());
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const json j = ReadJson(d / "out" / "analysis.json");
   EXPECT_TRUE(j.at("effects").empty()) << j.at("effects").dump();

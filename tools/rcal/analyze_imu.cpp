@@ -11,16 +11,22 @@
 #include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
+#include <utility>
+#include <vector>
 
 #include "command.hpp"
 #include "pose_log.hpp"
+#include "rcal/estimation/pose_pipeline.hpp"
 #include "rcal/imu_sample_t.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/csv_table.hpp"
 #include "rcal/io/imu_csv.hpp"
 #include "rcal/io/lcm_log.hpp"
 #include "rcal/io/plot.hpp"
+#include "rcal/joint_state_t.hpp"
+#include "rcal/transport/channels.hpp"
 #include "rcal/transport/lcm_schema.hpp"
 #include "report.hpp"
 #include "significance_json.hpp"
@@ -92,16 +98,43 @@ bool IsImuStreamCsv(const std::string& path) {
   return false;
 }
 
-disc::ImuStreamData LoadImuStreamLog(const std::string& path, const std::string& channel,
-                                     bool allow_gaps) {
+ImuLog LoadImuStreamLog(const std::string& path, const std::string& channel, bool allow_gaps,
+                        const std::string& joints_channel) {
   io::LcmLogReader log(path);  // throws naming the file
-  disc::ImuStreamData d;
+  ImuLog out;
+  disc::ImuStreamData& d = out.data;
   int64_t last = std::numeric_limits<int64_t>::min(), events = 0, skipped = 0;
   std::string first_reason;
   const auto skip = [&](const std::string& why) {
     if (skipped++ == 0) first_reason = "event " + std::to_string(events) + ": " + why;
   };
+  // The arm's rest from its joints, as the pose pipeline takes it (StillDetector): still while
+  // max_i |Δq_i| / Δt between consecutive readings stays below its joint_rate_threshold. Each
+  // IMU sample takes the state of the latest joint reading at or before it (moving before any).
+  const double rate_limit = estimation::StillDetectorSettings{}.joint_rate_threshold;
+  std::optional<std::pair<int64_t, std::vector<double>>> last_joints;
+  bool arm_moving = true;
+  std::vector<int> movement;
   while (const auto e = log.Next()) {
+    if (!joints_channel.empty() && e->channel == joints_channel) {
+      joint_state_t j{};
+      if (!transport::DecodeLcm(e->data.data(), e->data.size(), &j).empty()) continue;
+      bool finite = true;
+      for (double q : j.q) finite &= std::isfinite(q);
+      if (!finite || (last_joints &&
+                      (j.utime <= last_joints->first || j.q.size() != last_joints->second.size())))
+        continue;
+      if (last_joints) {
+        double rate = 0.0;
+        const double dt = static_cast<double>(j.utime - last_joints->first) * 1e-6;
+        for (size_t i = 0; i < j.q.size(); ++i)
+          rate = std::max(rate, std::abs(j.q[i] - last_joints->second[i]) / dt);
+        arm_moving = rate >= rate_limit;
+        ++out.joint_readings;
+      }
+      last_joints = {j.utime, j.q};
+      continue;
+    }
     if (e->channel != channel) continue;
     ++events;
     imu_sample_t m{};
@@ -132,6 +165,8 @@ disc::ImuStreamData LoadImuStreamLog(const std::string& path, const std::string&
     d.gyro.push_back(g);
     d.accel.push_back(a);
     d.mag_uT.push_back(b * 1e6);  // the message carries tesla
+    // The joints logged after this sample (same utime) are not known yet: the state so far.
+    movement.push_back(arm_moving ? 1 : 0);
   }
   CheckLogGaps(path, log.stats(), allow_gaps);
   if (skipped > 0)
@@ -140,7 +175,12 @@ disc::ImuStreamData LoadImuStreamLog(const std::string& path, const std::string&
   if (d.t.empty())
     throw std::runtime_error(path + ": no usable " + channel +
                              " samples (imu_sample_t) in the log");
-  return d;
+  if (out.joint_readings > 0) {
+    d.movement = std::move(movement);
+    spdlog::info("{}: rests from the {} channel ({} readings, still below {} rad/s)", path,
+                 joints_channel, out.joint_readings + 1, rate_limit);
+  }
+  return out;
 }
 
 disc::ImuStreamData LoadImuStreamCsv(const std::string& path) {
@@ -175,10 +215,18 @@ void WriteImuStreamCsv(const fs::path& path, const std::vector<sim::ImuStreamSam
 int RunAnalyzeImu(const AnalyzeImuOptions& o) {
   const std::string path = ResolvePath(o.data);
   spdlog::info("rcal analyze: the IMU stream of {}; no robot needed", path);
-  const disc::ImuStreamData data =
-      IsLcmLog(path) ? LoadImuStreamLog(path, o.channel, o.allow_gaps) : LoadImuStreamCsv(path);
+  const bool is_log = IsLcmLog(path);
+  const ImuLog log = is_log ? LoadImuStreamLog(path, o.channel, o.allow_gaps, o.joints_channel)
+                            : ImuLog{LoadImuStreamCsv(path), 0};
+  const disc::ImuStreamData& data = log.data;
   disc::ImuAnalysisSettings settings;
   settings.alpha = o.alpha;
+  // Rests from the joints mark the arm's stops exactly: cut only the pose pipeline's settle time
+  // from each end, not the 0.5 s that a movement column's coarse transitions need.
+  if (log.joint_readings > 0) settings.rest_trim_s = estimation::PosePipelineSettings{}.settle_time;
+  const std::string rest_source = log.joint_readings > 0   ? "the joints (" + o.joints_channel + ")"
+                                  : !data.movement.empty() ? "movement column"
+                                                           : "detected still";
   const disc::ImuAnalysis a = disc::AnalyzeImuStream(data, settings);
   const fs::path out(o.out);
   fs::create_directories(out);
@@ -246,6 +294,13 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
                   {"has_truth", a.has_truth},
                   {"has_movement", a.has_movement},
                   {"rest_segments_s", jrests},
+                  {"rests",
+                   {{"source", rest_source},
+                    {"short", a.short_rests},
+                    {"trim_s", settings.rest_trim_s},
+                    {"reference_rests", a.reference_rests},
+                    {"reference_s", a.reference_s},
+                    {"note", a.rest_note}}},
                   {"reference",
                    {{"mag_norm_uT", a.mag_ref_norm_uT},
                     {"mag_dip_rad", a.mag_ref_dip_rad},
@@ -328,13 +383,15 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
   // --- report.md ---
   std::ostringstream md;
   md << "# rcal analyze (IMU stream)\n\n- Data: `" << o.data << "`, " << a.samples << " samples at "
-     << Fmt(a.rate_hz, 1) << " Hz, " << a.rests.size() << " rest segments ("
-     << (a.has_movement ? "movement column" : "detected still") << "), truth orientation "
-     << (a.has_truth ? "present" : "absent")
-     << "\n- Reference (first rest): |m| = " << Fmt(a.mag_ref_norm_uT, 2) << " µT (σ "
-     << Fmt(a.sigma_mag_norm_uT, 2) << "), dip " << Fmt(a.mag_ref_dip_rad * kDeg, 2) << "° (σ "
-     << Fmt(a.sigma_dip_rad * kDeg, 2) << "°), |f| = " << Fmt(a.gravity_ref, 3) << " m/s² (σ "
-     << Fmt(a.sigma_accel_norm, 3)
+     << Fmt(a.rate_hz, 1) << " Hz, " << a.rests.size() << " rest segments (" << rest_source
+     << "), truth orientation " << (a.has_truth ? "present" : "absent")
+     << (a.short_rests ? "\n- **Short rests**: " + a.rest_note : std::string()) << "\n- Reference ("
+     << (a.reference_rests > 1 ? "first " + std::to_string(a.reference_rests) + " rests, " +
+                                     Fmt(a.reference_s, 2) + " s"
+                               : std::string("first rest"))
+     << "): |m| = " << Fmt(a.mag_ref_norm_uT, 2) << " µT (σ " << Fmt(a.sigma_mag_norm_uT, 2)
+     << "), dip " << Fmt(a.mag_ref_dip_rad * kDeg, 2) << "° (σ " << Fmt(a.sigma_dip_rad * kDeg, 2)
+     << "°), |f| = " << Fmt(a.gravity_ref, 3) << " m/s² (σ " << Fmt(a.sigma_accel_norm, 3)
      << ")\n- Base model: white noise at the stated densities, constant gyro bias, constant "
         "field, accelerometer = gravity; base filter trusts every sample.\n\n## Finding\n\n";
   const auto effects = a.effects();
@@ -390,7 +447,9 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
   }
   io::AtomicWriteFile(out / "report.md", md.str());
 
-  std::printf("\nrcal analyze — %s, IMU stream, %d samples\n", o.data.c_str(), a.samples);
+  std::printf("\nrcal analyze — %s, IMU stream, %d samples, %zu rests (%s)\n", o.data.c_str(),
+              a.samples, a.rests.size(), rest_source.c_str());
+  if (a.short_rests) std::printf("  short rests: %s\n", a.rest_note.c_str());
   if (effects.empty()) std::printf("  no significant effect beyond the base sensor model\n");
   for (const auto* c : effects)
     std::printf("  %s (z %s%s)\n", c->cause.c_str(), disc::ZText(c->statistic, 1).c_str(),

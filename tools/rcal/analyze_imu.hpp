@@ -18,14 +18,22 @@ bool IsImuStreamCsv(const std::string& path);
 /// Throws std::runtime_error naming the file, the column and the row for bad input.
 discrepancy::ImuStreamData LoadImuStreamCsv(const std::string& path);
 
+/// The IMU channel of an LCM log of the pipeline.
+struct ImuLog {
+  discrepancy::ImuStreamData data;  ///< no truth; movement from the joints when they were logged
+  int joint_readings = 0;           ///< joint-rate readings behind `movement` (0: none, detected)
+};
+
 /// The IMU channel of an LCM log of the pipeline (imu_sample_t, field in T → µT): samples that
 /// fail to decode, are not finite, lack the magnetometer, or are not after the previous one are
-/// skipped and counted (a warning names the first reason). No truth orientation, no movement flag
-/// (rests are detected). The log's read summary is printed (CheckLogGaps): when frames were broken
-/// or events did not decode, throws unless `allow_gaps`. Throws std::runtime_error when the log
-/// cannot be read or has no samples.
-discrepancy::ImuStreamData LoadImuStreamLog(const std::string& path, const std::string& channel,
-                                            bool allow_gaps = false);
+/// skipped and counted (a warning names the first reason). No truth orientation. When the log
+/// has `joints_channel` (joint_state_t), each sample's movement flag is the arm's state from its
+/// joints, as the pose pipeline's StillDetector judges it (joint rate below its threshold: still);
+/// otherwise no movement flag (rests are detected from the IMU). The log's read summary is
+/// printed (CheckLogGaps): when frames were broken or events did not decode, throws unless
+/// `allow_gaps`. Throws std::runtime_error when the log cannot be read or has no samples.
+ImuLog LoadImuStreamLog(const std::string& path, const std::string& channel,
+                        bool allow_gaps = false, const std::string& joints_channel = "JOINTS");
 
 /// Writes the stream in the BROAD layout (atomically).
 void WriteImuStreamCsv(const std::filesystem::path& path,
@@ -37,7 +45,9 @@ struct AnalyzeImuOptions {
   std::string json_path;
   double alpha = 0.01;
   std::string channel = "IMU";  ///< for an LCM log: the imu_sample_t channel
-  bool allow_gaps = false;      ///< for an LCM log: go on when it lost data (CheckLogGaps)
+  /// For an LCM log: the joint_state_t channel the rests come from ("" or absent: detected).
+  std::string joints_channel = "JOINTS";
+  bool allow_gaps = false;  ///< for an LCM log: go on when it lost data (CheckLogGaps)
 };
 
 /// `rcal analyze` on an IMU stream: DIR/report.md with plots and DIR/analysis.json.

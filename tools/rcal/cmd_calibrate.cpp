@@ -74,8 +74,8 @@ json StatsJson(const identification::PoseErrorStats& s, const std::string& prefi
 std::vector<std::string> Row(const std::string& name, const identification::PoseErrorStats& s) {
   const bool o = !s.orientation_rad.empty();
   return {name, Fmt(s.mean_position_m * kMm), Fmt(s.max_position_m * kMm),
-          o ? Fmt(s.mean_orientation_rad * kDeg) : "–",
-          o ? Fmt(s.max_orientation_rad * kDeg) : "–"};
+          o ? Fmt(s.mean_orientation_rad * kDeg) : "n/a",
+          o ? Fmt(s.max_orientation_rad * kDeg) : "n/a"};
 }
 
 // The extended fit of --effects and its figures.
@@ -308,9 +308,10 @@ int Run(const Options& o) {
     spdlog::info("marker {}: offset from row {}, not fitted", marker.id,
                  data.samples[ref.measurement].row);
   }
-  spdlog::info("fitted {} parameters ({} set-up); noise σ {:.3f} mm, {:.3f}°",
-               fit.identified.size(), fit.setup.size(), fit.position_sigma_m * kMm,
-               fit.orientation_sigma_rad * kDeg);
+  spdlog::info("fitted {} parameters ({} set-up); noise σ {:.3f} mm{}", fit.identified.size(),
+               fit.setup.size(), fit.position_sigma_m * kMm,
+               data.has_orientation ? ", " + Fmt(fit.orientation_sigma_rad * kDeg, 3) + "°"
+                                    : std::string(" (positions only)"));
   std::optional<ExtendedResult> ext;
   identification::HeldOutErrors held;
   if (!o.effects_path.empty()) {
@@ -418,8 +419,10 @@ int Run(const Options& o) {
                                     : std::string("marker"))
      << " in the world (position sensor) frame\n- Method: " << o.method << "; noise "
      << (o.fixed_noise ? "given" : "estimated from the residuals") << ": "
-     << Fmt(fit.position_sigma_m * kMm, 4) << " mm, " << Fmt(fit.orientation_sigma_rad * kDeg, 4)
-     << "°\n\n'Nominal' is the drawing kinematics with only the set-up frames (world ← base, "
+     << Fmt(fit.position_sigma_m * kMm, 4) << " mm"
+     << (data.has_orientation ? ", " + Fmt(fit.orientation_sigma_rad * kDeg, 4) + "°"
+                              : std::string(" (positions only: no orientation measured)"))
+     << "\n\n'Nominal' is the drawing kinematics with only the set-up frames (world ← base, "
         "marker, IMU) fitted: the honest before-calibration figure.\n\n## Errors\n\n"
      << MdTable({"", "position mean [mm]", "position max [mm]", "orientation mean [deg]",
                  "orientation max [deg]"},
@@ -470,8 +473,9 @@ int Run(const Options& o) {
             {"method", o.method},
             {"validation", held.scheme},
             {"position_noise_m", fit.position_sigma_m},
-            {"orientation_noise_rad", fit.orientation_sigma_rad},
             {"parameters", jparams}};
+  // Positions only: no orientation noise (nor orientation errors, StatsJson) to report.
+  if (data.has_orientation) j["orientation_noise_rad"] = fit.orientation_sigma_rad;
   j.update(StatsJson(fit.nominal_fit, "fit_nominal_"));
   j.update(StatsJson(fit.calibrated_fit, "fit_"));
   j.update(StatsJson(held.nominal, "test_nominal_"));
@@ -506,11 +510,21 @@ int Run(const Options& o) {
 
   std::printf("\nrcal calibrate — %s, %zu poses, %zu parameters identified\n", o.data.c_str(),
               ms.size(), fit.identified.size());
-  std::printf("                         position mean/max [mm]   orientation mean/max [deg]\n");
+  // Positions only: no orientation was measured, so there is no orientation error to print (it
+  // used to read 0.000).
+  if (data.has_orientation)
+    std::printf("                         position mean/max [mm]   orientation mean/max [deg]\n");
+  else
+    std::printf(
+        "                         position mean/max [mm]   (positions only: no orientation)\n");
   const auto line = [](const char* name, const identification::PoseErrorStats& s) {
-    std::printf("  %-22s %8.3f / %-8.3f       %8.3f / %-8.3f\n", name, s.mean_position_m * kMm,
-                s.max_position_m * kMm, s.mean_orientation_rad * kDeg,
-                s.max_orientation_rad * kDeg);
+    if (s.orientation_rad.empty())
+      std::printf("  %-22s %8.3f / %-8.3f\n", name, s.mean_position_m * kMm,
+                  s.max_position_m * kMm);
+    else
+      std::printf("  %-22s %8.3f / %-8.3f       %8.3f / %-8.3f\n", name, s.mean_position_m * kMm,
+                  s.max_position_m * kMm, s.mean_orientation_rad * kDeg,
+                  s.max_orientation_rad * kDeg);
   };
   line("fit, nominal", fit.nominal_fit);
   line("fit, calibrated", fit.calibrated_fit);

@@ -40,8 +40,8 @@ struct Options {
   int seeds = 20;
   unsigned first_seed = 1000;
   std::string json_path;
-  std::string robot = "../shared/data/figaroh_ur10/robot.urdf";
-  std::string tip_link, base_link;  ///< URDF chain (empty: detected, the root)
+  std::string robot = "config/robots/ur10.urdf";  // the real UR10 (FIGAROH), shipped
+  std::string tip_link, base_link;                ///< URDF chain (empty: detected, the root)
   int poses = 60;
   std::vector<double> magnitudes{2.0, 3.0, 5.0};
   double position_sigma_mm = 0.05;

@@ -226,6 +226,7 @@ struct ParameterTable {
   json params = json::array();                 // the JSON's
   double ekf_vs_lm_max_sigma = 0;
   std::vector<double> z_index, z_ekf, z_lm;
+  std::vector<std::pair<double, std::string>> z_names;  // the plot's x axis: parameter names
 };
 
 ParameterTable TabulateParameters(const kinematics::KinematicModel& model, const PaperSetup& s,
@@ -242,6 +243,7 @@ ParameterTable TabulateParameters(const kinematics::KinematicModel& model, const
     t.ekf_vs_lm_max_sigma =
         std::max(t.ekf_vs_lm_max_sigma, std::abs(x_ekf(p) - x_lm(p)) / lm.sigma(p));
     t.z_index.push_back(i + 1);
+    t.z_names.emplace_back(i + 1, P.name);
     t.z_ekf.push_back((x_ekf(p) - x_eq(p)) / crb_sigma);
     t.z_lm.push_back((x_lm(p) - x_eq(p)) / crb_sigma);
     t.rows.push_back(
@@ -298,15 +300,18 @@ PaperResults ComputePaper(const PaperOptions& o, const kinematics::KinematicMode
 
 void WritePaperPlots(const fs::path& out, const PaperResults& r) {
   const EkfConvergence& c = r.ekf;
-  io::PlotPng({"EKF convergence (the paper's Fig. 7)",
-               "poses used",
-               "error",
-               {{"RMS parameter error [Cramér–Rao σ of 50 poses]", c.conv_index, c.conv_param,
-                 "linespoints"},
-                {"mean test position error [mm]", c.conv_index, c.conv_test, "linespoints"}},
-               false,
-               true},
-              out / "convergence.png");
+  // Parameter error in σ (left) and test error in mm (right): two units, two axes.
+  io::PlotSpec convergence{
+      "EKF convergence (the paper's Fig. 7)",
+      "poses used",
+      "RMS parameter error [Cramér–Rao σ of 50 poses]",
+      {{"RMS parameter error [σ]", c.conv_index, c.conv_param, "linespoints"},
+       {"mean test position error [mm]", c.conv_index, c.conv_test, "linespoints", true}},
+      false,
+      true};
+  convergence.y2label = "mean test position error [mm]";
+  convergence.logy2 = true;
+  io::PlotPng(convergence, out / "convergence.png");
   io::PlotPng({"Test position error against calibration poses (the paper's Fig. 10)",
                "calibration poses",
                "mean test position error [mm]",
@@ -316,12 +321,13 @@ void WritePaperPlots(const fs::path& out, const PaperResults& r) {
                false,
                true},
               out / "poses.png");
-  io::PlotPng({"Identified parameters: error from the truth in Cramér–Rao σ",
-               "parameter (base set)",
-               "(estimate - truth) / σ_CRB",
-               {{"EKF", r.params.z_index, r.params.z_ekf, "points"},
-                {"LM", r.params.z_index, r.params.z_lm, "points"}}},
-              out / "parameters.png");
+  io::PlotSpec params{"Identified parameters: error from the truth in Cramér–Rao σ",
+                      "parameter (base set)",
+                      "(estimate - truth) / σ_CRB",
+                      {{"EKF", r.params.z_index, r.params.z_ekf, "points"},
+                       {"LM", r.params.z_index, r.params.z_lm, "points"}}};
+  params.xtics = r.params.z_names;
+  io::PlotPng(params, out / "parameters.png");
 }
 // ---- report.md ----
 

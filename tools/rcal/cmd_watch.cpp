@@ -119,7 +119,7 @@ int Run(const Options& o) {
     t.HandleTimeout(100);
     if (heard && o.idle_s > 0 &&
         std::chrono::steady_clock::now() - last_heard > std::chrono::duration<double>(o.idle_s)) {
-      std::printf("nothing heard for %.0f s\n", o.idle_s);
+      std::fprintf(stderr, "rcal watch: nothing heard for %.0f s\n", o.idle_s);
       break;
     }
   }

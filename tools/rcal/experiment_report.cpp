@@ -324,7 +324,8 @@ struct ParameterTable {
   json params = json::array();                 // the JSON's
   double max_abs_z = 0, sum_z2 = 0;
   std::vector<double> z_index, z_ekf;
-  Eigen::VectorXd e_ekf;  // EKF − truth on the base set
+  std::vector<std::pair<double, std::string>> z_names;  // the plot's x axis: parameter names
+  Eigen::VectorXd e_ekf;                                // EKF − truth on the base set
 };
 
 ParameterTable TabulateParameters(const Cell& cell, const Identification& id) {
@@ -344,6 +345,7 @@ ParameterTable TabulateParameters(const Cell& cell, const Identification& id) {
     t.sum_z2 += z * z;
     t.e_ekf(i) = x_ekf(p) - cell.x_eq(p);
     t.z_index.push_back(i + 1);
+    t.z_names.emplace_back(i + 1, P.name);
     t.z_ekf.push_back(z);
     t.rows.push_back({P.name, P.is_angle ? "deg" : "mm", Fmt(cell.x_true(p) * unit, 4),
                       Fmt(cell.x_eq(p) * unit, 4),
@@ -604,17 +606,19 @@ void WritePegPlot(const fs::path& out, const PegResult& peg) {
 
 void WriteSweepPlot(const fs::path& out, const std::vector<SweepRow>& sweep) {
   std::vector<double> xs, ys;
+  io::PlotSpec p{"Robustness: test error after calibration",
+                 "",
+                 "mean test position error [mm]",
+                 {},
+                 false,
+                 true};
   for (size_t k = 0; k < sweep.size(); ++k) {
     xs.push_back(k + 1);
     ys.push_back(sweep[k].test_position_m * kMm);
+    p.xtics.emplace_back(k + 1, sweep[k].factor + " " + sweep[k].value);
   }
-  io::PlotPng({"Robustness: test error after calibration (see the table for the rows)",
-               "sweep row",
-               "mean test position error [mm]",
-               {{"EKF from sensors", xs, ys, "boxes"}},
-               false,
-               true},
-              out / "sweep.png");
+  p.series = {{"EKF from sensors", xs, ys, "boxes"}};
+  io::PlotPng(p, out / "sweep.png");
 }
 
 void WritePlots(const fs::path& out, const ReportOptions& o, const SensorsReport& r) {
@@ -639,11 +643,12 @@ void WritePlots(const fs::path& out, const ReportOptions& o, const SensorsReport
                false,
                true},
               out / "poses.png");
-  io::PlotPng({"Identified parameters: (EKF − truth on base set) / own σ",
-               "parameter (base set)",
-               "z",
-               {{"EKF (sensors)", r.params.z_index, r.params.z_ekf, "points"}}},
-              out / "parameters.png");
+  io::PlotSpec params{"Identified parameters: (EKF − truth on base set) / own σ",
+                      "parameter (base set)",
+                      "z",
+                      {{"EKF (sensors)", r.params.z_index, r.params.z_ekf, "points"}}};
+  params.xtics = r.params.z_names;
+  io::PlotPng(params, out / "parameters.png");
   if (o.peg) WritePegPlot(out, r.peg);
   if (o.sweep) WriteSweepPlot(out, r.sweep);
 }

@@ -5,6 +5,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <map>
 #include <numbers>
@@ -190,9 +191,18 @@ struct Context {
   int n = 0;
   double dt = 0.0, rate = 0.0;
   std::vector<char> rest_mask;  // sample in a used rest segment
+  std::vector<char> ref_mask;   // sample in the reference (excluded from the field's test)
+  int longest_still = 0;        // the longest still run before trimming [samples]
 };
 
-std::vector<std::pair<int, int>> FindRests(Context& c) {
+// `v` with `digits` decimals.
+std::string Fixed(double v, int digits) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", digits, v);
+  return buf;
+}
+
+std::vector<std::pair<int, int>> FindRests(Context& c, bool* short_rests) {
   const auto& d = c.d;
   std::vector<char> still(c.n, 0);
   if (!d.movement.empty()) {
@@ -206,10 +216,9 @@ std::vector<std::pair<int, int>> FindRests(Context& c) {
       still[k] = (d.gyro[k] - med).norm() < c.s.still_gyro &&
                  std::abs(d.accel[k].norm() - c.s.gravity) < c.s.still_accel;
   }
-  // Runs of still samples, trimmed by 0.5 s at both ends (transitions).
-  const int trim = static_cast<int>(std::round(0.5 * c.rate));
-  const int min_len = static_cast<int>(std::round(c.s.min_rest_s * c.rate));
-  std::vector<std::pair<int, int>> rests;
+  // Runs of still samples, trimmed by rest_trim_s at both ends (transitions).
+  const int trim = static_cast<int>(std::round(c.s.rest_trim_s * c.rate));
+  std::vector<std::pair<int, int>> runs;
   int k = 0;
   while (k < c.n) {
     if (!still[k]) {
@@ -218,11 +227,23 @@ std::vector<std::pair<int, int>> FindRests(Context& c) {
     }
     int e = k;
     while (e < c.n && still[e]) ++e;
+    c.longest_still = std::max(c.longest_still, e - k);
     const int b2 = k == 0 ? 0 : k + trim;
     const int e2 = e == c.n ? e : e - trim;
-    if (e2 - b2 >= min_len) rests.emplace_back(b2, e2);
+    if (e2 > b2) runs.emplace_back(b2, e2);
     k = e;
   }
+  // The rests of min_rest_s; without any, those of min_short_rest_s (short_rests).
+  const auto longer = [&](double s) {
+    const int min_len = static_cast<int>(std::round(s * c.rate));
+    std::vector<std::pair<int, int>> out;
+    for (auto [b, e] : runs)
+      if (e - b >= min_len) out.emplace_back(b, e);
+    return out;
+  };
+  std::vector<std::pair<int, int>> rests = longer(c.s.min_rest_s);
+  *short_rests = rests.empty();
+  if (rests.empty()) rests = longer(std::min(c.s.min_short_rest_s, c.s.min_rest_s));
   c.rest_mask.assign(c.n, 0);
   for (auto [b, e] : rests)
     for (int i = b; i < e; ++i) c.rest_mask[i] = 1;
@@ -285,15 +306,17 @@ est::OrientationKfSettings BaseFilter(const ImuAnalysisSettings& s) {
 Context MakeContext(const ImuStreamData& data, const ImuAnalysisSettings& settings) {
   const int n = static_cast<int>(data.t.size());
   const double dt = (data.t.back() - data.t.front()) / (n - 1);
-  return Context{data, settings, n, dt, 1.0 / dt, {}};
+  return Context{data, settings, n, dt, 1.0 / dt, {}, {}, 0};
 }
 
-// The reference field (norm, dip), gravity and their noise levels on [rb, re) of the first rest.
-void FitReference(const Context& c, int rb, int re, ImuAnalysis& a) {
+// The reference field (norm, dip), gravity and their noise levels on the samples of c.ref_mask
+// (the first rest, or the first rests pooled).
+void FitReference(const Context& c, ImuAnalysis& a) {
   const auto& data = c.d;
   const auto& s = c.s;
   std::vector<double> nm, dip, fn;
-  for (int k = rb; k < re; ++k) {
+  for (int k = 0; k < c.n; ++k) {
+    if (!c.ref_mask[k]) continue;
     const double m = data.mag_uT[k].norm(), f = data.accel[k].norm();
     nm.push_back(m);
     fn.push_back(f);
@@ -494,7 +517,12 @@ ImuCandidate TestGyroBias(const Context& c, double alpha_c, ImuAnalysis& a) {
   gb.note = "white line from the data's short-τ level (stated " +
             std::to_string(s.gyro_noise_density) + " rad/s/√Hz)";
   if (A.tau_s.empty() || test_idx.empty()) {
-    gb.note = "rests too short for the long-τ Allan test";
+    gb.note = "rests too short for the long-τ Allan test (τ ≥ " + Fixed(s.allan_test_tau_min_s, 1) +
+              " s needs rests of " + Fixed(2 * s.allan_test_tau_min_s, 1) + " s)";
+    if (a.rests.size() >= 2)
+      gb.note += ": tested only by the drift between the first and the last rest";
+    else
+      gb.tested = false;
   }
   double k_ext = s.base_bias_random_walk;
   for (int i = 0; i < 3; ++i)
@@ -505,7 +533,7 @@ ImuCandidate TestGyroBias(const Context& c, double alpha_c, ImuAnalysis& a) {
 
 // ----- magnetic_disturbance -----
 
-// Per-sample deviations of the field from the reference, outside the reference rest [rb, re).
+// Per-sample deviations of the field from the reference, outside the reference (c.ref_mask).
 struct FieldDeviations {
   std::vector<double> dn;       // |m| − m₀ [µT]
   std::vector<double> dd;       // dip (base filter's attitude) − δ₀ [rad]
@@ -516,7 +544,7 @@ struct FieldDeviations {
 // The deviations; a.mag_norm_uT and a.mag_dip_rad (dip from the base filter's attitude) on every
 // sample.
 FieldDeviations DeviationsFromReference(const Context& c,
-                                        const std::vector<Eigen::Vector4d>& q_base, int rb, int re,
+                                        const std::vector<Eigen::Vector4d>& q_base,
                                         ImuAnalysis& a) {
   const auto& data = c.d;
   const Eigen::Vector3d up(0, 0, 1);
@@ -527,7 +555,7 @@ FieldDeviations DeviationsFromReference(const Context& c,
     if (!q_base[k].allFinite()) continue;
     const Eigen::Vector3d down_B = -geometry::QuatToMatrix(q_base[k]).transpose() * up;
     a.mag_dip_rad[k] = std::asin(std::clamp(data.mag_uT[k].dot(down_B) / m, -1.0, 1.0));
-    if (k >= rb && k < re) continue;  // the reference itself
+    if (c.ref_mask[k]) continue;  // the reference itself
     f.dn.push_back(m - a.mag_ref_norm_uT);
     f.dk.push_back(k);
     f.dd.push_back(a.mag_dip_rad[k] - a.mag_ref_dip_rad);
@@ -586,7 +614,7 @@ GateCounts CountOutsideGate(const Context& c, const FieldDeviations& f, double g
 // magnetic_disturbance: the binomial test of the samples outside the fitted gate; the gate into
 // a.mag_gate_*; the per-sample field series into a.
 ImuCandidate TestMagneticDisturbance(const Context& c, const std::vector<Eigen::Vector4d>& q_base,
-                                     int rb, int re, double alpha_c, ImuAnalysis& a) {
+                                     double alpha_c, ImuAnalysis& a) {
   const auto& s = c.s;
   ImuCandidate md;
   md.cause = "magnetic_disturbance";
@@ -595,7 +623,7 @@ ImuCandidate TestMagneticDisturbance(const Context& c, const std::vector<Eigen::
   a.mag_norm_uT.assign(c.n, kNaN);
   a.mag_dip_rad.assign(c.n, kNaN);
   a.mag_disturbed.assign(c.n, 0);
-  const FieldDeviations f = DeviationsFromReference(c, q_base, rb, re, a);
+  const FieldDeviations f = DeviationsFromReference(c, q_base, a);
   const double sig_n = RobustSpread(f.dn, a.sigma_mag_norm_uT),
                sig_d = RobustSpread(f.dd, a.sigma_dip_rad);
   const double gate_n = s.band_z * sig_n, gate_d = s.band_z * sig_d;
@@ -879,24 +907,53 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
   a.has_movement = !data.movement.empty();
   a.has_truth = false;
   for (const auto& q : data.q_truth) a.has_truth |= q.allFinite();
-  a.rests = FindRests(c);
-  spdlog::info("imu analysis: {} samples at {:.1f} Hz, {} rest segments, truth {}", c.n, c.rate,
-               a.rests.size(), a.has_truth ? "yes" : "no");
+  a.rests = FindRests(c, &a.short_rests);
+  spdlog::info("imu analysis: {} samples at {:.1f} Hz, {} rest segments{}, truth {}", c.n, c.rate,
+               a.rests.size(), a.short_rests ? " (short)" : "", a.has_truth ? "yes" : "no");
   if (a.rests.empty())
-    throw std::invalid_argument("IMU stream: no rest segment of at least " +
-                                std::to_string(s.min_rest_s) + " s (movement = 0 or still)");
+    throw std::invalid_argument(
+        "IMU stream: no rest segment of at least " + Fixed(s.min_short_rest_s, 1) + " s (" +
+        Fixed(s.min_rest_s, 1) + " s for every test) after cutting " + Fixed(s.rest_trim_s, 1) +
+        " s from each end of every still run (movement = 0 or still); the longest still run is " +
+        Fixed(c.longest_still / c.rate, 2) + " s");
 
-  // The reference on the first rest (at most reference_max_s of it).
-  const auto [rb, re_full] = a.rests.front();
-  const int re = std::min(re_full, rb + static_cast<int>(s.reference_max_s * c.rate));
-  FitReference(c, rb, re, a);
+  // The reference: the first rest (at most reference_max_s of it); with short rests the first
+  // rests pooled until they hold min_rest_s.
+  c.ref_mask.assign(c.n, 0);
+  const int ref_max = static_cast<int>(s.reference_max_s * c.rate);
+  const int ref_want = a.short_rests ? static_cast<int>(std::round(s.min_rest_s * c.rate)) : 1;
+  int ref_len = 0;
+  for (auto [b, e] : a.rests) {
+    if (ref_len >= ref_want || ref_len >= ref_max) break;
+    const int e2 = std::min(e, b + ref_max - ref_len);
+    for (int k = b; k < e2; ++k) c.ref_mask[k] = 1;
+    ref_len += e2 - b;
+    ++a.reference_rests;
+  }
+  a.reference_s = ref_len / c.rate;
+  FitReference(c, a);
+  if (a.short_rests) {
+    int longest = 0;
+    for (auto [b, e] : a.rests) longest = std::max(longest, e - b);
+    a.rest_note = "no rest of " + Fixed(s.min_rest_s, 1) + " s: " + std::to_string(a.rests.size()) +
+                  " short rests used (longest " + Fixed(longest / c.rate, 2) +
+                  " s, after cutting " + Fixed(s.rest_trim_s, 1) +
+                  " s from each end); the reference field and noise pooled over the first " +
+                  std::to_string(a.reference_rests) + " (" + Fixed(a.reference_s, 2) +
+                  " s); the Allan deviation reaches τ = " + Fixed(longest / 2 / c.rate, 2) +
+                  " s, so the long-τ Allan test (τ ≥ " + Fixed(s.allan_test_tau_min_s, 1) +
+                  " s, rests of " + Fixed(2 * s.allan_test_tau_min_s, 1) +
+                  " s) cannot run: gyro_bias is tested only by the drift between the first and "
+                  "the last rest (a bias that wanders and returns is not seen)";
+    spdlog::warn("imu analysis: {}", a.rest_note);
+  }
 
   spdlog::info("imu analysis: base filter (trusts every sample, constant gyro bias)");
   const est::OrientationKfSettings base_f = BaseFilter(s);
   const std::vector<Eigen::Vector4d> q_base = RunOrientationFilter(data, base_f);
 
   const ImuCandidate gb = TestGyroBias(c, alpha_c, a);
-  const ImuCandidate md = TestMagneticDisturbance(c, q_base, rb, re, alpha_c, a);
+  const ImuCandidate md = TestMagneticDisturbance(c, q_base, alpha_c, a);
   const ImuCandidate am = TestAccelMotion(c, q_base, alpha_c, a);
   const TimeOffsetTest to = TestTimeOffset(c, alpha_c, a.has_truth);
   a.candidates = {gb, md, am, to.candidate};

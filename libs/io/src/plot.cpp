@@ -7,6 +7,7 @@
 
 #include <fcntl.h>
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <sstream>
@@ -60,6 +61,65 @@ int RunGnuplot(const std::filesystem::path& script) {
 
 }  // namespace
 
+void WriteGnuplotData(const PlotSpec& spec, const std::filesystem::path& data) {
+  std::ofstream d(data);
+  d.precision(10);
+  for (const Series& s : spec.series) {
+    for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) d << s.x[i] << ' ' << s.y[i] << '\n';
+    d << "\n\n";  // gnuplot data block separator: one `index` per series
+  }
+}
+
+std::string GnuplotScript(const PlotSpec& spec, const std::filesystem::path& data,
+                          const std::filesystem::path& png) {
+  std::ostringstream gp;
+  gp << "set terminal pngcairo size " << spec.width_px << "," << spec.height_px
+     << " noenhanced font 'Sans,10'\n";
+  gp << "set output " << Quote(png.string()) << "\n";
+  gp << "set title " << Quote(spec.title) << "\n";
+  gp << "set xlabel " << Quote(spec.xlabel) << "\n";
+  gp << "set ylabel " << Quote(spec.ylabel) << "\n";
+  // The legend below the plot, in as many columns as fit: the plot keeps the full width.
+  gp << "set grid\nset key below horizontal\n";
+  if (spec.logx) gp << "set logscale x\n";
+  if (spec.logy) gp << "set logscale y\n";
+  bool y2 = false;
+  for (const Series& s : spec.series) y2 |= s.y2;
+  if (y2) {
+    gp << "set ytics nomirror\nset y2tics\nset y2label " << Quote(spec.y2label) << "\n";
+    if (spec.logy2) gp << "set logscale y2\n";
+  }
+  if (!spec.xtics.empty()) {
+    gp << "set xtics rotate by 45 right (";
+    for (size_t i = 0; i < spec.xtics.size(); ++i) {
+      char at[32];
+      std::snprintf(at, sizeof at, "%.10g", spec.xtics[i].first);
+      gp << (i ? ", " : "") << Quote(spec.xtics[i].second) << " " << at;
+    }
+    gp << ")\n";
+    // Half a step of room beyond the first and last names: their points (or boxes) are not cut
+    // in half by the border.
+    double step = 0;  // the smallest gap between two names (1 with a single name)
+    for (size_t i = 1; i < spec.xtics.size(); ++i) {
+      const double d = std::abs(spec.xtics[i].first - spec.xtics[i - 1].first);
+      if (d > 0 && (step == 0 || d < step)) step = d;
+    }
+    if (step == 0) step = 1;
+    char half[32];
+    std::snprintf(half, sizeof half, "%.10g", step / 2);
+    gp << "set offsets " << half << ", " << half << ", 0, 0\n";
+  }
+  gp << "plot ";
+  for (size_t i = 0; i < spec.series.size(); ++i) {
+    if (i) gp << ", ";
+    gp << Quote(data.string()) << " index " << i << " using 1:2"
+       << (spec.series[i].y2 ? " axes x1y2" : "") << " with " << spec.series[i].style << " title "
+       << Quote(spec.series[i].title);
+  }
+  gp << "\n";
+  return gp.str();
+}
+
 bool PlotPng(const PlotSpec& spec, const std::filesystem::path& png) {
   namespace fs = std::filesystem;
   if (png.string().find_first_of("\n\r") != std::string::npos) {
@@ -70,33 +130,8 @@ bool PlotPng(const PlotSpec& spec, const std::filesystem::path& png) {
   // Absolute: gnuplot must not read a script path that starts with '-' as an option.
   const std::string stem = fs::absolute(png).string() + ".tmp." + std::to_string(::getpid());
   const fs::path tmp_png = stem + ".png", data = stem + ".dat", script = stem + ".gp";
-  {
-    std::ofstream d(data);
-    d.precision(10);
-    for (const Series& s : spec.series) {
-      for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i)
-        d << s.x[i] << ' ' << s.y[i] << '\n';
-      d << "\n\n";  // gnuplot data block separator: one `index` per series
-    }
-  }
-  std::ostringstream gp;
-  gp << "set terminal pngcairo size " << spec.width_px << "," << spec.height_px
-     << " noenhanced font 'Sans,10'\n";
-  gp << "set output " << Quote(tmp_png.string()) << "\n";
-  gp << "set title " << Quote(spec.title) << "\n";
-  gp << "set xlabel " << Quote(spec.xlabel) << "\n";
-  gp << "set ylabel " << Quote(spec.ylabel) << "\n";
-  gp << "set grid\nset key outside right\n";
-  if (spec.logx) gp << "set logscale x\n";
-  if (spec.logy) gp << "set logscale y\n";
-  gp << "plot ";
-  for (size_t i = 0; i < spec.series.size(); ++i) {
-    if (i) gp << ", ";
-    gp << Quote(data.string()) << " index " << i << " using 1:2 with " << spec.series[i].style
-       << " title " << Quote(spec.series[i].title);
-  }
-  gp << "\n";
-  std::ofstream(script) << gp.str();
+  WriteGnuplotData(spec, data);
+  std::ofstream(script) << GnuplotScript(spec, data, tmp_png);
   const int rc = RunGnuplot(script);
   fs::remove(data);
   fs::remove(script);

@@ -10,9 +10,17 @@
 //   mag   m   = R_WIᵀ m_W + n_m,  |m_W| and dip δ constant,   n_m white, density N_m [µT/√Hz]
 // and the filter that trusts it: the orientation KF (estimation/orientation_kf.hpp) with
 // reject_mag = reject_accel = false and gyro_bias_random_walk = base_bias_random_walk.
-// Fit: rest segments (movement = 0, or detected still when there is no movement column) of at
-// least min_rest_s; the reference field (norm m₀, dip δ₀ = asin(−m·f / |m||f|)) and the noise
-// levels σ_|m|, σ_δ, σ_|f| (never below the stated densities · √rate) on the first rest segment.
+// Fit: rest segments (movement = 0, or detected still when there is no movement column; each run
+// trimmed by rest_trim_s at both ends) of at least min_rest_s; the reference field (norm m₀, dip
+// δ₀ = asin(−m·f / |m||f|)) and the noise levels σ_|m|, σ_δ, σ_|f| (never below the stated
+// densities · √rate) on the first rest segment.
+// Short rests (a still-and-move programme such as the demo's 1.5 s stops): when no rest reaches
+// min_rest_s, the rests of at least min_short_rest_s are used instead (ImuAnalysis::short_rests):
+// the reference is pooled over the first rests until they hold min_rest_s (norm, dip and |f| do
+// not depend on the orientation, so rests at different poses measure the same quantities); the
+// Allan curve only reaches half the longest rest, so the long-τ Allan test (τ ≥
+// allan_test_tau_min_s, rests of at least twice that) cannot run and gyro_bias rests on the drift
+// between the first and the last rest alone. ImuAnalysis::rest_note says so in words.
 //
 // Candidates (cause vocabulary), each tested at α / 4 (Bonferroni over the four):
 //  gyro_bias   overlapping Allan variance per axis over the rest segments (pooled), relative
@@ -80,7 +88,10 @@ struct ImuAnalysisSettings {
   double mag_noise_density_uT = sim::ImuModelSettings{}.mag_noise_density;   ///< [µT/√Hz]
   double alpha = 0.01;  ///< false-positive rate of the whole selection [-]
   // Rest segments.
-  double min_rest_s = 3.0;        ///< shorter rests are not used [s]
+  double min_rest_s = 3.0;  ///< shorter rests are not used while a rest this long exists [s]
+  /// With no rest of min_rest_s: the shortest rest used, the tests adapted (header comment) [s].
+  double min_short_rest_s = 0.4;
+  double rest_trim_s = 0.5;       ///< cut from both ends of each still run (transitions) [s]
   double still_gyro = 0.05;       ///< detected still: |ω_m − median| below [rad/s]
   double still_accel = 0.3;       ///< and ||f| − g| below [m/s²]
   double gravity = 9.81;          ///< [m/s²], for still detection only
@@ -145,7 +156,13 @@ struct ImuAnalysis {
   double rate_hz = 0.0;
   bool has_truth = false, has_movement = false;
   std::vector<std::pair<int, int>> rests;  ///< [begin, end) sample ranges
-  // Reference fitted on the first rest.
+  /// No rest of min_rest_s: rests of min_short_rest_s and longer used (header comment).
+  bool short_rests = false;
+  int reference_rests = 0;   ///< rests pooled into the reference
+  double reference_s = 0.0;  ///< their total length [s]
+  /// What the rests allow, in words, when short_rests ("" otherwise).
+  std::string rest_note;
+  // Reference fitted on the first rest (short_rests: on the first reference_rests).
   double mag_ref_norm_uT = 0.0, mag_ref_dip_rad = 0.0, gravity_ref = 0.0;
   double sigma_mag_norm_uT = 0.0, sigma_dip_rad = 0.0, sigma_accel_norm = 0.0;
   double mag_gate_norm_uT = 0.0, mag_gate_dip_rad = 0.0;  ///< the fitted gate half-widths

@@ -13,7 +13,7 @@
 //   set             `cal` | `test` (empty: unspecified)                        optional
 // Other columns are ignored with a warning naming them (PoseDataset::ignored_columns).
 //
-// FIGAROH layout (e.g. ../shared/data/figaroh_ur10/calibration.csv), recognised by its `x1` and
+// FIGAROH layout (e.g. data/figaroh_ur10/calibration.csv), recognised by its `x1` and
 // `phix1` columns: per measured marker k = 1, 2, ... the columns xk, yk, zk [m] and optionally
 // phixk, phiyk, phizk (roll, pitch, yaw [rad], R = Rz(yaw)·Ry(pitch)·Rx(roll)), world frame; every
 // other column is a joint position named after its joint, in the model's joint order. Marker k
@@ -79,7 +79,7 @@ PoseDataset ParsePoseDataset(const std::string& text, const std::string& source,
 /// Reads a FIGAROH-layout file (LoadPoseDataset detects it too).
 PoseDataset LoadFigarohDataset(const std::filesystem::path& path,
                                const std::vector<std::string>& joint_names = {});
-/// The UR10 data of ../shared/data/figaroh_ur10/calibration.csv: the FIGAROH layout with the six
+/// The UR10 data of data/figaroh_ur10/calibration.csv: the FIGAROH layout with the six
 /// UR joint columns (shoulder_pan_joint … wrist_3_joint) in chain order.
 PoseDataset LoadFigarohUr10(const std::filesystem::path& path);
 

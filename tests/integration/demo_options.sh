@@ -1,0 +1,26 @@
+#!/bin/sh
+# deploy_demo_options: `deploy/demo --help` prints its usage and exits 0 without installing or
+# building anything, and an unknown option is refused on stderr with exit 2. Both run with a PATH
+# that holds only the few tools a shell script needs to print (no cmake, apt-get, dpkg-query,
+# unshare): a demo that tried to install, build or start anything would fail here.
+# Usage: demo_options.sh REPO
+set -u
+repo=$1
+bin=$(mktemp -d)
+trap 'rm -rf "$bin"' EXIT
+for tool in bash sh sed dirname cat; do ln -s "$(command -v "$tool")" "$bin/$tool"; done
+fail=0
+out=$(PATH=$bin "$repo/deploy/demo" --help 2>"$bin/err")
+rc=$?
+[ "$rc" -eq 0 ] || { echo "deploy/demo --help: exit $rc, stderr: $(cat "$bin/err")"; fail=1; }
+printf '%s\n' "$out" | grep -q '^Usage:' || { echo "deploy/demo --help: no usage on stdout"; fail=1; }
+printf '%s\n' "$out" | grep -q 'deploy/demo --offline' || { echo "deploy/demo --help: --offline not described"; fail=1; }
+[ -s "$bin/err" ] && { echo "deploy/demo --help wrote to stderr: $(cat "$bin/err")"; fail=1; }
+out=$(PATH=$bin "$repo/deploy/demo" --no-such-option 2>"$bin/err")
+rc=$?
+[ "$rc" -eq 2 ] || { echo "deploy/demo --no-such-option: exit $rc, expected 2"; fail=1; }
+[ -z "$out" ] || { echo "deploy/demo --no-such-option wrote to stdout: $out"; fail=1; }
+grep -q "unknown option '--no-such-option'" "$bin/err" ||
+  { echo "deploy/demo --no-such-option: stderr does not name the option: $(cat "$bin/err")"; fail=1; }
+[ "$fail" = 0 ] && echo "ok: deploy/demo --help and a bad option, nothing installed or built"
+exit $fail
