@@ -20,6 +20,9 @@
 // arrived (a step of more than one; a step back is a restarted still_window). HEALTH's time is
 // the KINEMATIC_PARAMS and POSE_MEASUREMENT utimes that pass a time gate (a far-future utime
 // never schedules the heartbeat).
+//
+// --cell FILE: the cell's channel names for KINEMATIC_PARAMS (the CSV) and POSE_MEASUREMENT (the
+// gap count); every channel is recorded whatever its name.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -34,6 +37,7 @@
 
 #include "log_files.hpp"
 #include "rcal/estimation/time_gate.hpp"
+#include "rcal/io/cell_yaml.hpp"
 #include "rcal/kinematic_params_t.hpp"
 #include "rcal/pose_measurement_t.hpp"
 #include "rcal/services/common.hpp"
@@ -55,9 +59,15 @@ int main(int argc, char** argv) {
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   app.add_option("--lcm-url", lcm_url, "LCM URL");
+  std::string cell_path;
+  app.add_option("--cell", cell_path,
+                 "cell file (schema rcal.cell/1): its KINEMATIC_PARAMS and POSE_MEASUREMENT "
+                 "channel names");
   CLI11_PARSE(app, argc, argv);
 
   try {
+    io::CellChannels channels;
+    if (!cell_path.empty()) channels = io::LoadCellSpec(services::RepoPath(cell_path)).channels;
     services::InstallStopHandlers();
     std::filesystem::create_directories(dir);
     // One subscription to every channel: a queue for seconds of the whole bus (a logger that
@@ -107,7 +117,7 @@ int main(int argc, char** argv) {
       bytes += size + static_cast<long long>(channel.size()) + 28;
     });
     t.Subscribe<kinematic_params_t>(
-        transport::channels::kKinematicParams,
+        channels.kinematic_params,
         [&](const kinematic_params_t& m) {
           std::string header = "utime,poses_used";
           for (const auto& n : m.names) header += "," + n + ",sigma_" + n;
@@ -121,7 +131,7 @@ int main(int argc, char** argv) {
         },
         [&](const std::string& e) { health.Rejected(e); });
     t.Subscribe<pose_measurement_t>(
-        transport::channels::kPoseMeasurement,
+        channels.pose_measurement,
         [&](const pose_measurement_t& m) {
           if (last_pose_index && m.pose_index > *last_pose_index + 1) {
             health.Gap(m.pose_index - *last_pose_index - 1);

@@ -204,6 +204,64 @@ TEST(LogFiles, TwoRunsOfTheLoggerWriteTwoNumberedSets) {
   fs::remove_all(d);
 }
 
+// --cell FILE: the CSV history follows the cell's KINEMATIC_PARAMS channel (here KP_CELL); the
+// default channel's messages are still recorded in the log but are not this cell's parameters.
+TEST(LogFiles, TheLoggerTakesTheParameterChannelFromTheCell) {
+  RCAL_IN_NAMESPACE("LogFiles.TheLoggerTakesTheParameterChannelFromTheCell");
+  const fs::path d = fs::temp_directory_path() / ("rcal_logger_cell_" + std::to_string(::getpid()));
+  fs::remove_all(d);
+  fs::create_directories(d);
+  std::string text;
+  {
+    std::ifstream in(RCAL_SOURCE_DIR "/config/cells/grb3016_poses.yaml");
+    text.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  const std::string rel = "../robots/grb3016.yaml";
+  ASSERT_NE(text.find(rel), std::string::npos);
+  text.replace(text.find(rel), rel.size(), RCAL_SOURCE_DIR "/config/robots/grb3016.yaml");
+  text += "channels: {kinematic_params: KP_CELL}\n";
+  std::ofstream(d / "cell.yaml") << text;
+  const std::string url = "udpm://239.255.76.67:7742?ttl=0";
+  lcm::LCM lcm(url);
+  ASSERT_TRUE(lcm.good());
+  const pid_t pid = integration::Spawn({LOGGER_EXE, "--cell", (d / "cell.yaml").string(), "--dir",
+                                        (d / "lcm").string(), "--lcm-url", url},
+                                       d / "logger.log");
+  ASSERT_GT(pid, 0);
+  kinematic_params_t m{};
+  m.robot_id = "test";
+  m.model_id = "test";
+  m.num_params = 1;
+  m.names = {"a"};
+  m.values = {0.5};
+  m.sigmas = {0.1};
+  m.identified = {true};
+  const fs::path csv = d / "lcm" / ParamsCsvName("rcal", 0);
+  std::string header;
+  const bool written =
+      integration::Until([&] { return CsvRows(csv, &header).size() >= 3; },
+                         [&] {
+                           m.utime += 1000;
+                           m.poses_used = 1;  // the cell's channel
+                           lcm.publish("KP_CELL", &m);
+                           m.poses_used = 2;  // not the cell's channel
+                           lcm.publish("KINEMATIC_PARAMS", &m);
+                           std::this_thread::sleep_for(std::chrono::milliseconds(20));
+                         },
+                         60);
+  EXPECT_TRUE(written) << csv;
+  ::kill(pid, SIGINT);
+  EXPECT_EQ(integration::Wait(pid), 0);
+  for (const auto& [utime, poses] : CsvRows(csv, &header))
+    EXPECT_EQ(poses, 1) << "row of utime " << utime;
+  // Both channels are in the log.
+  std::ifstream in(d / "lcm" / LogFileName("rcal", 0), std::ios::binary);
+  const std::string log((std::istreambuf_iterator<char>(in)), {});
+  EXPECT_NE(log.find("KP_CELL"), std::string::npos);
+  EXPECT_NE(log.find("KINEMATIC_PARAMS"), std::string::npos);
+  fs::remove_all(d);
+}
+
 TEST(LogFiles, TheLoggerStartsBesideAFileWhoseNumberOverflows) {
   // The logger itself (an in-process LCM, no network): it must start, write the next file and
   // stop cleanly on SIGINT.

@@ -111,11 +111,11 @@ Bytes Damaged(Bytes b, size_t k, Damage d) {
     case Damage::kDataLength0x7fffffff:
       PutBe32(b, at + 24, 0x7fffffffu);
       break;
-    case Damage::kNumJointsMinus1:  // pose_measurement_t: fingerprint, utime, pose_index
-      PutBe32(b, DataOffset(b, at) + 20, 0xffffffffu);
+    case Damage::kNumJointsMinus1:  // pose_measurement_t: fingerprint, utime, pose_index, marker_id
+      PutBe32(b, DataOffset(b, at) + 24, 0xffffffffu);
       break;
     case Damage::kNumJointsHuge:
-      PutBe32(b, DataOffset(b, at) + 20, (1u << 28) + 6);
+      PutBe32(b, DataOffset(b, at) + 24, (1u << 28) + 6);
       break;
   }
   return b;

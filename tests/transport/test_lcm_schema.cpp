@@ -42,7 +42,7 @@ void PutBe32(std::vector<uint8_t>& b, size_t at, int64_t v) {
     b[at + static_cast<size_t>(k)] = static_cast<uint8_t>(u >> (24 - 8 * k));
 }
 
-// The 422-byte pose of the fuzzing report: 6 joints, 6×6 covariance.
+// The pose of the fuzzing report (422 bytes then, 426 with marker_id): 6 joints, 6×6 covariance.
 pose_measurement_t Pose6() {
   pose_measurement_t m{};
   m.utime = 1000;
@@ -106,14 +106,14 @@ TEST(LcmSchema, PoseMeasurementMembersInOrder) {
   ASSERT_NE(t, nullptr);
   std::vector<std::string> names;
   for (const auto& m : t->members) names.push_back(m.name);
-  EXPECT_EQ(names, (std::vector<std::string>{"utime", "pose_index", "num_joints", "q", "p",
-                                             "has_orientation", "q_EI", "dimension",
+  EXPECT_EQ(names, (std::vector<std::string>{"utime", "pose_index", "marker_id", "num_joints", "q",
+                                             "p", "has_orientation", "q_EI", "dimension",
                                              "num_covariance", "covariance"}));
-  ASSERT_EQ(t->members[3].dimensions.size(), 1u);
-  EXPECT_TRUE(t->members[3].dimensions[0].variable);
-  EXPECT_EQ(t->members[3].dimensions[0].size, "num_joints");
-  EXPECT_FALSE(t->members[4].dimensions[0].variable);
-  EXPECT_EQ(t->members[4].dimensions[0].constant, 3);
+  ASSERT_EQ(t->members[4].dimensions.size(), 1u);
+  EXPECT_TRUE(t->members[4].dimensions[0].variable);
+  EXPECT_EQ(t->members[4].dimensions[0].size, "num_joints");
+  EXPECT_FALSE(t->members[5].dimensions[0].variable);
+  EXPECT_EQ(t->members[5].dimensions[0].constant, 3);
 }
 
 TEST(LcmSchema, ValidMessagesOfEveryTypePass) {
@@ -162,7 +162,7 @@ TEST(LcmSchema, ValidMessagesOfEveryTypePass) {
 
 TEST(LcmSchema, TheFuzzedLengthsAreRefusedNamingTheField) {
   std::vector<uint8_t> b = Encode(Pose6());
-  ASSERT_EQ(b.size(), 422u);
+  ASSERT_EQ(b.size(), 426u);
   PutBe32(b, kNumJointsAt, (int64_t{1} << 28) + 6);
   EXPECT_EQ(CheckAs<pose_measurement_t>(b),
             "pose_measurement_t.num_joints = 268435462 exceeds the 398 bytes left "
@@ -177,7 +177,7 @@ TEST(LcmSchema, TheFuzzedLengthsAreRefusedNamingTheField) {
             std::string::npos)
       << CheckAs<pose_measurement_t>(b);
   PutBe32(b, kNumJointsAt, 6);
-  PutBe32(b, 422 - 4 - 8 * 36, 600000000);  // num_covariance = 6e8
+  PutBe32(b, 426 - 4 - 8 * 36, 600000000);  // num_covariance = 6e8
   EXPECT_EQ(CheckAs<pose_measurement_t>(b),
             "pose_measurement_t.num_covariance = 600000000 exceeds the 288 bytes left "
             "(covariance[num_covariance])");
