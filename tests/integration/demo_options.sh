@@ -22,5 +22,14 @@ rc=$?
 [ -z "$out" ] || { echo "deploy/demo --no-such-option wrote to stdout: $out"; fail=1; }
 grep -q "unknown option '--no-such-option'" "$bin/err" ||
   { echo "deploy/demo --no-such-option: stderr does not name the option: $(cat "$bin/err")"; fail=1; }
-[ "$fail" = 0 ] && echo "ok: deploy/demo --help and a bad option, nothing installed or built"
+# rcal-up --demo --sim with a sim file that is not there: refused before anything starts.
+out=$(PATH=$bin "$repo/deploy/rcal-up" --demo --sim /no/such.sim.yaml 2>"$bin/err")
+rc=$?
+[ "$rc" -eq 2 ] || { echo "rcal-up --demo --sim /no/such.sim.yaml: exit $rc, expected 2"; fail=1; }
+grep -q "no/such.sim.yaml: no such file" "$bin/err" ||
+  { echo "rcal-up --sim: stderr does not name the file: $(cat "$bin/err")"; fail=1; }
+out=$(PATH=$bin "$repo/deploy/rcal-up" --sim "$repo/config/cells/panda.sim.yaml" 2>"$bin/err")
+rc=$?
+[ "$rc" -eq 2 ] || { echo "rcal-up --sim without --demo: exit $rc, expected 2"; fail=1; }
+[ "$fail" = 0 ] && echo "ok: deploy/demo --help and a bad option, rcal-up --sim refusals, nothing installed or built"
 exit $fail
