@@ -103,6 +103,88 @@ TEST(BadFiles, CalibrateRefusesAPositionBeyondTheArmsReach) {
   ExpectRefused(r, "row 5 column 'z1' is 1e12", d / "out");
 }
 
+// The UR10 data with every cell of columns [first, last] (0-based) multiplied by `factor`: the
+// file as a user who wrote another unit gives it.
+fs::path Ur10Scaled(const fs::path& dir, int first, int last, double factor) {
+  std::vector<std::string> lines = Lines(Read(kUr10 + "/calibration.csv"));
+  for (size_t r = 1; r < lines.size(); ++r) {
+    if (lines[r].empty()) continue;
+    for (int c = first; c <= last; ++c) {
+      std::stringstream in(lines[r]);
+      std::string cell;
+      for (int k = 0; k <= c; ++k) std::getline(in, cell, ',');
+      std::ostringstream v;
+      v.precision(17);
+      v << std::stod(cell) * factor;
+      lines[r] = SetCell(lines[r], c, v.str());
+    }
+  }
+  const fs::path p = dir / "poses.csv";
+  Write(p, Join(lines));
+  return p;
+}
+
+// Issue 13, item 4: units where users trip, refused with the likely cause named. Was: the same
+// refusal with no cause (a joint "beyond its limits", a marker "beyond the arm's reach").
+TEST(BadFiles, CalibrateRefusesJointsInDegreesSayingSo) {
+  // Columns 6-11 of the FIGAROH file are the six joints.
+  const fs::path d = TempDir("degrees");
+  const Result r =
+      RunRcal("calibrate " + Ur10Scaled(d, 6, 11, 180 / 3.14159265358979323846).string() +
+              " --robot " + kUr10 + "/robot.urdf --out " + (d / "out").string());
+  ExpectRefused(r, "row 1 column 'wrist_2_joint' (joint 'wrist_2_joint') is 102.226 rad",
+                d / "out");
+  EXPECT_NE(r.output.find("every revolute joint's readings × π/180 lie within its limits: joints "
+                          "in degrees? rcal reads radians"),
+            std::string::npos)
+      << r.output;
+}
+
+TEST(BadFiles, CalibrateRefusesPositionsInMillimetresSayingSo) {
+  // Columns 0-2 are the marker position x1, y1, z1.
+  const fs::path d = TempDir("millimetres");
+  const Result r = RunRcal("calibrate " + Ur10Scaled(d, 0, 2, 1000).string() + " --robot " + kUr10 +
+                           "/robot.urdf --out " + (d / "out").string());
+  ExpectRefused(r, "beyond the arm's reach", d / "out");
+  EXPECT_NE(r.output.find("and × 1e-3 every one lies within it: positions in millimetres? rcal "
+                          "reads metres"),
+            std::string::npos)
+      << r.output;
+}
+
+// Data measured on one arm calibrated with another arm's file of the same joint count: the
+// UR5e's ±2π joints take the KR6's readings, so nothing before the fit tells them apart. Was:
+// exit 0 and a "calibrated" UR5e (held-out 168 mm mean, parameters moved by 0.54 m and 3.2 rad).
+// Now refused after the fit, exit 3, no calibrated robot (an earlier run's is removed), the
+// report and results.json saying why.
+TEST(BadFiles, CalibrateRefusesAnotherArmsRobotFile) {
+  const fs::path d = TempDir("wrong_robot");
+  Result r = RunRcal("simulate --robot tests/data/arms/kr6_like.urdf --poses 60 --out " +
+                     (d / "kr6.csv").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  // The right file calibrates (and leaves a calibrated robot in --out).
+  r = RunRcal("calibrate " + (d / "kr6.csv").string() +
+              " --robot tests/data/arms/kr6_like.urdf --out " + (d / "out").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_TRUE(fs::exists(d / "out/robot_calibrated.yaml"));
+  r = RunRcal("calibrate " + (d / "kr6.csv").string() +
+              " --robot tests/data/arms/ur5e_like.urdf --out " + (d / "out").string());
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+  ExpectRefused(r, "calibration REJECTED, no calibrated robot written", d / "out");
+  EXPECT_NE(r.output.find("the drawing with only the set-up frames fitted misses the measured "
+                          "positions by "),
+            std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("is this the robot that was measured "
+                          "('tests/data/arms/ur5e_like.urdf')?"),
+            std::string::npos)
+      << r.output;
+  EXPECT_FALSE(fs::exists(d / "out/robot_calibrated.urdf"));
+  EXPECT_NE(Read(d / "out/report.md").find("**REJECTED**"), std::string::npos);
+  const std::string results = Read(d / "out/results.json");
+  EXPECT_NE(results.find("\"rejected\": true"), std::string::npos) << results;
+}
+
 // A `marker` column that is not marker ids (here a row counter: 150 distinct values) would give
 // the model 3 parameters per value: refused, naming the column. Was (before several markers were
 // fitted): refused for any id but 0.
