@@ -185,6 +185,29 @@ TEST(BadFiles, CalibrateRefusesAnotherArmsRobotFile) {
   EXPECT_NE(results.find("\"rejected\": true"), std::string::npos) << results;
 }
 
+// The same for `rcal analyze`: was exit 0, "no significant effect beyond geometry" and an
+// analysis.json for `calibrate --effects`; now exit 3 and no analysis.json.
+TEST(BadFiles, AnalyzeRefusesAnotherArmsRobotFile) {
+  const fs::path d = TempDir("wrong_robot_analyze");
+  Result r = RunRcal("simulate --robot tests/data/arms/kr6_like.urdf --poses 60 --out " +
+                     (d / "kr6.csv").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = RunRcal("analyze " + (d / "kr6.csv").string() +
+              " --robot tests/data/arms/kr6_like.urdf --out " + (d / "out").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_TRUE(fs::exists(d / "out/analysis.json"));
+  r = RunRcal("analyze " + (d / "kr6.csv").string() +
+              " --robot tests/data/arms/ur5e_like.urdf --out " + (d / "out").string());
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+  EXPECT_NE(r.output.find("analysis REJECTED, no analysis.json written"), std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("is this the robot that was measured "
+                          "('tests/data/arms/ur5e_like.urdf')?"),
+            std::string::npos)
+      << r.output;
+  EXPECT_FALSE(fs::exists(d / "out/analysis.json"));
+}
+
 // A `marker` column that is not marker ids (here a row counter: 150 distinct values) would give
 // the model 3 parameters per value: refused, naming the column. Was (before several markers were
 // fitted): refused for any id but 0.
