@@ -75,6 +75,20 @@ fs::path Ur10With(const fs::path& dir, int row, int column, const std::string& v
   return p;
 }
 
+// `rcal ARGS` run from the source tree with stdout and stderr apart: exit code, stdout, stderr.
+struct SplitResult {
+  int exit_code = -1;
+  std::string out, err;
+};
+SplitResult RunRcalSplit(const std::string& args, const fs::path& dir) {
+  const std::string cmd = std::string("cd ") + RCAL_SOURCE_DIR + " && ulimit -t 30 && " + RCAL_EXE +
+                          " " + args + " > " + (dir / "stdout.txt").string() + " 2> " +
+                          (dir / "stderr.txt").string();
+  const int status = std::system(cmd.c_str());
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, Read(dir / "stdout.txt"),
+          Read(dir / "stderr.txt")};
+}
+
 void ExpectRefused(const Result& r, const std::string& message, const fs::path& out) {
   EXPECT_GT(r.exit_code, 0) << r.output;  // refused, not crashed (-1) and not accepted (0)
   EXPECT_NE(r.output.find(message), std::string::npos) << r.output;
@@ -185,6 +199,31 @@ TEST(BadFiles, CalibrateRefusesAnotherArmsRobotFile) {
   EXPECT_NE(results.find("\"rejected\": true"), std::string::npos) << results;
 }
 
+// The refusals above as a user's terminal shows them: the likely cause on stderr, apart from the
+// figures on stdout (was: on stdout with them).
+TEST(BadFiles, CalibrateNamesTheLikelyCauseOnStderr) {
+  const fs::path d = TempDir("stderr");
+  SplitResult r =
+      RunRcalSplit("calibrate " + Ur10Scaled(d, 6, 11, 180 / 3.14159265358979323846).string() +
+                       " --robot " + kUr10 + "/robot.urdf --out " + (d / "out").string(),
+                   d);
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("joints in degrees? rcal reads radians"), std::string::npos) << r.err;
+  ASSERT_EQ(RunRcal("simulate --robot tests/data/arms/kr6_like.urdf --poses 60 --out " +
+                    (d / "kr6.csv").string())
+                .exit_code,
+            0);
+  r = RunRcalSplit("calibrate " + (d / "kr6.csv").string() +
+                       " --robot tests/data/arms/ur5e_like.urdf --out " + (d / "out").string(),
+                   d);
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_NE(r.err.find("calibration REJECTED, no calibrated robot written"), std::string::npos)
+      << r.err;
+  EXPECT_NE(r.err.find("is this the robot that was measured"), std::string::npos) << r.err;
+  EXPECT_NE(r.out.find("held-out, calibrated"), std::string::npos) << r.out;  // the figures
+  EXPECT_EQ(r.out.find("REJECTED"), std::string::npos) << r.out;
+}
+
 // The same for `rcal analyze`: was exit 0, "no significant effect beyond geometry" and an
 // analysis.json for `calibrate --effects`; now exit 3 and no analysis.json.
 TEST(BadFiles, AnalyzeRefusesAnotherArmsRobotFile) {
@@ -265,6 +304,62 @@ TEST(BadFiles, AnAbsurdRobotYamlIsRefusedNamingTheKey) {
   Write(d / "robot.yaml", yaml);
   ExpectRefused(RunRcal("identifiability --robot " + (d / "robot.yaml").string()),
                 "links[3].d: '1e6' is beyond 100 m", d / "out");
+}
+
+// Issue 13, item 4: a robot file in degrees or millimetres, brought to every command that takes
+// one (calibrate DATA, calibrate --log, analyze), is refused with the field and the likely unit
+// on stderr. Was: limits of ±90 taken as ±90 rad and an alpha of -90 as -90 rad, the arm
+// "calibrated", exit 0; a URDF in mm refused without naming the unit; every refusal on stdout.
+TEST(BadFiles, ARobotFileInDegreesOrMillimetresIsRefusedNamingTheUnitOnStderr) {
+  const fs::path d = TempDir("robot_units");
+  const std::string grb = Read(RCAL_SOURCE_DIR "/config/robots/grb3016.yaml");
+  ASSERT_EQ(RunRcal("simulate --robot config/robots/grb3016.yaml --poses 30 --out " +
+                    (d / "poses.csv").string())
+                .exit_code,
+            0);
+  std::ofstream(d / "empty.lcmlog").close();
+  const auto refused = [&](const std::string& robot, const std::string& message) {
+    for (const std::string& command :
+         {"calibrate " + (d / "poses.csv").string() + " --out " + (d / "out").string(),
+          "calibrate --log " + (d / "empty.lcmlog").string(),
+          "analyze " + (d / "poses.csv").string() + " --out " + (d / "out").string()}) {
+      const SplitResult r = RunRcalSplit(command + " --robot " + robot, d);
+      EXPECT_EQ(r.exit_code, 1) << command << "\n" << r.out << r.err;
+      EXPECT_NE(r.err.find(message), std::string::npos) << command << "\n" << r.err;
+      EXPECT_EQ(r.out.find("[error]"), std::string::npos) << command << "\n" << r.out;
+      EXPECT_FALSE(fs::exists(d / "out/robot_calibrated.yaml")) << command;
+    }
+  };
+  // Limits of ±90° on joint 5, below the 100 rad any angle is bounded by.
+  std::string yaml = grb;
+  yaml.replace(yaml.find("lower: -2*pi/3, upper: 2*pi/3"), 29, "lower: -90, upper: 90");
+  Write(d / "limits.yaml", yaml);
+  refused((d / "limits.yaml").string(),
+          "limits.yaml: links[4].joint.lower: '-90' rad is beyond two turns (4π): degrees? rcal "
+          "files are in radians: -90° is -pi/2 (line 24)");
+  // Every alpha of -pi/2 as -90.
+  yaml = grb;
+  for (size_t at = 0; (at = yaml.find("alpha: -pi/2", at)) != std::string::npos;)
+    yaml.replace(at, 12, "alpha: -90");
+  Write(d / "alpha.yaml", yaml);
+  refused((d / "alpha.yaml").string(),
+          "alpha.yaml: links[0].alpha: '-90' rad is beyond a turn (2π): degrees? rcal files are "
+          "in radians: -90° is -pi/2 (line 15)");
+  // The UR10's URDF with its origins in millimetres.
+  std::string urdf = Read(kUr10 + "/robot.urdf");
+  const std::string from = "xyz=\"-0.6127 0 0\"";
+  ASSERT_NE(urdf.find(from), std::string::npos);
+  urdf.replace(urdf.find(from), from.size(), "xyz=\"-612.7 0 0\"");
+  Write(d / "ur10_mm.urdf", urdf);
+  const SplitResult r =
+      RunRcalSplit("calibrate " + kUr10 + "/calibration.csv --robot " +
+                       (d / "ur10_mm.urdf").string() + " --out " + (d / "out").string(),
+                   d);
+  EXPECT_EQ(r.exit_code, 1) << r.out << r.err;
+  EXPECT_NE(r.err.find("joint 'elbow_joint': origin xyz beyond 100 m: not an arm's dimension "
+                       "(xyz -612.7 0 0): millimetres? URDF lengths are metres"),
+            std::string::npos)
+      << r.err;
 }
 
 // The first 5000 rows of BROAD trial 02 (40 s of rest, then motion), one cell replaced.
