@@ -128,6 +128,36 @@ TEST(CalibrationSanity, AFitThatDoesNotPredictIsRefusedOnlyBeyondBothBounds) {
   EXPECT_EQ(All(CalibrationImplausible(f)), "");
 }
 
+// Test 4, a sequential fit (the EKF of `rcal calibrate --log`): refused when it rejected more
+// than half the poses or had none; a few outliers pass.
+TEST(CalibrationSanity, AnEkfThatRejectedMostPosesOrHadNoneIsRefused) {
+  CalibrationFigures f;
+  f.robot = "arm.yaml";
+  f.poses = 20;
+  f.poses_rejected = 20;
+  std::vector<std::string> why = CalibrationImplausible(f);
+  ASSERT_EQ(why.size(), 1u) << All(why);
+  EXPECT_EQ(why[0].find("the EKF rejected 20 of 20 poses at its innovation gate (refused beyond "
+                        "50 %): the model does not describe the measurements: set-up frames "
+                        "(world ← base, flange → marker) far from where the EKF starts them"),
+            0u)
+      << why[0];
+  EXPECT_NE(why[0].find("Or is this the robot that was measured ('arm.yaml')?"), std::string::npos)
+      << why[0];
+  f.poses_rejected = 11;
+  EXPECT_EQ(CalibrationImplausible(f).size(), 1u);
+  f.poses_rejected = 10;  // half: not most
+  EXPECT_EQ(All(CalibrationImplausible(f)), "");
+  f.poses_rejected = 2;
+  EXPECT_EQ(All(CalibrationImplausible(f)), "");
+  f.poses = 0;
+  f.poses_rejected = 0;
+  EXPECT_EQ(All(CalibrationImplausible(f)),
+            "no pose was given to the fit: nothing was calibrated\n");
+  f.poses = -1;  // not a sequential fit
+  EXPECT_EQ(All(CalibrationImplausible(f)), "");
+}
+
 // With as many parameters as measured values the fit passes through every pose: no residual to
 // estimate the noise from. Was: a NaN covariance and "measurement 0: covariance: not finite".
 TEST(CalibrationSanity, TooFewPosesToEstimateTheNoiseAreRefusedSayingSo) {

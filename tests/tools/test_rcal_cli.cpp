@@ -693,13 +693,17 @@ TEST(RcalCli, CalibrateLogIsAnAliasOfCalibrateLog) {
   ASSERT_EQ(help.exit_code, 0);
   EXPECT_NE(help.output.find("--log"), std::string::npos);
   EXPECT_NE(help.output.find("calibrate-log"), std::string::npos);
-  // The same code path: the same figures from the same (here empty) log, and the same error.
+  // The same code path: the same figures from the same (here empty) log, and the same error. A
+  // log with no pose to fit is no calibration: exit 3, saying so (was: exit 0).
   std::ofstream(d / "empty.lcmlog").close();
   const std::string log = (d / "empty.lcmlog").string();
   Result a = RunRcal("calibrate-log " + log + " --json " + (d / "a.json").string());
   Result b = RunRcal("calibrate --log " + log + " --json " + (d / "b.json").string());
-  ASSERT_EQ(a.exit_code, 0) << a.output;
-  ASSERT_EQ(b.exit_code, 0) << b.output;
+  EXPECT_EQ(a.exit_code, 3) << a.output;
+  EXPECT_EQ(b.exit_code, 3) << b.output;
+  EXPECT_NE(a.output.find("no pose was given to the fit: nothing was calibrated"),
+            std::string::npos)
+      << a.output;
   EXPECT_EQ(ReadJson(d / "a.json"), ReadJson(d / "b.json"));
   EXPECT_EQ(ReadJson(d / "b.json")["poses_accepted"], 0);
   EXPECT_EQ(a.output, b.output);

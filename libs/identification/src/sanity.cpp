@@ -85,6 +85,16 @@ std::vector<std::string> CalibrationImplausible(const CalibrationFigures& f,
                   "°): the calibrated model does not describe the data: are the orientations of "
                   "the IMU on this tool, a unit quaternion w, x, y, z? " +
                   wrong_arm);
+  // 4. A sequential fit that took no pose, or rejected most.
+  if (f.poses == 0) out.push_back("no pose was given to the fit: nothing was calibrated");
+  if (f.poses > 0 && f.poses_rejected >= 0 && f.poses_rejected > b.max_rejected_fraction * f.poses)
+    out.push_back("the EKF rejected " + std::to_string(f.poses_rejected) + " of " +
+                  std::to_string(f.poses) + " poses at its innovation gate (refused beyond " +
+                  Sig(100 * b.max_rejected_fraction) +
+                  " %): the model does not describe the measurements: set-up frames (world ← "
+                  "base, flange → marker) far from where the EKF starts them (give them in the "
+                  "robot file, or --cell-seed for rcal's simulated cell)? Or " +
+                  wrong_arm);
   return out;
 }
 

@@ -20,6 +20,10 @@
 //    per axis: laser trackers 0.01–0.05 mm, motion capture 0.1–1 mm, a camera a few mm) or any
 //    orientation sensor (`max_orientation_sigma_rad`: IMUs and trackers 0.01–1°): what is left is
 //    not noise but a model that does not describe the data.
+// 4. A sequential fit (the EKF of `rcal calibrate --log` and ekf_identifier) rejected more than
+//    `max_rejected_fraction` of the poses at its innovation gate, or had none to take: the model,
+//    with its set-up frames where they start, does not describe the measurements (a sensor's
+//    outliers are a few poses, not most).
 #pragma once
 
 #include <limits>
@@ -43,6 +47,10 @@ struct CalibrationFigures {
   /// Noise per axis estimated from the residuals (NaN when given by the user, not estimated).
   double position_sigma_m = kAbsent;
   double orientation_sigma_rad = kAbsent;  ///< NaN or 0 when positions only
+  /// A sequential fit: the poses it was given and those it rejected (its innovation gate);
+  /// −1: not a sequential fit, test 4 skipped.
+  int poses = -1;
+  int poses_rejected = -1;
 };
 
 struct CalibrationSanityBounds {
@@ -50,6 +58,7 @@ struct CalibrationSanityBounds {
   double heldout_factor = 10.0;            ///< test 2: an order of magnitude
   double max_position_sigma_m = 0.01;      ///< test 3 [m per axis]
   double max_orientation_sigma_rad = 0.1;  ///< test 3 [rad per axis]
+  double max_rejected_fraction = 0.5;      ///< test 4: most poses
 };
 
 /// Why the calibration is no calibration, one sentence per failed test naming the figure, its
