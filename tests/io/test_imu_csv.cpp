@@ -7,6 +7,8 @@
 
 #include <cmath>
 #include <filesystem>
+#include <numbers>
+#include <sstream>
 #include <string>
 
 #include "io_test_util.hpp"
@@ -120,6 +122,82 @@ TEST(ImuCsv, NaNTimeOrderAndTruthAreChecked) {
   EXPECT_TRUE(std::isnan(d.q_truth[1](0)));
   EXPECT_TRUE(std::isnan(d.p_truth[1](1)));
   EXPECT_EQ(d.q_truth[0], Eigen::Vector4d(1, 0, 0, 0));
+}
+
+// `text` (BROAD layout) with the columns [first, last] (0-based) multiplied by `factor`.
+std::string Scaled(const std::string& text, int first, int last, double factor) {
+  std::istringstream in(text);
+  std::string out, line;
+  std::getline(in, line);
+  out = line + "\n";
+  while (std::getline(in, line)) {
+    std::istringstream cells(line);
+    std::string cell, row;
+    for (int c = 0; std::getline(cells, cell, ','); ++c) {
+      if (c >= first && c <= last) {
+        std::ostringstream v;
+        v.precision(17);
+        v << std::stod(cell) * factor;
+        cell = v.str();
+      }
+      row += (c ? "," : "") + cell;
+    }
+    out += row + "\n";
+  }
+  return out;
+}
+
+// Issue 13, item 4: units the ranges cannot see, on the real BROAD trials (SI, a real 9-axis
+// IMU). Every trial passes as given (EveryBroadTrialReadsWithinTheDefaultRanges) and is refused,
+// naming the likely unit, with its gyro in °/s (also where no sample exceeds the gyro range),
+// its accelerometer in g, its magnetometer in tesla or gauss.
+TEST(ImuCsv, EveryBroadTrialInAnotherUnitIsRefusedNamingTheUnit) {
+  int trials = 0;
+  ImuCsvSettings wide;  // no gyro range refusal: the stream's own rotation must tell
+  wide.gyro_range_rad_s = 1e6;
+  for (const auto& e : std::filesystem::directory_iterator(testing::SharedDir() / "data/broad")) {
+    if (e.path().extension() != ".csv") continue;
+    ++trials;
+    SCOPED_TRACE(e.path().filename().string());
+    const std::string text = ReadFile(e.path());
+    const std::string deg = Scaled(text, 1, 3, 180.0 / std::numbers::pi);
+    std::string msg = ErrorOf([&] { ParseImuCsv(deg, "s.csv", wide); });
+    EXPECT_EQ(msg.find("s.csv: columns 'gyr_x,gyr_y,gyr_z': the magnetic field turns in the IMU "
+                       "frame at 0.01"),
+              0u)
+        << msg;
+    EXPECT_NE(msg.find("gyro in degrees per second? rcal reads rad/s"), std::string::npos) << msg;
+    // With the default range the first fast sample is refused, and names the unit too.
+    msg = ErrorOf([&] { ParseImuCsv(deg, "s.csv"); });
+    EXPECT_NE(msg.find(": beyond the gyro range ±35 rad/s (ImuCsvSettings::gyro_range_rad_s); the "
+                       "magnetic field turns"),
+              std::string::npos)
+        << msg;
+    EXPECT_NE(msg.find("gyro in degrees per second?"), std::string::npos) << msg;
+    // The other sensors on the undisturbed trial 02 and on trial 30 (a magnet near the path).
+    const std::string name = e.path().filename().string();
+    if (name != "broad_02_100hz.csv" && name != "broad_30_100hz.csv") continue;
+    msg = ErrorOf([&] { ParseImuCsv(Scaled(text, 4, 6, 1 / 9.80665), "s.csv"); });
+    EXPECT_EQ(msg.find("s.csv: columns 'acc_x,acc_y,acc_z': the median |acc| is 1."), 0u) << msg;
+    EXPECT_NE(msg.find("accelerometer in g (× 9.80665)? rcal reads m/s²"), std::string::npos)
+        << msg;
+    msg = ErrorOf([&] { ParseImuCsv(Scaled(text, 7, 9, 1e-6), "s.csv"); });
+    EXPECT_NE(msg.find("s.csv: columns 'mag_x,mag_y,mag_z': the median |mag| is 4"),
+              std::string::npos)
+        << msg;
+    EXPECT_NE(msg.find("magnetometer in tesla (× 1e+06)? rcal reads µT"), std::string::npos) << msg;
+    msg = ErrorOf([&] { ParseImuCsv(Scaled(text, 7, 9, 1e-2), "s.csv"); });
+    EXPECT_NE(msg.find("magnetometer in gauss (× 100)? rcal reads µT"), std::string::npos) << msg;
+  }
+  EXPECT_EQ(trials, 16);
+  // Milli-g exceeds the accelerometer range (9810 > 160): the range refusal names the unit.
+  const std::string text = ReadFile(testing::SharedDir() / "data/broad/broad_02_100hz.csv");
+  const std::string msg =
+      ErrorOf([&] { ParseImuCsv(Scaled(text, 4, 6, 1000 / 9.80665), "s.csv"); });
+  EXPECT_NE(msg.find("m/s² (ImuCsvSettings::accel_range_m_s2); the median |acc| is "),
+            std::string::npos)
+      << msg;
+  EXPECT_NE(msg.find("accelerometer in milli-g (× 0.00980665)?"), std::string::npos) << msg;
 }
 
 }  // namespace

@@ -320,6 +320,150 @@ TEST(PosePlausibility, TheRealUr10DataPassesAndOnePositionOf1e12DoesNot) {
             std::string::npos);
 }
 
+// A user's dataset of `arm` (tests/data/arms) with its base unknown: n poses uniform within the
+// joint limits (seeded), each marker position the drawing's forward kinematics with a marker
+// 0.1 m off the flange and the base 1.5 m away: the truth the unit mistakes below are made from.
+struct ArmData {
+  LoadedRobot robot;
+  PoseDataset data;
+};
+ArmData ArmDataset(const std::string& arm, int n, unsigned seed) {
+  UrdfOptions o;
+  o.add_base_frame = true;
+  o.add_marker = true;
+  ArmData a{LoadRobot(testing::SourceDir() / "tests/data/arms" / (arm + ".urdf"), o), {}};
+  const kinematics::KinematicModel& m = a.robot.model;
+  Eigen::VectorXd errors = Eigen::VectorXd::Zero(m.num_params());
+  for (int i = 0; i < m.num_params(); ++i) {
+    const auto& P = m.parameters()[i];
+    if (P.group == "marker") errors(i) = 0.1;
+    if (P.group == "base" && !P.is_angle) errors(i) = 1.5;
+  }
+  std::mt19937 rng(seed);
+  a.data.num_joints = m.num_joints();
+  for (int k = 0; k < n; ++k) {
+    Eigen::VectorXd q(m.num_joints());
+    for (int j = 0; j < m.num_joints(); ++j) {
+      const auto& jt = m.joints()[j];
+      q(j) = std::uniform_real_distribution<double>(jt.lower, jt.upper)(rng);
+    }
+    a.data.samples.push_back(SampleAt(q, m.Forward(q, errors).p_WM_W, k + 1));
+  }
+  return a;
+}
+
+// Joints in degrees (issue 13, item 4): every arm's data passes in radians and is refused in
+// degrees with the likely cause named; a single corrupted cell or a reading just beyond a limit
+// is refused without that guess.
+TEST(PosePlausibility, JointsInDegreesAreRefusedNamingTheLikelyCause) {
+  for (const std::string arm : {"grb3016", "kr6_like", "ur5e_like", "irb120_like", "panda_like"}) {
+    SCOPED_TRACE(arm);
+    ArmData a = ArmDataset(arm, 60, 5);
+    EXPECT_EQ(ErrorOf([&] { CheckPosesPlausible(a.data, a.robot.model, "p.csv"); }), "<no error>");
+    PoseDataset deg = a.data;
+    for (auto& p : deg.samples) p.q *= 180.0 / std::numbers::pi;
+    const std::string msg = ErrorOf([&] { CheckPosesPlausible(deg, a.robot.model, "p.csv"); });
+    EXPECT_NE(msg.find("every revolute joint's readings × π/180 lie within its limits: joints in "
+                       "degrees? rcal reads radians"),
+              std::string::npos)
+        << msg;
+    EXPECT_NE(msg.find("p.csv: row "), std::string::npos) << msg;
+    EXPECT_EQ(msg.find("is this the robot"), std::string::npos) << msg;
+  }
+  // The issue's example on the GRB3016: q2 at 170 (degrees) in one row of a radian file is a
+  // corrupted cell, not a file in degrees; q2 up to 170 with every joint in degrees is.
+  ArmData a = ArmDataset("grb3016", 30, 6);
+  PoseDataset one = a.data;
+  one.samples[4].q(1) = 170.0;
+  std::string msg = ErrorOf([&] { CheckPosesPlausible(one, a.robot.model, "p.csv"); });
+  EXPECT_NE(msg.find("p.csv: row 5 column 'q2' (joint 'j2') is 170 rad: beyond its limits"),
+            std::string::npos)
+      << msg;
+  EXPECT_EQ(msg.find("degrees"), std::string::npos) << msg;
+  PoseDataset deg = a.data;
+  for (auto& p : deg.samples) p.q *= 180.0 / std::numbers::pi;
+  msg = ErrorOf([&] { CheckPosesPlausible(deg, a.robot.model, "p.csv"); });
+  // The first reading beyond its limits is row 1's q1; the message gives that column's range.
+  double lo = 1e9, hi = -1e9;
+  for (const auto& p : deg.samples) {
+    lo = std::min(lo, p.q(0));
+    hi = std::max(hi, p.q(0));
+  }
+  std::ostringstream range;
+  range << "column 'q1' reads from " << lo << " to " << hi
+        << ", and every revolute joint's readings × π/180";
+  EXPECT_NE(msg.find("p.csv: row 1 column 'q1' (joint 'j1') is "), std::string::npos) << msg;
+  EXPECT_NE(msg.find(range.str()), std::string::npos) << msg;
+  // A degree file with one cell that no unit explains (1e6): no guess.
+  deg.samples[3].q(0) = 1e6;
+  msg = ErrorOf([&] { CheckPosesPlausible(deg, a.robot.model, "p.csv"); });
+  EXPECT_NE(msg.find("beyond its limits"), std::string::npos) << msg;
+  EXPECT_EQ(msg.find("degrees"), std::string::npos) << msg;
+  // Radians just beyond a limit (0.2 rad on j2, margin 0.1 rad), one row: no guess either.
+  PoseDataset near = a.data;
+  near.samples[2].q(1) = a.robot.model.joints()[1].upper + 0.2;
+  msg = ErrorOf([&] { CheckPosesPlausible(near, a.robot.model, "p.csv"); });
+  EXPECT_NE(msg.find("p.csv: row 3 column 'q2'"), std::string::npos) << msg;
+  EXPECT_EQ(msg.find("degrees"), std::string::npos) << msg;
+  EXPECT_EQ(msg.find("is this the robot"), std::string::npos) << msg;
+}
+
+// Another arm's robot file: the KR6's poses judged against the GRB3016's limits put many rows
+// beyond them, which one corrupted cell never does.
+TEST(PosePlausibility, ManyRowsBeyondTheLimitsAskWhetherThisIsTheRobotThatWasMeasured) {
+  const ArmData kr6 = ArmDataset("kr6_like", 60, 7);
+  const ArmData grb = ArmDataset("grb3016", 1, 7);
+  const std::string msg =
+      ErrorOf([&] { CheckPosesPlausible(kr6.data, grb.robot.model, "kr6.csv"); });
+  EXPECT_NE(msg.find("kr6.csv: row "), std::string::npos) << msg;
+  EXPECT_NE(msg.find(" of 60 poses have a joint beyond the limits of robot 'grb3016': is this the "
+                     "robot that was measured?"),
+            std::string::npos)
+      << msg;
+  EXPECT_EQ(msg.find("degrees"), std::string::npos) << msg;
+  // The UR5e's readings span up to two turns (±2π joints): against the KR6's narrower limits they
+  // lie beyond them by more than the KR6 joints' travel, yet they are radians, not degrees.
+  const ArmData ur5e = ArmDataset("ur5e_like", 60, 7);
+  const std::string ur =
+      ErrorOf([&] { CheckPosesPlausible(ur5e.data, kr6.robot.model, "ur5e.csv"); });
+  EXPECT_NE(ur.find("poses have a joint beyond the limits of robot 'kr6_like': is this the robot "
+                    "that was measured?"),
+            std::string::npos)
+      << ur;
+  EXPECT_EQ(ur.find("degrees"), std::string::npos) << ur;
+}
+
+// Positions in millimetres: the bulk of the positions beyond the reach and, × 1e-3, all within.
+TEST(PosePlausibility, PositionsInMillimetresAreRefusedNamingTheLikelyCause) {
+  for (const std::string arm : {"grb3016", "ur5e_like", "irb120_like"}) {
+    SCOPED_TRACE(arm);
+    const ArmData a = ArmDataset(arm, 40, 8);
+    PoseDataset mm = a.data;
+    for (auto& p : mm.samples) p.p_WM_W *= 1e3;
+    const std::string msg = ErrorOf([&] { CheckPosesPlausible(mm, a.robot.model, "p.csv"); });
+    EXPECT_NE(msg.find("beyond the arm's reach"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("× the arm's reach of "), std::string::npos) << msg;
+    EXPECT_NE(msg.find("and × 1e-3 every one lies within it: positions in millimetres? rcal "
+                       "reads metres"),
+              std::string::npos)
+        << msg;
+    // The spread / reach ratio is the unit's 1000 within what the workspace allows: the marker
+    // spreads over a sizeable part of the reach, never beyond (1 + √3) of it.
+    const size_t at = msg.find("m or more from their median, ");
+    ASSERT_NE(at, std::string::npos) << msg;
+    const double ratio = std::stod(msg.substr(at + 29));
+    EXPECT_GT(ratio, 100.0) << msg;
+    EXPECT_LT(ratio, 2733.0) << msg;
+  }
+  // One row 1000 m off: refused, no unit guessed (the median of the others is within reach).
+  ArmData a = ArmDataset("grb3016", 40, 9);
+  a.data.samples[6].p_WM_W.x() += 1000.0;
+  const std::string msg = ErrorOf([&] { CheckPosesPlausible(a.data, a.robot.model, "p.csv"); });
+  EXPECT_NE(msg.find("p.csv: row 7 column 'x'"), std::string::npos) << msg;
+  EXPECT_EQ(msg.find("millimetres"), std::string::npos) << msg;
+  EXPECT_EQ(msg.find("half the positions"), std::string::npos) << msg;
+}
+
 TEST(PoseDataset, FigarohUr10LoadsWithOrientation) {
   const PoseDataset d = LoadPoseDataset(FigarohCsv(), 6);  // layout detected from x1/phix1
   ASSERT_EQ(d.samples.size(), 23u);

@@ -3,16 +3,19 @@
 #include <gtest/gtest.h>
 #include <tinyxml.h>
 
+#include <filesystem>
 #include <map>
 #include <numbers>
 #include <random>
 #include <sstream>
 #include <tuple>
+#include <vector>
 
 #include "../kinematics/test_robots.hpp"
 #include "io_test_util.hpp"
 #include "rcal/geometry/so3.hpp"
 #include "rcal/io/atomic_file.hpp"
+#include "rcal/io/pose_dataset.hpp"
 
 namespace rcal::io {
 namespace {
@@ -458,6 +461,110 @@ TEST(RobotUrdf, ALongChainIsWalkedWithoutRecursion) {
   EXPECT_EQ(spec.links.back().joint->name, "j" + std::to_string(kLinks - 1));
 }
 
+// Issue 13, item 4: a URDF in millimetres (a 600 mm link as 600 m), refused naming the unit; a
+// small arm in millimetres, every origin below 100 m, by the sum of its lengths. Was: the same
+// refusal without the unit, and the small arm accepted.
+TEST(RobotUrdf, LengthsInMillimetresAreRefusedNamingTheUnit) {
+  const std::string ur5e = ReadFile(testing::SourceDir() / "tests/data/arms/ur5e_like.urdf");
+  // Every origin xyz × 1000.
+  std::string mm = ur5e;
+  for (size_t at = 0; (at = mm.find("<origin xyz=\"", at)) != std::string::npos;) {
+    at += 13;
+    const size_t end = mm.find('"', at);
+    std::istringstream in(mm.substr(at, end - at));
+    std::ostringstream out;
+    for (double v; in >> v;) out << (out.tellp() > 0 ? " " : "") << v * 1000;
+    mm.replace(at, end - at, out.str());
+  }
+  std::string msg = ErrorOf([&] { ParseUrdfRobotSpec(mm, "mm.urdf"); });
+  EXPECT_NE(msg.find("mm.urdf: joint 'shoulder_pan_joint': origin xyz beyond 100 m: not an arm's "
+                     "dimension (xyz 0 0 162.5): millimetres? URDF lengths are metres"),
+            std::string::npos)
+      << msg;
+  // Origins of 60 m and 50 m: each below 100 m, their sum beyond.
+  std::string small = TinyUrdf("");
+  small.replace(small.find("xyz=\"0 0 0.1\""), 13, "xyz=\"0 0 60\"");
+  small.replace(small.find("xyz=\"0.2 0 0\""), 13, "xyz=\"0 0 50\"");
+  UrdfOptions to_c;
+  to_c.tip_link = "c";
+  msg = ErrorOf([&] { ParseUrdfRobotSpec(small, "small.urdf", to_c); });
+  EXPECT_EQ(msg,
+            "small.urdf: links: the arm's lengths add up to 110 m, beyond 100 m: no arm is that "
+            "long (the largest industrial arms reach about 4 m): millimetres? rcal files are in "
+            "metres");
+  // A prismatic travel of 500 mm.
+  std::string slide = TinyUrdf("");
+  slide.replace(slide.find("type=\"revolute\""), 15, "type=\"prismatic\"");
+  slide.replace(slide.find("lower=\"-1\" upper=\"1\""), 20, "lower=\"0\" upper=\"500\"");
+  EXPECT_EQ(ErrorOf([&] { ParseUrdfRobotSpec(slide, "slide.urdf"); }),
+            "slide.urdf: joint 'ab': <limit> beyond 100 m (lower 0, upper 500): millimetres? URDF "
+            "prismatic limits are metres");
+}
+
+// Issue 13, item 4: a URDF's revolute limits beyond two turns and an origin's roll, pitch or yaw
+// beyond a turn: in degrees, refused naming the unit and the value in radians, also below the
+// old 100 rad bound (limits of ±90°; liburdfdom keeps only the rotation of rpy="0 0 90", so it was
+// taken as 90 rad = 90 - 28π). Was: accepted, the arm calibrated, exit 0.
+TEST(RobotUrdf, AnglesInDegreesAreRefusedNamingTheUnit) {
+  std::string deg = TinyUrdf("");
+  deg.replace(deg.find("lower=\"-1\" upper=\"1\""), 20, "lower=\"-170\" upper=\"170\"");
+  EXPECT_EQ(ErrorOf([&] { ParseUrdfRobotSpec(deg, "deg.urdf"); }),
+            "deg.urdf: joint 'ab': <limit> (lower -170, upper 170) beyond two turns (4π rad): "
+            "degrees? URDF angles are radians: 170° is 2.96706");
+  deg = TinyUrdf("");
+  deg.replace(deg.find("lower=\"-1\" upper=\"1\""), 20, "lower=\"-90\" upper=\"90\"");
+  EXPECT_EQ(ErrorOf([&] { ParseUrdfRobotSpec(deg, "deg.urdf"); }),
+            "deg.urdf: joint 'ab': <limit> (lower -90, upper 90) beyond two turns (4π rad): "
+            "degrees? URDF angles are radians: 90° is 1.5708");
+  deg = TinyUrdf("");
+  deg.replace(deg.find("rpy=\"0 0 0\""), 11, "rpy=\"0 0 90\"");
+  EXPECT_EQ(ErrorOf([&] { ParseUrdfRobotSpec(deg, "deg.urdf"); }),
+            "deg.urdf: joint 'ab': origin rpy \"0 0 90\": 90 rad is beyond a turn (2π): degrees? "
+            "URDF angles are radians: 90° is 1.5708");
+  // A fixed joint of the chain too; one off the chain (a camera mount) is not rcal's to judge.
+  deg = TinyUrdf(R"(<link name="cam"/>
+  <joint name="cam_mount" type="fixed"><parent link="a"/><child link="cam"/>
+    <origin xyz="0 0 0" rpy="0 0 90"/></joint>
+)");
+  UrdfOptions to_c;
+  to_c.tip_link = "c";
+  EXPECT_EQ(ParseUrdfRobotSpec(deg, "deg.urdf", to_c).links.size(), 2u);
+  std::string fixed = TinyUrdf("");
+  const size_t bc = fixed.find("<joint name=\"bc\"");
+  fixed.replace(fixed.find("rpy=\"0 0 0\"", bc), 11, "rpy=\"-180 0 0\"");
+  EXPECT_EQ(ErrorOf([&] { ParseUrdfRobotSpec(fixed, "deg.urdf", to_c); }),
+            "deg.urdf: joint 'bc': origin rpy \"-180 0 0\": -180 rad is beyond a turn (2π): "
+            "degrees? URDF angles are radians: -180° is -3.14159");
+  // Within: a 2π rounded to 6.2832, limits of two turns and of ±450°.
+  std::string fine = TinyUrdf("");
+  fine.replace(fine.find("rpy=\"0 0 0\""), 11, "rpy=\"0 0 6.2832\"");
+  fine.replace(fine.find("lower=\"-1\" upper=\"1\""), 20,
+               "lower=\"-12.566370614359172\" upper=\"7.853981633974483\"");
+  const RobotSpec spec = ParseUrdfRobotSpec(fine, "fine.urdf");
+  EXPECT_DOUBLE_EQ(spec.links[0].joint->lower, -4 * kPi);
+}
+
+// Every real arm rcal ships or is tested on loads: the test arms, the shipped robots and the
+// FIGAROH UR10 (their lengths in metres, angles in radians, limits within two turns).
+TEST(RobotUrdf, EveryRealArmLoads) {
+  namespace fs = std::filesystem;
+  std::vector<fs::path> files;
+  for (const fs::path& dir :
+       {testing::SourceDir() / "tests/data/arms", testing::SourceDir() / "config/robots"})
+    for (const auto& e : fs::directory_iterator(dir))
+      if (e.path().extension() == ".urdf" || e.path().extension() == ".yaml")
+        files.push_back(e.path());
+  for (const auto& e : fs::recursive_directory_iterator(testing::SharedDir() / "data"))
+    if (e.path().filename() == "robot.urdf") files.push_back(e.path());
+  ASSERT_GE(files.size(), 9u);
+  for (const fs::path& f : files) {
+    SCOPED_TRACE(f.string());
+    const LoadedRobot r = LoadRobot(f);
+    EXPECT_GE(r.model.num_joints(), 6);
+    EXPECT_LT(ArmReach(r.model, false), 4.0);
+  }
+}
+
 TEST(RobotUrdf, DeeplyNestedXmlIsRefusedBeforeTinyxmlRecursesIntoIt) {
   // tinyxml parses (and frees) one stack frame per nesting level: 300 000 levels overflowed it.
   std::string xml = "<robot name=\"deep\">";
@@ -480,7 +587,7 @@ TEST(RobotUrdf, AbsurdOriginsAndLimitsAreRefusedNamingTheJoint) {
   std::string wide = TinyUrdf("");
   wide.replace(wide.find("upper=\"1\""), 9, "upper=\"1e6\"");
   EXPECT_EQ(ErrorOf([&] { ParseUrdfRobotSpec(wide, "wide.urdf"); }),
-            "wide.urdf: joint 'ab': <limit> beyond 100 rad");
+            "wide.urdf: joint 'ab': <limit> (lower -1, upper 1e+06) beyond two turns (4π rad)");
 }
 
 TEST(RobotUrdf, ContinuousAndPrismaticJoints) {

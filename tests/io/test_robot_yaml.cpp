@@ -5,6 +5,9 @@
 #include <cmath>
 #include <numbers>
 #include <random>
+#include <sstream>
+#include <string>
+#include <vector>
 
 #include "../kinematics/test_robots.hpp"
 #include "io_test_util.hpp"
@@ -353,15 +356,109 @@ INSTANTIATE_TEST_SUITE_P(
                 "links[3].d: '1e6' is beyond 100 m: not an arm's dimension"},
         BadCase{"tool: {a: 0.010,", "tool: {a: -1000,",
                 "tool.a: '-1000' is beyond 100 m: not an arm's dimension"},
-        BadCase{"upper: 5*pi/6", "upper: 1e9", "links[1].joint.upper: '1e9' is beyond 100 rad"},
+        BadCase{"upper: 5*pi/6", "upper: 1e9",
+                "links[1].joint.upper: '1e9' rad is beyond two turns (4π) (line"},
         BadCase{"{a: 0.150, alpha: -pi/2,", "{a: 0.150, alpha: 1e300,",
-                "links[0].alpha: '1e300' is beyond 100 rad"},
+                "links[0].alpha: '1e300' rad is beyond a turn (2π) (line"},
         BadCase{"lower: -17*pi/18, upper: 17*pi/18", "lower: 1, upper: 1",
                 "links[0].joint: lower limit must be below upper limit"},
         // duplicate key, malformed YAML
         BadCase{"tool: {a: 0.010,", "tool: {a: 0.010, a: 0.02,", "tool.a: duplicate key"},
         BadCase{"links:\n", "links: [\n", "malformed YAML"},
         BadCase{"tool: {a: 0.010,", "tool: {a: 0.010,,]", "malformed YAML"}));
+
+// `text` with every value of the keys `keys` (a: 0.150, d: 0.645, ...) multiplied by `factor`.
+std::string ScaleKeys(std::string text, const std::vector<std::string>& keys, double factor) {
+  for (const std::string& k : keys) {
+    const std::string tag = "{" + k + ": ", tag2 = " " + k + ": ";
+    for (size_t at = 0; (at = text.find(k + ": ", at)) != std::string::npos; at += k.size()) {
+      if (at == 0 || (text.compare(at - 1, tag.size(), tag) != 0 &&
+                      text.compare(at - 1, tag2.size(), tag2) != 0))
+        continue;
+      const size_t start = at + k.size() + 2, end = text.find_first_of(",}", start);
+      std::ostringstream v;
+      v << std::stod(text.substr(start, end - start)) * factor;
+      text.replace(start, end - start, v.str());
+    }
+  }
+  return text;
+}
+
+// `text` with every occurrence of `from` replaced by `to`.
+std::string ReplaceAll(std::string text, const std::string& from, const std::string& to) {
+  for (size_t at = 0; (at = text.find(from, at)) != std::string::npos; at += to.size())
+    text.replace(at, from.size(), to);
+  return text;
+}
+
+// Issue 13, item 4: a robot file in millimetres, refused naming the unit. The GRB3016's lengths
+// in mm: its first length beyond 100 m names millimetres. A small arm in mm with every length
+// below 100 (each one alone passes the bound of one length) is refused by the sum. Was: the same
+// refusal without the unit, and the small arm accepted as a 169 m arm.
+TEST(RobotYaml, LengthsInMillimetresAreRefusedNamingTheUnit) {
+  const std::string text = ReadFile(Grb3016Path());
+  std::string msg = ErrorOf([&] { ParseRobotYaml(ScaleKeys(text, {"a", "d"}, 1000), "mm.yaml"); });
+  EXPECT_EQ(msg,
+            "mm.yaml: links[0].a: '150' is beyond 100 m: not an arm's dimension: millimetres? "
+            "rcal files are in metres (line 15)")
+      << msg;
+  // Table 1: 0.150 + 0.250 + 0.570 + 0.150 + 0.645 + 0.200 = 1.965 m, tool 0.010 + 0.050: 2.025 m
+  // in all, 168.75 "m" at 1000/12.
+  std::string small = ScaleKeys(text, {"a", "d"}, 1000.0 / 12.0);
+  msg = ErrorOf([&] { ParseRobotYaml(small, "small.yaml"); });
+  EXPECT_EQ(msg,
+            "small.yaml: links: the arm's lengths add up to 168.75 m, beyond 100 m: no arm is "
+            "that long (the largest industrial arms reach about 4 m): millimetres? rcal files are "
+            "in metres")
+      << msg;
+}
+
+// Issue 13, item 4: angles in degrees, refused naming the unit and the value in radians, also
+// where the old bound (100 rad) let them through: a D–H alpha of -90, limits of ±90, a base yaw
+// of 180. A constant angle lies within a turn, a limit within two (UR ±2π, a wrist's ±450°).
+// Was: alpha -90 rad and limits ±90 rad accepted, the arm calibrated, exit 0.
+TEST(RobotYaml, AnglesInDegreesAreRefusedNamingTheUnit) {
+  const std::string text = ReadFile(Grb3016Path());
+  // Every alpha in degrees: the first one named.
+  std::string deg = ReplaceAll(text, "alpha: -pi/2", "alpha: -90");
+  deg = ReplaceAll(deg, "alpha: pi/2", "alpha: 90");
+  deg = ReplaceAll(deg, "alpha: -pi,", "alpha: -180,");
+  EXPECT_EQ(ErrorOf([&] { ParseRobotYaml(deg, "deg.yaml"); }),
+            "deg.yaml: links[0].alpha: '-90' rad is beyond a turn (2π): degrees? rcal files are "
+            "in radians: -90° is -pi/2 (line 15)");
+  // A theta offset.
+  deg = ReplaceAll(text, "theta: -pi/2,\n     joint: {name: j2",
+                   "theta: -90,\n     joint: {name: j2");
+  EXPECT_EQ(ErrorOf([&] { ParseRobotYaml(deg, "deg.yaml"); }),
+            "deg.yaml: links[1].theta: '-90' rad is beyond a turn (2π): degrees? rcal files are "
+            "in radians: -90° is -pi/2 (line 17)");
+  // Limits of 170° and of ±90° (below the 100 rad bound of any angle).
+  deg = ReplaceAll(text, "upper: 17*pi/18}", "upper: 170}");
+  EXPECT_EQ(ErrorOf([&] { ParseRobotYaml(deg, "deg.yaml"); }),
+            "deg.yaml: links[0].joint.upper: '170' rad is beyond two turns (4π): degrees? rcal "
+            "files are in radians: 170° is 17*pi/18 (line 16)");
+  deg = ReplaceAll(text, "lower: -2*pi/3, upper: 2*pi/3", "lower: -90, upper: 90");
+  EXPECT_EQ(ErrorOf([&] { ParseRobotYaml(deg, "deg.yaml"); }),
+            "deg.yaml: links[4].joint.lower: '-90' rad is beyond two turns (4π): degrees? rcal "
+            "files are in radians: -90° is -pi/2 (line 24)");
+  // A frame's roll-pitch-yaw; a limit of 137.5° has no multiple of pi to name.
+  deg = text + "base: {xyz: [1, 0, 0], rpy: [0, 0, 180]}\n";
+  EXPECT_EQ(ErrorOf([&] { ParseRobotYaml(deg, "deg.yaml"); }),
+            "deg.yaml: base.rpy[2]: '180' rad is beyond a turn (2π): degrees? rcal files are in "
+            "radians: 180° is pi (line 32)");
+  deg = ReplaceAll(text, "upper: 17*pi/18}", "upper: 137.5}");
+  EXPECT_NE(ErrorOf([&] { ParseRobotYaml(deg, "deg.yaml"); })
+                .find("'137.5' rad is beyond two turns (4π): degrees? rcal files are in radians: "
+                      "137.5° is 2.39983"),
+            std::string::npos);
+  // Within the bounds, rounding included: a 2π written 6.2832, limits of two turns (UR's ±2π
+  // from a URDF, ±720°) and ±450°.
+  std::string fine = ReplaceAll(text, "alpha: 0, d: -0.200", "alpha: 6.2832, d: -0.200");
+  fine = ReplaceAll(fine, "lower: -2*pi, upper: 2*pi", "lower: -4*pi, upper: 7.8539816");
+  const RobotSpec spec = ParseRobotYaml(fine, "fine.yaml");
+  EXPECT_DOUBLE_EQ(spec.links[5].alpha, 6.2832);
+  EXPECT_DOUBLE_EQ(spec.links[5].joint->lower, -4 * kPi);
+}
 
 TEST(RobotYaml, EmptyAndMissingFilesAreErrors) {
   ScratchDir dir;

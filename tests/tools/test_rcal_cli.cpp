@@ -728,6 +728,9 @@ TEST(RcalCli, CalibrateLogIsAnAliasOfCalibrateLog) {
   EXPECT_EQ(a.exit_code, 3) << a.output;
   EXPECT_EQ(b.exit_code, 3) << b.output;
   EXPECT_NE(a.output.find("no pose accepted"), std::string::npos) << a.output;
+  EXPECT_NE(a.output.find("no pose was given to the fit: nothing was calibrated"),
+            std::string::npos)
+      << a.output;
   EXPECT_EQ(ReadJson(d / "a.json"), ReadJson(d / "b.json"));
   EXPECT_EQ(ReadJson(d / "b.json")["poses_accepted"], 0);
   EXPECT_EQ(a.output, b.output);

@@ -15,6 +15,7 @@
 #include "rcal/discrepancy/analysis.hpp"
 #include "rcal/geometry/so3.hpp"
 #include "rcal/identification/calibration.hpp"
+#include "rcal/identification/sanity.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/effects_json.hpp"
 #include "rcal/io/plot.hpp"
@@ -124,6 +125,18 @@ int Run(const Options& o) {
                data.has_orientation ? "position and orientation" : "positions only", model.name(),
                model.num_params());
   const discrepancy::Analysis a = discrepancy::Analyze(model, pd, settings);
+  // A geometric fit that describes no arm this robot file could be (identification/sanity.hpp):
+  // its effects mean nothing, so no analysis.json is written for `calibrate --effects` or
+  // ik_corrector to use (an earlier run's is removed); report.md says why; exit code 3.
+  identification::CalibrationFigures figures;
+  figures.robot = o.robot;
+  figures.arm_reach_m = io::ArmReach(model, false);
+  figures.nominal_rms_position_m = a.base_fit.nominal_fit.rms_position_m;
+  if (settings.estimate_noise) {
+    figures.position_sigma_m = a.base_fit.position_sigma_m;
+    if (data.has_orientation) figures.orientation_sigma_rad = a.base_fit.orientation_sigma_rad;
+  }
+  const std::vector<std::string> rejected = identification::CalibrationImplausible(figures);
 
   const fs::path out(o.out);
   fs::create_directories(out);
@@ -293,13 +306,24 @@ int Run(const Options& o) {
       {"selection", jrounds},
       {"alpha", settings.alpha},
       {"skipped", a.skipped}};
-  io::AtomicWriteFile(out / "analysis.json", j.dump(2));
-  if (!o.json_path.empty()) io::AtomicWriteFile(o.json_path, j.dump(2));
+  if (rejected.empty()) {
+    io::AtomicWriteFile(out / "analysis.json", j.dump(2));
+    if (!o.json_path.empty()) io::AtomicWriteFile(o.json_path, j.dump(2));
+  } else {
+    fs::remove(out / "analysis.json");
+  }
 
   // report.md
   std::ostringstream md;
-  md << "# rcal analyze\n\n- Data: `" << o.data << "`, " << pd.measurements.size() << " poses ("
-     << a.num_fit_poses << " fitted, " << a.num_test_poses << " test), "
+  md << "# rcal analyze\n\n";
+  if (!rejected.empty()) {
+    md << "**REJECTED**: no analysis.json was written; the geometric fit describes no arm the "
+          "robot file could be:\n\n";
+    for (const auto& r : rejected) md << "- " << r << "\n";
+    md << "\n";
+  }
+  md << "- Data: `" << o.data << "`, " << pd.measurements.size() << " poses (" << a.num_fit_poses
+     << " fitted, " << a.num_test_poses << " test), "
      << (data.has_orientation ? "position and orientation" : "positions only") << "\n- Robot: `"
      << o.robot << "` (" << model.name() << "), " << a.base_fit.identified.size()
      << " geometric parameters identifiable at these poses\n- Chain: " << ChainText(robot)
@@ -428,6 +452,12 @@ int Run(const Options& o) {
               a.gain.scheme.c_str(), a.gain.heldout_rms_before_m * kMm,
               a.gain.heldout_rms_after_m * kMm, 100 * a.gain.relative_gain);
   std::printf("  wrote %s\n", (out / "report.md").c_str());
+  if (!rejected.empty()) {
+    std::string why;
+    for (const auto& r : rejected) why += "\n  - " + r;
+    spdlog::error("{}: analysis REJECTED, no analysis.json written:{}", o.data, why);
+    return 3;
+  }
   return 0;
 }
 

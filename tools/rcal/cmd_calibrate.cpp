@@ -24,6 +24,7 @@
 #include "rcal/identification/calibration.hpp"
 #include "rcal/identification/extended_lm.hpp"
 #include "rcal/identification/extended_measurement.hpp"
+#include "rcal/identification/sanity.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/effects_json.hpp"
 #include "rcal/io/plot.hpp"
@@ -322,6 +323,21 @@ int Run(const Options& o) {
     held = identification::HeldOut(model, ms, is_test, fit, settings, references);
   }
 
+  // A fit that describes no arm this robot file could be (identification/sanity.hpp) is refused:
+  // no calibrated robot is written (an earlier run's is removed from --out, so none is left to be
+  // deployed by mistake); the report and results.json say why, and the exit code is 3.
+  identification::CalibrationFigures figures;
+  figures.robot = o.robot;
+  figures.arm_reach_m = io::ArmReach(model, false);
+  figures.nominal_rms_position_m = fit.nominal_fit.rms_position_m;
+  figures.heldout_nominal_rms_position_m = held.nominal.rms_position_m;
+  figures.heldout_rms_position_m = held.calibrated.rms_position_m;
+  if (!o.fixed_noise) {
+    figures.position_sigma_m = fit.position_sigma_m;
+    if (data.has_orientation) figures.orientation_sigma_rad = fit.orientation_sigma_rad;
+  }
+  const std::vector<std::string> rejected = identification::CalibrationImplausible(figures);
+
   const fs::path out(o.out);
   fs::create_directories(out);
   const std::vector<std::string> header = {" calibrated by rcal calibrate from " + o.data,
@@ -329,10 +345,16 @@ int Run(const Options& o) {
                                                Fmt(held.calibrated.mean_position_m * kMm, 4) +
                                                " mm (nominal " +
                                                Fmt(held.nominal.mean_position_m * kMm, 4) + " mm)"};
-  io::SaveCalibratedRobotYaml(out / "robot_calibrated.yaml", robot.spec, model, fit.x, header);
-  if (robot.from_urdf)
+  if (!rejected.empty()) {
+    for (const char* f :
+         {"robot_calibrated.yaml", "robot_calibrated.urdf", "robot_calibrated_extended.yaml"})
+      fs::remove(out / f);
+  } else {
+    io::SaveCalibratedRobotYaml(out / "robot_calibrated.yaml", robot.spec, model, fit.x, header);
+  }
+  if (rejected.empty() && robot.from_urdf)
     io::SaveCalibratedUrdf(robot.source, out / "robot_calibrated.urdf", robot.spec, model, fit.x);
-  if (ext)  // the geometry that goes with the calibrated effects
+  if (rejected.empty() && ext)  // the geometry that goes with the calibrated effects
     io::SaveCalibratedRobotYaml(
         out / "robot_calibrated_extended.yaml", robot.spec, model, ext->fit.x,
         {" calibrated by rcal calibrate --effects " + o.effects_path + " from " + o.data,
@@ -410,7 +432,14 @@ int Run(const Options& o) {
         {"parent", "earth"}, {"child", "world"}, {"rpy_rad", vec(calibrated.earth->rpy)}};
   }
   std::ostringstream md;
-  md << "# rcal calibrate\n\n- Data: `" << o.data << "`, " << ms.size() << " poses, "
+  md << "# rcal calibrate\n\n";
+  if (!rejected.empty()) {  // said first: the figures below are a fit, not a calibration
+    md << "**REJECTED**: no calibrated robot was written; the fit describes no arm the robot file "
+          "could be:\n\n";
+    for (const auto& r : rejected) md << "- " << r << "\n";
+    md << "\n";
+  }
+  md << "- Data: `" << o.data << "`, " << ms.size() << " poses, "
      << (data.has_orientation ? "position and orientation" : "positions only") << "\n- Robot: `"
      << o.robot << "` (" << model.name() << "), " << model.num_params() << " parameters, "
      << fit.identified.size() << " identifiable at these poses, " << fit.setup.size()
@@ -434,8 +463,10 @@ int Run(const Options& o) {
      << MdTable({"frame", "what", "value"}, frows)
      << "\nroll-pitch-yaw: R = Rz(yaw)·Ry(pitch)·Rx(roll).\n\n## Identified parameters\n\n"
      << MdTable({"parameter", "frame", "unit", "error", "σ"}, prows)
-     << "\nCalibrated robot: `robot_calibrated.yaml`"
-     << (robot.from_urdf ? " and `robot_calibrated.urdf`" : "") << ".\n";
+     << (rejected.empty()
+             ? "\nCalibrated robot: `robot_calibrated.yaml`" +
+                   std::string(robot.from_urdf ? " and `robot_calibrated.urdf`" : "") + ".\n"
+             : std::string("\nCalibrated robot: none (rejected, above).\n"));
   if (ext) {
     const auto params = ext->model.EffectParameters();
     std::vector<std::vector<std::string>> erows;
@@ -473,7 +504,9 @@ int Run(const Options& o) {
             {"method", o.method},
             {"validation", held.scheme},
             {"position_noise_m", fit.position_sigma_m},
-            {"parameters", jparams}};
+            {"parameters", jparams},
+            {"rejected", !rejected.empty()},
+            {"rejected_because", rejected}};
   // Positions only: no orientation noise (nor orientation errors, StatsJson) to report.
   if (data.has_orientation) j["orientation_noise_rad"] = fit.orientation_sigma_rad;
   j.update(StatsJson(fit.nominal_fit, "fit_nominal_"));
@@ -543,6 +576,12 @@ int Run(const Options& o) {
                   ext->fit.sigma_e(i), params[i].unit.c_str());
   }
   std::printf("  wrote %s\n", (out / "report.md").c_str());
+  if (!rejected.empty()) {
+    std::string why;
+    for (const auto& r : rejected) why += "\n  - " + r;
+    spdlog::error("{}: calibration REJECTED, no calibrated robot written:{}", o.data, why);
+    return 3;
+  }
   return 0;
 }
 

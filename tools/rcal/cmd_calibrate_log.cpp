@@ -8,6 +8,15 @@
 // skipped and counted, as the process rejects them. `rcal calibrate --log LOG` runs this same code.
 // Every event is checked against its schema before it is decoded; a log that lost data (broken
 // frames, bytes unreadable, undecodable events) is refused after its summary unless --allow-gaps.
+// Where users trip (issue 13, item 4), as `rcal calibrate DATA` refuses them: the logged poses
+// are checked against the robot (joints in degrees, positions in millimetres, another arm's joint
+// limits: io::CheckPosesPlausible, exit 1 naming the likely cause), and the outcome is judged
+// (identification::CalibrationImplausible on the noise left in the accepted poses' residuals and
+// the poses the EKF rejected): no pose accepted or a fit no arm gives is REJECTED, exit 3, the
+// reasons on stderr and in the JSON (rejected, rejected_because).
+#include <cmath>
+#include <cstdio>
+#include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 
@@ -15,6 +24,7 @@
 #include "command.hpp"
 #include "pose_log.hpp"
 #include "rcal/cell/online_identification.hpp"
+#include "rcal/identification/sanity.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/io/lcm_log.hpp"
@@ -51,6 +61,10 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
     throw std::runtime_error("calibrate-log: cannot read " + o.log);
   }
   int64_t events = 0, skipped = 0;
+  PoseLog valid;  // the poses that decode and fit the model, for the plausibility check
+  std::map<int64_t, kinematics::PoseMeasurement> by_utime;  // ... and the residuals of the fit
+  std::vector<int64_t> accepted_utimes;
+  std::string first_skip;  // why the first pose skipped was
   while (const auto e = log->Next()) {
     if (e->channel != o.channel) continue;
     ++events;
@@ -64,10 +78,35 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
     }
     std::string error;
     auto z = transport::FromMessage(msg, &error, &id.model());
-    if (!z || !id.Add({std::move(*z), msg.utime, msg.pose_index}).rejected.empty()) ++skipped;
+    if (!z) {
+      if (first_skip.empty()) first_skip = error;
+      ++skipped;
+      continue;
+    }
+    const kinematics::PoseMeasurement m = *z;
+    const auto outcome = id.Add({std::move(*z), msg.utime, msg.pose_index});
+    if (!outcome.rejected.empty()) {
+      if (first_skip.empty()) first_skip = outcome.rejected;
+      ++skipped;
+      continue;
+    }
+    valid.poses.push_back({m, msg.utime, msg.pose_index});
+    by_utime.emplace(msg.utime, m);
+    for (const auto& u : outcome.updates)
+      if (u.result.accepted) accepted_utimes.push_back(u.utime);
   }
   const io::LcmLogStats stats = log->stats();
   CheckLogGaps(o.log, stats, o.allow_gaps);
+  // Poses this robot cannot have produced (joints in degrees, positions in millimetres, joints
+  // beyond another arm's limits): refused naming the likely cause, as `rcal calibrate DATA`. The
+  // positions are judged by their spread (the world ← base frame unknown, as --frames auto has
+  // it): set-up frames the EKF cannot find are judged by what it rejects, below.
+  if (!valid.poses.empty()) {
+    io::RobotSpec spread = id.cell().robot.spec;
+    if (!spread.base) spread.base = io::FrameSpec{};
+    io::CheckPosesPlausible(ToPoseDataset(valid, model.num_joints()), io::BuildModel(spread),
+                            o.log);
+  }
   const auto& ekf = id.ekf();
   const int64_t last_utime = id.last_utime(), last_pose_index = id.last_pose_index();
   const Eigen::VectorXd x = ekf.x(), sigma = ekf.sigma();
@@ -96,6 +135,25 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
                           {"value_" + unit, x(i)},
                           {"sigma_" + unit, sigma(i)}});
   }
+  // The noise left in the accepted poses' residuals at the estimate, and the poses rejected.
+  identification::CalibrationFigures figures;
+  figures.robot = id.cell().spec.robot.file.string();
+  figures.poses = ekf.accepted() + ekf.rejected();
+  figures.poses_rejected = ekf.rejected();
+  double p2 = 0, o2 = 0;
+  int np = 0, no = 0;
+  for (const int64_t t : accepted_utimes) {
+    const Eigen::VectorXd r = kinematics::Residual(model, by_utime.at(t), x);
+    p2 += r.head<3>().squaredNorm();
+    ++np;
+    if (r.size() == 6) {
+      o2 += r.tail<3>().squaredNorm();
+      ++no;
+    }
+  }
+  if (np > 0) figures.position_sigma_m = std::sqrt(p2 / (3.0 * np));
+  if (no > 0) figures.orientation_sigma_rad = std::sqrt(o2 / (3.0 * no));
+  const std::vector<std::string> rejected = identification::CalibrationImplausible(figures);
   if (!o.json_path.empty()) {
     nlohmann::json j = {
         {"log", o.log},
@@ -116,20 +174,30 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
         {"last_pose_index", last_pose_index},
         {"identified", base},
         {"names", names},
-        {"parameters", parameters}};
+        {"parameters", parameters},
+        {"residual_position_sigma_m", figures.position_sigma_m},
+        {"residual_orientation_sigma_rad", figures.orientation_sigma_rad},
+        {"rejected", !rejected.empty()},
+        {"rejected_because", rejected}};
     io::AtomicWriteFile(o.json_path, j.dump(2));
   }
-  if (ekf.accepted() == 0) {
-    // Never a silent nominal: say what happened and what to check.
+  if (!rejected.empty() || ekf.accepted() == 0) {
+    std::string why;
+    for (const auto& r : rejected) why += "\n  - " + r;
+    if (ekf.accepted() == 0) {
+      // Never a silent nominal: say what happened and what to check.
+      why += "\n  - no pose accepted (" + std::to_string(events) + " " + o.channel + " events, " +
+             std::to_string(id.held().size()) + " held for the set-up guess of " +
+             std::to_string(id.cell().spec.identifier.guess_poses) + ", " +
+             std::to_string(ekf.rejected()) + " rejected by the EKF" +
+             (ekf.last_rejection().empty() ? "" : ": " + ekf.last_rejection()) +
+             (first_skip.empty() ? "" : "; the first skipped because: " + first_skip) + "); is " +
+             o.cell + " the cell that was recorded, and " + o.channel + " its pose channel?";
+    }
     std::fprintf(stderr,
-                 "rcal calibrate-log: no pose accepted (%lld %s events, %d held for the set-up "
-                 "guess of %d, %d rejected by the EKF%s); is %s the cell that was recorded, and "
-                 "%s its pose channel?\n",
-                 static_cast<long long>(events), o.channel.c_str(),
-                 static_cast<int>(id.held().size()), id.cell().spec.identifier.guess_poses,
-                 ekf.rejected(),
-                 ekf.last_rejection().empty() ? "" : (": " + ekf.last_rejection()).c_str(),
-                 o.cell.c_str(), o.channel.c_str());
+                 "rcal calibrate-log: %s: calibration REJECTED, these parameters are no "
+                 "calibration:%s\n",
+                 o.log.c_str(), why.c_str());
     return 3;
   }
   return 0;

@@ -1,10 +1,15 @@
 // rcal: offline work on the library (simulate, calibrate, analyze, report).
+#include <spdlog/sinks/base_sink.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <exception>
 #include <filesystem>
 #include <iostream>
+#include <memory>
+#include <mutex>
+#include <utility>
 
 #include "command.hpp"
 
@@ -23,10 +28,42 @@ std::string ResolvePath(const std::string& path) {
   return path;
 }
 
+namespace {
+
+/// Passes messages below warning to `inner` (stdout, with the figures); warnings and errors go to
+/// stderr, where a user (and a script) looks for why a command failed.
+class BelowWarningSink : public spdlog::sinks::base_sink<std::mutex> {
+ public:
+  explicit BelowWarningSink(std::shared_ptr<spdlog::sinks::sink> inner)
+      : inner_(std::move(inner)) {}
+
+ protected:
+  void sink_it_(const spdlog::details::log_msg& msg) override {
+    if (msg.level < spdlog::level::warn) inner_->log(msg);
+  }
+  void flush_() override { inner_->flush(); }
+
+ private:
+  std::shared_ptr<spdlog::sinks::sink> inner_;
+};
+
+void LogWarningsToStderr() {
+  auto err = std::make_shared<spdlog::sinks::stderr_color_sink_mt>();
+  err->set_level(spdlog::level::warn);
+  auto out =
+      std::make_shared<BelowWarningSink>(std::make_shared<spdlog::sinks::stdout_color_sink_mt>());
+  auto logger = std::make_shared<spdlog::logger>("", spdlog::sinks_init_list{out, err});
+  logger->set_level(spdlog::default_logger()->level());
+  spdlog::set_default_logger(logger);
+}
+
+}  // namespace
+
 }  // namespace rcal::tool
 
 int main(int argc, char** argv) {
   using namespace rcal::tool;
+  LogWarningsToStderr();
   CLI::App app{"rcal: online robot calibration with an IMU and a position sensor"};
   app.require_subcommand(1);
   auto& entries = Registry();

@@ -6,6 +6,7 @@
 #include <numeric>
 #include <random>
 #include <stdexcept>
+#include <string>
 
 #include "rcal/geometry/so3.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
@@ -206,6 +207,15 @@ CalibrationFit Calibrate(const kinematics::KinematicModel& model,
       }
     }
     const double redundancy = 1.0 - static_cast<double>(fit.identified.size()) / (n_p + n_o);
+    // As many parameters as measured values: the fit passes through every pose and leaves no
+    // residual to estimate the noise from (it was 0/0, a NaN covariance, an obscure error).
+    if (!(redundancy > 0))
+      throw std::invalid_argument(
+          "calibration: " + std::to_string(ms.size()) + " poses give " + std::to_string(n_p + n_o) +
+          " measured values for " + std::to_string(fit.identified.size()) +
+          " identifiable parameters: the fit passes through every pose and leaves nothing to "
+          "estimate the noise from; measure more poses (or give the noise and do not estimate "
+          "it)");
     fit.position_sigma_m = std::sqrt(ss_p / (n_p * redundancy));
     if (n_o > 0) fit.orientation_sigma_rad = std::sqrt(ss_o / (n_o * redundancy));
   }

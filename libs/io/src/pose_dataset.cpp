@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <set>
 #include <sstream>
@@ -306,6 +307,81 @@ bool IsUnknownBase(const kinematics::KinematicModel& model,
   return et.param >= 0 && model.parameters()[et.param].group == "base";
 }
 
+bool Wraps(const kinematics::Joint& jt) {
+  return jt.type == kinematics::JointType::kRevolute &&
+         jt.upper - jt.lower >= 2.0 * std::numbers::pi - 1e-9;
+}
+
+/// Whether a reading is beyond what the joint allows: its limits plus the margin, or for a
+/// wrapping joint ±PosePlausibility::wrapping_joint_bound_rad.
+bool BeyondLimits(const kinematics::Joint& jt, double q, const PosePlausibility& s) {
+  if (Wraps(jt)) return std::abs(q) > s.wrapping_joint_bound_rad;
+  const double margin = jt.type == kinematics::JointType::kRevolute ? s.joint_limit_margin_rad
+                                                                    : s.joint_limit_margin_m;
+  return q < jt.lower - margin || q > jt.upper + margin;
+}
+
+/// Joints of one kind (revolute or prismatic) read in another unit (degrees, millimetres): the
+/// readings of some joint the robot file bounds span more than no arm's joint of that kind does in
+/// SI (a revolute joint limited to less than a turn: more than two turns, 4π, which even another
+/// arm's file with ±2π joints does not explain; a prismatic joint: more than ten times its travel),
+/// or a wrapping joint reads beyond its bound, while every reading of every joint of that kind,
+/// times `to_si`, lies within what the joint allows.
+bool JointsInUnit(const PoseDataset& data, const kinematics::KinematicModel& model,
+                  kinematics::JointType type, double to_si, const PosePlausibility& s) {
+  bool far = false;
+  for (int j = 0; j < model.num_joints(); ++j) {
+    const kinematics::Joint& jt = model.joints()[j];
+    if (jt.type != type) continue;
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (const PoseSample& p : data.samples) {
+      if (p.q.size() != model.num_joints()) return false;
+      if (!std::isfinite(p.q(j)) || BeyondLimits(jt, p.q(j) * to_si, s)) return false;
+      lo = std::min(lo, p.q(j));
+      hi = std::max(hi, p.q(j));
+      far = far || (Wraps(jt) && BeyondLimits(jt, p.q(j), s));
+    }
+    const double most = type == kinematics::JointType::kRevolute
+                            ? 4.0 * std::numbers::pi + 2.0 * s.joint_limit_margin_rad
+                            : 10.0 * (jt.upper - jt.lower + 2.0 * s.joint_limit_margin_m);
+    far = far || (!Wraps(jt) && hi - lo > most);
+  }
+  return far;
+}
+
+/// What a refusal of joint j adds: the file's likely unit mistake, else how many rows are beyond
+/// the limits when more than one is (one can be a corrupted cell; several mean the robot file's
+/// limits are not the measured arm's).
+std::string JointHint(const PoseDataset& data, const kinematics::KinematicModel& model, int j,
+                      const std::string& column, const PosePlausibility& s) {
+  const kinematics::Joint& jt = model.joints()[j];
+  const bool revolute = jt.type == kinematics::JointType::kRevolute;
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  for (const PoseSample& p : data.samples) {
+    if (p.q.size() != model.num_joints()) return "";
+    lo = std::min(lo, p.q(j));
+    hi = std::max(hi, p.q(j));
+  }
+  if (JointsInUnit(data, model, jt.type, revolute ? std::numbers::pi / 180.0 : 1e-3, s))
+    return revolute ? "; column '" + column + "' reads from " + Number(lo) + " to " + Number(hi) +
+                          ", and every revolute joint's readings × π/180 lie within its limits: "
+                          "joints in degrees? rcal reads radians"
+                    : "; column '" + column + "' reads from " + Number(lo) + " to " + Number(hi) +
+                          ", and every prismatic joint's readings × 1e-3 lie within its limits: "
+                          "joints in millimetres? rcal reads metres";
+  size_t rows = 0;
+  for (const PoseSample& p : data.samples) {
+    bool beyond = false;
+    for (int k = 0; k < model.num_joints(); ++k)
+      beyond = beyond || BeyondLimits(model.joints()[k], p.q(k), s);
+    rows += beyond ? 1 : 0;
+  }
+  if (rows < 2) return "";
+  return "; " + std::to_string(rows) + " of " + std::to_string(data.samples.size()) +
+         " poses have a joint beyond the limits of robot '" + model.name() +
+         "': is this the robot that was measured?";
+}
+
 }  // namespace
 
 double ArmReach(const kinematics::KinematicModel& model, bool include_base) {
@@ -339,20 +415,17 @@ void CheckPosesPlausible(const PoseDataset& data, const kinematics::KinematicMod
                              jt.name + "') is " + Number(p.q(j));
       if (!std::isfinite(p.q(j))) throw std::runtime_error(at + ": not a number");
       const bool revolute = jt.type == kinematics::JointType::kRevolute;
-      if (revolute && jt.upper - jt.lower >= 2.0 * std::numbers::pi - 1e-9) {
-        if (std::abs(p.q(j)) > settings.wrapping_joint_bound_rad)
-          throw std::runtime_error(at + " rad: beyond ±" +
-                                   Number(settings.wrapping_joint_bound_rad) +
-                                   " rad (PosePlausibility::wrapping_joint_bound_rad)");
-        continue;
-      }
+      if (!BeyondLimits(jt, p.q(j), settings)) continue;
+      const std::string hint = JointHint(data, model, j, column, settings);
+      if (Wraps(jt))
+        throw std::runtime_error(at + " rad: beyond ±" + Number(settings.wrapping_joint_bound_rad) +
+                                 " rad (PosePlausibility::wrapping_joint_bound_rad)" + hint);
       const double margin =
           revolute ? settings.joint_limit_margin_rad : settings.joint_limit_margin_m;
-      if (p.q(j) < jt.lower - margin || p.q(j) > jt.upper + margin)
-        throw std::runtime_error(
-            at + (revolute ? " rad" : " m") + ": beyond its limits [" + Number(jt.lower) + ", " +
-            Number(jt.upper) + "] by more than " + Number(margin) + (revolute ? " rad" : " m") +
-            " (PosePlausibility::joint_limit_margin_" + (revolute ? "rad" : "m") + ")");
+      throw std::runtime_error(
+          at + (revolute ? " rad" : " m") + ": beyond its limits [" + Number(jt.lower) + ", " +
+          Number(jt.upper) + "] by more than " + Number(margin) + (revolute ? " rad" : " m") +
+          " (PosePlausibility::joint_limit_margin_" + (revolute ? "rad" : "m") + ")" + hint);
     }
   }
   // Positions: against the origin when the base is known, else against the median position.
@@ -374,6 +447,31 @@ void CheckPosesPlausible(const PoseDataset& data, const kinematics::KinematicMod
     }
     bound = (1.0 + std::sqrt(3.0)) * ArmReach(model, false) + settings.reach_margin_m;
   }
+  // Positions in millimetres: the bulk of them (half: one corrupted row does not move the
+  // median) lies beyond the reach, while × 1e-3 every one lies within it.
+  std::string hint;
+  {
+    std::vector<double> dist;
+    bool all_in_mm = true;
+    for (const PoseSample& p : data.samples) {
+      const double d = (p.p_WM_W - centre).norm();
+      dist.push_back(std::isfinite(d) ? d : std::numeric_limits<double>::infinity());
+      all_in_mm = all_in_mm && std::isfinite(d) && d * 1e-3 <= bound;
+    }
+    if (!dist.empty()) {
+      std::nth_element(dist.begin(), dist.begin() + static_cast<std::ptrdiff_t>(dist.size() / 2),
+                       dist.end());
+      const double median = dist[dist.size() / 2];
+      const double reach = ArmReach(model, !unknown_base);
+      if (median > bound)
+        hint = "; half the positions lie " + Number(median) + " m or more from " +
+               (unknown_base ? "their median" : "the world origin") + ", " +
+               Number(std::round(median / reach)) + "× the arm's reach of " + Number(reach) + " m" +
+               (all_in_mm ? ", and × 1e-3 every one lies within it: positions in millimetres? "
+                            "rcal reads metres"
+                          : ": is this the robot that was measured?");
+    }
+  }
   for (size_t i = 0; i < data.samples.size(); ++i) {
     const PoseSample& p = data.samples[i];
     const double dist = (p.p_WM_W - centre).norm();
@@ -387,7 +485,7 @@ void CheckPosesPlausible(const PoseDataset& data, const kinematics::KinematicMod
         " m: the marker is " + Number(dist) + " m from " +
         (unknown_base ? "the median of the measured positions" : "the world origin") +
         ", beyond the arm's reach (" + Number(bound - settings.reach_margin_m) + " m + " +
-        Number(settings.reach_margin_m) + " m, PosePlausibility::reach_margin_m)");
+        Number(settings.reach_margin_m) + " m, PosePlausibility::reach_margin_m)" + hint);
   }
 }
 

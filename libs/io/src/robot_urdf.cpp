@@ -7,10 +7,12 @@
 #include <cctype>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <map>
 #include <numbers>
 #include <set>
+#include <sstream>
 #include <stdexcept>
 #include <vector>
 
@@ -187,12 +189,23 @@ void ParseXml(TiXmlDocument* doc, const std::string& xml, const std::string& sou
                              std::to_string(doc->ErrorRow()) + ")");
 }
 
-urdf::ModelInterfaceSharedPtr ParseUrdf(const std::string& xml, const std::string& source) {
+/// Parses a URDF. `origin_rpy`, when given, receives each joint's <origin rpy="..."> as written
+/// (liburdfdom keeps only the rotation, which forgets an angle written in degrees).
+urdf::ModelInterfaceSharedPtr ParseUrdf(const std::string& xml, const std::string& source,
+                                        std::map<std::string, std::string>* origin_rpy = nullptr) {
   TiXmlDocument doc;
   ParseXml(&doc, xml, source);
   // liburdfdom links a loop's links by shared_ptr (leaked) and leaves a link with several parents
   // to its last joint; walking such a tree never ends. Only a proper tree reaches it.
   CheckLinkTree(doc, source);
+  if (origin_rpy != nullptr)
+    for (const TiXmlElement* j = RobotElement(doc, source)->FirstChildElement("joint");
+         j != nullptr; j = j->NextSiblingElement("joint")) {
+      const TiXmlElement* o = j->FirstChildElement("origin");
+      const char* rpy = o != nullptr ? o->Attribute("rpy") : nullptr;
+      if (rpy != nullptr && j->Attribute("name") != nullptr)
+        (*origin_rpy)[j->Attribute("name")] = rpy;
+    }
   urdf::ModelInterfaceSharedPtr model = urdf::parseURDF(xml);
   if (!model)
     throw std::runtime_error(source +
@@ -209,10 +222,14 @@ void Origin(const urdf::Joint& j, Eigen::Vector3d* xyz, Eigen::Vector3d* rpy) {
   *rpy = RobustRpy(q.normalized().toRotationMatrix());
 }
 
-/// Largest joint origin offset accepted [m] and largest |limit| [rad | m]: beyond them a value is
-/// a typo or garbage, not an arm (as robot_yaml.hpp's bounds).
+/// Largest joint origin offset accepted [m] and largest prismatic |limit| [m]: beyond them a
+/// value is a typo or garbage, not an arm (as robot_yaml.hpp's bounds). A revolute limit lies
+/// within two turns and an origin's roll, pitch or yaw within a turn (as a robot YAML's): beyond,
+/// in degrees most likely. kAngleRounding allows for a rounded π (6.2832 for 2π).
 constexpr double kMaxUrdfLength = 100.0;
 constexpr double kMaxUrdfLimit = 100.0;
+constexpr double kTurn = 2.0 * std::numbers::pi;
+constexpr double kAngleRounding = 1e-3;
 
 std::string Num(double v) {
   if (v == 0.0) return "0";
@@ -226,11 +243,31 @@ std::string Triple(const Eigen::Vector3d& v) {
   return Num(v(0)) + " " + Num(v(1)) + " " + Num(v(2));
 }
 
+/// ": degrees? URDF angles are radians: 170° is 2.96706" when `value` read as degrees lies within
+/// ±bound [rad], else empty.
+std::string DegreesHint(double value, double bound) {
+  const double rad = value * std::numbers::pi / 180.0;
+  if (!(std::abs(rad) <= bound + kAngleRounding)) return "";
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%.6g", rad);
+  return ": degrees? URDF angles are radians: " + Num(value) + "° is " + buf;
+}
+
+/// Refuses an origin rpy (as written, `text`) with an angle beyond a turn, naming degrees.
+void CheckOriginRpy(const std::string& text, const std::string& where) {
+  std::istringstream in(text);
+  for (double v; in >> v;)
+    if (std::isfinite(v) && std::abs(v) > kTurn + kAngleRounding)
+      throw std::runtime_error(where + ": origin rpy \"" + text + "\": " + Num(v) +
+                               " rad is beyond a turn (2π)" + DegreesHint(v, kTurn));
+}
+
 }  // namespace
 
 RobotSpec ParseUrdfRobotSpec(const std::string& urdf_xml, const std::string& source,
                              const UrdfOptions& options) {
-  const urdf::ModelInterfaceSharedPtr urdf = ParseUrdf(urdf_xml, source);
+  std::map<std::string, std::string> origin_rpy;
+  const urdf::ModelInterfaceSharedPtr urdf = ParseUrdf(urdf_xml, source, &origin_rpy);
   const std::string base_name =
       options.base_link.empty() ? urdf->getRoot()->name : options.base_link;
   const urdf::LinkConstSharedPtr base = urdf->getLink(base_name);
@@ -307,9 +344,14 @@ RobotSpec ParseUrdfRobotSpec(const std::string& urdf_xml, const std::string& sou
     Origin(*j, &l.xyz, &l.rpy);
     if (!l.xyz.allFinite() || !l.rpy.allFinite())
       throw std::runtime_error(where + ": origin is not finite");
+    if (const auto rpy = origin_rpy.find(j->name); rpy != origin_rpy.end())
+      CheckOriginRpy(rpy->second, where);
     if (l.xyz.cwiseAbs().maxCoeff() > kMaxUrdfLength)
-      throw std::runtime_error(where + ": origin xyz beyond " + Num(kMaxUrdfLength) +
-                               " m: not an arm's dimension");
+      throw std::runtime_error(
+          where + ": origin xyz beyond " + Num(kMaxUrdfLength) + " m: not an arm's dimension" +
+          (l.xyz.cwiseAbs().maxCoeff() * 1e-3 <= kMaxUrdfLength
+               ? " (xyz " + Triple(l.xyz) + "): millimetres? URDF lengths are metres"
+               : ""));
     if (j->type == urdf::Joint::FIXED) {
       l.name = j->name;
       l.identify = false;
@@ -344,9 +386,18 @@ RobotSpec ParseUrdfRobotSpec(const std::string& urdf_xml, const std::string& sou
         throw std::runtime_error(where + ": <limit> lower and upper must be finite");
       if (!(joint.lower < joint.upper))
         throw std::runtime_error(where + ": lower limit must be below upper limit");
-      if (std::max(std::abs(joint.lower), std::abs(joint.upper)) > kMaxUrdfLimit)
-        throw std::runtime_error(where + ": <limit> beyond " + Num(kMaxUrdfLimit) +
-                                 (j->type == urdf::Joint::PRISMATIC ? " m" : " rad"));
+      const double largest = std::max(std::abs(joint.lower), std::abs(joint.upper));
+      const std::string limits =
+          " (lower " + Num(joint.lower) + ", upper " + Num(joint.upper) + ")";
+      if (j->type == urdf::Joint::PRISMATIC && largest > kMaxUrdfLimit)
+        throw std::runtime_error(where + ": <limit> beyond " + Num(kMaxUrdfLimit) + " m" +
+                                 (largest * 1e-3 <= kMaxUrdfLimit
+                                      ? limits + ": millimetres? URDF prismatic limits are metres"
+                                      : ""));
+      // Two turns: UR's ±2π, a wrist's ±450° on some arms.
+      if (j->type != urdf::Joint::PRISMATIC && largest > 2 * kTurn + kAngleRounding)
+        throw std::runtime_error(where + ": <limit>" + limits + " beyond two turns (4π rad)" +
+                                 DegreesHint(largest, 2 * kTurn));
     }
     l.axis = {j->axis.x, j->axis.y, j->axis.z};
     if (!l.axis.allFinite() || l.axis.norm() < 1e-9)
@@ -360,6 +411,7 @@ RobotSpec ParseUrdfRobotSpec(const std::string& urdf_xml, const std::string& sou
   if (moving == 0)
     throw std::runtime_error(source + ": no moving joint between '" + base_name + "' and '" +
                              tip_name + "'");
+  CheckArmSize(spec, source);
   if (options.add_marker) spec.markers.push_back({0, options.marker_xyz, options.identify_marker});
   spec.base_link = base_name;
   spec.tip_link = tip_name;

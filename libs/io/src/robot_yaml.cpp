@@ -25,6 +25,23 @@ constexpr const char* kSchema = "rcal.robot/1";
 
 using detail::Reader;
 
+/// A robot's constant angles (D–H alpha, theta, beta; roll-pitch-yaw) lie within a turn, its
+/// revolute limits within two turns (UR ±2π, a wrist's ±450° on some arms): written in degrees
+/// (alpha: -90, upper: 170) they are beyond, refused naming degrees (Reader::BoundedAngle).
+constexpr double kTurn = 2.0 * std::numbers::pi;
+
+double ConstantAngle(const Reader& r, const YAML::Node& n, const std::string& path) {
+  return r.BoundedAngle(n, path, kTurn, "a turn (2π)");
+}
+
+Eigen::Vector3d Rpy(const Reader& r, const YAML::Node& n, const std::string& path) {
+  if (!n.IsSequence() || n.size() != 3)
+    r.Fail(path, "expected a list of 3 angles [roll, pitch, yaw], got " + Reader::Kind(n), &n);
+  Eigen::Vector3d v;
+  for (int i = 0; i < 3; ++i) v(i) = ConstantAngle(r, n[i], path + "[" + std::to_string(i) + "]");
+  return v;
+}
+
 Joint ReadJoint(const Reader& r, const YAML::Node& n, const std::string& path) {
   r.CheckMap(n, path, {"name", "type", "lower", "upper"});
   Joint j;
@@ -38,9 +55,14 @@ Joint ReadJoint(const Reader& r, const YAML::Node& n, const std::string& path) {
   } else {
     r.Fail(path + ".type", "expected revolute or prismatic, got '" + t + "'", &type);
   }
-  const bool angle = j.type == JointType::kRevolute;
-  j.lower = r.Number(r.Require(n, path, "lower"), path + ".lower", angle);
-  j.upper = r.Number(r.Require(n, path, "upper"), path + ".upper", angle);
+  const auto limit = [&](const char* key) {
+    const YAML::Node v = r.Require(n, path, key);
+    return j.type == JointType::kRevolute
+               ? r.BoundedAngle(v, path + "." + key, 2 * kTurn, "two turns (4π)")
+               : r.Number(v, path + "." + key, false);
+  };
+  j.lower = limit("lower");
+  j.upper = limit("upper");
   if (!(j.lower < j.upper)) r.Fail(path, "lower limit must be below upper limit", &n);
   return j;
 }
@@ -53,7 +75,7 @@ FrameSpec ReadFrame(const Reader& r, const YAML::Node& n, const std::string& pat
   r.CheckMap(n, path, keys);
   FrameSpec f;
   if (xyz) f.xyz = r.Vec3(r.Require(n, path, "xyz"), path + ".xyz", false);
-  if (rpy) f.rpy = r.Vec3(r.Require(n, path, "rpy"), path + ".rpy", true);
+  if (rpy) f.rpy = Rpy(r, r.Require(n, path, "rpy"), path + ".rpy");
   if (n["identify"]) f.identify = r.Bool(n["identify"], path + ".identify");
   return f;
 }
@@ -64,7 +86,7 @@ LinkSpec ReadLink(const Reader& r, const YAML::Node& n, const std::string& path,
     r.CheckMap(n, path, {"name", "xyz", "rpy", "axis", "joint", "identify"});
     if (n["name"]) l.name = r.String(n["name"], path + ".name");
     l.xyz = r.Vec3(r.Require(n, path, "xyz"), path + ".xyz", false);
-    l.rpy = r.Vec3(r.Require(n, path, "rpy"), path + ".rpy", true);
+    l.rpy = Rpy(r, r.Require(n, path, "rpy"), path + ".rpy");
     if (n["joint"]) {
       l.joint = ReadJoint(r, n["joint"], path + ".joint");
       const YAML::Node axis = r.Require(n, path, "axis");
@@ -82,16 +104,16 @@ LinkSpec ReadLink(const Reader& r, const YAML::Node& n, const std::string& path,
   }
   r.CheckMap(n, path, {"a", "alpha", "d", "theta", "hayati", "beta", "joint"});
   l.a = r.Number(r.Require(n, path, "a"), path + ".a", false);
-  l.alpha = r.Number(r.Require(n, path, "alpha"), path + ".alpha", true);
+  l.alpha = ConstantAngle(r, r.Require(n, path, "alpha"), path + ".alpha");
   l.d = r.Number(r.Require(n, path, "d"), path + ".d", false);
-  l.theta = r.Number(r.Require(n, path, "theta"), path + ".theta", true);
+  l.theta = ConstantAngle(r, r.Require(n, path, "theta"), path + ".theta");
   l.joint = ReadJoint(r, r.Require(n, path, "joint"), path + ".joint");
   if (n["hayati"]) l.hayati = r.Bool(n["hayati"], path + ".hayati");
   if (l.hayati && l.joint->type != JointType::kRevolute)
     r.Fail(path + ".hayati", "only for revolute joints", &n);
   if (n["beta"]) {
     if (!l.hayati) r.Fail(path + ".beta", "only with hayati: true", &n);
-    l.beta = r.Number(n["beta"], path + ".beta", true);
+    l.beta = ConstantAngle(r, n["beta"], path + ".beta");
   }
   return l;
 }
@@ -298,13 +320,27 @@ RobotSpec ParseRobotYaml(const std::string& text, const std::string& source) {
     r.CheckMap(t, "tool", {"a", "alpha", "d", "theta", "identify"});
     ToolSpec tool;
     tool.a = r.Number(r.Require(t, "tool", "a"), "tool.a", false);
-    tool.alpha = r.Number(r.Require(t, "tool", "alpha"), "tool.alpha", true);
+    tool.alpha = ConstantAngle(r, r.Require(t, "tool", "alpha"), "tool.alpha");
     tool.d = r.Number(r.Require(t, "tool", "d"), "tool.d", false);
-    tool.theta = r.Number(r.Require(t, "tool", "theta"), "tool.theta", true);
+    tool.theta = ConstantAngle(r, r.Require(t, "tool", "theta"), "tool.theta");
     if (t["identify"]) tool.identify = r.Bool(t["identify"], "tool.identify");
     spec.tool = tool;
   }
+  CheckArmSize(spec, source);
   return spec;
+}
+
+void CheckArmSize(const RobotSpec& spec, const std::string& source) {
+  double total = 0.0;
+  for (const LinkSpec& l : spec.links)
+    total += spec.convention == Convention::kUrdf ? l.xyz.norm() : std::abs(l.a) + std::abs(l.d);
+  if (spec.tool) total += std::abs(spec.tool->a) + std::abs(spec.tool->d);
+  if (!(total > detail::kMaxLength)) return;
+  std::ostringstream o;
+  o << source << ": links: the arm's lengths add up to " << total
+    << " m, beyond 100 m: no arm is that long (the largest industrial arms reach about 4 m)"
+    << (total * 1e-3 <= detail::kMaxLength ? ": millimetres? rcal files are in metres" : "");
+  throw std::runtime_error(o.str());
 }
 
 RobotSpec LoadRobotSpec(const std::filesystem::path& path) {

@@ -29,6 +29,12 @@ struct ImuCsvSettings {
   double mag_range_uT = 5000.0;        ///< largest |mag_*| [µT]
   double position_range_m = 1e6;       ///< largest |pos_*| [m]
   double quaternion_tolerance = 1e-3;  ///< largest | |q| − 1 | of a truth quaternion
+  /// Refuse a stream whose units are not rcal's, naming the likely one: the median |acc| outside
+  /// g/3 … 3g (in g? milli-g?), the median |mag| outside a factor of 3 of Earth's 22 … 67 µT
+  /// (tesla? gauss? milligauss? nanotesla?; all zero is a stream without magnetometer, let
+  /// through), the magnetic field turning in the IMU frame at π/180 of the rate the gyro reads
+  /// (°/s?). A range refusal names the likely unit too.
+  bool check_units = true;
 };
 
 /// One IMU stream, a sample per row.

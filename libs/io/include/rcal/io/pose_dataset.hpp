@@ -112,7 +112,14 @@ double ArmReach(const kinematics::KinematicModel& model, bool include_base);
 /// bounded by (1 + √3)·ArmReach(model, false) (the median of points in a ball of radius R lies
 /// within √3·R of its centre). Throws std::runtime_error "SOURCE: row N column 'q2': ..." naming
 /// the first offending row (PoseSample::row, else the sample's position in the dataset) and
-/// column.
+/// column, and, when the whole file shows it, the likely cause:
+/// - "joints in degrees?": some joint the file limits to less than a turn spans more than two
+///   turns (4π; prismatic: more than ten times its travel), or a wrapping joint reads beyond its
+///   bound, while every revolute (prismatic) reading × π/180 (× 1e-3) lies within its limits;
+/// - "is this the robot that was measured?": more than one pose has a joint beyond the limits
+///   (one can be a corrupted cell) and no unit explains it;
+/// - "positions in millimetres?": half the positions lie beyond the reach (one corrupted row
+///   does not move the median) and × 1e-3 every one lies within it.
 void CheckPosesPlausible(const PoseDataset& data, const kinematics::KinematicModel& model,
                          const std::string& source, const PosePlausibility& settings = {});
 

@@ -51,7 +51,11 @@ struct UrdfOptions {
 };
 
 /// The robot description (convention urdf) of the chain in URDF text. `source` names the file in
-/// error messages. Throws std::runtime_error naming the file and the link or joint at fault.
+/// error messages. Throws std::runtime_error naming the file and the link or joint at fault,
+/// also for values no arm has, naming the likely unit where it explains them: an origin xyz or a
+/// prismatic limit beyond 100 m, or the chain's origins adding up to more (CheckArmSize),
+/// "millimetres?"; a chain joint's origin roll, pitch or yaw beyond a turn (2π, as written: the
+/// parsed rotation forgets it) or a revolute limit beyond two turns (4π), "degrees?".
 RobotSpec ParseUrdfRobotSpec(const std::string& urdf_xml, const std::string& source,
                              const UrdfOptions& options = {});
 /// Reads a URDF file: ParseUrdfRobotSpec of its text.

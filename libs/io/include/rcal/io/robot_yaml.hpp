@@ -4,8 +4,12 @@
 // written as a number or as a readable multiple of π: `pi`, `-pi/2`, `2*pi/3`, `0.5*pi`.
 // Unknown keys, missing required keys, wrong types and non-finite values are errors naming the
 // file and the key path, e.g. `grb3016.yaml: links[2].alpah: unknown key (line 14)`. So are
-// absurd values: a length (or prismatic limit) beyond 100 m, an angle (or revolute limit) beyond
-// 100 rad, a lower limit not below the upper one.
+// absurd values: a length (or prismatic limit) beyond 100 m, or lengths adding up to more
+// (CheckArmSize); a constant angle (alpha, theta, beta, rpy) beyond a turn (2π) or a revolute
+// limit beyond two turns (4π); a lower limit not below the upper one. Where millimetres or
+// degrees explain the value the message says so, e.g.
+// `links[0].alpha: '-90' rad is beyond a turn (2π): degrees? rcal files are in radians: -90° is
+// -pi/2 (line 15)`.
 //
 //   schema: rcal.robot/1                     # required, exactly this
 //   name: grb3016                            # required
@@ -114,6 +118,13 @@ RobotSpec LoadRobotSpec(const std::filesystem::path& path);
 
 /// Builds the kinematic model a spec describes. Throws std::runtime_error on an inconsistent spec.
 kinematics::KinematicModel BuildModel(const RobotSpec& spec);
+
+/// Refuses a robot whose links add up (Σ|a| + |d| per D–H link and tool, |xyz| per URDF origin)
+/// to more than 100 m, the bound of one length: no arm is that long (the largest industrial arms
+/// reach about 4 m), while every length alone may be below it (a small arm in millimetres). The
+/// message names millimetres. ParseRobotYaml and ParseUrdfRobotSpec call it. Throws
+/// std::runtime_error "SOURCE: links: ...".
+void CheckArmSize(const RobotSpec& spec, const std::string& source);
 
 /// Loads a robot YAML file straight into a model: BuildModel(LoadRobotSpec(path)).
 kinematics::KinematicModel LoadRobotYaml(const std::filesystem::path& path);

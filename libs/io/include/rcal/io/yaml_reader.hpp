@@ -13,7 +13,9 @@
 #include <Eigen/Core>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <limits>
+#include <numbers>
 #include <optional>
 #include <set>
 #include <stdexcept>
@@ -133,36 +135,62 @@ class Reader {
     Fail(path, "expected true or false, got " + Kind(n), &n);
   }
 
-  /// A length [m] (plain number) or, with `angle`, an angle [rad] (number or multiple of pi).
+  /// A length [m] (plain number) or, with `angle`, an angle [rad] (number or multiple of pi),
+  /// within kMaxLength or kMaxAngle.
   double Number(const YAML::Node& n, const std::string& path, bool angle) const {
-    if (!n.IsScalar() || n.Scalar().empty())
-      Fail(path,
-           std::string("expected ") + (angle ? "an angle [rad]" : "a number") + ", got " + Kind(n),
-           &n);
+    const double v = Parse(n, path, angle);
     const std::string& s = n.Scalar();
-    std::optional<double> v = YamlSpecial(s);
-    if (v) {
-      // .nan / .inf: reported as not finite below
-    } else if (angle) {
-      v = ParseAngle(s);
-    } else {
-      v = PlainNumber(s);
+    // Beyond the bound, the likely unit when it gives a value within it: millimetres (a 600 mm
+    // link as 600 m), degrees up to two turns (a limit of 170° as 170 rad).
+    if (!angle && std::abs(v) > kMaxLength)
+      Fail(path,
+           "'" + s + "' is beyond 100 m: not an arm's dimension" +
+               (std::abs(v) * 1e-3 <= kMaxLength ? ": millimetres? rcal files are in metres" : ""),
+           &n);
+    if (angle && std::abs(v) > kMaxAngle)
+      Fail(path,
+           "'" + s + "' is beyond 100 rad" +
+               (std::abs(v) <= 720.0 ? ": degrees? rcal files are in radians (a number or a "
+                                       "multiple of pi such as -pi/2)"
+                                     : ""),
+           &n);
+    return v;
+  }
+
+  /// An angle [rad] within ±`bound` (1e-3 rad of rounding allowed: 6.2832 for 2π); `bound_text`
+  /// names the bound in the message ("a turn (2π)"). Beyond it, when the value read as degrees
+  /// lies within the bound: "degrees?" and the value in radians ("-90° is -pi/2"). A robot's
+  /// constant angles are within a turn and its joint limits within two: an angle written in
+  /// degrees (alpha: -90, upper: 170) is beyond them.
+  double BoundedAngle(const YAML::Node& n, const std::string& path, double bound,
+                      const std::string& bound_text) const {
+    const double v = Parse(n, path, true);
+    if (std::abs(v) <= bound + kAngleRounding) return v;
+    Fail(path, "'" + n.Scalar() + "' rad is beyond " + bound_text + DegreesHint(v, bound), &n);
+  }
+
+  /// ": degrees? rcal files are in radians: 170° is 17*pi/18" when `value` read as degrees lies
+  /// within ±bound [rad], else empty.
+  static std::string DegreesHint(double value, double bound) {
+    if (!(std::abs(value) * std::numbers::pi / 180.0 <= bound + kAngleRounding)) return "";
+    return ": degrees? rcal files are in radians: " + ShortText(value) + "° is " +
+           DegreesAsRadians(value);
+  }
+
+  /// Degrees as radians in a robot file's words: a multiple of pi when exact ("-pi/2",
+  /// "17*pi/18"), else the number to 6 digits.
+  static std::string DegreesAsRadians(double degrees) {
+    for (const int q : {1, 2, 3, 4, 6, 9, 12, 18, 36, 180}) {
+      const double p = degrees * q / 180.0;
+      if (std::abs(p - std::round(p)) > 1e-9) continue;
+      const long long k = std::llround(p);
+      if (k == 0) return "0";
+      const std::string num = k == 1 ? "pi" : k == -1 ? "-pi" : std::to_string(k) + "*pi";
+      return q == 1 ? num : num + "/" + std::to_string(q);
     }
-    if (!v) {
-      if (!angle && ParseAngle(s))
-        Fail(path, "expected a number [m], got '" + s + "' (pi is for angles only)", &n);
-      Fail(
-          path,
-          std::string("expected ") +
-              (angle ? "an angle [rad] (a number or a multiple of pi such as -pi/2)" : "a number") +
-              ", got '" + s + "'",
-          &n);
-    }
-    if (!std::isfinite(*v)) Fail(path, "value is not finite: '" + s + "'", &n);
-    if (!angle && std::abs(*v) > kMaxLength)
-      Fail(path, "'" + s + "' is beyond 100 m: not an arm's dimension", &n);
-    if (angle && std::abs(*v) > kMaxAngle) Fail(path, "'" + s + "' is beyond 100 rad", &n);
-    return *v;
+    char buf[32];
+    std::snprintf(buf, sizeof(buf), "%.6g", degrees * std::numbers::pi / 180.0);
+    return buf;
   }
 
   Eigen::Vector3d Vec3(const YAML::Node& n, const std::string& path, bool angle) const {
@@ -224,6 +252,45 @@ class Reader {
   const std::string& source() const { return source_; }
 
  private:
+  /// Rounding allowed beyond an angle bound [rad] (6.2832 written for 2π).
+  static constexpr double kAngleRounding = 1e-3;
+
+  /// A finite length (plain number) or angle (number or multiple of pi), no bound.
+  double Parse(const YAML::Node& n, const std::string& path, bool angle) const {
+    if (!n.IsScalar() || n.Scalar().empty())
+      Fail(path,
+           std::string("expected ") + (angle ? "an angle [rad]" : "a number") + ", got " + Kind(n),
+           &n);
+    const std::string& s = n.Scalar();
+    std::optional<double> v = YamlSpecial(s);
+    if (v) {
+      // .nan / .inf: reported as not finite below
+    } else if (angle) {
+      v = ParseAngle(s);
+    } else {
+      v = PlainNumber(s);
+    }
+    if (!v) {
+      if (!angle && ParseAngle(s))
+        Fail(path, "expected a number [m], got '" + s + "' (pi is for angles only)", &n);
+      Fail(
+          path,
+          std::string("expected ") +
+              (angle ? "an angle [rad] (a number or a multiple of pi such as -pi/2)" : "a number") +
+              ", got '" + s + "'",
+          &n);
+    }
+    if (!std::isfinite(*v)) Fail(path, "value is not finite: '" + s + "'", &n);
+    return *v;
+  }
+
+  /// The shortest text of a number that reads back the same.
+  static std::string ShortText(double v) {
+    char buf[64];
+    const auto [ptr, ec] = std::to_chars(buf, buf + sizeof(buf), v);
+    return ec == std::errc() ? std::string(buf, ptr) : std::to_string(v);
+  }
+
   std::string source_;
   std::string kind_;
 };
