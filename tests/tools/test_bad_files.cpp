@@ -122,7 +122,7 @@ TEST(BadFiles, CalibrateRefusesAPositionBeyondTheArmsReach) {
 // The UR10 data with every cell of columns [first, last] (0-based) multiplied by `factor`: the
 // file as a user who wrote another unit gives it.
 fs::path Ur10Scaled(const fs::path& dir, int first, int last, double factor) {
-  std::vector<std::string> lines = Lines(Read(kUr10 + "/calibration.csv"));
+  std::vector<std::string> lines = Lines(Read(kUr10Data));
   for (size_t r = 1; r < lines.size(); ++r) {
     if (lines[r].empty()) continue;
     for (int c = first; c <= last; ++c) {
@@ -147,7 +147,7 @@ TEST(BadFiles, CalibrateRefusesJointsInDegreesSayingSo) {
   const fs::path d = TempDir("degrees");
   const Result r =
       RunRcal("calibrate " + Ur10Scaled(d, 6, 11, 180 / 3.14159265358979323846).string() +
-              " --robot " + kUr10 + "/robot.urdf --out " + (d / "out").string());
+              " --robot " + kUr10 + " --out " + (d / "out").string());
   ExpectRefused(r, "row 1 column 'wrist_2_joint' (joint 'wrist_2_joint') is 102.226 rad",
                 d / "out");
   EXPECT_NE(r.output.find("every revolute joint's readings × π/180 lie within its limits: joints "
@@ -160,7 +160,7 @@ TEST(BadFiles, CalibrateRefusesPositionsInMillimetresSayingSo) {
   // Columns 0-2 are the marker position x1, y1, z1.
   const fs::path d = TempDir("millimetres");
   const Result r = RunRcal("calibrate " + Ur10Scaled(d, 0, 2, 1000).string() + " --robot " + kUr10 +
-                           "/robot.urdf --out " + (d / "out").string());
+                           " --out " + (d / "out").string());
   ExpectRefused(r, "beyond the arm's reach", d / "out");
   EXPECT_NE(r.output.find("and × 1e-3 every one lies within it: positions in millimetres? rcal "
                           "reads metres"),
@@ -207,7 +207,7 @@ TEST(BadFiles, CalibrateNamesTheLikelyCauseOnStderr) {
   const fs::path d = TempDir("stderr");
   SplitResult r =
       RunRcalSplit("calibrate " + Ur10Scaled(d, 6, 11, 180 / 3.14159265358979323846).string() +
-                       " --robot " + kUr10 + "/robot.urdf --out " + (d / "out").string(),
+                       " --robot " + kUr10 + " --out " + (d / "out").string(),
                    d);
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("joints in degrees? rcal reads radians"), std::string::npos) << r.err;
@@ -321,11 +321,17 @@ TEST(BadFiles, ARobotFileInDegreesOrMillimetresIsRefusedNamingTheUnitOnStderr) {
             0);
   std::ofstream(d / "empty.lcmlog").close();
   const auto refused = [&](const std::string& robot, const std::string& message) {
-    for (const std::string& command :
-         {"calibrate " + (d / "poses.csv").string() + " --out " + (d / "out").string(),
-          "calibrate --log " + (d / "empty.lcmlog").string(),
-          "analyze " + (d / "poses.csv").string() + " --out " + (d / "out").string()}) {
-      const SplitResult r = RunRcalSplit(command + " --robot " + robot, d);
+    // calibrate --log takes its robot from a cell file: the demo's cell naming this robot.
+    std::string cell = Read(RCAL_SOURCE_DIR "/config/cells/grb3016.yaml");
+    cell.replace(cell.find("../robots/grb3016.yaml"), 22, robot);
+    Write(d / "cell.yaml", cell);
+    for (const std::string& command : {"calibrate " + (d / "poses.csv").string() + " --out " +
+                                           (d / "out").string() + " --robot " + robot,
+                                       "calibrate --log " + (d / "empty.lcmlog").string() +
+                                           " --cell " + (d / "cell.yaml").string(),
+                                       "analyze " + (d / "poses.csv").string() + " --out " +
+                                           (d / "out").string() + " --robot " + robot}) {
+      const SplitResult r = RunRcalSplit(command, d);
       EXPECT_EQ(r.exit_code, 1) << command << "\n" << r.out << r.err;
       EXPECT_NE(r.err.find(message), std::string::npos) << command << "\n" << r.err;
       EXPECT_EQ(r.out.find("[error]"), std::string::npos) << command << "\n" << r.out;
@@ -348,14 +354,14 @@ TEST(BadFiles, ARobotFileInDegreesOrMillimetresIsRefusedNamingTheUnitOnStderr) {
           "alpha.yaml: links[0].alpha: '-90' rad is beyond a turn (2π): degrees? rcal files are "
           "in radians: -90° is -pi/2 (line 15)");
   // The UR10's URDF with its origins in millimetres.
-  std::string urdf = Read(kUr10 + "/robot.urdf");
+  std::string urdf = Read(kUr10);
   const std::string from = "xyz=\"-0.6127 0 0\"";
   ASSERT_NE(urdf.find(from), std::string::npos);
   urdf.replace(urdf.find(from), from.size(), "xyz=\"-612.7 0 0\"");
   Write(d / "ur10_mm.urdf", urdf);
   const SplitResult r =
-      RunRcalSplit("calibrate " + kUr10 + "/calibration.csv --robot " +
-                       (d / "ur10_mm.urdf").string() + " --out " + (d / "out").string(),
+      RunRcalSplit("calibrate " + kUr10Data + " --robot " + (d / "ur10_mm.urdf").string() +
+                       " --out " + (d / "out").string(),
                    d);
   EXPECT_EQ(r.exit_code, 1) << r.out << r.err;
   EXPECT_NE(r.err.find("joint 'elbow_joint': origin xyz beyond 100 m: not an arm's dimension "

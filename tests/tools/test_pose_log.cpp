@@ -458,12 +458,12 @@ std::pair<int, std::string> RunCalibrateLog(const fs::path& dir, const std::stri
           std::string((std::istreambuf_iterator<char>(err)), {})};
 }
 
-// Issue 13, item 4, on the log path: the demo cell's log (20 stops of config/cells/grb3016.sim.yaml)
-// with its joints in degrees, its positions in millimetres, given with a cell of another arm or
-// with a cell whose set-up frames are not the recorded cell's (the pose-level cell: every frame
-// fixed at the identity, so the EKF starts 1-2 m off) is refused with the likely cause on
-// stderr, never exit 0. Was: exit 0 and the parameters printed (every one 0 with nothing
-// accepted) in each case.
+// Issue 13, item 4, on the log path: the demo cell's log (20 stops of
+// config/cells/grb3016.sim.yaml) with its joints in degrees, its positions in millimetres, given
+// with a cell of another arm or with a cell whose set-up frames are not the recorded cell's (the
+// pose-level cell: every frame fixed at the identity, so the EKF starts 1-2 m off) is refused with
+// the likely cause on stderr, never exit 0. Was: exit 0 and the parameters printed (every one 0
+// with nothing accepted) in each case.
 TEST(PoseLog, RcalCalibrateLogRefusesWhereUsersTrip) {
   const io::BuiltCell built = io::LoadCell(RCAL_SOURCE_DIR "/config/cells/grb3016.yaml");
   const cell::CellSimSpec sim =
