@@ -53,7 +53,7 @@ Loaded Load(const std::string& name) {
 TEST(CellSimYaml, DemoSimFileIsTodaysSimulatedCell) {
   const Loaded d = Load("grb3016");
   const Cell a = MakeSimCell(d.cell, d.sim);
-  const Cell b = MakeCell(d.cell.robot.spec, 1);  // today's: ekf_identifier --cell-seed 1
+  const Cell b = MakeCell(d.cell.robot.spec, 1);  // the seed-built cell of sim_cell (rcal experiment paper --sensors)
   ASSERT_EQ(a.model.num_params(), b.model.num_params());
   for (int i = 0; i < a.model.num_params(); ++i) {
     EXPECT_EQ(a.model.parameters()[i].name, b.model.parameters()[i].name);

@@ -1,5 +1,5 @@
 // Killing any one process of the sensor-level pipeline mid-run (SIGKILL) is survived: the demo's
-// pipeline (config/processes.demo.yaml: logger, ekf_identifier --cell-seed --checkpoint,
+// pipeline (config/processes.demo.yaml: logger, ekf_identifier --cell --checkpoint,
 // still_window, sensor_acquisition --source sim --level sensors --checkpoint) as real processes
 // over real UDP multicast, inside a private network namespace on a non-default port. In each case
 // one process is SIGKILLed mid-run and started again with the same command line (what the

@@ -1,5 +1,5 @@
 // Issue 11, items 3-5, live: the poison messages sent into a running sensor-level pipeline
-// (sensor_acquisition --level sensors → orientation_kf, still_window → ekf_identifier --cell-seed,
+// (sensor_acquisition --level sensors → orientation_kf, still_window → ekf_identifier --cell,
 // real processes over UDP multicast in a private network namespace) while it calibrates:
 //   - IMU, JOINTS, POSITION and POSE_MEASUREMENT copies with utime = 2^62,
 //   - IMU copies with gyro = 1e300 rad/s (finite, beyond any gyro's range),

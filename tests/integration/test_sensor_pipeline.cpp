@@ -1,7 +1,7 @@
 // The sensor-level pipeline as real processes over real UDP multicast, inside a private network
 // namespace on a non-default port: sensor_acquisition --source sim --level sensors (JOINTS, IMU,
 // POSITION at 100 Hz) → still_window (pose pipeline → POSE_MEASUREMENT) → ekf_identifier
-// --cell-seed (the offline experiment's cell, set-up guess and base set) → KINEMATIC_PARAMS.
+// --cell config/cells/grb3016.yaml (the set-up guessed from the first poses) → KINEMATIC_PARAMS.
 // The final test-pose error against the simulator's truth must be within 1.5× of the offline
 // `rcal experiment paper --sensors` figure for the same seed and pose count (computed here with
 // the same functions: SimulateWindows + RunOnline), and the identifier's estimate must equal, to

@@ -92,8 +92,8 @@ std::vector<std::string> CalibrationImplausible(const CalibrationFigures& f,
                   std::to_string(f.poses) + " poses at its innovation gate (refused beyond " +
                   Sig(100 * b.max_rejected_fraction) +
                   " %): the model does not describe the measurements: set-up frames (world ← "
-                  "base, flange → marker) far from where the EKF starts them (give them in the "
-                  "robot file, or --cell-seed for rcal's simulated cell)? Or " +
+                  "base, flange → marker) far from where the EKF starts them (is the cell file the "
+                  "cell that was recorded, its frames fixed, prior or guess as they are)? Or " +
                   wrong_arm);
   return out;
 }
