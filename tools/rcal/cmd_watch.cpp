@@ -8,6 +8,9 @@
 // after the --poses calibration stops from mt19937_64(S·1000+3), S the sim file's seed).
 // Ends after --poses poses (0: never), on Ctrl-C, or when nothing was heard for --idle seconds
 // after the first pose (wall clock: a viewer, not a filter).
+// The cell (--cell FILE, or the sim file's cell) gives the channels, which parameters are angles,
+// and whether orientation is measured: a positions-only cell has no orientation residual, shown
+// as "(positions only)" instead of the status message's 0.
 #include <atomic>
 #include <chrono>
 #include <csignal>
@@ -37,7 +40,8 @@ void OnSignal(int) {
 
 struct Options {
   std::string lcm_url;
-  std::string sim;  ///< empty: no truth to judge against
+  std::string sim;   ///< empty: no truth to judge against
+  std::string cell;  ///< the cell file (without --sim); empty: the default channels
   int poses = 0, test_poses = 50;
   double idle_s = 30.0;
 };
@@ -47,12 +51,17 @@ int Run(const Options& o) {
   std::signal(SIGTERM, OnSignal);
   transport::LcmTransport t(o.lcm_url);
   std::optional<cell::Cell> cell;
+  std::optional<io::BuiltCell> built;
   std::vector<Eigen::VectorXd> test_q;
   unsigned seed = 0;
+  if (!o.sim.empty() && !o.cell.empty())
+    throw std::runtime_error("watch: --sim names its cell; give --sim or --cell, not both");
+  if (!o.cell.empty()) built = io::LoadCell(ResolvePath(o.cell));
   if (!o.sim.empty()) {
     const cell::CellSimSpec sim_spec = cell::LoadCellSimSpec(ResolvePath(o.sim));
     seed = sim_spec.seed;
-    cell = cell::MakeSimCell(io::LoadCell(sim_spec.cell), sim_spec);
+    built = io::LoadCell(sim_spec.cell);
+    cell = cell::MakeSimCell(*built, sim_spec);
     sim::Rng rng(seed * 1000 + 3);
     sim::SampleJoints(cell->model, 1, rng);  // home
     const auto stops = sim::SampleJoints(cell->model, o.poses + o.test_poses, rng);
@@ -63,14 +72,15 @@ int Run(const Options& o) {
   int last_poses = 0;
   auto last_heard = std::chrono::steady_clock::now();
   bool heard = false;
-  t.Subscribe<kinematic_params_t>(transport::channels::kKinematicParams,
-                                  [&](const kinematic_params_t& m) {
-                                    params = m;
-                                    last_heard = std::chrono::steady_clock::now();
-                                    heard = true;
-                                  });
+  const io::CellChannels channels = built ? built->spec.channels : io::CellChannels{};
+  const bool orientation = !built || built->spec.measures_orientation();
+  t.Subscribe<kinematic_params_t>(channels.kinematic_params, [&](const kinematic_params_t& m) {
+    params = m;
+    last_heard = std::chrono::steady_clock::now();
+    heard = true;
+  });
   t.Subscribe<calibration_status_t>(
-      transport::channels::kCalibrationStatus, [&](const calibration_status_t& s) {
+      channels.calibration_status, [&](const calibration_status_t& s) {
         last_heard = std::chrono::steady_clock::now();
         if (!params || params->utime != s.utime || params->poses_used == last_poses) return;
         const kinematic_params_t& p = *params;
@@ -79,8 +89,8 @@ int Run(const Options& o) {
           for (int i = 0; i < p.num_params; ++i) {
             const double d = p.values[i] - previous->values[i];
             if (p.sigmas[i] > 0) max_step = std::max(max_step, std::abs(d) / p.sigmas[i]);
-            const bool angle = cell && i < cell->model.num_params()
-                                   ? cell->model.parameters()[i].is_angle
+            const bool angle = built && i < built->model.num_params()
+                                   ? built->model.parameters()[i].is_angle
                                    : (p.names[i].find("alpha") != std::string::npos ||
                                       p.names[i].find("theta") != std::string::npos ||
                                       p.names[i].find("beta") != std::string::npos ||
@@ -102,12 +112,16 @@ int Run(const Options& o) {
             test = "  (" + error + ")";
           }
         }
+        char rms_orientation[32] = "(positions only)";
+        if (orientation)
+          std::snprintf(rms_orientation, sizeof rms_orientation, "%6.3f mrad",
+                        s.rms_orientation_residual * 1e3);
         std::printf(
             "pose %3d  t %8.2f s  change max %7.2f σ (|Δ| %7.3f mm, %7.3f mrad)  RMS residual "
-            "%6.3f mm %6.3f mrad  rejected %d%s%s\n",
+            "%6.3f mm %s  rejected %d%s%s\n",
             p.poses_used, s.utime * 1e-6, max_step, std::sqrt(d_len) * 1e3, std::sqrt(d_ang) * 1e3,
-            s.rms_position_residual * 1e3, s.rms_orientation_residual * 1e3, s.poses_rejected,
-            test.c_str(), s.converged ? "  converged" : "");
+            s.rms_position_residual * 1e3, rms_orientation, s.poses_rejected, test.c_str(),
+            s.converged ? "  converged" : "");
         std::fflush(stdout);
         last_poses = p.poses_used;
         previous = p;
@@ -139,6 +153,9 @@ const RegisterCommand kWatch(
       sub.add_option("--sim", o->sim,
                      "simulated cell (schema rcal.cell_sim/1, as sensor_acquisition --sim): show "
                      "the test error against its truth");
+      sub.add_option("--cell", o->cell,
+                     "cell file (schema rcal.cell/1; a simulated one's comes with --sim): its "
+                     "channels, and no orientation residual for a positions-only cell");
       sub.add_option("--poses", o->poses, "stop after this many poses used (0: Ctrl-C)")
           ->capture_default_str();
       sub.add_option("--test-poses", o->test_poses, "test stops (as the sim's --test-poses)")
