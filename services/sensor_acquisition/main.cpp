@@ -63,10 +63,11 @@
 
 namespace {
 
-// Publishes a source's samples, pacing recorded ones by utime against the wall clock.
-int RunSource(rcal::sensors::SensorSource& source, rcal::transport::Transport& t, double speed) {
+// Publishes a source's samples on `channels`, pacing recorded ones by utime against the wall
+// clock.
+int RunSource(rcal::sensors::SensorSource& source, rcal::transport::Transport& t, double speed,
+              const rcal::io::CellChannels& channels) {
   using namespace rcal;
-  namespace ch = transport::channels;
   transport::Health health("sensor_acquisition");
   spdlog::info("sensor_acquisition: {}, speed {}", source.Describe(), speed);
   std::optional<int64_t> utime0;
@@ -90,13 +91,13 @@ int RunSource(rcal::sensors::SensorSource& source, rcal::transport::Transport& t
     }
     bool ok = false;
     if (const auto* imu = std::get_if<transport::ImuSample>(&*e))
-      ok = t.Publish(ch::kImu, transport::ToMessage(*imu));
+      ok = t.Publish(channels.imu, transport::ToMessage(*imu));
     else if (const auto* pos = std::get_if<transport::PositionSample>(&*e))
-      ok = t.Publish(ch::kPosition, transport::ToMessage(*pos));
+      ok = t.Publish(channels.position, transport::ToMessage(*pos));
     else if (const auto* js = std::get_if<joint_state_t>(&*e))
-      ok = t.Publish(ch::kJoints, *js);
+      ok = t.Publish(channels.joints, *js);
     else
-      ok = t.Publish(ch::kPoseMeasurement, std::get<pose_measurement_t>(*e));
+      ok = t.Publish(channels.pose_measurement, std::get<pose_measurement_t>(*e));
     if (ok) {
       health.Published();
       ++published;
@@ -296,6 +297,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--robot", robot_path,
                  "replay of a pose dataset: the robot (YAML or URDF) its rows are checked against");
+  std::string cell_path;
+  app.add_option("--cell", cell_path,
+                 "replay: the cell file (schema rcal.cell/1): its channels, and its robot for the "
+                 "rows of a pose dataset (instead of --robot)");
   std::string sim_path;
   app.add_option("--sim", sim_path,
                  "sim: the simulated cell (schema rcal.cell_sim/1: the cell file it simulates and "
@@ -360,9 +365,13 @@ int main(int argc, char** argv) {
     transport::LcmTransport t(lcm_url);
     if (source == "replay") {
       const std::string path = services::RepoPath(replay_file);
+      std::optional<io::BuiltCell> replay_cell;
+      if (!cell_path.empty()) replay_cell = io::LoadCell(services::RepoPath(cell_path));
+      const io::CellChannels channels =
+          replay_cell ? replay_cell->spec.channels : io::CellChannels{};
       if (sensors::IsRawStreamCsv(path)) {
         sensors::RawCsvReplaySource src(path, replay);
-        return RunSource(src, t, speed);
+        return RunSource(src, t, speed, channels);
       }
       sensors::PoseDatasetReplaySettings ps;
       ps.rate = rate;
@@ -372,17 +381,19 @@ int main(int argc, char** argv) {
       ps.include_test = include_test;
       // With --robot, the rows are checked against it (limits, reach) before any is published.
       std::optional<io::LoadedRobot> replay_robot;
-      if (app.get_option("--robot")->count() > 0) {
+      if (replay_cell) {
+        ps.model = &replay_cell->model;
+      } else if (app.get_option("--robot")->count() > 0) {
         replay_robot = io::LoadRobot(services::RepoPath(robot_path));
         ps.model = &replay_robot->model;
       } else {
         spdlog::warn(
             "sensor_acquisition: {} is not checked against a robot's joint limits and "
-            "reach (give --robot)",
+            "reach (give --cell or --robot)",
             path);
       }
       sensors::PoseDatasetReplaySource src(path, ps);
-      return RunSource(src, t, speed);
+      return RunSource(src, t, speed, channels);
     }
     if (sim_path.empty())
       sim_path = level == "sensors" ? "config/cells/grb3016.sim.yaml"

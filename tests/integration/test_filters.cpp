@@ -294,10 +294,10 @@ TEST_F(Filters, PositionKfSurvivesASigkilledOrientationKf) {
 }
 
 // --cell FILE: both filters take the IMU's earth frame, the position sensor's σ (its largest per
-// axis) and the channels from the cell file. A cell saying ENU, σ (0.5, 1, 0.2) mm and its own
-// ORIENTATION/TOOL_POSITION channel names gives exactly the reference (ENU, 1 mm) on those
-// channels; the defaults (NED, other channels) would give nothing there. A cell without an IMU is
-// refused by both, naming the key.
+// axis) and the channels from the cell file, and the replay source its channels. A cell saying ENU,
+// σ (0.5, 1, 0.2) mm and its own ORIENTATION/TOOL_POSITION channel names gives exactly the
+// reference (ENU, 1 mm) on those channels; the defaults (NED, other channels) would give nothing
+// there. A cell without an IMU is refused by both, naming the key.
 TEST_F(Filters, TheCellFileGivesEarthFrameSigmaAndChannels) {
   RCAL_IN_NAMESPACE("Filters.TheCellFileGivesEarthFrameSigmaAndChannels");
   std::string text = io::ReadFile(RCAL_SOURCE_DIR "/config/cells/grb3016.yaml");
@@ -311,7 +311,9 @@ TEST_F(Filters, TheCellFileGivesEarthFrameSigmaAndChannels) {
   const auto sigma = text.find("    sigma: [");
   ASSERT_NE(sigma, std::string::npos);
   text.replace(sigma, text.find('\n', sigma) - sigma, "    sigma: [5e-4, 1e-3, 2e-4]");
-  text += "channels: {orientation: ORIENTATION_C, tool_position: TOOL_POSITION_C}\n";
+  text +=
+      "channels: {imu: IMU_C, position: POSITION_C, orientation: ORIENTATION_C, tool_position: "
+      "TOOL_POSITION_C}\n";
   const std::string cell = (dir_ / "cell.yaml").string();
   io::AtomicWriteFile(cell, text);
 
@@ -322,9 +324,11 @@ TEST_F(Filters, TheCellFileGivesEarthFrameSigmaAndChannels) {
   ASSERT_TRUE(
       l.WaitFor([&] { return l.health.count("orientation_kf") && l.health.count("position_kf"); }));
   constexpr int kCellRows = 1000;
-  const pid_t src = Start({RCAL_SENSOR_ACQUISITION, "--source", "replay", kTrial, "--max-rows",
-                           std::to_string(kCellRows), "--speed", "4", "--lcm-url", kUrl},
-                          "sensor_acquisition.log");
+  // The replay publishes on the cell's IMU and POSITION channels too.
+  const pid_t src =
+      Start({RCAL_SENSOR_ACQUISITION, "--source", "replay", kTrial, "--max-rows",
+             std::to_string(kCellRows), "--speed", "4", "--cell", cell, "--lcm-url", kUrl},
+            "sensor_acquisition.log");
   // Read while the replay runs (each HandleTimeout takes one message), until it has finished and
   // nothing came for a second.
   bool src_done = false;
