@@ -28,6 +28,7 @@
 
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/cell_yaml.hpp"
+#include "rcal/services/cell_imu.hpp"
 #include "rcal/services/common.hpp"
 #include "rcal/services/time_options.hpp"
 #include "rcal/transport/channels.hpp"
@@ -99,17 +100,8 @@ int main(int argc, char** argv) {
   try {
     if (!cell_path.empty()) {
       const io::CellSpec cell = io::LoadCellSpec(services::RepoPath(cell_path));
-      if (!cell.imu)
-        throw std::runtime_error(cell.source +
-                                 ": sensors.imu: absent, the cell has no IMU for orientation_kf");
-      if (app.count("--earth") == 0) {
-        settings.earth = cell.imu->earth;
-        earth = cell.imu->earth == estimation::EarthFrame::kEnu ? "enu" : "ned";
-      }
-      if (app.count("--gravity") == 0) settings.gravity = cell.imu->gravity;
-      options.ranges.gyro = cell.imu->gyro_range;
-      options.ranges.accel = cell.imu->accel_range;
-      options.ranges.mag = cell.imu->mag_range;
+      services::ApplyCellImu(cell, app, "orientation_kf", &settings.earth, &earth,
+                             &settings.gravity, &options.ranges);
       options.imu_channel = cell.channels.imu;
       options.orientation_channel = cell.channels.orientation;
       options.health_channel = cell.channels.health;

@@ -12,6 +12,7 @@
 #include <stdexcept>
 
 #include "rcal/io/cell_yaml.hpp"
+#include "rcal/services/cell_imu.hpp"
 #include "rcal/services/common.hpp"
 #include "rcal/services/time_options.hpp"
 #include "rcal/transport/filter_nodes.hpp"
@@ -55,20 +56,11 @@ int main(int argc, char** argv) {
   try {
     if (!cell_path.empty()) {
       const io::CellSpec cell = io::LoadCellSpec(services::RepoPath(cell_path));
-      if (!cell.imu)
-        throw std::runtime_error(cell.source +
-                                 ": sensors.imu: absent, the cell has no IMU for position_kf");
-      if (app.count("--earth") == 0) {
-        settings.earth = cell.imu->earth;
-        earth = cell.imu->earth == estimation::EarthFrame::kEnu ? "enu" : "ned";
-      }
-      if (app.count("--gravity") == 0) settings.gravity = cell.imu->gravity;
+      services::ApplyCellImu(cell, app, "position_kf", &settings.earth, &earth, &settings.gravity,
+                             &options.ranges);
       if (app.count("--position-sigma") == 0)
         settings.position_sigma = cell.position.sigma.maxCoeff();
       if (app.count("--marker-id") == 0) options.marker_id = cell.position.markers.front();
-      options.ranges.gyro = cell.imu->gyro_range;
-      options.ranges.accel = cell.imu->accel_range;
-      options.ranges.mag = cell.imu->mag_range;
       options.imu_channel = cell.channels.imu;
       options.orientation_channel = cell.channels.orientation;
       options.position_channel = cell.channels.position;
