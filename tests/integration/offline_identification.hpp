@@ -17,6 +17,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -68,20 +69,31 @@ inline const io::BuiltCell& DemoCell() {
   return cell;
 }
 
+/// OnlineIdentification(`cell`) run on `used` in order, each message decoded against the cell's
+/// model; a pose it refuses is a test failure. (A unique_ptr: the identification holds its cell.)
+inline std::unique_ptr<cell::OnlineIdentification> Replayed(
+    const io::BuiltCell& cell, const std::vector<pose_measurement_t>& used) {
+  auto id = std::make_unique<cell::OnlineIdentification>(cell);
+  for (const auto& m : used) {
+    std::string error;
+    const auto z = transport::FromMessage(m, &error, &cell.model);
+    EXPECT_TRUE(z) << error;
+    if (!z) continue;
+    const auto out = id->Add({*z, m.utime, m.pose_index});
+    EXPECT_TRUE(out.rejected.empty()) << out.rejected;
+  }
+  return id;
+}
+
 /// The identifier's final estimate `params` against OnlineIdentification(`cell`) on `used` in
 /// order: equal to kSameAsOffline, value by value and σ by σ.
 inline void ExpectIdentifierEqualsOffline(const io::BuiltCell& cell,
                                           const std::vector<pose_measurement_t>& used,
                                           const kinematic_params_t& params,
                                           const std::string& what) {
-  cell::OnlineIdentification id(cell);
-  for (const auto& m : used) {
-    std::string error;
-    const auto z = transport::FromMessage(m, &error, &cell.model);
-    ASSERT_TRUE(z) << error;
-    const auto out = id.Add({*z, m.utime, m.pose_index});
-    ASSERT_TRUE(out.rejected.empty()) << what << ": " << out.rejected;
-  }
+  SCOPED_TRACE(what);
+  const auto replayed = Replayed(cell, used);
+  const cell::OnlineIdentification& id = *replayed;
   const kinematic_params_t off =
       transport::ToKinematicParams(id.ekf(), id.model().name(), params.utime);
   EXPECT_EQ(params.poses_used, static_cast<int>(used.size())) << what;

@@ -226,17 +226,12 @@ TEST_F(Pipeline, TheUr10TrackerCellWithTwoMarkersCalibratesLive) {
   const auto x = transport::ParamsFromMessage(*l.params, built.model, &error);
   ASSERT_TRUE(x) << error;
   // What the identifier's own covariance predicts there (E|Jₚ δx| with δx ~ N(0, P)).
-  cell::OnlineIdentification id(built);
-  for (const auto& m : used) {
-    const auto z = transport::FromMessage(m, &error, &built.model);
-    ASSERT_TRUE(z) << error;
-    id.Add({*z, m.utime, m.pose_index});
-  }
+  const auto id = integration::Replayed(built, used);
   for (int slot : {0, 1}) {
     const auto view = built.model.ForMarker(slot);
     const double e = identification::ErrorsAgainstTruth(view, *x, x_true, test_q).mean_position_m;
     const double predicted =
-        identification::PredictedMeanErrors(view, id.ekf().identified(), id.ekf().P(), *x, test_q)
+        identification::PredictedMeanErrors(view, id->ekf().identified(), id->ekf().P(), *x, test_q)
             .first;
     std::printf("ur10 cell, marker %d: test error %.4f mm, predicted by its covariance %.4f mm\n",
                 transport::MarkerId(built.model, slot), e * 1e3, predicted * 1e3);

@@ -200,15 +200,9 @@ TEST_F(SensorPipeline, ThePandaCellCalibratesLiveAndItsLogGivesTheSameOffline) {
   EXPECT_EQ(used.size(), poses.size());
   integration::ExpectIdentifierEqualsOffline(built, used, *params, "panda cell");
 
-  cell::OnlineIdentification live(built);
-  for (const auto& m : used) {
-    std::string error;
-    const auto z = transport::FromMessage(m, &error);
-    ASSERT_TRUE(z) << error;
-    live.Add({*z, m.utime, m.pose_index});
-  }
+  const auto live = integration::Replayed(built, used);
   const double online_m =
-      identification::ErrorsAgainstTruth(built.model, live.ekf().x(), x_true, test_q)
+      identification::ErrorsAgainstTruth(built.model, live->ekf().x(), x_true, test_q)
           .mean_position_m;
   const double start_m = identification::ErrorsAgainstTruth(
                              built.model, Eigen::VectorXd::Zero(x_true.size()), x_true, test_q)

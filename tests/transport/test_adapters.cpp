@@ -8,6 +8,7 @@
 #include "fixture.hpp"
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/transport/adapters.hpp"
+#include "rcal/transport/lcm_schema.hpp"
 #include "rcal/transport/lcm_transport.hpp"
 
 namespace rcal::transport {
@@ -140,6 +141,42 @@ TEST(PoseMeasurementAdapter, MarkerIdIsTheCellsAndBecomesTheModelsSlot) {
   ASSERT_TRUE(back) << error;
   EXPECT_EQ(back->marker, 0);
   EXPECT_FALSE(FromMessage(ToMessage(g.poses[0], 10, 0, 3), &error, &g.model));
+}
+
+// A POSE_MEASUREMENT as recorded before marker_id (its fingerprint 0x257fdb5ac9ac24a6, the same
+// fields without marker_id) decodes as marker 0, field for field; anything else keeps its refusal:
+// a damaged old message is refused naming the field, an unknown fingerprint as before.
+TEST(PoseMeasurementAdapter, TheLayoutBeforeMarkerIdStillDecodes) {
+  const Grb3016 g(2);
+  const pose_measurement_t now = ToMessage(g.poses[1], 123456, 9);
+  std::vector<uint8_t> bytes(static_cast<size_t>(now.getEncodedSize()));
+  now.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+  // The old layout: the old fingerprint, marker_id's 4 bytes (after pose_index) left out.
+  std::vector<uint8_t> old(bytes.begin(), bytes.begin() + 20);
+  old.insert(old.end(), bytes.begin() + 24, bytes.end());
+  const uint8_t before[8] = {0x25, 0x7f, 0xdb, 0x5a, 0xc9, 0xac, 0x24, 0xa6};
+  std::copy(before, before + 8, old.begin());
+  pose_measurement_t msg;
+  EXPECT_NE(DecodeLcm(old.data(), old.size(), &msg), "");  // the plain decoder refuses it
+  ASSERT_EQ(DecodePoseMeasurement(old.data(), old.size(), &msg), "");
+  EXPECT_EQ(msg.utime, 123456);
+  EXPECT_EQ(msg.pose_index, 9);
+  EXPECT_EQ(msg.marker_id, 0);
+  EXPECT_EQ(msg.q, now.q);
+  EXPECT_EQ(msg.covariance, now.covariance);
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(msg.q_EI[i], now.q_EI[i]);
+  // Today's layout decodes as it is.
+  ASSERT_EQ(DecodePoseMeasurement(bytes.data(), bytes.size(), &msg), "");
+  EXPECT_EQ(msg.pose_index, 9);
+  // An old message with num_joints = -1: refused naming the field.
+  old[20] = old[21] = old[22] = old[23] = 0xff;
+  EXPECT_NE(DecodePoseMeasurement(old.data(), old.size(), &msg).find("num_joints = -1"),
+            std::string::npos);
+  // Another fingerprint: refused as DecodeLcm refuses it.
+  old[0] ^= 0x01;
+  EXPECT_EQ(DecodePoseMeasurement(old.data(), old.size(), &msg),
+            DecodeLcm(old.data(), old.size(), &msg));
+  EXPECT_NE(DecodePoseMeasurement(old.data(), old.size(), &msg), "");
 }
 
 TEST(KinematicParamsAdapter, RoundTripAndModelChecks) {

@@ -70,7 +70,8 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
     ++events;
     pose_measurement_t msg;
     // Checked against the schema before the generated decoder allocates (num_joints = 2^28 + 6).
-    if (const std::string why = transport::DecodeLcm(e->data.data(), e->data.size(), &msg);
+    if (const std::string why =
+            transport::DecodePoseMeasurement(e->data.data(), e->data.size(), &msg);
         !why.empty()) {
       log->Skip(*e, "does not decode as pose_measurement_t: " + why);
       ++skipped;

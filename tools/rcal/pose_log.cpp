@@ -46,7 +46,8 @@ PoseLog ReadPoseLog(const std::filesystem::path& path, const kinematics::Kinemat
     ++out.events;
     pose_measurement_t msg;
     // Checked against the schema before the generated decoder allocates (num_joints = 2^28 + 6).
-    if (const std::string why = transport::DecodeLcm(e->data.data(), e->data.size(), &msg);
+    if (const std::string why =
+            transport::DecodePoseMeasurement(e->data.data(), e->data.size(), &msg);
         !why.empty()) {
       reader.Skip(*e, "does not decode as pose_measurement_t: " + why);
       skip("does not decode as pose_measurement_t: " + why);

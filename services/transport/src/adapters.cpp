@@ -1,7 +1,12 @@
 #include "rcal/transport/adapters.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
+#include <vector>
+
+#include "rcal/transport/lcm_schema.hpp"
 
 namespace rcal::transport {
 namespace {
@@ -53,6 +58,25 @@ pose_measurement_t ToMessage(const kinematics::PoseMeasurement& m, int64_t utime
     for (int c = 0; c < m.covariance.cols(); ++c)
       msg.covariance[r * m.covariance.cols() + c] = m.covariance(r, c);
   return msg;
+}
+
+std::string DecodePoseMeasurement(const void* data, size_t size, pose_measurement_t* msg) {
+  const std::string why = DecodeLcm(data, size, msg);
+  // The layout before marker_id: fingerprint, utime, pose_index, then today's fields from
+  // num_joints on. Upgraded by inserting marker_id = 0 after pose_index.
+  constexpr uint64_t kBeforeMarkerId = 0x257fdb5ac9ac24a6ULL;
+  constexpr size_t kMarkerIdAt = 8 + 8 + 4;
+  if (why.empty() || size < kMarkerIdAt) return why;
+  const auto* b = static_cast<const uint8_t*>(data);
+  uint64_t hash = 0;
+  for (int i = 0; i < 8; ++i) hash = (hash << 8) | b[i];
+  if (hash != kBeforeMarkerId) return why;
+  std::vector<uint8_t> upgraded(size + 4, 0);
+  const auto now = static_cast<uint64_t>(pose_measurement_t::getHash());
+  for (int i = 0; i < 8; ++i) upgraded[i] = static_cast<uint8_t>(now >> (56 - 8 * i));
+  std::copy(b + 8, b + kMarkerIdAt, upgraded.begin() + 8);
+  std::copy(b + kMarkerIdAt, b + size, upgraded.begin() + kMarkerIdAt + 4);
+  return DecodeLcm(upgraded.data(), upgraded.size(), msg);
 }
 
 int32_t MarkerId(const kinematics::KinematicModel& model, int slot) {

@@ -36,6 +36,11 @@ std::string ModelId(const kinematics::KinematicModel& model);
 pose_measurement_t ToMessage(const kinematics::PoseMeasurement& m, int64_t utime,
                              int32_t pose_index, int32_t marker_id = 0);
 
+/// Decodes a POSE_MEASUREMENT as transport::DecodeLcm does, and also as it was recorded before it
+/// carried marker_id (fingerprint 0x257fdb5ac9ac24a6: the same fields without marker_id), read as
+/// marker 0, so that logs recorded by earlier rcal still calibrate. Returns "" or the refusal.
+std::string DecodePoseMeasurement(const void* data, size_t size, pose_measurement_t* msg);
+
 /// The message's marker id for marker slot `slot` of `model` (0 for a model without markers).
 int32_t MarkerId(const kinematics::KinematicModel& model, int slot);
 
