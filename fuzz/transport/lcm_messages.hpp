@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <string>
 #include <string_view>
+#include <type_traits>
 
 #include "rcal/calibration_status_t.hpp"
 #include "rcal/health_t.hpp"
@@ -40,6 +41,9 @@ inline const kinematics::KinematicModel& Grb3016() {
 inline void Adapt(const pose_measurement_t& m) {
   std::string error;
   if (auto z = transport::FromMessage(m, &error)) (void)kinematics::Validate(Grb3016(), *z);
+  // marker_id mapped to the model's marker slot, as ekf_identifier and calibrate-log do.
+  if (auto z = transport::FromMessage(m, &error, &Grb3016()))
+    (void)kinematics::Validate(Grb3016(), *z);
 }
 inline void Adapt(const ik_request_t& m) {
   std::string error;
@@ -67,6 +71,11 @@ void Decode(const std::uint8_t* data, std::size_t size) {
     std::abort();
   }
   if (why.empty()) Adapt(msg);
+  if constexpr (std::is_same_v<Msg, pose_measurement_t>) {
+    // The log readers' decoder, which also reads the layout before marker_id.
+    Msg upgraded;
+    if (transport::DecodePoseMeasurement(data, size, &upgraded).empty()) Adapt(upgraded);
+  }
 }
 
 /// Decodes as the type with this index (mod 12).

@@ -49,7 +49,69 @@ constexpr const char* kUrl = "udpm://239.255.76.67:7713?ttl=0&recv_buf_size=8388
 constexpr unsigned kSeed = 1;
 constexpr int kCal = 25, kTest = 50;
 
-class SensorPipeline : public ProcessFixture {};
+// What a live run of a cell gave: every POSE_MEASUREMENT published, the identifier's last
+// KINEMATIC_PARAMS and CALIBRATION_STATUS, and its checkpoint file.
+struct LiveRun {
+  std::vector<pose_measurement_t> poses;
+  std::optional<kinematic_params_t> params;
+  std::optional<calibration_status_t> status;
+  std::filesystem::path checkpoint;
+};
+
+class SensorPipeline : public ProcessFixture {
+ protected:
+  // sensor_acquisition --source sim --level sensors --sim SIM --poses CAL --test-poses TEST
+  // (then `more`, at 20x) → still_window → ekf_identifier, both --cell CELL, until CAL poses were
+  // judged; every process then stopped and its exit checked.
+  LiveRun RunCell(const std::string& cell_file, const std::string& sim_file, int cal, int test,
+                  const std::vector<std::string>& more = {}) {
+    LiveRun run;
+    transport::LcmTransport t(kUrl);
+    t.Subscribe<pose_measurement_t>(transport::channels::kPoseMeasurement,
+                                    [&](const pose_measurement_t& m) { run.poses.push_back(m); });
+    t.Subscribe<kinematic_params_t>(transport::channels::kKinematicParams,
+                                    [&](const kinematic_params_t& m) { run.params = m; });
+    t.Subscribe<calibration_status_t>(transport::channels::kCalibrationStatus,
+                                      [&](const calibration_status_t& s) { run.status = s; });
+    run.checkpoint = dir_ / "ekf_identifier.checkpoint.json";
+    const pid_t ekf = Start({RCAL_EKF_IDENTIFIER, "--lcm-url", kUrl, "--cell", cell_file,
+                             "--checkpoint", run.checkpoint.string()},
+                            "ekf_identifier.log");
+    const pid_t sw =
+        Start({RCAL_STILL_WINDOW, "--lcm-url", kUrl, "--cell", cell_file}, "still_window.log");
+    // Both listening (the identifier announces itself with a CALIBRATION_STATUS).
+    EXPECT_TRUE(
+        integration::Until([&] { return run.status.has_value(); }, [&] { t.HandleTimeout(100); }));
+    usleep(300'000);
+    std::vector<std::string> sa_cmd = {RCAL_SENSOR_ACQUISITION,
+                                       "--lcm-url",
+                                       kUrl,
+                                       "--source",
+                                       "sim",
+                                       "--level",
+                                       "sensors",
+                                       "--poses",
+                                       std::to_string(cal),
+                                       "--test-poses",
+                                       std::to_string(test),
+                                       "--speed",
+                                       "20",
+                                       "--sim",
+                                       sim_file};
+    sa_cmd.insert(sa_cmd.end(), more.begin(), more.end());
+    const pid_t sa = Start(sa_cmd, "sensor_acquisition.log");
+    EXPECT_TRUE(integration::Until(
+        [&] {
+          return run.status && run.status->poses_accepted + run.status->poses_rejected >= cal;
+        },
+        [&] { t.HandleTimeout(100); }, 300));
+    EXPECT_EQ(integration::Wait(sa), 0);
+    Reaped(sa);
+    EXPECT_EQ(Stop(sw), 0);
+    EXPECT_EQ(Stop(ekf), 0);
+    return run;
+  }
+};
 
 TEST_F(SensorPipeline, CalibratesToTheOfflineFigure) {
   RCAL_IN_NAMESPACE("SensorPipeline.CalibratesToTheOfflineFigure");
@@ -65,40 +127,10 @@ TEST_F(SensorPipeline, CalibratesToTheOfflineFigure) {
   const auto offline = cell::RunOnline(cell, w.cal, test_q);
   const double offline_mm = offline.test_error_after_pose_mm.back();
 
-  transport::LcmTransport t(kUrl);
-  std::optional<kinematic_params_t> params;
-  std::optional<calibration_status_t> status;
-  std::vector<pose_measurement_t> poses;
-  t.Subscribe<pose_measurement_t>(transport::channels::kPoseMeasurement,
-                                  [&](const pose_measurement_t& m) { poses.push_back(m); });
-  t.Subscribe<kinematic_params_t>(transport::channels::kKinematicParams,
-                                  [&](const kinematic_params_t& m) { params = m; });
-  t.Subscribe<calibration_status_t>(transport::channels::kCalibrationStatus,
-                                    [&](const calibration_status_t& s) { status = s; });
-  const auto checkpoint = dir_ / "ekf_identifier.checkpoint.json";
-  const pid_t ekf =
-      Start({RCAL_EKF_IDENTIFIER, "--lcm-url", kUrl, "--cell",
-             RCAL_SOURCE_DIR "/config/cells/grb3016.yaml", "--checkpoint", checkpoint.string()},
-            "ekf_identifier.log");
-  const pid_t sw = Start({RCAL_STILL_WINDOW, "--lcm-url", kUrl, "--cell",
-                          RCAL_SOURCE_DIR "/config/cells/grb3016.yaml"},
-                         "still_window.log");
-  // Both listening (the identifier announces itself with a CALIBRATION_STATUS).
-  ASSERT_TRUE(
-      integration::Until([&] { return status.has_value(); }, [&] { t.HandleTimeout(100); }));
-  usleep(300'000);
-  const pid_t sa = Start({RCAL_SENSOR_ACQUISITION, "--lcm-url", kUrl, "--source", "sim", "--level",
-                          "sensors", "--seed", std::to_string(kSeed), "--poses",
-                          std::to_string(kCal), "--test-poses", std::to_string(kTest), "--speed",
-                          "20", "--sim", RCAL_SOURCE_DIR "/config/cells/grb3016.sim.yaml"},
-                         "sensor_acquisition.log");
-  ASSERT_TRUE(integration::Until(
-      [&] { return status && status->poses_accepted + status->poses_rejected >= kCal; },
-      [&] { t.HandleTimeout(100); }, 300));
-  EXPECT_EQ(integration::Wait(sa), 0);
-  Reaped(sa);
-  EXPECT_EQ(Stop(sw), 0);
-  EXPECT_EQ(Stop(ekf), 0);
+  const LiveRun run = RunCell(RCAL_SOURCE_DIR "/config/cells/grb3016.yaml",
+                              RCAL_SOURCE_DIR "/config/cells/grb3016.sim.yaml", kCal, kTest,
+                              {"--seed", std::to_string(kSeed)});
+  const auto& [poses, params, status, checkpoint] = run;
 
   ASSERT_TRUE(status.has_value());
   ASSERT_TRUE(params.has_value());
@@ -164,37 +196,10 @@ TEST_F(SensorPipeline, ThePandaCellCalibratesLiveAndItsLogGivesTheSameOffline) {
   const auto stops = sim::SampleJoints(built.model, kPandaCal + kPandaTest, rng);
   const std::vector<Eigen::VectorXd> test_q(stops.begin() + kPandaCal, stops.end());
 
-  transport::LcmTransport t(kUrl);
-  std::optional<kinematic_params_t> params;
-  std::optional<calibration_status_t> status;
-  std::vector<pose_measurement_t> poses;
-  t.Subscribe<pose_measurement_t>(transport::channels::kPoseMeasurement,
-                                  [&](const pose_measurement_t& m) { poses.push_back(m); });
-  t.Subscribe<kinematic_params_t>(transport::channels::kKinematicParams,
-                                  [&](const kinematic_params_t& m) { params = m; });
-  t.Subscribe<calibration_status_t>(transport::channels::kCalibrationStatus,
-                                    [&](const calibration_status_t& s) { status = s; });
-  const auto checkpoint = dir_ / "ekf_identifier.checkpoint.json";
-  const pid_t ekf = Start({RCAL_EKF_IDENTIFIER, "--lcm-url", kUrl, "--cell", cell_file,
-                           "--checkpoint", checkpoint.string()},
-                          "ekf_identifier.log");
-  const pid_t sw =
-      Start({RCAL_STILL_WINDOW, "--lcm-url", kUrl, "--cell", cell_file}, "still_window.log");
-  ASSERT_TRUE(
-      integration::Until([&] { return status.has_value(); }, [&] { t.HandleTimeout(100); }));
-  usleep(300'000);
-  const pid_t sa = Start({RCAL_SENSOR_ACQUISITION, "--lcm-url", kUrl, "--source", "sim", "--level",
-                          "sensors", "--poses", std::to_string(kPandaCal), "--test-poses",
-                          std::to_string(kPandaTest), "--speed", "20", "--sim", sim_file},
-                         "sensor_acquisition.log");
-  ASSERT_TRUE(integration::Until(
-      [&] { return status && status->poses_accepted + status->poses_rejected >= kPandaCal; },
-      [&] { t.HandleTimeout(100); }, 300));
-  EXPECT_EQ(integration::Wait(sa), 0);
-  Reaped(sa);
-  EXPECT_EQ(Stop(sw), 0);
-  EXPECT_EQ(Stop(ekf), 0);
+  const LiveRun run = RunCell(cell_file, sim_file, kPandaCal, kPandaTest);
+  const auto& [poses, params, status, checkpoint] = run;
   ASSERT_TRUE(params.has_value());
+  ASSERT_TRUE(status.has_value());
   EXPECT_EQ(status->poses_accepted, kPandaCal);
   const auto used = integration::UsedPoses(checkpoint, poses);
   EXPECT_EQ(used.size(), poses.size());
