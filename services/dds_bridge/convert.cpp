@@ -1,82 +1,14 @@
 // LCM <-> DDS conversion (see include/rcal/dds/convert.hpp).
 #include "rcal/dds/convert.hpp"
 
+#include "rcal/dds/convert_detail.hpp"
+
 #include <cmath>
 #include <limits>
 #include <type_traits>
 
 namespace rcal::dds {
-namespace {
-
-constexpr int64_t kMicrosPerSecond = 1'000'000;
-
-bool Fail(std::string* error, std::string message) {
-  if (error) *error = std::move(message);
-  return false;
-}
-
-// "field[i]" (appended piecewise: GCC 12's -Wrestrict misfires on "literal" + std::string).
-std::string Indexed(const char* field, size_t i) {
-  std::string s(field);
-  s += '[';
-  s += std::to_string(i);
-  s += ']';
-  return s;
-}
-
-// A finite value, or (allow_inf) +inf/-inf; never NaN. `field` is a string or a callable that
-// returns one (built only on failure: the check runs on every value of every message).
-template <typename Field>
-bool CheckValue(double v, const Field& field, std::string* error, bool allow_inf = false) {
-  if (std::isfinite(v) || (allow_inf && std::isinf(v))) return true;
-  std::string name;
-  if constexpr (std::is_invocable_v<Field>)
-    name = field();
-  else
-    name = field;
-  name += std::isnan(v) ? ": NaN" : ": infinite";
-  return Fail(error, std::move(name));
-}
-
-template <size_t N>
-bool CheckArray(const double (&a)[N], const char* field, std::string* error) {
-  for (size_t i = 0; i < N; ++i)
-    if (!CheckValue(
-            a[i], [&] { return Indexed(field, i); }, error))
-      return false;
-  return true;
-}
-
-char* Dup(const std::string& s) {
-  return dds_string_dup(s.c_str());
-}
-
-std::string Str(const char* s) {
-  return s ? std::string(s) : std::string();
-}
-
-template <typename Seq, typename Elem>
-void AllocSeq(Seq& seq, size_t n) {
-  seq._maximum = seq._length = static_cast<uint32_t>(n);
-  seq._buffer = n ? static_cast<Elem*>(dds_alloc(n * sizeof(Elem))) : nullptr;
-  seq._release = true;
-}
-
-bool FillHeader(std_msgs_msg_dds__Header_& h, int64_t utime, const char* frame,
-                const std::string& field, std::string* error) {
-  auto stamp = StampFromUtime(utime, field, error);
-  if (!stamp) return false;
-  h.stamp = *stamp;
-  h.frame_id = dds_string_dup(frame);
-  return true;
-}
-
-template <size_t N>
-void Copy(double (&to)[N], const double (&from)[N]) {
-  std::memcpy(to, from, sizeof to);
-}
-
-}  // namespace
+using namespace detail;
 
 std::optional<Time> StampFromUtime(int64_t utime, const std::string& field, std::string* error) {
   int64_t sec = utime / kMicrosPerSecond, rest = utime % kMicrosPerSecond;
@@ -98,6 +30,15 @@ std::optional<int64_t> UtimeFromStamp(const Time& stamp, const std::string& fiel
     return std::nullopt;
   }
   return static_cast<int64_t>(stamp.sec) * kMicrosPerSecond + stamp.nanosec / 1000;
+}
+
+bool FillHeader(std_msgs_msg_dds__Header_& h, int64_t utime, const char* frame,
+                const std::string& field, std::string* error) {
+  auto stamp = StampFromUtime(utime, field, error);
+  if (!stamp) return false;
+  h.stamp = *stamp;
+  h.frame_id = dds_string_dup(frame);
+  return true;
 }
 
 // ---- kinematic parameters ---------------------------------------------------------------------

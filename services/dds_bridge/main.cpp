@@ -9,6 +9,22 @@
 // with the latest ORIENTATION received before it. HEALTH at 1 Hz of sensor time (and once at
 // start, with utime 0, when the LCM subscriptions are in place).
 //
+// With --cell, also in the ROS 2 standard types, so stock tools (rviz2, tf2_echo, rqt_runtime_
+// monitor, robot_state_publisher's consumers) show rcal's results with no rcal package:
+//   rt/tf_static           tf2_msgs/TFMessage      the calibrated set-up frames (setup_frames.hpp),
+//                                                  reliable, transient-local, depth 1: re-sent
+//                                                  whole with every new KINEMATIC_PARAMS
+//   rt/robot_description   std_msgs/String         the calibrated URDF (URDF robots: the robot file
+//                                                  with its joint origins corrected and the set-up
+//                                                  frames as fixed joints), transient-local
+//   rt/diagnostics         diagnostic_msgs/DiagnosticArray   every process's HEALTH (level OK,
+//                                                  WARN when it rejected or lost something since
+//                                                  its previous HEALTH, ERROR on a filter reset)
+//                                                  and the drivers' clock offsets (CLOCK_OFFSET)
+//   rt/rcal/tool_pose_with_covariance  geometry_msgs/PoseWithCovarianceStamped  the marker's
+//                                                  position and the IMU's orientation in the world
+//                                                  (the position sensor's frame), best effort
+//
 // Cyclone binds to loopback only (config/cyclonedds-loopback.xml) unless CYCLONEDDS_URI is set,
 // e.g. to config/cyclonedds-network.xml. Bad input (fails to decode, NaN, sizes that disagree,
 // KINEMATIC_PARAMS of another robot) is rejected naming the field, counted in HEALTH, and not
@@ -19,12 +35,20 @@
 #include <CLI/CLI.hpp>
 #include <cerrno>
 #include <cstring>
+#include <map>
 #include <optional>
 
+#include "rcal/clock_offset_t.hpp"
 #include "rcal/dds/convert.hpp"
 #include "rcal/dds/dds_common.hpp"
+#include "rcal/dds/ros2_convert.hpp"
+#include "rcal/dds/setup_frames.hpp"
+#include "rcal/geometry/so3.hpp"
+#include "rcal/health_t.hpp"
+#include "rcal/io/atomic_file.hpp"
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/services/common.hpp"
+#include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/health.hpp"
 #include "rcal/transport/lcm_transport.hpp"
@@ -35,6 +59,7 @@ using namespace rcal;
 
 struct Options {
   std::string robot_id;
+  std::optional<io::BuiltCell> cell;  // --cell: the model for the ROS 2 standard outputs
   io::CellChannels channels;  // the LCM channels it subscribes (the cell's, else the table's)
   std::string lcm_url;
   int dds_domain = -1;  // -1: Cyclone's default (DDS_DOMAIN_DEFAULT)
@@ -52,6 +77,20 @@ class Bridge {
     status_w_ = Writer(participant, dds::Descriptor<dds::CalibrationStatus>(),
                        dds::kCalibrationStatusTopic, latched);
     pose_w_ = Writer(participant, dds::Descriptor<dds::ToolPose>(), dds::kToolPoseTopic, stream);
+    if (o_.cell) {
+      tf_w_ = Writer(participant, dds::Descriptor<dds::TFMessage>(), "rt/tf_static", latched);
+      description_w_ =
+          Writer(participant, dds::Descriptor<dds::RosString>(), "rt/robot_description", latched);
+      dds_qos_t* reliable = dds_create_qos();  // ROS 2's default: reliable, volatile
+      dds_qset_reliability(reliable, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
+      dds_qset_history(reliable, DDS_HISTORY_KEEP_LAST, 10);
+      diagnostics_w_ =
+          Writer(participant, dds::Descriptor<dds::DiagnosticArray>(), "rt/diagnostics", reliable);
+      dds_delete_qos(reliable);
+      pose_cov_w_ = Writer(participant, dds::Descriptor<dds::PoseWithCovarianceStamped>(),
+                           "rt/rcal/tool_pose_with_covariance", stream);
+      prefix_ = o_.cell->spec.ros2 ? o_.cell->spec.ros2->frame_prefix : "rcal_";
+    }
     dds_delete_qos(latched);
     dds_delete_qos(stream);
 
@@ -71,6 +110,12 @@ class Bridge {
     t_.Subscribe<tool_position_estimate_t>(
         o_.channels.tool_position, [this](const tool_position_estimate_t& m) { OnToolPosition(m); },
         undecodable);
+    if (o_.cell) {
+      t_.Subscribe<health_t>(
+          o_.channels.health, [this](const health_t& m) { OnHealth(m); }, undecodable);
+      t_.Subscribe<clock_offset_t>(
+          o_.channels.clock_offset, [this](const clock_offset_t& m) { OnClock(m); }, undecodable);
+    }
     health_.Tick(0, t_);  // "up": the subscriptions are in place
   }
 
@@ -115,8 +160,62 @@ class Bridge {
       Write(params_w_, dds::ToDds(m, &error), error, "kinematic_params");
       spdlog::info("kinematic_params utime {} ({} parameters, {} poses)", m.utime, m.num_params,
                    m.poses_used);
+      if (o_.cell) PublishCalibratedRobot(m);
     }
     health_.Tick(m.utime, t_);
+  }
+
+  // TF of the set-up frames and the calibrated URDF, from the identified parameters.
+  void PublishCalibratedRobot(const kinematic_params_t& m) {
+    std::string error;
+    const auto x = transport::ParamsFromMessage(m, o_.cell->model, &error);
+    if (!x) return Reject(error);
+    const io::RobotSpec cal = io::CalibratedSpec(o_.cell->robot_spec, o_.cell->model, *x);
+    if (cal.earth) R_WE_ = geometry::FromRpy(cal.earth->rpy).transpose();
+    Write(tf_w_, dds::ToRos(dds::SetupTransforms(cal, prefix_), m.utime, &error), error,
+          "tf_static");
+    if (!o_.cell->robot.from_urdf) return;  // a YAML robot: no URDF to correct
+    try {
+      const std::string urdf = io::CalibratedUrdfText(io::ReadFile(o_.cell->robot.source),
+                                                      o_.cell->robot.source.string(),
+                                                      o_.cell->robot_spec, o_.cell->model, *x);
+      Write(description_w_, std::optional{dds::ToRos(urdf)}, "", "robot_description");
+    } catch (const std::exception& e) {
+      health_.Error(std::string("robot_description: ") + e.what());
+    }
+  }
+
+  void OnHealth(const health_t& m) {
+    if (m.process == o_.name) return;  // its own: counted already
+    const auto prev = last_health_.find(m.process);
+    dds::DiagnosticEntry e{
+        m, dds::LevelOf(m, prev == last_health_.end() ? nullptr : &prev->second), {}};
+    last_health_[m.process] = m;
+    std::string error;
+    Write(diagnostics_w_, dds::ToRos({e}, o_.robot_id, m.utime, &error), error, "diagnostics");
+  }
+
+  void OnClock(const clock_offset_t& m) {
+    health_.Received();
+    const auto n = static_cast<size_t>(std::max(m.num_sources, 0));
+    if (m.source.size() != n || m.state.size() != n || m.offset.size() != n || m.sigma.size() != n)
+      return Reject("clock_offset: sizes disagree with num_sources");
+    health_t h{};
+    h.utime = m.utime;
+    h.process = "clock_offsets";
+    dds::DiagnosticEntry e{h, dds::DiagnosticLevel::kOk, {}};
+    static const char* kState[] = {"unknown", "estimating", "locked", "fixed"};
+    for (size_t i = 0; i < n; ++i) {
+      const int st = m.state[i] >= 0 && m.state[i] <= 3 ? m.state[i] : 0;
+      if (st < 2) e.level = dds::DiagnosticLevel::kWarn;
+      e.extra.emplace_back(m.source[i] + ".state", kState[st]);
+      e.extra.emplace_back(m.source[i] + ".offset_s", std::to_string(m.offset[i]));
+      e.extra.emplace_back(m.source[i] + ".sigma_s", std::to_string(m.sigma[i]));
+    }
+    e.health.last_error =
+        e.level == dds::DiagnosticLevel::kOk ? "" : "a clock offset is not locked";
+    std::string error;
+    Write(diagnostics_w_, dds::ToRos({e}, o_.robot_id, m.utime, &error), error, "diagnostics");
   }
 
   void OnStatus(const calibration_status_t& m) {
@@ -144,6 +243,11 @@ class Bridge {
     std::string error;
     Write(pose_w_, dds::ToDds(m, orientation_ ? &*orientation_ : nullptr, o_.robot_id, &error),
           error, "tool_pose");
+    if (o_.cell)
+      Write(pose_cov_w_,
+            dds::ToRos(m, orientation_ ? &*orientation_ : nullptr, R_WE_ ? &*R_WE_ : nullptr,
+                       (prefix_ + "world").c_str(), &error),
+            error, "tool_pose_with_covariance");
     health_.Tick(m.utime, t_);
   }
 
@@ -151,7 +255,11 @@ class Bridge {
   transport::Transport& t_;
   transport::Health health_;
   dds_entity_t params_w_ = 0, status_w_ = 0, pose_w_ = 0;
+  dds_entity_t tf_w_ = 0, description_w_ = 0, diagnostics_w_ = 0, pose_cov_w_ = 0;
   std::optional<orientation_estimate_t> orientation_;
+  std::string prefix_;
+  std::optional<Eigen::Matrix3d> R_WE_;          // world ← earth, from the latest parameters
+  std::map<std::string, health_t> last_health_;  // per process, for the diagnostic level
 };
 
 }  // namespace
@@ -177,9 +285,9 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   if (cell_opt->count() > 0) {
     try {
-      const io::BuiltCell cell = io::LoadCell(rcal::services::RepoPath(cell_path));
-      if (o.robot_id.empty()) o.robot_id = cell.model.name();
-      o.channels = cell.spec.channels;
+      o.cell = io::LoadCell(rcal::services::RepoPath(cell_path));
+      if (o.robot_id.empty()) o.robot_id = o.cell->model.name();
+      o.channels = o.cell->spec.channels;
     } catch (const std::exception& e) {
       spdlog::error("--cell: {}", e.what());
       return 2;

@@ -26,13 +26,20 @@
 // Settings (--cell FILE, schema rcal.cell/1): the pipeline's noise model from the cell's sensors
 // (io::BuiltCell::pipeline), the still-window settings, the IMU's axes (samples turned into the
 // mounting frame, v_I = R_IS·v_S) and the channel names. No simulator is involved.
+// Clocks: when the input stamps its drivers on one clock by estimating their offsets (ros2_input
+// publishes CLOCK_OFFSET), a window is formed only while every source's offset is locked (or
+// fixed) and 3σ of it is below --clock-fraction of the window's length; otherwise the window is
+// refused and counted (HEALTH rejected, naming the source). Without CLOCK_OFFSET (one clock: the
+// simulator, a replay) nothing changes.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <optional>
 
+#include "rcal/clock_offset_t.hpp"
 #include "rcal/estimation/pose_pipeline.hpp"
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/kinematics/measurement.hpp"
@@ -52,8 +59,9 @@ namespace ch = transport::channels;
 class StillWindowNode {
  public:
   StillWindowNode(const io::BuiltCell& cell, const estimation::TimeGateSettings& time,
-                  transport::Transport& t, const std::string& name)
+                  transport::Transport& t, const std::string& name, double clock_fraction)
       : pipeline_(cell.pipeline),
+        clock_fraction_(clock_fraction),
         warmup_(cell.spec.still_window.warmup),
         R_IS_(cell.spec.imu ? cell.spec.imu->R_IS : Eigen::Matrix3d::Identity()),
         channels_(cell.spec.channels),
@@ -71,6 +79,9 @@ class StillWindowNode {
         [this](const std::string& e) { Bad(e); });
     t_.Subscribe<position_sample_t>(
         channels_.position, [this](const position_sample_t& m) { OnPosition(m); },
+        [this](const std::string& e) { Bad(e); });
+    t_.Subscribe<clock_offset_t>(
+        channels_.clock_offset, [this](const clock_offset_t& m) { OnClock(m); },
         [this](const std::string& e) { Bad(e); });
   }
   int emitted() const { return emitted_; }
@@ -153,9 +164,40 @@ class StillWindowNode {
     if (!Admit(position_gate_, m.utime, "position_sample.utime")) return;
     Done(s->utime, pipeline_.AddPosition(Seconds(s->utime), s->p));
   }
+  void OnClock(const clock_offset_t& m) {
+    health_.Received();
+    const auto n = static_cast<size_t>(std::max(m.num_sources, 0));
+    if (m.source.size() != n || m.state.size() != n || m.offset.size() != n || m.sigma.size() != n)
+      return Bad("clock_offset: sizes disagree with num_sources");
+    for (size_t i = 0; i < n; ++i)
+      if (std::isnan(m.sigma[i]) || !std::isfinite(m.offset[i]) || m.state[i] < 0 || m.state[i] > 3)
+        return Bad("clock_offset." + m.source[i] + ": not finite or unknown state");
+    clock_ = m;
+  }
+  // Why a window [t_begin, t_end] may not be formed with the clocks as they are ("" when it
+  // may): a source whose offset is not locked, or whose 3σ is beyond clock_fraction of it.
+  std::string ClockVeto(double length_s) const {
+    if (!clock_) return "";
+    for (int i = 0; i < clock_->num_sources; ++i) {
+      const int state = clock_->state[i];
+      if (state == 3) continue;  // fixed: one clock
+      if (state != 2) return "clock offset of " + clock_->source[i] + " not locked yet";
+      if (3 * clock_->sigma[i] > clock_fraction_ * length_s)
+        return "clock offset of " + clock_->source[i] + " known to ±" +
+               std::to_string(3e3 * clock_->sigma[i]) + " ms (3σ), beyond " +
+               std::to_string(1e3 * clock_fraction_ * length_s) + " ms";
+    }
+    return "";
+  }
   void Emit(const estimation::StillPose& p) {
     if (t_first_ && p.t_begin - *t_first_ < warmup_) {
       spdlog::info("window {:.3f}–{:.3f} s dropped: warm-up", p.t_begin, p.t_end);
+      return;
+    }
+    if (const std::string veto = ClockVeto(p.t_end - p.t_begin); !veto.empty()) {
+      health_.Rejected("window " + std::to_string(p.t_begin) + "–" + std::to_string(p.t_end) +
+                       " s refused: " + veto);
+      spdlog::warn("window {:.3f}–{:.3f} s refused: {}", p.t_begin, p.t_end, veto);
       return;
     }
     const kinematics::PoseMeasurement z = p.ToMeasurement();
@@ -172,6 +214,8 @@ class StillWindowNode {
   }
 
   estimation::PosePipeline pipeline_;
+  double clock_fraction_;
+  std::optional<clock_offset_t> clock_;  // the input's latest CLOCK_OFFSET, if it sends one
   double warmup_;
   Eigen::Matrix3d R_IS_;
   io::CellChannels channels_;
@@ -202,6 +246,12 @@ int main(int argc, char** argv) {
   app.add_option("--lcm-url", lcm_url, "LCM URL");
   services::AddTimeGateOptions(app, &time, "sample");
   app.add_option("--name", name, "process name in HEALTH")->capture_default_str();
+  double clock_fraction = 0.05;
+  app.add_option("--clock-fraction", clock_fraction,
+                 "with CLOCK_OFFSET: a window needs every source's offset locked and its 3σ below "
+                 "this fraction of the window's length")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
   try {
@@ -210,7 +260,7 @@ int main(int argc, char** argv) {
     transport::LcmTransport t(lcm_url);
     spdlog::info("still_window on {}: cell {} ({}), {}", t.url(), cell.spec.name, cell.spec.source,
                  cell.pipeline.use_orientation ? "position and orientation" : "positions only");
-    StillWindowNode node(cell, time, t, name);
+    StillWindowNode node(cell, time, t, name, clock_fraction);
     if (const int rc =
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
         rc != 0)

@@ -284,6 +284,7 @@ TEST(CellYaml, DefaultsAreTodaysSettings) {
   EXPECT_EQ(c.ik_command, ch::kIkCommand);
   EXPECT_EQ(c.health, ch::kHealth);
   EXPECT_EQ(c.supervisor_state, ch::kSupervisorState);
+  EXPECT_EQ(c.clock_offset, ch::kClockOffset);
 }
 
 // A cell that sets nothing but the sensors today's defaults describe builds exactly today's
@@ -603,7 +604,57 @@ INSTANTIATE_TEST_SUITE_P(
         BadCase{kG, "  guess_poses: 6", "  guess_poses: 6\n  guess_poses: 7",
                 "identifier.guess_poses: duplicate key"},
         BadCase{kG, "schema: rcal.cell/1", "schema: [rcal", "malformed YAML"},
-        BadCase{kG, "identifier:", "channels: 5\nidentifier:", "channels: expected a map"}));
+        BadCase{kG, "identifier:", "channels: 5\nidentifier:", "channels: expected a map"},
+        // ros2
+        BadCase{kG, "  domain: 0", "  domain: 300", "ros2.domain: expected an integer from 0"},
+        BadCase{kG, "  imu: /imu/data", "  imu: imu/data",
+                "ros2.imu: 'imu/data' is not a ROS 2 topic name"},
+        BadCase{kG, "  imu: /imu/data", "  imu: /imu//data", "is not a ROS 2 topic name"},
+        BadCase{kG, "  imu: /imu/data\n", "", "ros2.imu: missing key (the cell has an IMU"},
+        BadCase{kG, "  domain: 0", "  domain: 0\n  topics: x", "ros2.topics: unknown key"},
+        BadCase{kG, "type: PointStamped", "type: Point", "ros2.positions[0].type: expected"},
+        BadCase{kG, "{marker: 0, topic: /tracker", "{marker: 4, topic: /tracker",
+                "ros2.positions[0].marker: marker 4 is not in sensors.position.markers"},
+        BadCase{kG, "  max_clock_offset: 0.5 ", "  max_clock_offset: 120 ",
+                "ros2.max_clock_offset: 120 s is beyond 10 s: milliseconds?"},
+        BadCase{kG, "  clock_offsets: estimate ", "  clock_offsets: guess ",
+                "ros2.clock_offsets: expected estimate or none"},
+        BadCase{kP, "panda_joint1, panda_joint2", "panda_joint1, panda_joint1",
+                "ros2.joint_names[1]: 'panda_joint1' twice"}));
+
+TEST(CellYaml, Ros2SectionNamesTheDriversTopics) {
+  const BuiltCell g = LoadCell(CellPath("grb3016.yaml"));
+  ASSERT_TRUE(g.spec.ros2);
+  const Ros2Spec& r = *g.spec.ros2;
+  EXPECT_EQ(r.domain, 0);
+  EXPECT_EQ(r.joint_states, "/joint_states");
+  EXPECT_EQ(r.imu, "/imu/data");
+  EXPECT_EQ(r.magnetic_field, "/imu/mag");
+  EXPECT_EQ(r.imu_frame, "imu_link");
+  ASSERT_EQ(r.positions.size(), 1u);
+  EXPECT_EQ(r.positions[0].topic, "/tracker/point");
+  EXPECT_FALSE(r.positions[0].pose);
+  EXPECT_EQ(r.positions[0].frame_id, "tracker");
+  EXPECT_TRUE(r.estimate_clock_offsets);
+  EXPECT_EQ(r.max_clock_offset, 0.5);
+  // No joint_names: the robot file's.
+  EXPECT_EQ(g.ros2_joint_names,
+            (std::vector<std::string>{"j1", "j2", "j3", "j4", "j5", "j6"}));
+
+  const BuiltCell p = LoadCell(CellPath("panda.yaml"));
+  ASSERT_TRUE(p.spec.ros2);
+  EXPECT_TRUE(p.spec.ros2->positions[0].pose);
+  EXPECT_EQ(p.ros2_joint_names.size(), 7u);
+  EXPECT_EQ(p.ros2_joint_names[6], "panda_joint7");
+  EXPECT_EQ(p.model.joints()[6].name, "joint7");  // the model keeps the URDF's names
+
+  // A cell without the section has none; a count that disagrees with the arm is refused.
+  EXPECT_FALSE(LoadCell(CellPath("ur10.yaml")).spec.ros2);
+  CellSpec bad = LoadCellSpec(CellPath("panda.yaml"));
+  bad.ros2->joint_names.pop_back();
+  const std::string msg = ErrorOf([&] { BuildCell(bad); });
+  EXPECT_NE(msg.find("ros2.joint_names: 6 names, the arm has 7 joints"), std::string::npos) << msg;
+}
 
 // The README's annotated example is a valid cell.
 TEST(CellYaml, ReadmeExampleParses) {

@@ -321,7 +321,8 @@ void ReadChannels(const Reader& r, const YAML::Node& n, const std::string& p, Ce
       {"ik_request", &c->ik_request},
       {"ik_command", &c->ik_command},
       {"health", &c->health},
-      {"supervisor_state", &c->supervisor_state}};
+      {"supervisor_state", &c->supervisor_state},
+      {"clock_offset", &c->clock_offset}};
   std::set<std::string> keys;
   for (const auto& f : fields) keys.insert(f.first);
   r.CheckMap(n, p, keys);
@@ -349,14 +350,113 @@ void ReadChannels(const Reader& r, const YAML::Node& n, const std::string& p, Ce
   }
 }
 
+/// A ROS 2 topic name: '/' then [A-Za-z0-9_/], no empty segment, no trailing '/', ≤ 200.
+void CheckRosTopic(const Reader& r, const YAML::Node& n, const std::string& path,
+                   const std::string& s) {
+  bool ok = s.size() >= 2 && s.size() <= 200 && s[0] == '/' && s.back() != '/' &&
+            s.find("//") == std::string::npos;
+  for (char ch : s)
+    if (!(std::isalnum(static_cast<unsigned char>(ch)) || ch == '_' || ch == '/')) ok = false;
+  if (ok && std::isdigit(static_cast<unsigned char>(s[1]))) ok = false;
+  if (!ok)
+    r.FailAt(path,
+             "'" + s + "' is not a ROS 2 topic name (absolute: /name/of/topic, [A-Za-z0-9_/])", n);
+}
+
+void ReadRos2(const Reader& r, const YAML::Node& n, const std::string& p, const CellSpec& spec,
+              Ros2Spec* o) {
+  r.CheckMap(n, p,
+             {"domain", "joint_states", "joint_names", "imu", "magnetic_field", "imu_frame",
+              "positions", "clock_offsets", "max_clock_offset", "frame_prefix"});
+  if (n["domain"]) o->domain = static_cast<int>(r.Integer(n["domain"], p + ".domain", 0, 232));
+  auto topic = [&](const char* key, std::string* out) {
+    if (!n[key]) return;
+    *out = r.String(n[key], p + "." + key);
+    CheckRosTopic(r, n[key], p + "." + key, *out);
+  };
+  topic("joint_states", &o->joint_states);
+  topic("imu", &o->imu);
+  topic("magnetic_field", &o->magnetic_field);
+  if (n["imu_frame"]) o->imu_frame = r.String(n["imu_frame"], p + ".imu_frame");
+  if (n["joint_names"]) {
+    const YAML::Node list = n["joint_names"];
+    if (!list.IsSequence() || list.size() == 0)
+      r.Fail(p + ".joint_names", "expected a list of joint names, got " + Reader::Kind(list),
+             &list);
+    std::set<std::string> seen;
+    for (size_t i = 0; i < list.size(); ++i) {
+      const std::string sub = p + ".joint_names[" + std::to_string(i) + "]";
+      const std::string name = r.String(list[i], sub);
+      if (name.empty()) r.FailAt(sub, "empty", list[i]);
+      if (!seen.insert(name).second) r.FailAt(sub, "'" + name + "' twice", list[i]);
+      o->joint_names.push_back(name);
+    }
+  }
+  if (spec.imu && o->imu.empty())
+    r.Fail(p + ".imu", "missing key (the cell has an IMU: its sensor_msgs/Imu topic)", &n);
+  if (!spec.imu && !o->imu.empty())
+    r.FailAt(p + ".imu", "the cell has no IMU (sensors.imu)", n["imu"]);
+  if (!o->magnetic_field.empty() && o->imu.empty())
+    r.FailAt(p + ".magnetic_field", "a magnetometer needs the IMU's topic (ros2.imu)",
+             n["magnetic_field"]);
+  const YAML::Node list = r.Require(n, p, "positions");
+  if (!list.IsSequence() || list.size() == 0)
+    r.Fail(p + ".positions", "expected a list, one per marker, got " + Reader::Kind(list), &list);
+  std::set<int> topics_for;
+  for (size_t i = 0; i < list.size(); ++i) {
+    const std::string sub = p + ".positions[" + std::to_string(i) + "]";
+    const YAML::Node e = list[i];
+    r.CheckMap(e, sub, {"marker", "topic", "type", "frame"});
+    Ros2PositionTopic t;
+    t.marker =
+        static_cast<int>(r.Integer(r.Require(e, sub, "marker"), sub + ".marker", 0, 1000000));
+    t.topic = r.String(r.Require(e, sub, "topic"), sub + ".topic");
+    CheckRosTopic(r, e["topic"], sub + ".topic", t.topic);
+    const std::string type = e["type"] ? r.String(e["type"], sub + ".type") : "PointStamped";
+    if (type == "PoseStamped" || type == "geometry_msgs/msg/PoseStamped")
+      t.pose = true;
+    else if (type != "PointStamped" && type != "geometry_msgs/msg/PointStamped")
+      r.FailAt(sub + ".type", "expected PointStamped or PoseStamped, got '" + type + "'",
+               e["type"]);
+    if (e["frame"]) t.frame_id = r.String(e["frame"], sub + ".frame");
+    if (std::find(spec.position.markers.begin(), spec.position.markers.end(), t.marker) ==
+        spec.position.markers.end())
+      r.FailAt(sub + ".marker",
+               "marker " + std::to_string(t.marker) + " is not in sensors.position.markers",
+               e["marker"]);
+    if (!topics_for.insert(t.marker).second)
+      r.FailAt(sub + ".marker", "marker " + std::to_string(t.marker) + " twice", e["marker"]);
+    o->positions.push_back(t);
+  }
+  for (int id : spec.position.markers)
+    if (!topics_for.count(id))
+      r.Fail(p + ".positions", "marker " + std::to_string(id) + " has no topic", &list);
+  if (n["clock_offsets"]) {
+    const std::string mode = r.String(n["clock_offsets"], p + ".clock_offsets");
+    if (mode != "estimate" && mode != "none")
+      r.FailAt(p + ".clock_offsets", "expected estimate or none, got '" + mode + "'",
+               n["clock_offsets"]);
+    o->estimate_clock_offsets = mode == "estimate";
+  }
+  if (n["max_clock_offset"])
+    o->max_clock_offset = Bounded(r, n["max_clock_offset"], p + ".max_clock_offset", "s", 0.01,
+                                  10.0, "milliseconds? (write seconds)", "", false);
+  if (n["frame_prefix"]) {
+    o->frame_prefix = r.String(n["frame_prefix"], p + ".frame_prefix");
+    if (!o->frame_prefix.empty() && !SafeName(o->frame_prefix, 32))
+      r.FailAt(p + ".frame_prefix", "'" + o->frame_prefix + "' is not [A-Za-z][A-Za-z0-9_-]*",
+               n["frame_prefix"]);
+  }
+}
+
 }  // namespace
 
 CellSpec ParseCellYaml(const std::string& text, const std::string& source) {
   const Reader r(source, "cell files");
   const YAML::Node root = detail::LoadYaml(text, source);
-  r.CheckMap(
-      root, "",
-      {"schema", "name", "robot", "frames", "sensors", "still_window", "identifier", "channels"});
+  r.CheckMap(root, "",
+             {"schema", "name", "robot", "frames", "sensors", "still_window", "identifier",
+              "channels", "ros2"});
   const YAML::Node schema = r.Require(root, "", "schema");
   if (r.String(schema, "schema") != kSchema)
     r.Fail("schema", std::string("expected ") + kSchema + ", got '" + schema.Scalar() + "'",
@@ -465,6 +565,10 @@ CellSpec ParseCellYaml(const std::string& text, const std::string& source) {
     ReadStillWindow(r, root["still_window"], "still_window", &spec.still_window);
   if (root["identifier"]) ReadIdentifier(r, root["identifier"], "identifier", &spec.identifier);
   if (root["channels"]) ReadChannels(r, root["channels"], "channels", &spec.channels);
+  if (root["ros2"]) {
+    spec.ros2.emplace();
+    ReadRos2(r, root["ros2"], "ros2", spec, &*spec.ros2);
+  }
   // A set-up guess needs poses enough to fit a rigid frame (GuessSetup: at least 3).
   bool guessed = spec.frames.world_from_base.mode == SetupMode::kGuess;
   for (const auto* f : {&spec.frames.earth_from_world, &spec.frames.flange_to_imu})
@@ -621,6 +725,16 @@ BuiltCell BuildCell(const CellSpec& spec) {
   es.drift_sigma_angle = id.drift_sigma_angle;
   es.gate_probability = id.gate_probability;
   es.gate_after = id.gate_after;
+
+  // The joints as the ROS 2 driver names them: one per model joint.
+  for (const kinematics::Joint& j : c.model.joints()) c.ros2_joint_names.push_back(j.name);
+  if (spec.ros2 && !spec.ros2->joint_names.empty()) {
+    if (spec.ros2->joint_names.size() != c.ros2_joint_names.size())
+      throw std::runtime_error(
+          src + ": ros2.joint_names: " + std::to_string(spec.ros2->joint_names.size()) +
+          " names, the arm has " + std::to_string(c.ros2_joint_names.size()) + " joints");
+    c.ros2_joint_names = spec.ros2->joint_names;
+  }
   return c;
 }
 

@@ -91,7 +91,26 @@
 //     imu: IMU                             # and position, joints, orientation, tool_position,
 //                                          # pose_measurement, kinematic_params,
 //                                          # calibration_status, ik_request, ik_command, health,
-//                                          # supervisor_state; distinct, [A-Za-z0-9_./-], ≤ 63
+//                                          # supervisor_state, clock_offset; distinct,
+//                                          # [A-Za-z0-9_./-], ≤ 63
+//   ros2:                                  # optional: the cell's ROS 2 drivers, read by ros2_input
+//                                          #   over DDS (ROS 2 wire types, no ROS installation)
+//     domain: 0                            # DDS domain (ROS_DOMAIN_ID), 0 to 232
+//     joint_states: /joint_states          # sensor_msgs/JointState topic (default /joint_states)
+//     joint_names: [j1, j2, ...]           # optional: the arm's joints as the driver names them,
+//                                          #   chain order (default: the robot file's names);
+//                                          #   rows are mapped by name, never by order
+//     imu: /imu/data                       # sensor_msgs/Imu, required iff sensors.imu
+//     magnetic_field: /imu/mag             # optional sensor_msgs/MagneticField (same clock)
+//     imu_frame: imu_link                  # optional: the header.frame_id IMU messages must carry
+//     positions:                           # required: one per sensors.position.markers id
+//       - {marker: 0, topic: /tracker/point, type: PointStamped, frame: tracker}
+//                                          # type PointStamped (laser tracker) | PoseStamped
+//                                          #   (motion capture); frame optional, as imu_frame
+//     clock_offsets: estimate              # estimate (each source's clock against the joints') |
+//                                          #   none (the drivers share one clock)
+//     max_clock_offset: 0.5                # [s] the largest offset searched, 0.01 to 10
+//     frame_prefix: rcal_                  # optional: TF frame names (rcal_world, rcal_base, ...)
 //
 // Plausibility (the likely unit mistake is named): frame positions within 100 m, marker offsets
 // within 2 m of the flange; angles within 2π ("degrees?"); σ of a length above 1 m (frames) or
@@ -221,6 +240,28 @@ struct CellChannels {
   std::string calibration_status = "CALIBRATION_STATUS";
   std::string ik_request = "IK_REQUEST", ik_command = "IK_COMMAND";
   std::string health = "HEALTH", supervisor_state = "SUPERVISOR_STATE";
+  std::string clock_offset = "CLOCK_OFFSET";
+};
+
+/// One marker's ROS 2 topic (`ros2.positions[i]`).
+struct Ros2PositionTopic {
+  int marker = 0;        ///< the marker id it measures (sensors.position.markers)
+  std::string topic;     ///< ROS 2 topic name, e.g. /tracker/point (DDS topic rt/tracker/point)
+  bool pose = false;     ///< true: geometry_msgs/PoseStamped; false: geometry_msgs/PointStamped
+  std::string frame_id;  ///< header.frame_id the messages must carry (empty: any)
+};
+
+/// The cell's ROS 2 drivers (`ros2:`): what ros2_input subscribes and how it reads it.
+struct Ros2Spec {
+  int domain = 0;  ///< DDS domain id (ROS_DOMAIN_ID)
+  std::string joint_states = "/joint_states";
+  std::vector<std::string> joint_names;  ///< chain order; empty: the robot file's names
+  std::string imu, magnetic_field;       ///< topics (empty: none)
+  std::string imu_frame;                 ///< required header.frame_id of IMU messages (empty: any)
+  std::vector<Ros2PositionTopic> positions;  ///< one per measured marker
+  bool estimate_clock_offsets = true;        ///< false: the drivers share the joints' clock
+  double max_clock_offset = 0.5;             ///< [s] largest offset searched
+  std::string frame_prefix = "rcal_";        ///< TF frame names: <prefix>world, <prefix>base, ...
 };
 
 /// Everything a cell file says.
@@ -234,6 +275,7 @@ struct CellSpec {
   StillWindowSpec still_window;
   IdentifierSpec identifier;
   CellChannels channels;
+  std::optional<Ros2Spec> ros2;  ///< absent: no ROS 2 drivers
 
   /// Where measured orientations come from: the IMU, the tracker (position.orientation), or
   /// nowhere (positions only).
@@ -277,6 +319,9 @@ struct BuiltCell {
   estimation::PosePipelineSettings pipeline;
   /// EkfSettings{} with identifier's prior σ, drift, gate_probability and gate_after.
   identification::EkfSettings ekf;
+  /// The arm's joint names as the ROS 2 driver publishes them, chain order: ros2.joint_names, else
+  /// the model's joint names (one per model joint; BuildCell checks the count).
+  std::vector<std::string> ros2_joint_names;
 
   /// prior[i].sigma for every parameter [m | rad].
   Eigen::VectorXd PriorSigma() const;

@@ -90,6 +90,11 @@ std::optional<Time> StampFromUtime(int64_t utime, const std::string& field, std:
 std::optional<int64_t> UtimeFromStamp(const Time& stamp, const std::string& field,
                                       std::string* error);
 
+/// Fills a header: stamp from utime, frame_id a copy of `frame` (dds_string_dup). Fails as
+/// StampFromUtime.
+bool FillHeader(std_msgs_msg_dds__Header_& h, int64_t utime, const char* frame,
+                const std::string& field, std::string* error);
+
 // ---- kinematic parameters ---------------------------------------------------------------------
 
 /// KINEMATIC_PARAMS → KinematicParams_. robot_id comes from the message (must not be empty);

@@ -1,0 +1,251 @@
+// ros2_input's core (see ros2_input.hpp).
+#include "ros2_input.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace rcal::ros2 {
+
+// ---- clocks -----------------------------------------------------------------------------------
+
+// Source indices of the tracker: 0 the IMU, 1 + i position topic i.
+class ClockOffsetTracker {
+ public:
+  ClockOffsetTracker(const Ros2InputSettings& s, const kinematics::KinematicModel& model)
+      : estimate_(s.estimate_clock_offsets) {
+    (void)model;
+    if (!s.imu_topic.empty()) names_.push_back("imu");
+    has_imu_ = !s.imu_topic.empty();
+    for (const auto& p : s.positions) names_.push_back("position/" + std::to_string(p.marker));
+    status_.resize(names_.size());
+    for (size_t i = 0; i < names_.size(); ++i) {
+      status_[i].source = names_[i];
+      if (!estimate_) {
+        status_[i].state = ClockState::kFixed;
+        status_[i].sigma = 0.0;
+      }
+    }
+  }
+  int ImuSource() const { return has_imu_ ? 0 : -1; }
+  int PositionSource(size_t i) const { return static_cast<int>(i) + (has_imu_ ? 1 : 0); }
+
+  void PushJoints(int64_t, const joint_state_t&) {}
+  void PushGyro(int64_t, const Eigen::Vector3d&) {}
+  void PushMarker(int, int64_t, const Eigen::Vector3d&) {}
+  /// The source's clock restarted: estimate anew.
+  void Reset(int source) {
+    if (source < 0) return;
+    ++status_[source].resets;
+    if (!estimate_) return;
+    status_[source].state = ClockState::kUnknown;
+    status_[source].offset = 0.0;
+    status_[source].sigma = std::numeric_limits<double>::infinity();
+  }
+  void ResetAll() {
+    for (size_t i = 0; i < status_.size(); ++i) Reset(static_cast<int>(i));
+  }
+  /// offset [s] to subtract from the source's stamps.
+  double Offset(int source) const { return source < 0 ? 0.0 : status_[source].offset; }
+  const std::vector<ClockStatus>& status() const { return status_; }
+
+ private:
+  bool estimate_;
+  bool has_imu_ = false;
+  std::vector<std::string> names_;
+  std::vector<ClockStatus> status_;
+};
+
+// ---- settings ---------------------------------------------------------------------------------
+
+Ros2InputSettings FromCell(const io::BuiltCell& cell) {
+  if (!cell.spec.ros2)
+    throw std::runtime_error(cell.spec.source +
+                             ": no `ros2:` section (the cell's ROS 2 topics, cell_yaml.hpp)");
+  const io::Ros2Spec& r = *cell.spec.ros2;
+  Ros2InputSettings s;
+  s.joint_names = cell.ros2_joint_names;
+  s.joint_topic = r.joint_states;
+  s.imu_topic = r.imu;
+  s.mag_topic = r.magnetic_field;
+  s.imu_frame = r.imu_frame;
+  for (const io::Ros2PositionTopic& p : r.positions)
+    s.positions.push_back({p.topic, p.marker, p.pose, p.frame_id});
+  s.position_covariance = cell.spec.position.sigma.cwiseAbs2().asDiagonal();
+  if (cell.spec.imu) {
+    s.ranges.gyro = cell.spec.imu->gyro_range;
+    s.ranges.accel = cell.spec.imu->accel_range;
+    s.ranges.mag = cell.spec.imu->mag_range;
+  }
+  s.estimate_clock_offsets = r.estimate_clock_offsets;
+  s.max_clock_offset = r.max_clock_offset;
+  // A driver restart jumps back by more than the largest offset.
+  s.gate.resync_min_jump_back_us =
+      std::max<int64_t>(s.gate.resync_min_jump_back_us, std::llround(2e6 * r.max_clock_offset));
+  return s;
+}
+
+// ---- the core ---------------------------------------------------------------------------------
+
+Ros2Input::Ros2Input(const Ros2InputSettings& settings, const kinematics::KinematicModel& model,
+                     transport::Health& health)
+    : s_(settings),
+      model_(model),
+      health_(health),
+      names_(settings.joint_names),
+      joints_{settings.joint_topic, estimation::TimeGate(settings.gate)},
+      imu_{settings.imu_topic, estimation::TimeGate(settings.gate)},
+      mag_{settings.mag_topic, estimation::TimeGate(settings.gate)},
+      clocks_(std::make_unique<ClockOffsetTracker>(settings, model)) {
+  if (static_cast<int>(s_.joint_names.size()) != model.num_joints())
+    throw std::invalid_argument("ros2_input: " + std::to_string(s_.joint_names.size()) +
+                                " joint names for an arm of " + std::to_string(model.num_joints()) +
+                                " joints");
+  for (const auto& p : s_.positions) positions_.push_back({p.topic, estimation::TimeGate(s_.gate)});
+}
+
+Ros2Input::~Ros2Input() = default;
+
+void Ros2Input::Refuse(const std::string& reason) {
+  health_.Rejected(reason);
+}
+
+bool Ros2Input::Admit(Stream& st, int64_t utime, int clock_source) {
+  const estimation::TimeVerdict v = health_.Gate(st.gate, utime, st.name + ".header.stamp");
+  if (!estimation::Usable(v)) return false;
+  if (v == estimation::TimeVerdict::kResynchronised) {
+    // A restarted driver: its clock is a new one.
+    if (&st == &joints_)
+      clocks_->ResetAll();
+    else
+      clocks_->Reset(clock_source);
+  }
+  return true;
+}
+
+void Ros2Input::Queue(int64_t utime, sensors::SensorEvent e) {
+  if (utime < released_) {
+    ++late_;
+    health_.Rejected("ros2_input: a sample at " + std::to_string(utime) +
+                     " µs (joints' clock) came after " + std::to_string(released_) +
+                     " µs had been published (later than the reorder delay)");
+    return;
+  }
+  newest_ = std::max(newest_, utime);
+  queue_.emplace(std::pair{utime, sequence_++}, std::move(e));
+}
+
+std::vector<sensors::SensorEvent> Ros2Input::Ready(bool flush) {
+  std::vector<sensors::SensorEvent> out;
+  const int64_t until =
+      flush ? std::numeric_limits<int64_t>::max() : newest_ - std::llround(s_.reorder_delay * 1e6);
+  while (!queue_.empty() && queue_.begin()->first.first <= until) {
+    released_ = queue_.begin()->first.first;
+    out.push_back(std::move(queue_.begin()->second));
+    queue_.erase(queue_.begin());
+  }
+  return out;
+}
+
+void Ros2Input::OnJointState(const dds::JointState& m) {
+  health_.Received();
+  std::string error;
+  auto js = dds::FromRos(m, names_, s_.joint_topic, &error);
+  if (!js) return Refuse(error);
+  if (!Admit(joints_, js->utime, -1)) return;
+  if (js->utime < joints_utime_) {
+    // The arm's clock restarted: what waits in the buffer belongs to the old time base.
+    queue_.clear();
+    released_ = newest_ = std::numeric_limits<int64_t>::min();
+  }
+  joints_utime_ = js->utime;
+  clocks_->PushJoints(js->utime, *js);
+  const int64_t t = js->utime;
+  Queue(t, std::move(*js));
+}
+
+void Ros2Input::OnImu(const dds::Imu& m) {
+  health_.Received();
+  const std::string frame = dds::FrameId(m.header);
+  if (!s_.imu_frame.empty() && frame != s_.imu_frame)
+    return Refuse(s_.imu_topic + ".header.frame_id: '" + frame + "' is not the cell's '" +
+                  s_.imu_frame + "'");
+  std::string error;
+  auto imu = dds::FromRos(m, s_.ranges, s_.imu_topic, &error);
+  if (!imu) return Refuse(error);
+  const int source = clocks_->ImuSource();
+  if (!Admit(imu_, imu->utime, source)) return;
+  if (mag_reading_ &&
+      std::abs(mag_reading_->utime - imu->utime) <= std::llround(s_.mag_pairing * 1e6)) {
+    imu->has_mag = true;
+    imu->m_B = mag_reading_->m_S;
+    ++mag_paired_;
+  }
+  clocks_->PushGyro(imu->utime, imu->gyro_B);
+  imu->utime -= std::llround(clocks_->Offset(source) * 1e6);
+  const int64_t t = imu->utime;
+  Queue(t, *imu);
+}
+
+void Ros2Input::OnMagneticField(const dds::MagneticField& m) {
+  health_.Received();
+  std::string error;
+  auto b = dds::FromRos(m, s_.ranges, s_.mag_topic, &error);
+  if (!b) return Refuse(error);
+  if (!Admit(mag_, b->utime, clocks_->ImuSource())) return;
+  mag_reading_ = *b;
+}
+
+void Ros2Input::OnPosition(size_t i, std::optional<transport::PositionSample> p,
+                           const std::string& frame_id, const std::string& error) {
+  const auto& spec = s_.positions[i];
+  if (!p) return Refuse(error);
+  if (!spec.frame_id.empty() && frame_id != spec.frame_id)
+    return Refuse(spec.topic + ".header.frame_id: '" + frame_id + "' is not the cell's '" +
+                  spec.frame_id + "'");
+  const int source = clocks_->PositionSource(i);
+  if (!Admit(positions_[i], p->utime, source)) return;
+  clocks_->PushMarker(source, p->utime, p->p);
+  p->utime -= std::llround(clocks_->Offset(source) * 1e6);
+  const int64_t t = p->utime;
+  Queue(t, *p);
+}
+
+void Ros2Input::OnPose(size_t i, const dds::PoseStamped& m) {
+  health_.Received();
+  if (i >= s_.positions.size() || !s_.positions[i].pose)
+    return Refuse("ros2_input: PoseStamped on a topic that is not one");
+  std::string error;
+  auto p = dds::FromRos(m, s_.positions[i].marker, s_.position_covariance, s_.ranges,
+                        s_.positions[i].topic, &error);
+  OnPosition(i, std::move(p), dds::FrameId(m.header), error);
+}
+
+void Ros2Input::OnPoint(size_t i, const dds::PointStamped& m) {
+  health_.Received();
+  if (i >= s_.positions.size() || s_.positions[i].pose)
+    return Refuse("ros2_input: PointStamped on a topic that is not one");
+  std::string error;
+  auto p = dds::FromRos(m, s_.positions[i].marker, s_.position_covariance, s_.ranges,
+                        s_.positions[i].topic, &error);
+  OnPosition(i, std::move(p), dds::FrameId(m.header), error);
+}
+
+std::vector<ClockStatus> Ros2Input::Clocks() const {
+  return clocks_->status();
+}
+
+clock_offset_t Ros2Input::ClockMessage(int64_t utime) const {
+  clock_offset_t m;
+  m.utime = utime;
+  for (const ClockStatus& c : clocks_->status()) {
+    m.source.push_back(c.source);
+    m.state.push_back(static_cast<int8_t>(c.state));
+    m.offset.push_back(c.offset);
+    m.sigma.push_back(c.sigma);
+    m.resets.push_back(c.resets);
+  }
+  m.num_sources = static_cast<int32_t>(m.source.size());
+  return m;
+}
+
+}  // namespace rcal::ros2

@@ -1,0 +1,161 @@
+// The core of ros2_input: a cell's ROS 2 drivers' samples (decoded DDS samples of the ROS 2 wire
+// types) in, the pipeline's sensor events out, on the arm's clock. No DDS entities, no LCM: the
+// process (main.cpp) takes samples from DDS readers and publishes what this returns; tests feed it
+// directly.
+//
+//   joints     sensor_msgs/JointState, mapped by name (dds::JointNameMap) → JOINTS, stamped with
+//              the arm controller's clock: the reference clock of the pipeline.
+//   IMU        sensor_msgs/Imu (+ the latest sensor_msgs/MagneticField of the same driver within
+//              mag_pairing of its stamp) → IMU, the stamp moved to the joints' clock.
+//   positions  geometry_msgs/PointStamped (laser tracker) or PoseStamped (motion capture), one
+//              topic per marker → POSITION with the cell's σ², the stamp moved to the joints'
+//              clock.
+//
+// Clocks. Every driver stamps with its own clock. With clock_offsets `estimate` each source's
+// offset against the joints (offset = t_source − t_joints) is estimated from the motion itself
+// (estimation::ClockOffsetEstimator: the angular rate the joints give through the kinematics
+// against the gyro, the marker speed against the forward-kinematics speed) and a sample is
+// published at t_source − offset; before the offset is locked the current estimate is used (0 at
+// first) and CLOCK_OFFSET says so, so still_window forms no window from it. With `none` the
+// drivers share the joints' clock.
+//
+// Order. The pipeline (still_window's PosePipeline) takes the three streams in one time order,
+// but drivers deliver with their own latencies. The events wait in a reorder buffer and leave in
+// time order (on the joints' clock) once they are `reorder_delay` older than the newest event; one
+// that arrives older than what already left is dropped as late, counted. Before the clocks are
+// locked, a source whose offset is not yet removed may so be late: counted, and no window is
+// formed from that time anyway.
+//
+// Time and restarts. Each stream has an estimation::TimeGate on the driver's own stamps:
+// duplicates, out-of-order and far-future stamps are refused and counted; a driver restart
+// (its stamps jump back and go on consistently) re-synchronises the stream, counted, and its clock
+// offset is estimated anew (the joints' restart restarts every offset). Bad samples (NaN, units,
+// frames, sizes, missing joints) are refused naming the field (dds/ros2_convert.hpp), counted in
+// HEALTH, and never stop the stream.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <limits>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "rcal/clock_offset_t.hpp"
+#include "rcal/dds/ros2_convert.hpp"
+#include "rcal/estimation/time_gate.hpp"
+#include "rcal/io/cell_yaml.hpp"
+#include "rcal/transport/health.hpp"
+#include "sources.hpp"
+
+namespace rcal::ros2 {
+
+/// Settings, all from the cell file (FromCell) but the tolerances.
+struct Ros2InputSettings {
+  std::vector<std::string> joint_names;  ///< chain order, as the driver names them
+  std::string joint_topic = "/joint_states", imu_topic, mag_topic;
+  std::string imu_frame;  ///< header.frame_id IMU messages must carry (empty: any)
+  struct Position {
+    std::string topic;
+    int32_t marker = 0;
+    bool pose = false;     ///< PoseStamped (else PointStamped)
+    std::string frame_id;  ///< required header.frame_id (empty: any)
+  };
+  std::vector<Position> positions;
+  Eigen::Matrix3d position_covariance = Eigen::Matrix3d::Zero();  ///< [m²], the cell's σ²
+  transport::SensorRanges ranges;                                 ///< the cell's IMU ranges
+  bool estimate_clock_offsets = true;
+  double max_clock_offset = 0.5;  ///< [s]
+  /// An IMU sample carries the latest magnetometer reading when it is at most this much older or
+  /// newer [s] (magnetometers often run slower than the gyro; the field changes slowly).
+  double mag_pairing = 0.1;
+  /// Events leave the reorder buffer this long after the newest event [s] (the spread of the
+  /// drivers' latencies it absorbs).
+  double reorder_delay = 0.05;
+  /// The offset is good enough for still windows when 3σ is below this [s] (CLOCK_OFFSET's
+  /// state `locked`).
+  double lock_sigma = 0.002;
+  estimation::TimeGateSettings gate;
+};
+
+/// The settings of `cell` (its `ros2:` section; throws std::runtime_error naming the cell file when
+/// it has none).
+Ros2InputSettings FromCell(const io::BuiltCell& cell);
+
+/// CLOCK_OFFSET's per-source states.
+enum class ClockState : int8_t { kUnknown = 0, kEstimating = 1, kLocked = 2, kFixed = 3 };
+
+/// One source's clock against the joints'.
+struct ClockStatus {
+  std::string source;  ///< "imu", "position/<marker id>"
+  ClockState state = ClockState::kUnknown;
+  double offset = 0.0;                                     ///< t_source − t_joints [s]
+  double sigma = std::numeric_limits<double>::infinity();  ///< [s]
+  int32_t resets = 0;
+};
+
+class ClockOffsetTracker;  // the estimator behind the clock statuses (ros2_input.cpp)
+
+class Ros2Input {
+ public:
+  /// `model`: the cell's arm (kinematics for the clock-offset estimate), outlives this.
+  Ros2Input(const Ros2InputSettings& settings, const kinematics::KinematicModel& model,
+            transport::Health& health);
+  ~Ros2Input();
+
+  /// One driver sample: checked, its stamp moved to the joints' clock, into the reorder buffer.
+  void OnJointState(const dds::JointState& m);
+  void OnImu(const dds::Imu& m);
+  void OnMagneticField(const dds::MagneticField& m);
+  /// `i`: the index in settings().positions.
+  void OnPose(size_t i, const dds::PoseStamped& m);
+  void OnPoint(size_t i, const dds::PointStamped& m);
+  /// The events to publish now, in time order: those reorder_delay older than the newest
+  /// (`flush`: all).
+  std::vector<sensors::SensorEvent> Ready(bool flush = false);
+
+  /// Every source's clock now.
+  std::vector<ClockStatus> Clocks() const;
+  /// CLOCK_OFFSET at joints' time `utime`.
+  clock_offset_t ClockMessage(int64_t utime) const;
+  /// Latest joints' time seen [µs] (0 before any).
+  int64_t joints_utime() const { return joints_utime_; }
+
+  /// Events dropped because they arrived older than what had left the reorder buffer.
+  int64_t late() const { return late_; }
+  /// IMU samples published with a magnetometer reading.
+  int64_t mag_paired() const { return mag_paired_; }
+  const Ros2InputSettings& settings() const { return s_; }
+
+ private:
+  struct Stream {
+    std::string name;
+    estimation::TimeGate gate;
+  };
+  // Gates the driver's own stamp; false when refused (counted). Resets the source's clock on a
+  // re-synchronisation.
+  bool Admit(Stream& st, int64_t utime, int clock_source);
+  // Into the reorder buffer at `utime` (joints' clock), or dropped as late.
+  void Queue(int64_t utime, sensors::SensorEvent e);
+  void Refuse(const std::string& reason);
+  void OnPosition(size_t i, std::optional<transport::PositionSample> p, const std::string& frame_id,
+                  const std::string& error);
+
+  Ros2InputSettings s_;
+  const kinematics::KinematicModel& model_;
+  transport::Health& health_;
+  dds::JointNameMap names_;
+  Stream joints_, imu_, mag_;  // the streams' time gates
+  std::vector<Stream> positions_;
+  std::optional<dds::MagReading> mag_reading_;
+  std::unique_ptr<ClockOffsetTracker> clocks_;
+  // The reorder buffer: (utime, arrival sequence) → event.
+  std::map<std::pair<int64_t, int64_t>, sensors::SensorEvent> queue_;
+  int64_t sequence_ = 0, newest_ = std::numeric_limits<int64_t>::min(),
+          released_ = std::numeric_limits<int64_t>::min();
+  int64_t joints_utime_ = 0, late_ = 0, mag_paired_ = 0;
+};
+
+}  // namespace rcal::ros2
