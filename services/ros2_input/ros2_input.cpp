@@ -1,58 +1,146 @@
 // ros2_input's core (see ros2_input.hpp).
 #include "ros2_input.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
+
+#include "rcal/estimation/clock_offset.hpp"
 
 namespace rcal::ros2 {
 
 // ---- clocks -----------------------------------------------------------------------------------
 
-// Source indices of the tracker: 0 the IMU, 1 + i position topic i.
+// Source indices: 0 the IMU (when the cell has one), then one per position topic. One estimator
+// per source (each also takes the joints), so that a restarted driver resets its source alone.
+//
+// Coarse alignment: a driver's clock may count from anywhere (its boot, another epoch), far beyond
+// the estimator's search range (max_clock_offset). The first samples of a source after a (re)start
+// give a coarse offset from their arrival: the median over kCoarseSamples of (source stamp − the
+// newest joints' stamp received before it), good to the transport's latency. The estimator then
+// works on the source's stamps minus that coarse offset and finds the rest within ±max_lag; the
+// offset reported is their sum.
 class ClockOffsetTracker {
  public:
+  static constexpr int kCoarseSamples = 21;
+
   ClockOffsetTracker(const Ros2InputSettings& s, const kinematics::KinematicModel& model)
       : estimate_(s.estimate_clock_offsets) {
-    (void)model;
-    if (!s.imu_topic.empty()) names_.push_back("imu");
+    estimation::ClockOffsetSettings es;
+    es.max_lag_s = s.max_clock_offset;
+    es.max_sigma_s = s.lock_sigma;
+    if (!s.imu_topic.empty()) Add("imu", estimation::ClockSource::kImu, model, es);
     has_imu_ = !s.imu_topic.empty();
-    for (const auto& p : s.positions) names_.push_back("position/" + std::to_string(p.marker));
-    status_.resize(names_.size());
-    for (size_t i = 0; i < names_.size(); ++i) {
-      status_[i].source = names_[i];
-      if (!estimate_) {
-        status_[i].state = ClockState::kFixed;
-        status_[i].sigma = 0.0;
-      }
+    for (const auto& p : s.positions) {
+      const int slot = model.markers().empty() ? 0 : model.MarkerSlot(p.marker);
+      Add("position/" + std::to_string(p.marker), estimation::ClockSource::kMarker,
+          model.ForMarker(std::max(slot, 0)), es);
     }
   }
   int ImuSource() const { return has_imu_ ? 0 : -1; }
   int PositionSource(size_t i) const { return static_cast<int>(i) + (has_imu_ ? 1 : 0); }
 
-  void PushJoints(int64_t, const joint_state_t&) {}
-  void PushGyro(int64_t, const Eigen::Vector3d&) {}
-  void PushMarker(int, int64_t, const Eigen::Vector3d&) {}
+  void PushJoints(int64_t utime, const joint_state_t& js) {
+    latest_joints_ = utime;
+    if (!estimate_) return;
+    const Eigen::Map<const Eigen::VectorXd> q(js.q.data(), static_cast<Eigen::Index>(js.q.size()));
+    const Eigen::Map<const Eigen::VectorXd> qd(js.dq.data(),
+                                               static_cast<Eigen::Index>(js.dq.size()));
+    const double t = 1e-6 * static_cast<double>(utime);
+    for (Source& s : sources_) {
+      if (has_velocity_)
+        s.estimator.PushJoints(t, q, qd);
+      else
+        s.estimator.PushJoints(t, q);
+    }
+  }
+  void SetJointVelocities(bool given) { has_velocity_ = given; }
+  void PushGyro(int source, int64_t utime, const Eigen::Vector3d& w) {
+    if (Coarse(source, utime)) sources_[source].estimator.PushGyro(Shifted(source, utime), w);
+    Update(source);
+  }
+  void PushMarker(int source, int64_t utime, const Eigen::Vector3d& p) {
+    if (Coarse(source, utime)) sources_[source].estimator.PushMarker(Shifted(source, utime), p);
+    Update(source);
+  }
   /// The source's clock restarted: estimate anew.
   void Reset(int source) {
     if (source < 0) return;
-    ++status_[source].resets;
-    if (!estimate_) return;
-    status_[source].state = ClockState::kUnknown;
-    status_[source].offset = 0.0;
-    status_[source].sigma = std::numeric_limits<double>::infinity();
+    Source& s = sources_[source];
+    ++s.status.resets;
+    s.arrivals.clear();
+    s.coarse_us.reset();
+    s.estimator.Reset();
+    if (estimate_) {
+      s.status.state = ClockState::kUnknown;
+      s.status.offset = 0.0;
+      s.status.sigma = std::numeric_limits<double>::infinity();
+    }
   }
   void ResetAll() {
-    for (size_t i = 0; i < status_.size(); ++i) Reset(static_cast<int>(i));
+    for (size_t i = 0; i < sources_.size(); ++i) Reset(static_cast<int>(i));
   }
-  /// offset [s] to subtract from the source's stamps.
-  double Offset(int source) const { return source < 0 ? 0.0 : status_[source].offset; }
-  const std::vector<ClockStatus>& status() const { return status_; }
+  /// Offset [s] to subtract from the source's stamps: the estimate, else the coarse one.
+  double Offset(int source) const { return source < 0 ? 0.0 : sources_[source].status.offset; }
+  std::vector<ClockStatus> status() const {
+    std::vector<ClockStatus> out;
+    for (const Source& s : sources_) out.push_back(s.status);
+    return out;
+  }
 
  private:
+  struct Source {
+    estimation::ClockSource kind;
+    estimation::ClockOffsetEstimator estimator;
+    ClockStatus status;
+    std::vector<int64_t> arrivals;  // source stamp − newest joints' stamp [µs]
+    std::optional<int64_t> coarse_us;
+  };
+  void Add(const std::string& name, estimation::ClockSource kind,
+           const kinematics::KinematicModel& model, const estimation::ClockOffsetSettings& es) {
+    Source s{kind, estimation::ClockOffsetEstimator(model, es), {}, {}, {}};
+    s.status.source = name;
+    if (!estimate_) {
+      s.status.state = ClockState::kFixed;
+      s.status.sigma = 0.0;
+    }
+    sources_.push_back(std::move(s));
+  }
+  // True once the source's coarse offset is known (collecting it until then).
+  bool Coarse(int source, int64_t utime) {
+    if (!estimate_ || source < 0 || !latest_joints_) return false;
+    Source& s = sources_[source];
+    if (s.coarse_us) return true;
+    s.arrivals.push_back(utime - *latest_joints_);
+    if (static_cast<int>(s.arrivals.size()) < kCoarseSamples) return false;
+    std::nth_element(s.arrivals.begin(), s.arrivals.begin() + kCoarseSamples / 2, s.arrivals.end());
+    s.coarse_us = s.arrivals[kCoarseSamples / 2];
+    // Within the search range, the estimator finds it all: no coarse shift (exact, no latency).
+    if (std::abs(1e-6 * static_cast<double>(*s.coarse_us)) < 0.5 * s.estimator.settings().max_lag_s)
+      s.coarse_us = 0;
+    s.status.offset = 1e-6 * static_cast<double>(*s.coarse_us);
+    s.status.state = ClockState::kUnknown;
+    return true;
+  }
+  double Shifted(int source, int64_t utime) const {
+    return 1e-6 * static_cast<double>(utime - *sources_[source].coarse_us);
+  }
+  void Update(int source) {
+    if (!estimate_ || source < 0) return;
+    Source& s = sources_[source];
+    if (!s.coarse_us) return;
+    const estimation::ClockOffset& o = s.estimator.offset(s.kind);
+    if (o.state == estimation::ClockState::kUnknown) return;
+    s.status.offset = 1e-6 * static_cast<double>(*s.coarse_us) + o.offset_s;
+    s.status.sigma = o.sigma_s;
+    s.status.state =
+        o.state == estimation::ClockState::kLocked ? ClockState::kLocked : ClockState::kEstimating;
+  }
+
   bool estimate_;
-  bool has_imu_ = false;
-  std::vector<std::string> names_;
-  std::vector<ClockStatus> status_;
+  bool has_imu_ = false, has_velocity_ = true;
+  std::optional<int64_t> latest_joints_;
+  std::vector<Source> sources_;
 };
 
 // ---- settings ---------------------------------------------------------------------------------
@@ -116,7 +204,7 @@ bool Ros2Input::Admit(Stream& st, int64_t utime, int clock_source) {
     // A restarted driver: its clock is a new one.
     if (&st == &joints_)
       clocks_->ResetAll();
-    else
+    else if (clock_source >= 0)
       clocks_->Reset(clock_source);
   }
   return true;
@@ -158,6 +246,7 @@ void Ros2Input::OnJointState(const dds::JointState& m) {
     released_ = newest_ = std::numeric_limits<int64_t>::min();
   }
   joints_utime_ = js->utime;
+  clocks_->SetJointVelocities(m.velocity._length > 0);
   clocks_->PushJoints(js->utime, *js);
   const int64_t t = js->utime;
   Queue(t, std::move(*js));
@@ -174,13 +263,23 @@ void Ros2Input::OnImu(const dds::Imu& m) {
   if (!imu) return Refuse(error);
   const int source = clocks_->ImuSource();
   if (!Admit(imu_, imu->utime, source)) return;
-  if (mag_reading_ &&
-      std::abs(mag_reading_->utime - imu->utime) <= std::llround(s_.mag_pairing * 1e6)) {
-    imu->has_mag = true;
-    imu->m_B = mag_reading_->m_S;
-    ++mag_paired_;
+  if (!mags_.empty()) {
+    // The reading nearest in time (stamps increase: binary search).
+    const auto it =
+        std::lower_bound(mags_.begin(), mags_.end(), imu->utime,
+                         [](const dds::MagReading& r, int64_t u) { return r.utime < u; });
+    const dds::MagReading* best = nullptr;
+    if (it != mags_.end()) best = &*it;
+    if (it != mags_.begin() &&
+        (!best || imu->utime - std::prev(it)->utime < best->utime - imu->utime))
+      best = &*std::prev(it);
+    if (std::abs(best->utime - imu->utime) <= std::llround(s_.mag_pairing * 1e6)) {
+      imu->has_mag = true;
+      imu->m_B = best->m_S;
+      ++mag_paired_;
+    }
   }
-  clocks_->PushGyro(imu->utime, imu->gyro_B);
+  clocks_->PushGyro(source, imu->utime, imu->gyro_B);
   imu->utime -= std::llround(clocks_->Offset(source) * 1e6);
   const int64_t t = imu->utime;
   Queue(t, *imu);
@@ -191,8 +290,14 @@ void Ros2Input::OnMagneticField(const dds::MagneticField& m) {
   std::string error;
   auto b = dds::FromRos(m, s_.ranges, s_.mag_topic, &error);
   if (!b) return Refuse(error);
-  if (!Admit(mag_, b->utime, clocks_->ImuSource())) return;
-  mag_reading_ = *b;
+  // The IMU driver's clock: its restart resets the source through the IMU stream (not twice).
+  if (!Admit(mag_, b->utime, -1)) return;
+  if (!mags_.empty() && b->utime < mags_.back().utime) mags_.clear();  // re-synchronised
+  mags_.push_back(*b);
+  // Kept for kMagRetention behind the newest: IMU samples of a backlog still find theirs.
+  constexpr int64_t kMagRetention = 5'000'000;  // [µs]
+  while (mags_.size() > 1 && mags_.front().utime < b->utime - kMagRetention) mags_.pop_front();
+  if (mags_.size() > 8192) mags_.pop_front();
 }
 
 void Ros2Input::OnPosition(size_t i, std::optional<transport::PositionSample> p,

@@ -36,6 +36,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <deque>
 #include <limits>
 #include <map>
 #include <memory>
@@ -68,12 +69,13 @@ struct Ros2InputSettings {
   transport::SensorRanges ranges;                                 ///< the cell's IMU ranges
   bool estimate_clock_offsets = true;
   double max_clock_offset = 0.5;  ///< [s]
-  /// An IMU sample carries the latest magnetometer reading when it is at most this much older or
-  /// newer [s] (magnetometers often run slower than the gyro; the field changes slowly).
+  /// An IMU sample carries the magnetometer reading nearest to it in time when that is at most
+  /// this much older or newer [s] (magnetometers often run slower than the gyro; the field
+  /// changes slowly).
   double mag_pairing = 0.1;
   /// Events leave the reorder buffer this long after the newest event [s] (the spread of the
   /// drivers' latencies it absorbs).
-  double reorder_delay = 0.05;
+  double reorder_delay = 0.2;
   /// The offset is good enough for still windows when 3σ is below this [s] (CLOCK_OFFSET's
   /// state `locked`).
   double lock_sigma = 0.002;
@@ -149,7 +151,9 @@ class Ros2Input {
   dds::JointNameMap names_;
   Stream joints_, imu_, mag_;  // the streams' time gates
   std::vector<Stream> positions_;
-  std::optional<dds::MagReading> mag_reading_;
+  // The recent magnetometer readings, increasing stamps (the IMU sample takes the nearest: the
+  // two topics arrive in no fixed order relative to each other).
+  std::deque<dds::MagReading> mags_;
   std::unique_ptr<ClockOffsetTracker> clocks_;
   // The reorder buffer: (utime, arrival sequence) → event.
   std::map<std::pair<int64_t, int64_t>, sensors::SensorEvent> queue_;

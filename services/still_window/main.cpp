@@ -28,8 +28,9 @@
 // mounting frame, v_I = R_IS·v_S) and the channel names. No simulator is involved.
 // Clocks: when the input stamps its drivers on one clock by estimating their offsets (ros2_input
 // publishes CLOCK_OFFSET), a window is formed only while every source's offset is locked (or
-// fixed) and 3σ of it is below --clock-fraction of the window's length; otherwise the window is
-// refused and counted (HEALTH rejected, naming the source). Without CLOCK_OFFSET (one clock: the
+// fixed) and its σ is below --clock-fraction of the window's length
+// (estimation::MayFormStillWindow); otherwise the window is refused and counted (HEALTH rejected,
+// naming the source). Without CLOCK_OFFSET (one clock: the
 // simulator, a replay) nothing changes.
 #include <spdlog/spdlog.h>
 
@@ -40,6 +41,7 @@
 #include <optional>
 
 #include "rcal/clock_offset_t.hpp"
+#include "rcal/estimation/clock_offset.hpp"
 #include "rcal/estimation/pose_pipeline.hpp"
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/kinematics/measurement.hpp"
@@ -174,18 +176,25 @@ class StillWindowNode {
         return Bad("clock_offset." + m.source[i] + ": not finite or unknown state");
     clock_ = m;
   }
-  // Why a window [t_begin, t_end] may not be formed with the clocks as they are ("" when it
-  // may): a source whose offset is not locked, or whose 3σ is beyond clock_fraction of it.
+  // Why a window of `length_s` may not be formed with the clocks as they are ("" when it may):
+  // estimation::MayFormStillWindow for every source whose offset is estimated.
   std::string ClockVeto(double length_s) const {
     if (!clock_) return "";
     for (int i = 0; i < clock_->num_sources; ++i) {
-      const int state = clock_->state[i];
-      if (state == 3) continue;  // fixed: one clock
-      if (state != 2) return "clock offset of " + clock_->source[i] + " not locked yet";
-      if (3 * clock_->sigma[i] > clock_fraction_ * length_s)
-        return "clock offset of " + clock_->source[i] + " known to ±" +
-               std::to_string(3e3 * clock_->sigma[i]) + " ms (3σ), beyond " +
-               std::to_string(1e3 * clock_fraction_ * length_s) + " ms";
+      if (clock_->state[i] == 3) continue;  // fixed: one clock
+      estimation::ClockOffset o;
+      o.state = clock_->state[i] == 2   ? estimation::ClockState::kLocked
+                : clock_->state[i] == 1 ? estimation::ClockState::kEstimating
+                                        : estimation::ClockState::kUnknown;
+      o.usable = o.state == estimation::ClockState::kLocked;
+      o.offset_s = clock_->offset[i];
+      o.sigma_s = clock_->sigma[i];
+      const auto source = clock_->source[i] == "imu" ? estimation::ClockSource::kImu
+                                                     : estimation::ClockSource::kMarker;
+      if (const estimation::Status st =
+              estimation::MayFormStillWindow(o, source, length_s, clock_fraction_);
+          !st.ok())
+        return clock_->source[i] + ": " + st.error();
     }
     return "";
   }
@@ -246,9 +255,9 @@ int main(int argc, char** argv) {
   app.add_option("--lcm-url", lcm_url, "LCM URL");
   services::AddTimeGateOptions(app, &time, "sample");
   app.add_option("--name", name, "process name in HEALTH")->capture_default_str();
-  double clock_fraction = 0.05;
+  double clock_fraction = estimation::ClockOffsetSettings{}.still_window_sigma_fraction;
   app.add_option("--clock-fraction", clock_fraction,
-                 "with CLOCK_OFFSET: a window needs every source's offset locked and its 3σ below "
+                 "with CLOCK_OFFSET: a window needs every source's offset locked and its σ below "
                  "this fraction of the window's length")
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();

@@ -8,8 +8,10 @@
 #include <algorithm>
 #include <array>
 #include <cstdio>
+#include <map>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "process_table.hpp"
 #include "rcal/io/cell_yaml.hpp"
@@ -58,5 +60,46 @@ TEST(DdsProcessTable, StartsTheBridgeForTheIdentifiersRobot) {
     }
   }
 }
+
+#if defined(RCAL_ROS2_INPUT) && defined(RCAL_ROS2_SIM_DRIVERS)
+// config/processes.demo-ros2.yaml (deploy/demo --ros2): parses, every process of the cell is given
+// the same cell file, the consumers start before the input and the drivers last, and every option
+// is one the program accepts.
+TEST(DdsProcessTable, TheRos2DemoRunsOneCellFromTheDriversIn) {
+  const auto table =
+      rcal::services::LoadProcessTable(RCAL_SOURCE_DIR "/config/processes.demo-ros2.yaml");
+  const auto& p = table.processes;
+  std::vector<std::string> names;
+  for (const auto& s : p) names.push_back(s.name);
+  EXPECT_EQ(names, (std::vector<std::string>{"logger", "ekf_identifier", "still_window",
+                                             "dds_bridge", "ros2_input", "ros2_sim_drivers"}));
+  const std::map<std::string, std::string> exe = {{"ekf_identifier", RCAL_EKF_IDENTIFIER_EXE},
+                                                  {"still_window", RCAL_STILL_WINDOW_EXE},
+                                                  {"dds_bridge", RCAL_DDS_BRIDGE},
+                                                  {"ros2_input", RCAL_ROS2_INPUT},
+                                                  {"ros2_sim_drivers", RCAL_ROS2_SIM_DRIVERS}};
+  for (const auto& s : p) {
+    const auto& a = s.argv;
+    ASSERT_FALSE(a.empty());
+    EXPECT_EQ(a[0], s.name);
+    const auto cell = std::find(a.begin(), a.end(), "--cell");
+    if (s.name != "ros2_sim_drivers") {
+      ASSERT_NE(cell, a.end()) << s.name;
+      EXPECT_EQ(*(cell + 1), "config/cells/grb3016.yaml") << s.name;
+    } else {
+      // The drivers simulate the cell the sim file names: the same one.
+      const auto sim = std::find(a.begin(), a.end(), "--sim");
+      ASSERT_NE(sim, a.end());
+      EXPECT_EQ(*(sim + 1), "config/cells/grb3016.sim.yaml");
+    }
+    const auto it = exe.find(s.name);
+    if (it == exe.end()) continue;
+    const std::string help = Output(it->second + " --help");
+    for (const auto& arg : a)
+      if (arg.rfind("--", 0) == 0)
+        EXPECT_NE(help.find(arg), std::string::npos) << s.name << " " << arg;
+  }
+}
+#endif
 
 }  // namespace

@@ -15,6 +15,7 @@ rc=$?
 [ "$rc" -eq 0 ] || { echo "deploy/demo --help: exit $rc, stderr: $(cat "$bin/err")"; fail=1; }
 printf '%s\n' "$out" | grep -q '^Usage:' || { echo "deploy/demo --help: no usage on stdout"; fail=1; }
 printf '%s\n' "$out" | grep -q 'deploy/demo --offline' || { echo "deploy/demo --help: --offline not described"; fail=1; }
+printf '%s\n' "$out" | grep -q 'deploy/demo --ros2' || { echo "deploy/demo --help: --ros2 not described"; fail=1; }
 [ -s "$bin/err" ] && { echo "deploy/demo --help wrote to stderr: $(cat "$bin/err")"; fail=1; }
 out=$(PATH=$bin "$repo/deploy/demo" --no-such-option 2>"$bin/err")
 rc=$?
@@ -22,6 +23,14 @@ rc=$?
 [ -z "$out" ] || { echo "deploy/demo --no-such-option wrote to stdout: $out"; fail=1; }
 grep -q "unknown option '--no-such-option'" "$bin/err" ||
   { echo "deploy/demo --no-such-option: stderr does not name the option: $(cat "$bin/err")"; fail=1; }
+# rcal-up --ros2 without --demo, and --ros2 with --sim: refused before anything starts.
+out=$(PATH=$bin "$repo/deploy/rcal-up" --ros2 2>"$bin/err")
+rc=$?
+[ "$rc" -eq 2 ] || { echo "rcal-up --ros2: exit $rc, expected 2"; fail=1; }
+grep -q "an option of --demo" "$bin/err" || { echo "rcal-up --ros2: $(cat "$bin/err")"; fail=1; }
+out=$(PATH=$bin "$repo/deploy/rcal-up" --demo --ros2 --sim x.sim.yaml 2>"$bin/err")
+rc=$?
+[ "$rc" -eq 2 ] || { echo "rcal-up --demo --ros2 --sim: exit $rc, expected 2"; fail=1; }
 # rcal-up --demo --sim with a sim file that is not there: refused before anything starts.
 out=$(PATH=$bin "$repo/deploy/rcal-up" --demo --sim /no/such.sim.yaml 2>"$bin/err")
 rc=$?

@@ -1,0 +1,353 @@
+// A cell run by ROS 2 drivers, as real processes inside a private network namespace: the
+// simulated demo cell played by ros2_sim_drivers as its drivers would publish it over Cyclone DDS
+// with the ROS 2 wire types (JointState 125 Hz with the names shuffled and a gripper joint added,
+// Imu + MagneticField 100 Hz on a clock +37 ms off the arm's, PointStamped from the tracker on a
+// clock −120 ms off, 0.5 ms stamp jitter) → ros2_input (clock offsets estimated and removed) →
+// still_window → ekf_identifier, and dds_bridge --cell publishing the results in ROS 2 terms.
+//
+//   * the calibration reaches ≤ 1.5× the offline figure of the same cell (the offline
+//     `rcal experiment paper --sensors` computation, as SensorPipeline);
+//   * each driver's clock offset is recovered within 2 ms and locked;
+//   * TF (rt/tf_static) carries exactly the identified set-up frames, diagnostics every process;
+//   * a restarted IMU driver (its stamps jump back) is re-synchronised and its offset re-locked;
+//   * malformed and oversized samples are counted in ros2_input's HEALTH and never crash it.
+// ctest label: ros2. Guards only turn a hang into a failure; nothing asserts on time.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <optional>
+
+#include "netns.hpp"
+#include "rcal/calibration_status_t.hpp"
+#include "rcal/cell/cell_sim_yaml.hpp"
+#include "rcal/cell/sim_cell.hpp"
+#include "rcal/clock_offset_t.hpp"
+#include "rcal/dds/dds_common.hpp"
+#include "rcal/dds/ros2_convert.hpp"
+#include "rcal/dds/setup_frames.hpp"
+#include "rcal/health_t.hpp"
+#include "rcal/identification/metrics.hpp"
+#include "rcal/io/cell_yaml.hpp"
+#include "rcal/joint_state_t.hpp"
+#include "rcal/kinematic_params_t.hpp"
+#include "rcal/transport/adapters.hpp"
+#include "rcal/transport/channels.hpp"
+#include "rcal/transport/lcm_transport.hpp"
+
+namespace rcal {
+namespace {
+
+using integration::ProcessFixture;
+constexpr const char* kUrl = "udpm://239.255.76.67:7721?ttl=0&recv_buf_size=8388608";
+constexpr const char* kCell = RCAL_SOURCE_DIR "/config/cells/grb3016.yaml";
+constexpr const char* kSim = RCAL_SOURCE_DIR "/config/cells/grb3016.sim.yaml";
+constexpr unsigned kSeed = 1;
+constexpr int kCal = 25, kTest = 50;
+
+// A DDS reader in the test.
+template <typename T>
+class Reader {
+ public:
+  Reader(dds_entity_t participant, const char* topic, dds_qos_t* qos) {
+    const dds_entity_t t = dds_create_topic(participant, dds::Descriptor<T>(), topic, qos, nullptr);
+    reader_ = dds_create_reader(participant, t, qos, nullptr);
+    dds_delete_qos(qos);
+    EXPECT_GT(reader_, 0) << topic;
+  }
+  void Take(const std::function<void(const T&)>& f) {
+    for (;;) {
+      void* samples[1] = {nullptr};
+      dds_sample_info_t info;
+      const int n = dds_take(reader_, samples, &info, 1, 1);
+      if (n <= 0) return;
+      if (info.valid_data) f(*static_cast<const T*>(samples[0]));
+      dds_return_loan(reader_, samples, n);
+    }
+  }
+
+ private:
+  dds_entity_t reader_ = 0;
+};
+
+dds_qos_t* Reliable(bool transient_local) {
+  dds_qos_t* q = dds_create_qos();
+  dds_qset_reliability(q, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
+  if (transient_local) dds_qset_durability(q, DDS_DURABILITY_TRANSIENT_LOCAL);
+  dds_qset_history(q, DDS_HISTORY_KEEP_LAST, transient_local ? 1 : 100);
+  return q;
+}
+
+// What the LCM side of a run showed.
+struct CellRun {
+  std::optional<kinematic_params_t> params;
+  std::optional<calibration_status_t> status;
+  std::optional<clock_offset_t> clocks;
+  std::optional<health_t> input_health, window_health;
+  int joints = 0;
+};
+
+class Ros2Cell : public ProcessFixture {
+ protected:
+  void SetUp() override {
+    ProcessFixture::SetUp();
+    setenv("CYCLONEDDS_URI", dds::LoopbackConfigUri().c_str(), 1);
+  }
+  void Listen(transport::LcmTransport& t, CellRun& run) {
+    namespace ch = transport::channels;
+    t.Subscribe<kinematic_params_t>(ch::kKinematicParams,
+                                    [&](const kinematic_params_t& m) { run.params = m; });
+    t.Subscribe<calibration_status_t>(ch::kCalibrationStatus,
+                                      [&](const calibration_status_t& m) { run.status = m; });
+    t.Subscribe<clock_offset_t>(ch::kClockOffset, [&](const clock_offset_t& m) { run.clocks = m; });
+    t.Subscribe<joint_state_t>(ch::kJoints, [&](const joint_state_t&) { ++run.joints; });
+    t.Subscribe<health_t>(ch::kHealth, [&](const health_t& h) {
+      if (h.process == "ros2_input") run.input_health = h;
+      if (h.process == "still_window") run.window_health = h;
+    });
+  }
+  // ros2_input, still_window, ekf_identifier (and dds_bridge) on the demo cell, then the drivers
+  // with `driver_args`; runs until the drivers are done and the identifier has judged every window.
+  CellRun RunCell(const std::vector<std::string>& driver_args, bool bridge,
+              const std::function<void()>& while_running = {}) {
+    CellRun run;
+    transport::LcmTransport t(kUrl);
+    Listen(t, run);
+    const pid_t ekf = Start({RCAL_EKF_IDENTIFIER, "--lcm-url", kUrl, "--cell", kCell,
+                             "--checkpoint", (dir_ / "ekf.checkpoint.json").string()},
+                            "ekf_identifier.log");
+    const pid_t sw =
+        Start({RCAL_STILL_WINDOW, "--lcm-url", kUrl, "--cell", kCell}, "still_window.log");
+    const pid_t in = Start({RCAL_ROS2_INPUT, "--lcm-url", kUrl, "--cell", kCell}, "ros2_input.log");
+    std::optional<pid_t> br;
+    if (bridge) br = Start({RCAL_DDS_BRIDGE, "--lcm-url", kUrl, "--cell", kCell}, "dds_bridge.log");
+    EXPECT_TRUE(integration::Until([&] { return run.status && run.input_health; },
+                                   [&] { t.HandleTimeout(100); }));
+    std::vector<std::string> cmd = {RCAL_ROS2_SIM_DRIVERS, "--sim",   kSim, "--seed",
+                                    std::to_string(kSeed), "--speed", "5"};
+    cmd.insert(cmd.end(), driver_args.begin(), driver_args.end());
+    const pid_t drivers = Start(cmd, "ros2_sim_drivers.log");
+    EXPECT_TRUE(integration::Until([&] { return !integration::Running(drivers); },
+                                   [&] {
+                                     t.HandleTimeout(100);
+                                     if (while_running) while_running();
+                                   },
+                                   600));
+    Reaped(drivers);
+    // The last windows: the identifier has judged all still_window published.
+    int64_t settled = 0;
+    integration::Until([&] { return ++settled > 40; },
+                       [&] {
+                         t.HandleTimeout(100);
+                         if (while_running) while_running();
+                       });
+    EXPECT_EQ(Stop(in), 0);
+    EXPECT_EQ(Stop(sw), 0);
+    EXPECT_EQ(Stop(ekf), 0);
+    if (br) {
+      EXPECT_EQ(Stop(*br), 0);
+    }
+    return run;
+  }
+};
+
+// The offline figure of the demo cell (SensorPipeline's): its test error after `poses` poses.
+double OfflineTestErrorMm(int poses, std::vector<Eigen::VectorXd>* test_q, cell::Cell* out) {
+  const auto robot = io::LoadRobot(RCAL_SOURCE_DIR "/config/robots/grb3016.yaml");
+  const cell::Cell cell = cell::MakeCell(robot.spec, kSeed);
+  cell::RunSettings rs;
+  rs.seed = kSeed;
+  rs.num_cal = kCal;
+  rs.num_test = kTest;
+  const auto w = cell::SimulateWindows(cell, rs);
+  for (const auto& m : w.test) test_q->push_back(m.q);
+  const auto offline = cell::RunOnline(cell, w.cal, *test_q);
+  *out = cell;
+  return offline.test_error_after_pose_mm.at(std::max(poses, 1) - 1);
+}
+
+TEST_F(Ros2Cell, TheDemoCellCalibratesThroughItsRos2Drivers) {
+  RCAL_IN_NAMESPACE("Ros2Cell.TheDemoCellCalibratesThroughItsRos2Drivers");
+  const io::BuiltCell built = io::LoadCell(kCell);
+  // The bridge's ROS 2 outputs, read while the cell runs.
+  dds::EntityGuard participant(dds_create_participant(0, nullptr, nullptr));
+  ASSERT_GT(participant.get(), 0);
+  Reader<dds::TFMessage> tf(participant.get(), "rt/tf_static", Reliable(true));
+  Reader<dds::DiagnosticArray> diagnostics(participant.get(), "rt/diagnostics", Reliable(false));
+  std::optional<std::vector<dds::NamedTransform>> transforms;
+  std::set<std::string> diagnosed;
+  auto read = [&] {
+    tf.Take([&](const dds::TFMessage& m) {
+      std::string error;
+      transforms = dds::FromRos(m, &error);
+      EXPECT_TRUE(transforms) << error;
+    });
+    diagnostics.Take([&](const dds::DiagnosticArray& m) {
+      std::string error;
+      const auto r = dds::FromRos(m, &error);
+      ASSERT_TRUE(r) << error;
+      for (const auto& s : *r) diagnosed.insert(s.name);
+    });
+  };
+
+  const CellRun run =
+      RunCell({"--poses", std::to_string(kCal), "--test-poses", std::to_string(kTest)}, true, read);
+  read();
+  ASSERT_TRUE(run.params && run.status && run.clocks && run.input_health);
+  const int accepted = run.status->poses_accepted;
+  std::printf(
+      "ros2 cell: %d poses accepted, %d rejected; ros2_input rejected %lld, still_window "
+      "rejected %lld (%s)\n",
+      accepted, run.status->poses_rejected, static_cast<long long>(run.input_health->rejected),
+      static_cast<long long>(run.window_health ? run.window_health->rejected : -1),
+      run.window_health ? run.window_health->last_error.c_str() : "");
+
+  // Clocks: both offsets recovered within 2 ms, locked.
+  ASSERT_EQ(run.clocks->num_sources, 2);
+  const double truth[2] = {0.037, -0.120};
+  for (int i = 0; i < 2; ++i) {
+    std::printf("clock %s: %.3f ms ± %.3f ms (truth %.1f ms), state %d\n",
+                run.clocks->source[i].c_str(), 1e3 * run.clocks->offset[i],
+                1e3 * run.clocks->sigma[i], 1e3 * truth[i], run.clocks->state[i]);
+    EXPECT_NEAR(run.clocks->offset[i], truth[i], 0.002) << run.clocks->source[i];
+    EXPECT_EQ(run.clocks->state[i], 2) << run.clocks->source[i];
+  }
+
+  // The calibration: ≤ 1.5× the offline figure after as many poses.
+  std::vector<Eigen::VectorXd> test_q;
+  cell::Cell cell;
+  const double offline_mm = OfflineTestErrorMm(accepted, &test_q, &cell);
+  std::string error;
+  const auto x = transport::ParamsFromMessage(*run.params, cell.model, &error);
+  ASSERT_TRUE(x) << error;
+  const double online_mm =
+      identification::ErrorsAgainstTruth(cell.model, *x, cell.x_true, test_q).mean_position_m * 1e3;
+  std::printf("test error: through ROS 2 %.4f mm, offline %.4f mm (%d poses)\n", online_mm,
+              offline_mm, accepted);
+  EXPECT_GE(accepted, kCal - 3);  // the windows before the clocks locked are refused
+  EXPECT_LT(online_mm, 1.5 * offline_mm);
+
+  // TF: exactly the identified set-up frames of the last parameters.
+  ASSERT_TRUE(transforms.has_value());
+  const auto x_built = transport::ParamsFromMessage(*run.params, built.model, &error);
+  ASSERT_TRUE(x_built) << error;
+  const auto expected =
+      dds::SetupTransforms(io::CalibratedSpec(built.robot_spec, built.model, *x_built), "rcal_");
+  ASSERT_EQ(transforms->size(), expected.size());
+  for (size_t i = 0; i < expected.size(); ++i) {
+    EXPECT_EQ((*transforms)[i].parent, expected[i].parent);
+    EXPECT_EQ((*transforms)[i].child, expected[i].child);
+    EXPECT_LT(((*transforms)[i].p_PC_P - expected[i].p_PC_P).norm(), 1e-12);
+    EXPECT_LT((*transforms)[i].q_PC.angularDistance(expected[i].q_PC), 1e-9);
+  }
+  for (const char* name :
+       {"rcal/ros2_input", "rcal/still_window", "rcal/ekf_identifier", "rcal/clock_offsets"})
+    EXPECT_TRUE(diagnosed.count(name)) << name;
+}
+
+TEST_F(Ros2Cell, ARestartedImuDriverIsResynchronisedAndItsOffsetLockedAgain) {
+  RCAL_IN_NAMESPACE("Ros2Cell.ARestartedImuDriverIsResynchronisedAndItsOffsetLockedAgain");
+  // The IMU driver restarts 60 s into the programme: its stamps start over from the beginning.
+  const CellRun run = RunCell({"--poses", "12", "--test-poses", "1", "--imu-restart-at", "60"}, false);
+  ASSERT_TRUE(run.clocks && run.status && run.input_health);
+  EXPECT_GE(run.input_health->resyncs, 1);
+  ASSERT_EQ(run.clocks->num_sources, 2);
+  EXPECT_EQ(run.clocks->resets[0], 1);  // the IMU's clock
+  EXPECT_EQ(run.clocks->resets[1], 0);
+  EXPECT_EQ(run.clocks->state[0], 2);
+  // After the restart the IMU clock reads sim time − 60 s + 37 ms: offset −59.963 s.
+  EXPECT_NEAR(run.clocks->offset[0], -60.0 + 0.037, 0.002);
+  EXPECT_GE(run.status->poses_accepted, 8);
+}
+
+TEST_F(Ros2Cell, MalformedAndOversizedSamplesAreCountedAndNeverCrash) {
+  RCAL_IN_NAMESPACE("Ros2Cell.MalformedAndOversizedSamplesAreCountedAndNeverCrash");
+  CellRun run;
+  transport::LcmTransport t(kUrl);
+  Listen(t, run);
+  const pid_t in = Start({RCAL_ROS2_INPUT, "--lcm-url", kUrl, "--cell", kCell}, "ros2_input.log");
+  ASSERT_TRUE(integration::Until([&] { return run.input_health.has_value(); },
+                                 [&] { t.HandleTimeout(100); }));
+  dds::EntityGuard participant(dds_create_participant(0, nullptr, nullptr));
+  auto writer = [&](const dds_topic_descriptor_t* desc, const char* name) {
+    dds_qos_t* q = Reliable(false);
+    const dds_entity_t topic = dds_create_topic(participant.get(), desc, name, q, nullptr);
+    const dds_entity_t w = dds_create_writer(participant.get(), topic, q, nullptr);
+    dds_delete_qos(q);
+    EXPECT_GT(w, 0) << name;
+    return w;
+  };
+  const dds_entity_t joints_w = writer(dds::Descriptor<dds::JointState>(), "rt/joint_states");
+  const dds_entity_t imu_w = writer(dds::Descriptor<dds::Imu>(), "rt/imu/data");
+  // Another type on the tracker's topic name: DDS does not match it with ros2_input's reader.
+  const dds_entity_t wrong_w = writer(dds::Descriptor<dds::RosString>(), "rt/tracker/point");
+  usleep(1'000'000);  // discovery
+
+  const io::BuiltCell cell = io::LoadCell(kCell);
+  joint_state_t good;
+  good.num_joints = 6;
+  good.names = cell.ros2_joint_names;
+  good.q = {0.1, 0.2, 0.3, 0.4, 0.5, 0.6};
+  good.dq.assign(6, 0.0);
+  std::string error;
+  int64_t utime = 5'000'000;
+  auto write_joints = [&](const std::function<void(dds::JointState&)>& spoil) {
+    good.utime = (utime += 8'000);
+    auto s = dds::ToRos(good, {}, "", &error);
+    ASSERT_TRUE(s);
+    spoil(s->get());
+    EXPECT_GE(dds_write(joints_w, &s->get()), 0);
+  };
+  int bad = 0;
+  // NaN, lengths that disagree, a stamp's nanosec beyond 1e9, a missing joint.
+  write_joints([](dds::JointState& m) { m.position._buffer[0] = std::nan(""); });
+  write_joints([](dds::JointState& m) { m.position._length = 2; });
+  write_joints([](dds::JointState& m) { m.header.stamp.nanosec = 2'000'000'000u; });
+  write_joints([](dds::JointState& m) {
+    dds_free(m.name._buffer[3]);
+    m.name._buffer[3] = dds_string_dup("j9");
+  });
+  bad += 4;
+  // Oversized: 100 000 names (a valid CDR sample of ~2 MB).
+  {
+    auto s = dds::ToRos(good, {}, "", &error);
+    ASSERT_TRUE(s);
+    auto& m = s->get();
+    const uint32_t n = 100'000;
+    for (uint32_t i = 0; i < m.name._length; ++i) dds_free(m.name._buffer[i]);
+    dds_free(m.name._buffer);
+    m.name._buffer = static_cast<char**>(dds_alloc(n * sizeof(char*)));
+    m.name._length = m.name._maximum = n;
+    for (uint32_t i = 0; i < n; ++i) m.name._buffer[i] = dds_string_dup("joint_with_a_long_name");
+    m.header.stamp.sec = static_cast<int32_t>((utime += 8'000) / 1'000'000);
+    EXPECT_GE(dds_write(joints_w, &m), 0);
+    ++bad;
+  }
+  // An IMU in g, one in °/s, one in another frame.
+  for (int k = 0; k < 3; ++k) {
+    transport::ImuSample s;
+    s.utime = (utime += 8'000);
+    s.gyro_B = {0.01, 0.0, 0.0};
+    s.f_B = {0.0, 0.0, 9.81};
+    if (k == 0) s.f_B = {0.0, 0.0, 1.0};
+    if (k == 1) s.gyro_B = {90.0, 0.0, 0.0};
+    auto m = dds::ToRos(s, k == 2 ? "camera_link" : "imu_link", &error);
+    ASSERT_TRUE(m);
+    EXPECT_GE(dds_write(imu_w, &m->get()), 0);
+    ++bad;
+  }
+  auto junk = dds::ToRos(std::string(100, 'x'));
+  dds_write(wrong_w, &junk.get());
+  // Then good joints: they come through.
+  for (int k = 0; k < 20; ++k) write_joints([](dds::JointState&) {});
+  ASSERT_TRUE(integration::Until(
+      [&] { return run.input_health && run.input_health->rejected >= bad && run.joints >= 10; },
+      [&] { t.HandleTimeout(100); }, 60))
+      << "rejected " << (run.input_health ? run.input_health->rejected : -1) << ", joints "
+      << run.joints;
+  EXPECT_EQ(run.input_health->rejected, bad);
+  EXPECT_TRUE(integration::Running(in));
+  EXPECT_EQ(Stop(in), 0);
+}
+
+}  // namespace
+}  // namespace rcal

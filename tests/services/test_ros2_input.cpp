@@ -1,0 +1,180 @@
+// services/ros2_input/ros2_input: the ROS 2 drivers' samples into the pipeline's events — joints
+// by name, the magnetometer paired with the IMU, one time order out of several drivers, every bad
+// sample counted, a restarted driver re-synchronised.
+#include "ros2_input.hpp"
+
+#include <gtest/gtest.h>
+
+#include <limits>
+
+#include "rcal/io/cell_yaml.hpp"
+
+namespace rcal::ros2 {
+namespace {
+
+io::BuiltCell DemoCell() {
+  return io::LoadCell(RCAL_SOURCE_DIR "/config/cells/grb3016.yaml");
+}
+
+joint_state_t Joints(const io::BuiltCell& cell, int64_t utime, double q0 = 0.1) {
+  joint_state_t js;
+  js.utime = utime;
+  js.num_joints = cell.model.num_joints();
+  js.names = cell.ros2_joint_names;
+  for (int i = 0; i < js.num_joints; ++i) {
+    js.q.push_back(q0 * (i + 1));
+    js.dq.push_back(0.0);
+  }
+  return js;
+}
+
+dds::Sample<dds::JointState> RosJoints(const io::BuiltCell& cell, int64_t utime,
+                                       std::vector<int> order = {}) {
+  std::string error;
+  auto s = dds::ToRos(Joints(cell, utime), order, "", &error);
+  EXPECT_TRUE(s) << error;
+  return std::move(*s);
+}
+
+dds::Sample<dds::Imu> RosImu(int64_t utime, const char* frame = "imu_link") {
+  transport::ImuSample s;
+  s.utime = utime;
+  s.gyro_B = {0.01, 0.02, -0.03};
+  s.f_B = {0.1, 0.2, 9.8};
+  std::string error;
+  return std::move(*dds::ToRos(s, frame, &error));
+}
+
+dds::Sample<dds::PointStamped> RosPoint(int64_t utime, double x = 1.0) {
+  transport::PositionSample p;
+  p.utime = utime;
+  p.p = {x, 0.2, 0.3};
+  std::string error;
+  return std::move(*dds::ToRosPoint(p, "tracker", &error));
+}
+
+int64_t Utime(const sensors::SensorEvent& e) {
+  return sensors::Utime(e);
+}
+
+class Ros2InputTest : public ::testing::Test {
+ protected:
+  Ros2InputTest() : cell_(DemoCell()), health_("ros2_input") {
+    settings_ = FromCell(cell_);
+    settings_.estimate_clock_offsets = false;  // one clock: these tests are about the rest
+    settings_.reorder_delay = 0.05;
+  }
+  io::BuiltCell cell_;
+  Ros2InputSettings settings_;
+  transport::Health health_;
+};
+
+TEST_F(Ros2InputTest, SettingsComeFromTheCell) {
+  EXPECT_EQ(settings_.joint_topic, "/joint_states");
+  EXPECT_EQ(settings_.imu_topic, "/imu/data");
+  EXPECT_EQ(settings_.mag_topic, "/imu/mag");
+  ASSERT_EQ(settings_.positions.size(), 1u);
+  EXPECT_EQ(settings_.positions[0].topic, "/tracker/point");
+  EXPECT_EQ(settings_.positions[0].frame_id, "tracker");
+  // The cell's σ = 0.5 mm per axis.
+  EXPECT_DOUBLE_EQ(settings_.position_covariance(1, 1), 2.5e-7);
+  EXPECT_EQ(settings_.position_covariance(0, 1), 0.0);
+  io::BuiltCell ur10 = io::LoadCell(RCAL_SOURCE_DIR "/config/cells/ur10.yaml");
+  EXPECT_THROW(FromCell(ur10), std::runtime_error);  // no ros2: section
+}
+
+TEST_F(Ros2InputTest, EventsLeaveInOneTimeOrderAfterTheReorderDelay) {
+  Ros2Input in(settings_, cell_.model, health_);
+  // Joints in a shuffled order, at 0.100 s; the tracker's sample of 0.095 s arrives after them.
+  in.OnJointState(RosJoints(cell_, 100'000, {5, 3, 1, 0, 2, 4}).get());
+  in.OnPoint(0, RosPoint(95'000).get());
+  EXPECT_TRUE(in.Ready().empty());  // newer than the delay (50 ms here)
+  in.OnJointState(RosJoints(cell_, 160'000).get());
+  const auto out = in.Ready();
+  ASSERT_EQ(out.size(), 2u);
+  EXPECT_EQ(Utime(out[0]), 95'000);
+  ASSERT_TRUE(std::holds_alternative<transport::PositionSample>(out[0]));
+  EXPECT_EQ(std::get<transport::PositionSample>(out[0]).marker_id, 0);
+  ASSERT_TRUE(std::holds_alternative<joint_state_t>(out[1]));
+  const auto& js = std::get<joint_state_t>(out[1]);
+  EXPECT_EQ(js.names, cell_.ros2_joint_names);  // chain order again
+  EXPECT_DOUBLE_EQ(js.q[2], 0.3);
+  // A sample older than what left: late, counted, dropped.
+  in.OnPoint(0, RosPoint(99'000).get());
+  EXPECT_EQ(in.late(), 1);
+  EXPECT_EQ(health_.rejected(), 1);
+  EXPECT_NE(health_.last_error().find("reorder delay"), std::string::npos);
+  const auto rest = in.Ready(true);
+  ASSERT_EQ(rest.size(), 1u);
+  EXPECT_EQ(Utime(rest[0]), 160'000);
+}
+
+TEST_F(Ros2InputTest, TheImuCarriesTheLatestMagnetometerReading) {
+  Ros2Input in(settings_, cell_.model, health_);
+  std::string error;
+  in.OnImu(RosImu(10'000).get());  // no reading yet
+  auto mag = dds::ToRos(dds::MagReading{15'000, {2e-5, 0, 4e-5}}, "imu_link", &error);
+  in.OnMagneticField(mag->get());
+  in.OnImu(RosImu(20'000).get());
+  in.OnImu(RosImu(200'000).get());  // 185 ms after the reading: too old
+  const auto out = in.Ready(true);
+  ASSERT_EQ(out.size(), 3u);
+  EXPECT_FALSE(std::get<transport::ImuSample>(out[0]).has_mag);
+  const auto& paired = std::get<transport::ImuSample>(out[1]);
+  EXPECT_TRUE(paired.has_mag);
+  EXPECT_EQ(paired.m_B, Eigen::Vector3d(2e-5, 0, 4e-5));
+  EXPECT_FALSE(std::get<transport::ImuSample>(out[2]).has_mag);
+  EXPECT_EQ(in.mag_paired(), 1);
+}
+
+TEST_F(Ros2InputTest, BadSamplesAreCountedNamedAndNeverStopTheStream) {
+  Ros2Input in(settings_, cell_.model, health_);
+  auto nan_joints = RosJoints(cell_, 10'000);
+  nan_joints.get().position._buffer[1] = std::numeric_limits<double>::quiet_NaN();
+  in.OnJointState(nan_joints.get());
+  EXPECT_EQ(health_.rejected(), 1);
+  EXPECT_EQ(health_.last_error(), "/joint_states.position[1] (j2): NaN");
+  in.OnImu(RosImu(10'000, "base_link").get());
+  EXPECT_EQ(health_.last_error(),
+            "/imu/data.header.frame_id: 'base_link' is not the cell's 'imu_link'");
+  auto far = RosPoint(10'000, 5e3);  // 5 km
+  in.OnPoint(0, far.get());
+  EXPECT_EQ(health_.rejected(), 3);
+  // A duplicate and an out-of-order joint stamp: refused by the stream's time gate.
+  in.OnJointState(RosJoints(cell_, 20'000).get());
+  in.OnJointState(RosJoints(cell_, 20'000).get());
+  in.OnJointState(RosJoints(cell_, 19'000).get());
+  EXPECT_EQ(health_.duplicates(), 1);
+  EXPECT_EQ(health_.out_of_order(), 1);
+  // The good ones went through.
+  in.OnJointState(RosJoints(cell_, 30'000).get());
+  EXPECT_EQ(in.Ready(true).size(), 2u);
+  EXPECT_EQ(health_.received(), 7);
+}
+
+TEST_F(Ros2InputTest, ARestartedDriverIsResynchronisedAndItsClockEstimatedAnew) {
+  Ros2Input in(settings_, cell_.model, health_);
+  for (int k = 0; k < 10; ++k) in.OnImu(RosImu(500'000'000 + k * 10'000).get());
+  // The IMU driver restarts: its clock starts again near 0 (time since its boot).
+  for (int k = 0; k < 10; ++k) in.OnImu(RosImu(2'000'000 + k * 10'000).get());
+  EXPECT_EQ(health_.resyncs(), 1);
+  const auto clocks = in.Clocks();
+  ASSERT_EQ(clocks.size(), 2u);
+  EXPECT_EQ(clocks[0].source, "imu");
+  EXPECT_EQ(clocks[0].resets, 1);
+  EXPECT_EQ(clocks[1].resets, 0);
+  EXPECT_EQ(clocks[0].state, ClockState::kFixed);  // clock_offsets: none
+}
+
+TEST_F(Ros2InputTest, ClockMessageListsEverySource) {
+  Ros2Input in(settings_, cell_.model, health_);
+  const clock_offset_t m = in.ClockMessage(123);
+  EXPECT_EQ(m.utime, 123);
+  ASSERT_EQ(m.num_sources, 2);
+  EXPECT_EQ(m.source[0], "imu");
+  EXPECT_EQ(m.source[1], "position/0");
+  EXPECT_EQ(m.state[1], static_cast<int8_t>(ClockState::kFixed));
+}
+
+}  // namespace
+}  // namespace rcal::ros2
