@@ -278,6 +278,27 @@ TEST(ClockOffset, ADriverRestartResetsItsSourceWhichLocksAgain) {
               3 * est.offset(ClockSource::kMarker).sigma_s);
 }
 
+TEST(ClockOffset, AJumpForwardResetsAndAnOffsetBeyondTheLagRangeIsNeverEstimated) {
+  // The tracker's stamps jump 3 s forward halfway (more than jump_forward_s): a reset, counted;
+  // its new offset (2.88 s) is outside ±max_lag_s, so the source stays unknown rather than
+  // taking a wrong peak.
+  StreamSettings s;
+  s.stops = 10;
+  auto ev = Simulate(Grb(), s, 13);
+  const double t_jump = ev.back().arrival / 2;
+  for (Event& e : ev)
+    if (e.kind == 2 && e.arrival >= t_jump) e.stamp += 3.0;
+  ClockOffsetEstimator est(Grb().model);
+  Play(est, ev);
+  EXPECT_EQ(est.stream_counters(ClockSource::kMarker).clock_jumps, 1);
+  EXPECT_EQ(est.offset(ClockSource::kMarker).state, ClockState::kUnknown);
+  EXPECT_NE(est.source_counters(ClockSource::kMarker).last_reason.find("edge of the lag range"),
+            std::string::npos)
+      << est.source_counters(ClockSource::kMarker).last_reason;
+  EXPECT_EQ(est.stream_counters(ClockSource::kImu).clock_jumps, 0);
+  EXPECT_NEAR(est.offset(ClockSource::kImu).offset_s, kImuOffset, 0.002);
+}
+
 TEST(ClockOffset, BadInputIsRefusedNamingTheFieldCountedAndIgnored) {
   StreamSettings s;
   s.stops = 8;
