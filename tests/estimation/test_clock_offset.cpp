@@ -162,14 +162,22 @@ void Play(ClockOffsetEstimator& est, std::vector<Event>& ev,
 
 struct Offsets {
   ClockOffset imu, marker;
+  double imu_locked_at = -1, marker_locked_at = -1;  // first arrival time locked [s]; −1: never
 };
 
 Offsets RunCell(const Arm& arm, const StreamSettings& s, unsigned seed,
                 const ClockOffsetSettings& cs = {}, bool flange_reference = false) {
   auto ev = Simulate(arm, s, seed);
   ClockOffsetEstimator est(flange_reference ? arm.model_flange : arm.model, cs);
-  Play(est, ev);
-  return {est.offset(ClockSource::kImu), est.offset(ClockSource::kMarker)};
+  Offsets o;
+  Play(est, ev, [&](ClockOffsetEstimator& x, Event& e) {
+    if (o.imu_locked_at < 0 && x.offset(ClockSource::kImu).usable) o.imu_locked_at = e.arrival;
+    if (o.marker_locked_at < 0 && x.offset(ClockSource::kMarker).usable)
+      o.marker_locked_at = e.arrival;
+  });
+  o.imu = est.offset(ClockSource::kImu);
+  o.marker = est.offset(ClockSource::kMarker);
+  return o;
 }
 
 const Arm& Grb() {
@@ -193,6 +201,8 @@ TEST(ClockOffset, RecoversImuAndTrackerOffsetsOnStopAndGoMotion) {
     EXPECT_EQ(r.marker.state, ClockState::kLocked) << "seed " << seed;
     EXPECT_NEAR(r.imu.offset_s, kImuOffset, 0.002) << "seed " << seed;
     EXPECT_NEAR(r.marker.offset_s, kMarkerOffset, 0.002) << "seed " << seed;
+    std::printf("        locked after %.1f s (imu), %.1f s (marker)\n", r.imu_locked_at,
+                r.marker_locked_at);
     z_imu.push_back((r.imu.offset_s - kImuOffset) / r.imu.sigma_s);
     z_marker.push_back((r.marker.offset_s - kMarkerOffset) / r.marker.sigma_s);
   }

@@ -573,7 +573,11 @@ OffsetWindowEstimate ClockOffsetEstimator::Estimate(ClockSource s) {
   const double scatter = std::max(0.0, cb.swxx / cb.sw - mean * mean);
   const double var = std::max(std::min(overlap, static_cast<double>(cb.n)) / cb.sw,
                               cb.n > 1 ? scatter / spanned : 0.0);
-  const bool usable = std::sqrt(var) < settings_.max_sigma_s;
+  // One window's σ does not see the model error (header): no lock before the scatter of
+  // lock_min_windows independent windows bounds σ.
+  const double covered = (cb.last_t - cb.first_t) / std::max(1e-9, window);
+  const bool usable =
+      std::sqrt(var) < settings_.max_sigma_s && covered >= settings_.lock_min_windows;
   o.state = usable ? ClockState::kLocked : ClockState::kEstimating;
   o.usable = usable;
   o.offset_s = mean;

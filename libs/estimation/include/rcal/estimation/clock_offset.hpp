@@ -55,7 +55,7 @@
 // of buffer_s; a source is re-estimated every estimate_every_s of its own time. State per source:
 //   kUnknown     no estimate since the last reset;
 //   kEstimating  an estimate, σ ≥ max_sigma_s (not usable yet);
-//   kLocked      σ < max_sigma_s: offset usable.
+//   kLocked      σ < max_sigma_s and windows spanning lock_min_windows buffers: usable.
 // A window without motion changes nothing (the offset does not change while the arm stands).
 // The offset is assumed constant between resets (no drift model). Clock jumps: each stream's stamps
 // go through a TimeGate; a re-synchronisation (a restarted driver: stamps back by more than
@@ -97,9 +97,12 @@ struct ClockOffsetSettings {
   double estimate_every_s = 2.0;  ///< re-estimation period, in the source's own time [s]
   double min_window_s = 4.0;      ///< shortest overlap of source and joints to estimate from [s]
   double max_sigma_s = 0.002;     ///< an offset is usable (locked) when σ is below this [s]
-  double min_correlation = 0.6;   ///< coarse correlation peak below this: no estimate [-]
-  double min_rate_rms = 0.05;     ///< IMU: reference |ω| RMS about its mean below: still [rad/s]
-  double min_speed_rms = 0.02;    ///< tracker: reference speed RMS below this: still [m/s]
+  /// Locked also needs the windows combined to span this many buffer lengths of source data [-]
+  /// (the scatter between windows, which bounds σ, needs more than one).
+  double lock_min_windows = 2.0;
+  double min_correlation = 0.6;  ///< coarse correlation peak below this: no estimate [-]
+  double min_rate_rms = 0.05;    ///< IMU: reference |ω| RMS about its mean below: still [rad/s]
+  double min_speed_rms = 0.02;   ///< tracker: reference speed RMS below this: still [m/s]
   int joint_derivative_half_width = 6;  ///< samples each side of the q̇ fit when q̇ is absent [-]
   double marker_derivative_half_window_s = 0.05;  ///< half width of the marker velocity fit [s]
   bool estimate_marker_offset = true;             ///< fit r (see the header) with the offset
