@@ -236,6 +236,7 @@ int main(int argc, char** argv) {
     health.Tick(0, t, ch.health);  // "up": the readers are in place
 
     LatencyHistogram latency;
+    int64_t logged_rejections = 0;
     std::vector<int8_t> last_states;
     int64_t last_clock_report = 0;
     while (!services::StopRequested()) {
@@ -245,6 +246,10 @@ int main(int argc, char** argv) {
       int64_t dropped = 0;
       for (const Reader& r : readers) dropped += r.lost + r.rejected;
       health.SetDropped(dropped);
+      if (health.rejected() > logged_rejections) {
+        spdlog::warn("rejected {} so far; the last: {}", health.rejected(), health.last_error());
+        logged_rejections = health.rejected();
+      }
       const int64_t now = input.joints_utime();
       // CLOCK_OFFSET: 1 Hz of the joints' time, and at once when a state changes.
       const clock_offset_t clocks = input.ClockMessage(now);
