@@ -14,8 +14,12 @@
 // ctest label: ros2. Guards only turn a hang into a failure; nothing asserts on time.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <deque>
 #include <optional>
+#include <set>
 
 #include "netns.hpp"
 #include "rcal/calibration_status_t.hpp"
@@ -30,6 +34,7 @@
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/joint_state_t.hpp"
 #include "rcal/kinematic_params_t.hpp"
+#include "rcal/pose_measurement_t.hpp"
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/lcm_transport.hpp"
@@ -84,7 +89,15 @@ struct CellRun {
   std::optional<clock_offset_t> clocks;
   std::optional<health_t> input_health, window_health;
   int joints = 0;
+  // Wall time [s] from the JOINTS sample at a window's end leaving ros2_input to its
+  // POSE_MEASUREMENT reaching this test: the still window closing, and the identifier's input.
+  std::vector<double> pose_latency_s;
+  std::deque<std::pair<int64_t, double>> joints_wall;  // (utime, wall [s]) of recent JOINTS
 };
+
+double WallSeconds() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
 
 class Ros2Cell : public ProcessFixture {
  protected:
@@ -99,7 +112,18 @@ class Ros2Cell : public ProcessFixture {
     t.Subscribe<calibration_status_t>(ch::kCalibrationStatus,
                                       [&](const calibration_status_t& m) { run.status = m; });
     t.Subscribe<clock_offset_t>(ch::kClockOffset, [&](const clock_offset_t& m) { run.clocks = m; });
-    t.Subscribe<joint_state_t>(ch::kJoints, [&](const joint_state_t&) { ++run.joints; });
+    t.Subscribe<joint_state_t>(ch::kJoints, [&](const joint_state_t& m) {
+      ++run.joints;
+      run.joints_wall.emplace_back(m.utime, WallSeconds());
+      if (run.joints_wall.size() > 20000) run.joints_wall.pop_front();
+    });
+    t.Subscribe<pose_measurement_t>(ch::kPoseMeasurement, [&](const pose_measurement_t& m) {
+      for (const auto& [u, wall] : run.joints_wall)
+        if (u >= m.utime) {
+          run.pose_latency_s.push_back(WallSeconds() - wall);
+          break;
+        }
+    });
     t.Subscribe<health_t>(ch::kHealth, [&](const health_t& h) {
       if (h.process == "ros2_input") run.input_health = h;
       if (h.process == "still_window") run.window_health = h;
@@ -225,6 +249,14 @@ TEST_F(Ros2Cell, TheDemoCellCalibratesThroughItsRos2Drivers) {
       identification::ErrorsAgainstTruth(cell.model, *x, cell.x_true, test_q).mean_position_m * 1e3;
   std::printf("test error: through ROS 2 %.4f mm, offline %.4f mm (%d poses)\n", online_mm,
               offline_mm, accepted);
+  std::vector<double> lat = run.pose_latency_s;
+  if (!lat.empty()) {
+    std::sort(lat.begin(), lat.end());
+    std::printf(
+        "window end (JOINTS out of ros2_input) -> POSE_MEASUREMENT: median %.1f ms, max "
+        "%.1f ms over %zu windows (at 5x real time)\n",
+        1e3 * lat[lat.size() / 2], 1e3 * lat.back(), lat.size());
+  }
   EXPECT_GE(accepted, kCal - 3);  // the windows before the clocks locked are refused
   EXPECT_LT(online_mm, 1.5 * offline_mm);
 
