@@ -5,7 +5,9 @@
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 #include <random>
 
@@ -82,6 +84,7 @@ TEST(CalibrationExport, ParityAtThousandJointVectorsForEveryArm) {
   const std::vector<std::filesystem::path> arms = AllArms();
   ASSERT_GE(arms.size(), 8u);  // 5 test arms, 2 YAML and 1 URDF robot in config/robots
   int urdf_sources = 0, yaml_sources = 0;
+  std::vector<double> max_p, max_o;  // per arm and route, for the README's figures
   for (const auto& path : arms) {
     for (bool setup : {false, true}) {
       const Arm a = LoadArm(path, setup);
@@ -94,7 +97,9 @@ TEST(CalibrationExport, ParityAtThousandJointVectorsForEveryArm) {
         SCOPED_TRACE(a.file + (setup ? " with" : " without") + " set-up frames, " +
                      (xml.empty() ? "URDF written from the spec" : "its own URDF calibrated"));
         const std::string urdf = RobotDescriptionUrdf(a.robot.spec, model, p.x, xml, a.file);
-        if (xml.empty()) EXPECT_NE(urdf.find("  <!-- Written by rcal"), std::string::npos);
+        if (xml.empty()) {
+          EXPECT_NE(urdf.find("  <!-- Written by rcal"), std::string::npos);
+        }
         const ParityReport r = CheckUrdfParity(urdf, a.robot.spec, model, p.x);
         EXPECT_TRUE(r.passed);
         EXPECT_EQ(r.samples, 1000);
@@ -104,12 +109,20 @@ TEST(CalibrationExport, ParityAtThousandJointVectorsForEveryArm) {
         const size_t expected = std::max<size_t>(1, model.markers().size()) + 1 + (setup ? 1 : 0);
         EXPECT_EQ(r.checks.size(), expected);
         for (const ParityCheck& c : r.checks) EXPECT_EQ(c.errors.size(), 1000u) << c.what;
+        max_p.push_back(r.max_position_m);
+        max_o.push_back(r.max_orientation_rad);
         (xml.empty() ? yaml_sources : urdf_sources) += 1;
       }
     }
   }
   EXPECT_GE(urdf_sources, 12);  // 6 URDF arms × with/without
   EXPECT_GE(yaml_sources, 16);  // every arm written from its spec too
+  std::sort(max_p.begin(), max_p.end());
+  std::sort(max_o.begin(), max_o.end());
+  std::printf(
+      "%zu exports: largest error over 1000 joint vectors, median over exports %.3g m / "
+      "%.3g rad, worst %.3g m / %.3g rad\n",
+      max_p.size(), max_p[max_p.size() / 2], max_o[max_o.size() / 2], max_p.back(), max_o.back());
 }
 
 // The check can fail, and fails by exactly what moved: the world frame shifted by 3 µm after the
@@ -238,8 +251,19 @@ TEST(CalibrationExport, RecordRoundTripsToTheSameModel) {
     EXPECT_EQ(r.calibration_hash, CalibrationHash(a.robot.model, p.x));
     EXPECT_EQ(r.spec.base_link, a.robot.spec.base_link);
     EXPECT_EQ(r.data, "poses.csv");
-    for (int i = 0; i < model.num_params(); ++i)
+    for (int i = 0; i < model.num_params(); ++i) {
       EXPECT_EQ(std::isnan(back.sigma(i)), std::isnan(p.sigma(i)));
+      EXPECT_EQ(back.Identified(i), p.Identified(i));
+    }
+    // Identified with an unknown σ (null) stays identified.
+    ModelParameters unknown = p;
+    unknown.identified.assign(model.num_params(), true);
+    const CalibrationRecord u = ParseCalibrationRecord(
+        CalibrationRecordJson(a.robot.spec, a.robot.model, unknown, file, "d", "t").dump(), "u");
+    const ModelParameters ub =
+        ParametersByName(model, u.names, u.values, u.sigmas, "u", u.identified);
+    EXPECT_TRUE(std::isnan(ub.sigma(1)));
+    EXPECT_TRUE(ub.Identified(1));
   }
 }
 

@@ -511,8 +511,12 @@ int Run(const Options& o) {
   // What `rcal export` reads: the robot as fitted and every parameter with its σ (null: not
   // identified), under a hash of both (io/calibration_export.hpp).
   if (rejected.empty()) {
-    io::ModelParameters mp{fit.x, Eigen::VectorXd::Constant(model.num_params(), std::nan(""))};
-    for (int i : fit.identified) mp.sigma(i) = fit.sigma(i);
+    io::ModelParameters mp{fit.x, Eigen::VectorXd::Constant(model.num_params(), std::nan("")), {}};
+    mp.identified.assign(model.num_params(), false);
+    for (int i : fit.identified) {
+      mp.sigma(i) = fit.sigma(i);
+      mp.identified[i] = true;
+    }
     j["calibration"] = io::CalibrationRecordJson(
         robot.spec, model, mp, fs::absolute(robot.source).string(), o.data, io::UtcNow());
   }

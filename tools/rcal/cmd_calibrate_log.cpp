@@ -184,8 +184,12 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
     // What `rcal export` reads (io/calibration_export.hpp): the cell's robot with its set-up
     // frames and every parameter with its σ (null: not identified).
     if (rejected.empty() && ekf.accepted() > 0) {
-      io::ModelParameters mp{x, Eigen::VectorXd::Constant(model.num_params(), std::nan(""))};
-      for (int i : ekf.identified()) mp.sigma(i) = sigma(i);
+      io::ModelParameters mp{x, Eigen::VectorXd::Constant(model.num_params(), std::nan("")), {}};
+      mp.identified.assign(model.num_params(), false);
+      for (int i : ekf.identified()) {
+        mp.sigma(i) = sigma(i);
+        mp.identified[i] = true;
+      }
       j["calibration"] =
           io::CalibrationRecordJson(cell_robot.spec, model, mp, id.cell().spec.robot.file.string(),
                                     "LCM log " + o.log, io::UtcNow());

@@ -81,7 +81,7 @@ io::ExportInput FromCalibration(const Options& o) {
   in.spec = r.spec;
   in.model = io::BuildModel(r.spec);
   in.parameters = io::ParametersByName(in.model, r.names, r.values, r.sigmas,
-                                       file.string() + ": calibration.parameters");
+                                       file.string() + ": calibration.parameters", r.identified);
   // The rebuilt model must be the one that was fitted: the hash covers its structure and x.
   const std::string hash = io::CalibrationHash(in.model, in.parameters.x);
   if (hash != r.calibration_hash)
@@ -126,7 +126,11 @@ io::ExportInput FromCheckpoint(const Options& o) {
   in.parameters.x = ekf.x();
   const Eigen::VectorXd sigma = ekf.sigma();
   in.parameters.sigma = Eigen::VectorXd::Constant(in.model.num_params(), std::nan(""));
-  for (int i : ekf.identified()) in.parameters.sigma(i) = sigma(i);
+  in.parameters.identified.assign(in.model.num_params(), false);
+  for (int i : ekf.identified()) {
+    in.parameters.sigma(i) = sigma(i);
+    in.parameters.identified[i] = true;
+  }
   if (!in.parameters.x.allFinite()) throw std::runtime_error(o.checkpoint + ": x: not finite");
   in.data = "ekf_identifier poses up to utime " + std::to_string(f.utime) + " µs (" +
             std::to_string(ekf.accepted()) + " accepted)";
@@ -168,8 +172,9 @@ io::ExportInput FromLog(const Options& o) {
   std::vector<double> sigmas(n);
   for (size_t i = 0; i < n; ++i) sigmas[i] = last->identified[i] ? last->sigmas[i] : std::nan("");
   std::vector<double> values(x->data(), x->data() + x->size());
-  in.parameters =
-      io::ParametersByName(cell.model, last->names, values, sigmas, o.log + ": " + channel);
+  const std::vector<bool> identified(last->identified.begin(), last->identified.end());
+  in.parameters = io::ParametersByName(cell.model, last->names, values, sigmas,
+                                       o.log + ": " + channel, identified);
   in.data = "LCM log " + o.log + ", last " + channel + " (utime " + std::to_string(last->utime) +
             " µs, " + std::to_string(last->poses_used) + " poses used)";
   in.from = o.log;

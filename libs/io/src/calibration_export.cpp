@@ -138,14 +138,17 @@ std::string ParameterFrameText(const RobotSpec& spec, const kinematics::Kinemati
 ModelParameters ParametersByName(const kinematics::KinematicModel& model,
                                  const std::vector<std::string>& names,
                                  const std::vector<double>& values,
-                                 const std::vector<double>& sigmas, const std::string& field) {
-  if (values.size() != names.size() || (!sigmas.empty() && sigmas.size() != names.size()))
+                                 const std::vector<double>& sigmas, const std::string& field,
+                                 const std::vector<bool>& identified) {
+  if (values.size() != names.size() || (!sigmas.empty() && sigmas.size() != names.size()) ||
+      (!identified.empty() && identified.size() != names.size()))
     throw std::runtime_error(field + ": " + std::to_string(names.size()) + " names, " +
                              std::to_string(values.size()) + " values, " +
                              std::to_string(sigmas.size()) + " sigmas");
   ModelParameters p;
   p.x = Eigen::VectorXd::Zero(model.num_params());
   p.sigma = Eigen::VectorXd::Constant(model.num_params(), std::nan(""));
+  p.identified.assign(model.num_params(), false);
   std::vector<bool> seen(model.num_params(), false);
   for (size_t i = 0; i < names.size(); ++i) {
     const std::string where = field + "[" + std::to_string(i) + "] '" + names[i] + "'";
@@ -163,6 +166,8 @@ ModelParameters ParametersByName(const kinematics::KinematicModel& model,
         throw std::runtime_error(where + ": sigma must be finite and ≥ 0 (or null)");
       p.sigma(k) = s;
     }
+    p.identified[k] =
+        identified.empty() ? !std::isnan(p.sigma(k)) : static_cast<bool>(identified[i]);
   }
   for (int k = 0; k < model.num_params(); ++k)
     if (!seen[k])
@@ -179,7 +184,8 @@ nlohmann::json CalibrationRecordJson(const RobotSpec& spec, const kinematics::Ki
     const double s = i < p.sigma.size() ? p.sigma(i) : std::nan("");
     params.push_back({{"name", model.parameters()[i].name},
                       {"value", p.x(i)},
-                      {"sigma", std::isfinite(s) ? json(s) : json(nullptr)}});
+                      {"sigma", std::isfinite(s) ? json(s) : json(nullptr)},
+                      {"identified", p.Identified(i)}});
   }
   return {{"schema", kRecordSchema},
           {"robot", model.name()},
@@ -237,6 +243,13 @@ CalibrationRecord ParseCalibrationRecord(const std::string& text, const std::str
     if (!s.is_number() && !s.is_null())
       throw std::runtime_error(at + "sigma: not a number or null");
     r.sigmas.push_back(s.is_null() ? std::nan("") : s.get<double>());
+    bool id = !s.is_null();
+    if (params[i].contains("identified")) {
+      if (!params[i]["identified"].is_boolean())
+        throw std::runtime_error(at + "identified: not true or false");
+      id = params[i]["identified"].get<bool>();
+    }
+    r.identified.push_back(id);
   }
   return r;
 }
@@ -343,7 +356,9 @@ std::string ParameterYamlText(const ExportInput& in, const std::string& hash,
   s += "# rcal export: every parameter of the identified model " + model.name() +
        " with its 1-sigma, SI units (m, rad).\n";
   s += "# error: identified error from the nominal (drawing) value; value = nominal + error.\n";
-  s += "# sigma null: not identified (held at its value). Frames: roll-pitch-yaw with\n";
+  s += "# sigma null: not identified (held at its value), or its sigma unknown (identified: "
+       "true).\n";
+  s += "# Frames: roll-pitch-yaw with\n";
   s += "# R = Rz(yaw) Ry(pitch) Rx(roll).\n";
   s += "schema: rcal.calibration_parameters/1\n";
   s += "robot: " + Y(model.name()) + "\n";
@@ -362,7 +377,7 @@ std::string ParameterYamlText(const ExportInput& in, const std::string& hash,
     s += "  - {name: " + Y(p.name) + ", frame: " + Y(ParameterFrameText(in.spec, model, i)) +
          ", unit: " + (p.is_angle ? "rad" : "m") + ", nominal: " + Y(p.nominal) +
          ", error: " + Y(x(i)) + ", value: " + Y(p.nominal + x(i)) + ", sigma: " + Y(sigma(i)) +
-         ", identified: " + (std::isnan(sigma(i)) ? "false" : "true") + "}\n";
+         ", identified: " + (in.parameters.Identified(i) ? "true" : "false") + "}\n";
   }
   const RobotSpec cal = CalibratedSpec(in.spec, model, x);
   s += "setup_frames:\n";
@@ -413,7 +428,9 @@ ExportResult ExportCalibration(const ExportInput& in, const std::filesystem::pat
       " every parameter with its 1-sigma [m, rad]: calibration.yaml; parity: parity.md "};
   std::string sig;
   for (int i = 0; i < model.num_params(); ++i)
-    if (!std::isnan(p.sigma(i))) sig += " " + model.parameters()[i].name + "=" + Y(p.sigma(i));
+    if (p.Identified(i))
+      sig += " " + model.parameters()[i].name + "=" +
+             (std::isnan(p.sigma(i)) ? std::string("unknown") : Y(p.sigma(i)));
   header.push_back(" sigma [m | rad]:" + (sig.empty() ? std::string(" none identified") : sig) +
                    " ");
   const std::string urdf =

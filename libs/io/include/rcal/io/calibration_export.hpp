@@ -17,15 +17,15 @@
 //    "base_link": "base", "tip_link": "flange",
 //    "data": "poses.csv", "date": "2026-12-02T13:00:00Z",
 //    "calibration_hash": "fnv1a64:0123456789abcdef",
-//    "parameters": [{"name": "a1", "value": 1e-4, "sigma": 2e-6}, ...]}  # every parameter, model
-//                                                                      # order; sigma null: not
-//                                                                      # identified
+//    "parameters": [{"name": "a1", "value": 1e-4, "sigma": 2e-6, "identified": true}, ...]}
+//                  # every parameter, model order; sigma null: not identified, or unknown
 //
 // Hostile input (missing keys, wrong types, non-finite values, wrong sizes, parameters of another
 // robot) throws std::runtime_error naming the source and the field.
 #pragma once
 
 #include <Eigen/Core>
+#include <cmath>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -50,19 +50,27 @@ std::string ParameterFrameText(const RobotSpec& spec, const kinematics::Kinemati
 /// A full parameter vector in model order.
 struct ModelParameters {
   Eigen::VectorXd x;      ///< errors from the nominal model [m | rad]
-  Eigen::VectorXd sigma;  ///< 1σ [m | rad]; NaN: not identified (held at its value)
+  Eigen::VectorXd sigma;  ///< 1σ [m | rad]; NaN: not identified, or σ unknown (identified)
+  /// Which parameters were identified (the others held at their value); empty: those whose σ is
+  /// not NaN.
+  std::vector<bool> identified;
+  bool Identified(int i) const {
+    return identified.empty() ? !std::isnan(sigma(i)) : static_cast<bool>(identified.at(i));
+  }
 };
 
 /// Maps named values onto `model`'s parameters. `sigmas` may be empty (all NaN: none identified);
 /// a NaN σ means not identified; a negative or infinite σ is refused, as is a value that is not
-/// finite. Every
+/// finite. `identified`, when not empty, says per entry whether it was identified (a NaN σ then
+/// means unknown). Every
 /// parameter of the model must be named exactly once and no other name may appear (another
 /// robot's parameters: "not a parameter of robot M"). `field` names the list in messages, e.g.
 /// "results.json: calibration.parameters". Throws std::runtime_error naming the entry.
 ModelParameters ParametersByName(const kinematics::KinematicModel& model,
                                  const std::vector<std::string>& names,
                                  const std::vector<double>& values,
-                                 const std::vector<double>& sigmas, const std::string& field);
+                                 const std::vector<double>& sigmas, const std::string& field,
+                                 const std::vector<bool>& identified = {});
 
 /// A calibration as `rcal calibrate` records it (schema in the file comment).
 struct CalibrationRecord {
@@ -73,7 +81,8 @@ struct CalibrationRecord {
   std::string date;        ///< ISO 8601 UTC
   std::string calibration_hash;
   std::vector<std::string> names;
-  std::vector<double> values, sigmas;  ///< sigmas: NaN for null (not identified)
+  std::vector<double> values, sigmas;  ///< sigmas: NaN for null (not identified or unknown)
+  std::vector<bool> identified;        ///< per entry (`identified`; absent: σ not null)
 };
 
 /// The record's JSON object. `spec`/`model`/`x`/`sigma` as ExportInput's; hash computed.
