@@ -26,6 +26,7 @@
 #include "rcal/identification/extended_measurement.hpp"
 #include "rcal/identification/sanity.hpp"
 #include "rcal/io/atomic_file.hpp"
+#include "rcal/io/calibration_export.hpp"
 #include "rcal/io/effects_json.hpp"
 #include "rcal/io/plot.hpp"
 #include "rcal/io/pose_dataset.hpp"
@@ -507,6 +508,18 @@ int Run(const Options& o) {
             {"parameters", jparams},
             {"rejected", !rejected.empty()},
             {"rejected_because", rejected}};
+  // What `rcal export` reads: the robot as fitted and every parameter with its σ (null: not
+  // identified), under a hash of both (io/calibration_export.hpp).
+  if (rejected.empty()) {
+    io::ModelParameters mp{fit.x, Eigen::VectorXd::Constant(model.num_params(), std::nan("")), {}};
+    mp.identified.assign(model.num_params(), false);
+    for (int i : fit.identified) {
+      mp.sigma(i) = fit.sigma(i);
+      mp.identified[i] = true;
+    }
+    j["calibration"] = io::CalibrationRecordJson(
+        robot.spec, model, mp, fs::absolute(robot.source).string(), o.data, io::UtcNow());
+  }
   // Positions only: no orientation noise (nor orientation errors, StatsJson) to report.
   if (data.has_orientation) j["orientation_noise_rad"] = fit.orientation_sigma_rad;
   j.update(StatsJson(fit.nominal_fit, "fit_nominal_"));

@@ -26,6 +26,7 @@
 #include "rcal/cell/online_identification.hpp"
 #include "rcal/identification/sanity.hpp"
 #include "rcal/io/atomic_file.hpp"
+#include "rcal/io/calibration_export.hpp"
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/io/lcm_log.hpp"
 #include "rcal/io/robot_urdf.hpp"
@@ -180,6 +181,19 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
         {"residual_orientation_sigma_rad", figures.orientation_sigma_rad},
         {"rejected", !rejected.empty()},
         {"rejected_because", rejected}};
+    // What `rcal export` reads (io/calibration_export.hpp): the cell's robot with its set-up
+    // frames and every parameter with its σ (null: not identified).
+    if (rejected.empty() && ekf.accepted() > 0) {
+      io::ModelParameters mp{x, Eigen::VectorXd::Constant(model.num_params(), std::nan("")), {}};
+      mp.identified.assign(model.num_params(), false);
+      for (int i : ekf.identified()) {
+        mp.sigma(i) = sigma(i);
+        mp.identified[i] = true;
+      }
+      j["calibration"] =
+          io::CalibrationRecordJson(cell_robot.spec, model, mp, id.cell().spec.robot.file.string(),
+                                    "LCM log " + o.log, io::UtcNow());
+    }
     io::AtomicWriteFile(o.json_path, j.dump(2));
   }
   if (!rejected.empty() || ekf.accepted() == 0) {

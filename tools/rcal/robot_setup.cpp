@@ -12,6 +12,7 @@
 #include "command.hpp"
 #include "pose_log.hpp"
 #include "rcal/geometry/so3.hpp"
+#include "rcal/io/calibration_export.hpp"
 #include "rcal/io/robot_yaml.hpp"
 #include "rcal/transport/channels.hpp"
 
@@ -209,25 +210,7 @@ std::string ChainText(const io::LoadedRobot& robot) {
 }
 
 std::string ParameterFrame(const io::LoadedRobot& robot, int index) {
-  const kinematics::KinematicModel& model = robot.model;
-  const kinematics::Parameter& p = model.parameters().at(index);
-  const std::string& base = robot.spec.base_link;
-  const std::string& tip = robot.spec.tip_link;
-  if (p.group == "base")
-    return "world ← " + base + " (T_WB: translation in world, roll-pitch-yaw of R_WB)";
-  if (p.group == "earth") return "earth ← world (R_EW, roll-pitch-yaw)";
-  if (p.group == "imu") return tip + " → imu (R_FI, roll-pitch-yaw)";
-  if (p.group == "tool") return "D–H tool after the last joint (" + tip + ")";
-  if (p.group == "marker") {
-    for (const kinematics::Marker& m : model.markers())
-      for (int a = 0; a < 3; ++a)
-        if (m.param[a] == index)
-          return tip + " → marker " + std::to_string(m.id) + " (p_FM, " + tip + " frame)";
-    return tip + " → marker (p_FM, " + tip + " frame)";
-  }
-  for (const auto& j : model.joints())
-    if (p.group == j.name) return "origin of joint " + j.name + " (parent link frame)";
-  return p.group + " (D–H, previous link frame)";
+  return io::ParameterFrameText(robot.spec, robot.model, index);
 }
 
 }  // namespace rcal::tool

@@ -559,7 +559,7 @@ std::string CalibratedUrdfText(const std::string& urdf_xml, const std::string& s
     }
   }
   for (const MarkerSpec& m : cal.markers) {
-    const std::string name = m.id == 0 ? "rcal_marker" : "rcal_marker_" + std::to_string(m.id);
+    const std::string name = UrdfMarkerLink(m.id);
     AppendFixedFrame(robot, name, name + "_joint", spec.tip_link, name,
                      FromXyzRpy(m.xyz, Eigen::Vector3d::Zero()));
     mention(spec.tip_link + " -> " + name);
@@ -592,6 +592,238 @@ void SaveCalibratedUrdf(const std::filesystem::path& source_urdf, const std::fil
                         const Eigen::VectorXd& x) {
   AtomicWriteFile(out,
                   CalibratedUrdfText(ReadFile(source_urdf), source_urdf.string(), spec, model, x));
+}
+
+std::string UrdfMarkerLink(int marker_id) {
+  return marker_id == 0 ? "rcal_marker" : "rcal_marker_" + std::to_string(marker_id);
+}
+
+namespace {
+
+/// The value of an ET at parameter errors x and no joint motion [m | rad].
+double EtValue(const kinematics::ElementaryTransform& et, const Eigen::VectorXd& x) {
+  return et.param >= 0 ? et.nominal + x(et.param) : et.nominal;
+}
+
+/// The product of ETs [first, last) at x.
+Eigen::Isometry3d EtProduct(const std::vector<kinematics::ElementaryTransform>& ets, size_t first,
+                            size_t last, const Eigen::VectorXd& x) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  for (size_t i = first; i < last; ++i) T = T * kinematics::EtTransform(ets[i], EtValue(ets[i], x));
+  return T;
+}
+
+/// A name as an XML attribute value (a robot file's names are free text).
+std::string XmlAttr(const std::string& s) {
+  std::string out;
+  for (char c : s) {
+    switch (c) {
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      case '\'':
+        out += "&apos;";
+        break;
+      default:
+        out += c;
+    }
+  }
+  return out;
+}
+
+/// `<joint>` text of a fixed or moving joint with origin T (xyz, rpy at full precision).
+std::string JointXml(const std::string& name, const std::string& type, const std::string& parent,
+                     const std::string& child, const Eigen::Isometry3d& T,
+                     const std::string& extra = {}) {
+  return "  <joint name=\"" + XmlAttr(name) + "\" type=\"" + type + "\">\n    <parent link=\"" +
+         XmlAttr(parent) + "\"/>\n    <child link=\"" + XmlAttr(child) +
+         "\"/>\n    <origin xyz=\"" + Triple(T.translation()) + "\" rpy=\"" +
+         Triple(RobustRpy(T.linear())) + "\"/>\n" + extra + "  </joint>\n";
+}
+
+/// XML comments may not hold "--".
+std::string CommentSafe(std::string s) {
+  for (size_t i = s.find("--"); i != std::string::npos; i = s.find("--", i)) s.replace(i, 2, "- ");
+  return s;
+}
+
+}  // namespace
+
+std::string SpecUrdfText(const RobotSpec& spec, const kinematics::KinematicModel& model,
+                         const Eigen::VectorXd& x) {
+  if (x.size() != model.num_params())
+    throw std::runtime_error("robot '" + model.name() + "': x has " + std::to_string(x.size()) +
+                             " values, the model has " + std::to_string(model.num_params()));
+  for (int i = 0; i < x.size(); ++i)
+    if (!std::isfinite(x(i)))
+      throw std::runtime_error("robot '" + model.name() + "': parameter '" +
+                               model.parameters()[i].name + "' is not finite");
+  using kinematics::Segment;
+  const auto& chain = model.ets(Segment::kChain);
+  // The chain is [base frame (6 ETs)] links and tool [marker (3 ETs)] (kinematics/model.hpp).
+  const size_t first = spec.base ? 6 : 0;
+  const size_t last = chain.size() - (model.markers().empty() ? 0 : 3);
+  if (first > last)
+    throw std::runtime_error("robot '" + model.name() + "': the model is not BuildModel(spec)");
+  std::string links, joints;
+  const auto link = [&](const std::string& name) {
+    links += "  <link name=\"" + XmlAttr(name) + "\"/>\n";
+  };
+  link(spec.base_link);
+  std::string world = spec.base_link;
+  if (spec.base) {
+    link("rcal_world");
+    joints += JointXml("rcal_world_joint", "fixed", "rcal_world", spec.base_link,
+                       EtProduct(chain, 0, first, x));
+    world = "rcal_world";
+  }
+  const auto& earth = model.ets(Segment::kEarth);
+  if (!earth.empty()) {
+    link("rcal_earth");
+    joints += JointXml("rcal_earth_joint", "fixed", "rcal_earth", world,
+                       EtProduct(earth, 0, earth.size(), x));
+  }
+  // A joint's ET value is (nominal + x) + q: about one axis the constant part commutes with the
+  // motion, so a joint is origin F · motion(q) and its constant part starts the next origin.
+  Eigen::Isometry3d F = Eigen::Isometry3d::Identity();
+  std::string parent = spec.base_link;
+  int moving = 0;
+  for (size_t i = first; i < last; ++i) {
+    const kinematics::ElementaryTransform& et = chain[i];
+    if (et.joint < 0) {
+      F = F * kinematics::EtTransform(et, EtValue(et, x));
+      continue;
+    }
+    const kinematics::Joint& j = model.joints().at(et.joint);
+    // "link<i>" after joint i, unless the chain's own ends are called so (a 7-joint arm whose
+    // tip link is "link7").
+    std::string child = "link" + std::to_string(++moving);
+    if (child == spec.base_link || child == spec.tip_link) child = "rcal_" + child;
+    const bool rotation = et.kind == kinematics::ElementaryTransform::Kind::kRotation;
+    link(child);
+    joints +=
+        JointXml(j.name, rotation ? "revolute" : "prismatic", parent, child, F,
+                 "    <axis xyz=\"" + Triple(et.axis) + "\"/>\n    <limit lower=\"" + Num(j.lower) +
+                     "\" upper=\"" + Num(j.upper) + "\" effort=\"0\" velocity=\"0\"/>\n");
+    F = kinematics::EtTransform(et, EtValue(et, x));
+    parent = child;
+  }
+  link(spec.tip_link);
+  joints += JointXml(spec.tip_link + "_joint", "fixed", parent, spec.tip_link, F);
+  for (const kinematics::Marker& m : model.markers()) {
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    for (int a = 0; a < 3; ++a)
+      T.translation()(a) = m.param[a] >= 0 ? m.nominal(a) + x(m.param[a]) : m.nominal(a);
+    link(UrdfMarkerLink(m.id));
+    joints +=
+        JointXml(UrdfMarkerLink(m.id) + "_joint", "fixed", spec.tip_link, UrdfMarkerLink(m.id), T);
+  }
+  const auto& imu = model.ets(Segment::kImu);
+  if (!imu.empty()) {
+    link("rcal_imu");
+    joints += JointXml("rcal_imu_joint", "fixed", spec.tip_link, "rcal_imu",
+                       EtProduct(imu, 0, imu.size(), x));
+  }
+  return "<?xml version=\"1.0\"?>\n<robot name=\"" + XmlAttr(model.name()) + "\">\n" + "  <!-- " +
+         CommentSafe("Written by rcal from the robot description (" +
+                     std::string(spec.convention == Convention::kDh           ? "D-H"
+                                 : spec.convention == Convention::kModifiedDh ? "modified D-H"
+                                                                              : "URDF-style") +
+                     " links): chain " + spec.base_link + " -> " + spec.tip_link +
+                     "; set-up frames rcal_world (the position sensor's frame) <- " +
+                     spec.base_link + ", " + spec.tip_link + " -> rcal_marker, " + spec.tip_link +
+                     " -> rcal_imu, rcal_earth (the IMU's earth frame) <- world, where the "
+                     "model has them. ") +
+         "-->\n" + links + joints + "</robot>\n";
+}
+
+std::string RobotDescriptionUrdf(const RobotSpec& spec, const kinematics::KinematicModel& model,
+                                 const Eigen::VectorXd& x, const std::string& urdf_xml,
+                                 const std::string& source,
+                                 const std::vector<std::string>& header) {
+  std::string text = urdf_xml.empty() ? SpecUrdfText(spec, model, x)
+                                      : CalibratedUrdfText(urdf_xml, source, spec, model, x);
+  std::string comments;
+  for (const std::string& h : header) comments += "<!-- " + CommentSafe(h) + " -->\n";
+  // After the XML declaration, which must come first.
+  size_t at = 0;
+  if (text.compare(0, 5, "<?xml") == 0) {
+    const size_t end = text.find("?>");
+    at = end == std::string::npos ? 0 : end + 2;
+    if (at < text.size() && text[at] == '\n') ++at;
+  }
+  text.insert(at, comments);
+  return text;
+}
+
+UrdfChain::UrdfChain(const std::string& urdf_xml, const std::string& source,
+                     const std::string& root_link, const std::string& tip_link) {
+  const urdf::ModelInterfaceSharedPtr urdf = ParseUrdf(urdf_xml, source);
+  if (!urdf->getLink(root_link))
+    throw std::runtime_error(source + ": link '" + root_link + "' not found");
+  urdf::LinkConstSharedPtr l = urdf->getLink(tip_link);
+  if (!l) throw std::runtime_error(source + ": link '" + tip_link + "' not found");
+  std::vector<urdf::JointConstSharedPtr> path;
+  for (; l->name != root_link; l = urdf->getLink(l->parent_joint->parent_link_name)) {
+    if (!l->parent_joint || path.size() > urdf->joints_.size())
+      throw std::runtime_error(source + ": link '" + tip_link + "' is not below link '" +
+                               root_link + "'");
+    path.push_back(l->parent_joint);
+    if (!urdf->getLink(l->parent_joint->parent_link_name))
+      throw std::runtime_error(source + ": joint '" + l->parent_joint->name +
+                               "': parent link not found");
+  }
+  std::reverse(path.begin(), path.end());
+  for (const urdf::JointConstSharedPtr& j : path) {
+    Step s;
+    s.origin = OriginTransform(*j);
+    s.axis = Eigen::Vector3d(j->axis.x, j->axis.y, j->axis.z);
+    if (j->mimic) throw std::runtime_error(source + ": joint '" + j->name + "' is a mimic joint");
+    switch (j->type) {
+      case urdf::Joint::FIXED:
+        break;
+      case urdf::Joint::REVOLUTE:
+      case urdf::Joint::CONTINUOUS:
+      case urdf::Joint::PRISMATIC:
+        if (!s.axis.allFinite() || s.axis.norm() < 1e-9)
+          throw std::runtime_error(source + ": joint '" + j->name + "': axis is not a direction");
+        s.axis.normalize();
+        s.prismatic = j->type == urdf::Joint::PRISMATIC;
+        s.joint = static_cast<int>(joint_names_.size());
+        joint_names_.push_back(j->name);
+        break;
+      default:
+        throw std::runtime_error(source + ": joint '" + j->name +
+                                 "': floating and planar joints have no single joint value");
+    }
+    steps_.push_back(s);
+  }
+}
+
+Eigen::Isometry3d UrdfChain::Pose(const Eigen::VectorXd& q) const {
+  if (q.size() != static_cast<Eigen::Index>(joint_names_.size()))
+    throw std::invalid_argument("UrdfChain: q has " + std::to_string(q.size()) + " values, the " +
+                                "chain has " + std::to_string(joint_names_.size()) + " joints");
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  for (const Step& s : steps_) {
+    T = T * s.origin;
+    if (s.joint < 0) continue;
+    if (s.prismatic) {
+      T.translate(q(s.joint) * s.axis);
+    } else {
+      T.rotate(Eigen::AngleAxisd(q(s.joint), s.axis));
+    }
+  }
+  return T;
 }
 
 LoadedRobot LoadRobot(const std::filesystem::path& path, const UrdfOptions& urdf_options) {

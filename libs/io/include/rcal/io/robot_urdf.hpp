@@ -21,8 +21,10 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include "rcal/io/robot_yaml.hpp"
 #include "rcal/kinematics/model.hpp"
@@ -77,6 +79,60 @@ std::string CalibratedUrdfText(const std::string& urdf_xml, const std::string& s
 void SaveCalibratedUrdf(const std::filesystem::path& source_urdf, const std::filesystem::path& out,
                         const RobotSpec& spec, const kinematics::KinematicModel& model,
                         const Eigen::VectorXd& x);
+
+/// Link names of the set-up frames in every URDF rcal writes (file comment): "rcal_world",
+/// "rcal_earth", "rcal_imu", and "rcal_marker" for marker id 0, "rcal_marker_<id>" for others.
+std::string UrdfMarkerLink(int marker_id);
+
+/// A URDF of the model `spec` describes (BuildModel(spec) = `model`) at parameter errors `x`
+/// [m, rad], for robots that come from no URDF (rcal.robot/1 YAML, any convention): written from
+/// the model's elementary transforms, so it holds for D–H, modified D–H, Hayati and URDF-style
+/// links alike. Links: spec.base_link (root of the arm), "link1" … "linkN" after each joint
+/// ("rcal_linkI" where the chain's base or tip link has that name), the joints named as the
+/// model's, revolute or prismatic with the model's limits; spec.tip_link
+/// after the last joint and tool; the set-up frames as fixed joints with the names of the file
+/// comment (rcal_world → base_link is T_WB; rcal_earth → rcal_world, or → base_link without a
+/// base frame). Loaded with no errors it gives `model` at x (CheckUrdfParity). Throws
+/// std::runtime_error when x has the wrong size or a value is not finite.
+std::string SpecUrdfText(const RobotSpec& spec, const kinematics::KinematicModel& model,
+                         const Eigen::VectorXd& x);
+
+/// The calibrated robot as URDF text, whatever it came from: CalibratedUrdfText of `urdf_xml`
+/// when the robot came from a URDF (non-empty text; meshes, other links and fixed frames kept),
+/// else SpecUrdfText. `header` lines are added as XML comments after the declaration (the
+/// calibration hash, date, data and σ of rcal export). This is the text to publish as a
+/// robot_description. Throws std::runtime_error as the two functions do.
+std::string RobotDescriptionUrdf(const RobotSpec& spec, const kinematics::KinematicModel& model,
+                                 const Eigen::VectorXd& x, const std::string& urdf_xml = {},
+                                 const std::string& source = "<robot>",
+                                 const std::vector<std::string>& header = {});
+
+/// Forward kinematics straight from a URDF as liburdfdom parses it (its joint origins, axes and
+/// types), independent of kinematics::ModelBuilder: the proof that a written URDF means the model
+/// it was written from.
+class UrdfChain {
+ public:
+  /// The path of joints from `root_link` down to `tip_link`. Throws std::runtime_error naming the
+  /// file and the link or joint when the URDF does not parse, a link is missing, tip_link is not
+  /// below root_link, or a joint on the path is floating, planar or mimic.
+  UrdfChain(const std::string& urdf_xml, const std::string& source, const std::string& root_link,
+            const std::string& tip_link);
+  /// The moving joints on the path, root first.
+  const std::vector<std::string>& joint_names() const { return joint_names_; }
+  /// Pose of tip_link in root_link's frame, T_root_tip, at joint values `q` (one per
+  /// joint_names(), [rad | m]). Throws std::invalid_argument for the wrong size.
+  Eigen::Isometry3d Pose(const Eigen::VectorXd& q) const;
+
+ private:
+  struct Step {
+    Eigen::Isometry3d origin = Eigen::Isometry3d::Identity();  ///< parent link → joint frame
+    Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();           ///< unit, joint frame
+    int joint = -1;          ///< index into joint_names_, −1: fixed
+    bool prismatic = false;  ///< else revolute or continuous
+  };
+  std::vector<Step> steps_;
+  std::vector<std::string> joint_names_;
+};
 
 /// A robot from any file rcal accepts, with what is needed to save it calibrated.
 struct LoadedRobot {
