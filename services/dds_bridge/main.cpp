@@ -14,9 +14,11 @@
 //   rt/tf_static           tf2_msgs/TFMessage      the calibrated set-up frames (setup_frames.hpp),
 //                                                  reliable, transient-local, depth 1: re-sent
 //                                                  whole with every new KINEMATIC_PARAMS
-//   rt/robot_description   std_msgs/String         the calibrated URDF (URDF robots: the robot file
-//                                                  with its joint origins corrected and the set-up
-//                                                  frames as fixed joints), transient-local
+//   rt/robot_description   std_msgs/String         the calibrated URDF (io::RobotDescriptionUrdf: a
+//                                                  URDF robot's own file with its joint origins
+//                                                  corrected, a YAML robot's written from its
+//                                                  model; set-up frames as fixed joints; the
+//                                                  calibration hash in a comment), transient-local
 //   rt/diagnostics         diagnostic_msgs/DiagnosticArray   every process's HEALTH (level OK,
 //                                                  WARN when it rejected or lost something since
 //                                                  its previous HEALTH, ERROR on a filter reset)
@@ -46,7 +48,9 @@
 #include "rcal/geometry/so3.hpp"
 #include "rcal/health_t.hpp"
 #include "rcal/io/atomic_file.hpp"
+#include "rcal/io/calibration_export.hpp"
 #include "rcal/io/cell_yaml.hpp"
+#include "rcal/io/robot_urdf.hpp"
 #include "rcal/services/common.hpp"
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
@@ -174,14 +178,19 @@ class Bridge {
     if (cal.earth) R_WE_ = geometry::FromRpy(cal.earth->rpy).transpose();
     Write(tf_w_, dds::ToRos(dds::SetupTransforms(cal, prefix_), m.utime, &error), error,
           "tf_static");
-    if (!o_.cell->robot.from_urdf) return;  // a YAML robot: no URDF to correct
     try {
-      const std::string urdf = io::CalibratedUrdfText(io::ReadFile(o_.cell->robot.source),
-                                                      o_.cell->robot.source.string(),
-                                                      o_.cell->robot_spec, o_.cell->model, *x);
+      // The robot file's own URDF (joint origins corrected), or one written from a YAML robot.
+      if (o_.cell->robot.from_urdf && urdf_source_.empty())
+        urdf_source_ = io::ReadFile(o_.cell->robot.source);
+      const std::string urdf = io::RobotDescriptionUrdf(
+          o_.cell->robot_spec, o_.cell->model, *x, urdf_source_, o_.cell->robot.source.string(),
+          {"rcal calibration " + io::CalibrationHash(o_.cell->model, *x) + " of cell '" +
+           o_.cell->spec.name + "', " + std::to_string(m.poses_used) + " poses, sensor time " +
+           std::to_string(m.utime) + " us"});
       Write(description_w_, std::optional{dds::ToRos(urdf)}, "", "robot_description");
     } catch (const std::exception& e) {
       health_.Error(std::string("robot_description: ") + e.what());
+      spdlog::error("robot_description: {}", e.what());
     }
   }
 
@@ -258,7 +267,8 @@ class Bridge {
   dds_entity_t tf_w_ = 0, description_w_ = 0, diagnostics_w_ = 0, pose_cov_w_ = 0;
   std::optional<orientation_estimate_t> orientation_;
   std::string prefix_;
-  std::optional<Eigen::Matrix3d> R_WE_;          // world ← earth, from the latest parameters
+  std::string urdf_source_;              // the robot file's URDF text (URDF robots), read once
+  std::optional<Eigen::Matrix3d> R_WE_;  // world ← earth, from the latest parameters
   std::map<std::string, health_t> last_health_;  // per process, for the diagnostic level
 };
 
