@@ -31,6 +31,7 @@
 #include "rcal/dds/setup_frames.hpp"
 #include "rcal/health_t.hpp"
 #include "rcal/identification/metrics.hpp"
+#include "rcal/io/calibration_export.hpp"
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/joint_state_t.hpp"
 #include "rcal/kinematic_params_t.hpp"
@@ -197,6 +198,8 @@ TEST_F(Ros2Cell, TheDemoCellCalibratesThroughItsRos2Drivers) {
   ASSERT_GT(participant.get(), 0);
   Reader<dds::TFMessage> tf(participant.get(), "rt/tf_static", Reliable(true));
   Reader<dds::DiagnosticArray> diagnostics(participant.get(), "rt/diagnostics", Reliable(false));
+  Reader<dds::RosString> description(participant.get(), "rt/robot_description", Reliable(true));
+  std::string urdf;
   std::optional<std::vector<dds::NamedTransform>> transforms;
   std::set<std::string> diagnosed;
   auto read = [&] {
@@ -205,6 +208,7 @@ TEST_F(Ros2Cell, TheDemoCellCalibratesThroughItsRos2Drivers) {
       transforms = dds::FromRos(m, &error);
       EXPECT_TRUE(transforms) << error;
     });
+    description.Take([&](const dds::RosString& m) { urdf = m.data ? m.data : ""; });
     diagnostics.Take([&](const dds::DiagnosticArray& m) {
       std::string error;
       const auto r = dds::FromRos(m, &error);
