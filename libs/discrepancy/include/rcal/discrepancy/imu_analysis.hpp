@@ -140,7 +140,7 @@ struct ImuCandidate {
   double critical = 0.0;  ///< its critical value after Bonferroni
   bool significant = false;
   /// With truth: its extension raised the error it acts on (heading for magnetic_disturbance,
-  /// total otherwise) over the movement samples. A significant candidate whose extension loses
+  /// total otherwise) over the movement samples by more than 10 %. A significant candidate whose extension loses
   /// against the truth is not named as an effect (the test saw something; the extension is not
   /// what it is).
   bool loses_to_truth = false;
@@ -153,8 +153,9 @@ struct ImuCandidate {
   std::string gain_metric() const;
 };
 
-/// Sets loses_to_truth on each tested candidate whose `after` is worse than its `before` in its
-/// gain_metric() (both finite), and says so in its note.
+/// Sets loses_to_truth on each tested candidate whose `after` is more than 10 % worse than its
+/// `before` in its gain_metric() (both finite; within 10 % it gains nothing, which is no loss),
+/// and says so in its note.
 void MarkLosingExtensions(std::vector<ImuCandidate>& candidates);
 
 struct AllanCurve {
