@@ -32,7 +32,7 @@ std::vector<Field> OrientationFields(est::OrientationKfSettings& s) {
           {"mag_lowpass_tau", "s", &s.mag_lowpass_tau},
           {"tilt_motion_accel", "m_s2", &s.tilt_motion_accel},
           {"tilt_motion_rate", "rad_s", &s.tilt_motion_rate},
-          {"mag_evidence_inflation", "", &s.mag_evidence_inflation},
+          {"mag_evidence_inflation", "factor", &s.mag_evidence_inflation},
           {"accel_norm_tolerance", "m_s2", &s.accel_norm_tolerance},
           {"tilt_gate_chi2", "", &s.tilt_gate_chi2},
           {"mag_norm_tolerance", "fraction", &s.mag_norm_tolerance},
