@@ -140,9 +140,9 @@ struct ImuCandidate {
   double critical = 0.0;  ///< its critical value after Bonferroni
   bool significant = false;
   /// With truth: its extension raised the error it acts on (heading for magnetic_disturbance,
-  /// total otherwise) over the movement samples by more than 10 %. A significant candidate whose extension loses
-  /// against the truth is not named as an effect (the test saw something; the extension is not
-  /// what it is).
+  /// total otherwise) over the movement samples by more than 10 %. A significant candidate whose
+  /// extension loses against the truth is not named as an effect (the test saw something; the
+  /// extension is not what it is).
   bool loses_to_truth = false;
   bool tested = false;  ///< false: not testable on this stream (reason in note)
   std::string note;

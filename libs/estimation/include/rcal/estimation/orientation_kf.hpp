@@ -280,7 +280,7 @@ class OrientationKf {
   Eigen::Vector3d m_I_lp_ = Eigen::Vector3d::Zero();    // low-passed m in I
   Mat9 P_ = Mat9::Identity();
   Counters counters_;
-  double tilt_sigma_k_ = 0.0;     // this sample's tilt and heading σ [rad] (motion, evidence)
+  double tilt_sigma_k_ = 0.0;  // this sample's tilt and heading σ [rad] (motion, evidence)
   double heading_sigma_k_ = 0.0;
   double last_tilt_nis_ = 0.0;
   double last_heading_nis_ = 0.0;

@@ -26,11 +26,12 @@
 // accelerometer updates. The accelerometer's measurement is then z = R_EB f_B + g_E with
 // h = A − R_EB M r_B, M = [α_B]× + [ω_B]×². With estimate_lever_arm r_B joins the state
 // (constant; initial value lever_arm_B, σ lever_arm_sigma) and is observed whenever the body
-// turns; otherwise lever_arm_B is taken as known (zero: the paper's filter). Update as NOTES.md Eqs. 15–17,
-// Joseph form. The position sensor is χ²-gated: NIS = yᵀS⁻¹y > position_gate_chi2 rejects it
-// (counted). Bad input and out-of-order time are refused with a Status; the state is unchanged.
-// A state that goes non-finite anyway is never kept: the filter resets (Counters::resets) and
-// the update returns an Error saying so; the next position sample initialises it again.
+// turns; otherwise lever_arm_B is taken as known (zero: the paper's filter). Update as NOTES.md
+// Eqs. 15–17, Joseph form. The position sensor is χ²-gated: NIS = yᵀS⁻¹y > position_gate_chi2
+// rejects it (counted). Bad input and out-of-order time are refused with a Status; the state is
+// unchanged. A state that goes non-finite anyway is never kept: the filter resets
+// (Counters::resets) and the update returns an Error saying so; the next position sample
+// initialises it again.
 #pragma once
 
 #include <Eigen/Core>
