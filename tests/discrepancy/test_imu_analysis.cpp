@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <numbers>
 #include <random>
 #include <sstream>
 #include <string>
@@ -75,7 +76,10 @@ TEST(ImuAnalysis, FindsAGyroBiasRandomWalkOnItsAxis) {
       if (!c.significant) continue;
       ++found;
       EXPECT_EQ(c.axes, std::vector<std::string>{"z"}) << "K " << K << " seed " << seed;
-      EXPECT_EQ(Causes(a), std::vector<std::string>{"gyro_bias"});
+      // Named unless its extension loses against the truth (issue 17). The fitted random-walk
+      // extension does lose here (seed 11, K 2e-4: total 0.27° → 0.58°): detected, not named.
+      EXPECT_EQ(Causes(a), c.loses_to_truth ? std::vector<std::string>{}
+                                            : std::vector<std::string>{"gyro_bias"});
     }
   }
   EXPECT_EQ(found, runs) << "a 2e-4..3e-4 rad/s/√s walk on z is near but above the floor";
@@ -231,3 +235,37 @@ TEST(ImuAnalysis, BroadTrial30NamesTheMagneticDisturbanceAndGatingGainsHeading) 
 }
 
 }  // namespace
+
+// Issue 17, item 4: a significant candidate whose extension raises the error it acts on against
+// the truth by more than 10 % is not named (BROAD trial 35: magnetic_disturbance named while its
+// gate doubled the heading error). The RMSE are set by hand: heading 1° → 2° for the magnet,
+// total 2° → 2.1° (within 10 %: gains nothing) for the gyro bias.
+TEST(ImuAnalysis, AnEffectWhoseExtensionLosesAgainstTheTruthIsNotNamed) {
+  const double deg = std::numbers::pi / 180.0;
+  auto score = [&](double total, double heading) {
+    disc::OrientationScore s;
+    s.Add({total * deg, heading * deg, 0.5 * deg});
+    return s;
+  };
+  disc::ImuAnalysis a;
+  a.candidates.resize(3);
+  disc::ImuCandidate &mag = a.candidates[0], &bias = a.candidates[1], &untested = a.candidates[2];
+  mag.cause = "magnetic_disturbance";
+  mag.tested = mag.significant = true;
+  mag.before = score(1.5, 1.0);
+  mag.after = score(1.4, 2.0);  // total better, heading (what the gate acts on) worse
+  bias.cause = "gyro_bias";
+  bias.tested = bias.significant = true;
+  bias.before = score(2.0, 1.0);
+  bias.after = score(2.1, 1.2);  // total 5 % worse: gains nothing, no loss: named
+  untested.cause = "time_offset";
+  disc::MarkLosingExtensions(a.candidates);
+  EXPECT_TRUE(mag.loses_to_truth);
+  EXPECT_FALSE(mag.named());
+  EXPECT_NE(mag.note.find("from 1.00 to 2.00 deg"), std::string::npos) << mag.note;
+  EXPECT_FALSE(bias.loses_to_truth);
+  EXPECT_TRUE(bias.named());
+  EXPECT_FALSE(untested.loses_to_truth);
+  ASSERT_EQ(a.effects().size(), 1u);
+  EXPECT_EQ(a.effects()[0]->cause, "gyro_bias");
+}

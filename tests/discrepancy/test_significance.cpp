@@ -41,9 +41,15 @@ TEST(Significance, ZFromLogPIsExactWherePUnderflows) {
 }
 
 TEST(Significance, InfiniteZAndTinyPAreWrittenAsBounds) {
-  // Finite z as they are, however large.
-  EXPECT_EQ(WriteZ(288.9).value, 288.9);
-  EXPECT_EQ(WriteZ(288.9).bound, "");
+  // z within what a double p can express as they are; beyond, the bound (a z of 95 from a ratio
+  // |τ|/σ has p = e^−4500, no double: issue 17).
+  EXPECT_EQ(WriteZ(37.0).value, 37.0);
+  EXPECT_EQ(WriteZ(37.0).bound, "");
+  EXPECT_EQ(WriteZ(-8.0).bound, "");
+  EXPECT_NEAR(WriteZ(288.9).value, 38.46740561714435, 1e-9);
+  EXPECT_EQ(WriteZ(288.9).bound, ">");
+  EXPECT_EQ(ZText(95.0), "> 38.47");
+  EXPECT_EQ(ZText(-9.0), "< -8.21");
   EXPECT_EQ(ZText(3.67, 1), "3.7");
   // ±∞: the z of the extreme doubles p = 4.9e-324 and 1 − 2⁻⁵³ (mpmath), with the direction.
   EXPECT_NEAR(WriteZ(kInf).value, 38.46740561714435, 1e-9);

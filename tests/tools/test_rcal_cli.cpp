@@ -960,8 +960,8 @@ TEST(RcalCli, FuseSetTakesOnlyWholeFiniteNumbersAndTheJsonNamesUnits) {
   // Every key ends in its unit; the dimensionless ones say what they are.
   for (const auto& [key, value] : s.items()) {
     bool named = false;
-    for (const char* end :
-         {"_m_s2", "_rad", "_s", "_rad_s", "_sqrt_hz", "_sqrt_s", "_chi2", "_fraction"})
+    for (const char* end : {"_m_s2", "_rad", "_s", "_rad_s", "_sqrt_hz", "_sqrt_s", "_chi2",
+                            "_fraction", "_m", "_factor"})
       named |= key.size() > std::string(end).size() &&
                key.compare(key.size() - std::string(end).size(), std::string::npos, end) == 0;
     EXPECT_TRUE(named) << key;

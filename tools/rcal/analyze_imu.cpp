@@ -240,6 +240,8 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
               {"values", values},
               {"critical_z", c.critical},
               {"significant", c.significant},
+              {"loses_to_truth", c.loses_to_truth},
+              {"named", c.named()},
               {"tested", c.tested},
               {"note", c.note}};
     PutZ(j, "statistic_z", c.statistic);  // an infinite z as a bound (significance.hpp)
@@ -253,7 +255,7 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
   json jeffects = json::array(), jcands = json::array();
   for (const auto& c : a.candidates) {
     jcands.push_back(cand_json(c));
-    if (c.significant) {
+    if (c.named()) {
       json values = json::object();
       for (const auto& v : c.values) values[v.name] = {{"value", v.value}, {"sigma", v.sigma}};
       jeffects.push_back({{"cause", c.cause}, {"axes", c.axes}, {"values", values}});
@@ -411,9 +413,11 @@ int RunAnalyzeImu(const AnalyzeImuOptions& o) {
   md << "## Candidates\n\n";
   for (const auto& c : a.candidates) {
     md << "### " << c.cause << " — "
-       << (!c.tested       ? "not tested"
-           : c.significant ? "**found**"
-                           : "not significant")
+       << (!c.tested                           ? "not tested"
+           : c.named()                         ? "**found**"
+           : c.loses_to_truth && c.significant ? "significant, not named: its extension loses "
+                                                 "against the truth"
+                                               : "not significant")
        << "\n\nTest statistic " << Is("z", disc::ZText(c.statistic, 2))
        << (std::isnan(c.log_p) ? "" : ", " + Is("p", disc::PText(c.log_p))) << " (critical "
        << Fmt(c.critical, 2) << ")." << (c.note.empty() ? "" : " " + c.note + ".") << "\n\n";

@@ -9,7 +9,6 @@
 
 #include <Eigen/Core>
 #include <algorithm>
-#include <charconv>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -23,6 +22,7 @@
 #include <vector>
 
 #include "command.hpp"
+#include "fuse_settings.hpp"
 #include "rcal/discrepancy/imu_scoring.hpp"
 #include "rcal/estimation/fqa.hpp"
 #include "rcal/estimation/orientation_kf.hpp"
@@ -48,99 +48,6 @@ struct FuseOptions {
   std::vector<std::string> overrides;  // NAME=VALUE for the settings below
 };
 
-// Numeric settings that --set can override: name, unit (the JSON key is name_unit; "" for the
-// dimensionless χ² gates, "fraction" for a relative tolerance) and the value, SI units as in the
-// settings structs.
-struct Field {
-  const char* name;
-  const char* unit;
-  double* value;
-  std::string key() const { return *unit ? std::string(name) + "_" + unit : std::string(name); }
-};
-std::vector<Field> OrientationFields(est::OrientationKfSettings& s) {
-  return {{"gravity", "m_s2", &s.gravity},
-          {"angular_accel_noise", "rad_s2_sqrt_hz", &s.angular_accel_noise},
-          {"gyro_bias_random_walk", "rad_s_sqrt_s", &s.gyro_bias_random_walk},
-          {"attitude_process_noise", "rad_sqrt_s", &s.attitude_process_noise},
-          {"rate_proportional_noise", "sqrt_s", &s.rate_proportional_noise},
-          {"gyro_noise_density", "rad_s_sqrt_hz", &s.gyro_noise_density},
-          {"tilt_sigma", "rad", &s.tilt_sigma},
-          {"heading_sigma", "rad", &s.heading_sigma},
-          {"accel_lowpass_tau", "s", &s.accel_lowpass_tau},
-          {"mag_lowpass_tau", "s", &s.mag_lowpass_tau},
-          {"accel_norm_tolerance", "m_s2", &s.accel_norm_tolerance},
-          {"tilt_gate_chi2", "", &s.tilt_gate_chi2},
-          {"mag_norm_tolerance", "fraction", &s.mag_norm_tolerance},
-          {"mag_dip_tolerance", "rad", &s.mag_dip_tolerance},
-          {"heading_gate_chi2", "", &s.heading_gate_chi2},
-          {"mag_reference_tau", "s", &s.mag_reference_tau},
-          {"mag_new_reference_time", "s", &s.mag_new_reference_time},
-          {"still_gyro", "rad_s", &s.still_gyro},
-          {"still_accel", "m_s2", &s.still_accel},
-          {"zero_rate_sigma", "rad_s", &s.zero_rate_sigma},
-          {"initial_bias_sigma", "rad_s", &s.initial_bias_sigma}};
-}
-std::vector<Field> PositionFields(est::PositionKfSettings& s) {
-  return {{"pos.jerk_noise", "m_s3_sqrt_hz", &s.jerk_noise},
-          {"pos.accel_sigma", "m_s2", &s.accel_sigma},
-          {"pos.position_gate_chi2", "", &s.position_gate_chi2}};
-}
-
-// The whole of `text` as one finite number (no spaces, no trailing characters, no hex), else an
-// error naming the setting.
-double ParseSetting(const std::string& name, const std::string& text) {
-  double v = 0.0;
-  const char* end = text.data() + text.size();
-  const auto [ptr, ec] = std::from_chars(text.data(), end, v, std::chars_format::general);
-  if (ec == std::errc::result_out_of_range)
-    throw std::runtime_error("fuse: --set " + name + ": '" + text + "' is out of range");
-  if (ec != std::errc() || ptr != end)
-    throw std::runtime_error("fuse: --set " + name + ": '" + text + "' is not a number");
-  if (!std::isfinite(v))
-    throw std::runtime_error("fuse: --set " + name + ": '" + text + "' is not finite");
-  return v;
-}
-
-// The sensor ranges beyond which the trial is refused (io/imu_csv.hpp).
-std::vector<Field> ImuFields(io::ImuCsvSettings& s) {
-  return {{"imu.gyro_range", "rad_s", &s.gyro_range_rad_s},
-          {"imu.accel_range", "m_s2", &s.accel_range_m_s2},
-          {"imu.mag_range", "uT", &s.mag_range_uT}};
-}
-
-void ApplyOverrides(const std::vector<std::string>& overrides, est::OrientationKfSettings& o,
-                    est::PositionKfSettings& p, io::ImuCsvSettings& imu) {
-  auto fields = OrientationFields(o);
-  for (const Field& f : PositionFields(p)) fields.push_back(f);
-  for (const Field& f : ImuFields(imu)) fields.push_back(f);
-  for (const auto& kv : overrides) {
-    const auto eq = kv.find('=');
-    if (eq == std::string::npos)
-      throw std::runtime_error("fuse: --set expects NAME=VALUE, got " + kv);
-    const std::string name = kv.substr(0, eq);
-    // The name with or without its unit (tilt_sigma or tilt_sigma_rad).
-    const auto it = std::find_if(fields.begin(), fields.end(),
-                                 [&](const Field& f) { return name == f.name || name == f.key(); });
-    if (it == fields.end()) throw std::runtime_error("fuse: --set: unknown setting '" + name + "'");
-    *it->value = ParseSetting(name, kv.substr(eq + 1));
-  }
-}
-
-/// The one set of settings used for every BROAD trial (IMU → ENU, magnetic north on +y).
-est::OrientationKfSettings BroadOrientationSettings() {
-  est::OrientationKfSettings s;
-  s.earth = est::EarthFrame::kEnu;
-  return s;
-}
-
-est::PositionKfSettings BroadPositionSettings(double pos_noise_m) {
-  est::PositionKfSettings s;
-  s.earth = est::EarthFrame::kEnu;
-  s.position_sigma = pos_noise_m;
-  s.accel_sigma = 1.0;  // the IMU is not at the marker: lever-arm accelerations
-  return s;
-}
-
 // BROAD scoring (discrepancy/imu_scoring.hpp, shared with `rcal analyze` on IMU streams).
 using discrepancy::AngleErrors;
 using discrepancy::BroadErrors;
@@ -164,10 +71,10 @@ std::string Fixed(double v, int digits) {
 
 int RunFuse(const FuseOptions& opt) {
   // The settings first: a bad --set is refused before a trial is read.
-  est::OrientationKfSettings okf_settings = BroadOrientationSettings();
-  est::PositionKfSettings pkf_settings = BroadPositionSettings(opt.pos_noise_m);
-  io::ImuCsvSettings imu_settings;
-  ApplyOverrides(opt.overrides, okf_settings, pkf_settings, imu_settings);
+  const FuseSettings settings = BroadSettingsWith(opt.overrides, opt.pos_noise_m);
+  const est::OrientationKfSettings& okf_settings = settings.orientation;
+  const est::PositionKfSettings& pkf_settings = settings.position;
+  const io::ImuCsvSettings& imu_settings = settings.imu;
   const std::string path = ResolvePath(opt.trial);
   // Every sample checked against the sensor ranges, time order and NaN before any is fused.
   const io::ImuCsv trial = io::LoadImuCsv(path, imu_settings);
@@ -211,7 +118,7 @@ int RunFuse(const FuseOptions& opt) {
     const auto q_fqa = est::Fqa(f_B, m_B, fqa_settings);
     if (!q_fqa) ++fqa_failed;
     // Position KF: accelerometer every sample, the simulated position sensor at pos_rate_hz.
-    (void)pkf.UpdateAccel(t_k, f_B, okf.R_EB());
+    (void)pkf.UpdateAccel(t_k, f_B, okf.R_EB(), okf.omega_B());
     const Eigen::Vector3d& p_truth = trial.p_truth[k];
     if (t_k >= next_pos_t - 1e-9 && p_truth.allFinite()) {
       next_pos_t = (std::isfinite(next_pos_t) ? next_pos_t : t_k) + pos_period;
@@ -298,21 +205,12 @@ int RunFuse(const FuseOptions& opt) {
   j["non_finite_estimates"] = non_finite;
   j["truth_missing"] = trial.truth_missing;
   j["position_truth_missing"] = trial.position_missing;
-  {
-    auto o = okf_settings;
-    auto p = pkf_settings;
-    nlohmann::json js;
-    for (const Field& f : OrientationFields(o)) js[f.key()] = *f.value;
-    for (const Field& f : PositionFields(p)) js[f.key()] = *f.value;
-    j["settings"] = js;
-    // The sensor ranges the trial was checked against (--set imu.NAME), apart from the filter
-    // settings: the magnetometer's is in µT, the unit of the file.
-    auto imu = imu_settings;
-    nlohmann::json ranges;
-    for (const Field& f : ImuFields(imu)) ranges[f.key()] = *f.value;
-    j["imu_ranges"] = ranges;
-  }
+  j["settings"] = SettingsJson(settings);
+  // The sensor ranges the trial was checked against (--set imu.NAME), apart from the filter
+  // settings: the magnetometer's is in µT, the unit of the file.
+  j["imu_ranges"] = ImuRangesJson(settings);
   j["gyro_bias_final_rad_s"] = {okf.bias_B().x(), okf.bias_B().y(), okf.bias_B().z()};
+  j["lever_arm_B_m"] = {pkf.lever_arm_B().x(), pkf.lever_arm_B().y(), pkf.lever_arm_B().z()};
   j["mag_reference"] = {{"norm_uT", okf.mag_ref_norm()}, {"dip_rad", okf.mag_ref_dip()}};
   if (!opt.json.empty()) io::AtomicWriteFile(opt.json, j.dump(2) + "\n");
 

@@ -109,8 +109,35 @@ std::pair<double, long> AllanTerms(const std::vector<double>& cum, int b, int e,
 std::vector<const ImuCandidate*> ImuAnalysis::effects() const {
   std::vector<const ImuCandidate*> out;
   for (const auto& c : candidates)
-    if (c.significant) out.push_back(&c);
+    if (c.named()) out.push_back(&c);
   return out;
+}
+
+std::string ImuCandidate::gain_metric() const {
+  return cause == "magnetic_disturbance" ? "heading" : "total";
+}
+
+void MarkLosingExtensions(std::vector<ImuCandidate>& candidates) {
+  for (auto& c : candidates) {
+    if (!c.tested) continue;
+    const bool heading = c.gain_metric() == "heading";
+    const double b = (heading ? c.before.heading : c.before.total).value();
+    const double e = (heading ? c.after.heading : c.after.total).value();
+    // A loss within kLoseTolerance is "gains nothing" (two filters on the same samples differ
+    // by that much from noise alone: a 10 ms time offset, re-timed, scores 0.99-1.05x), not a
+    // loss; trial 35's magnet gate doubled the heading error.
+    constexpr double kLoseTolerance = 0.1;
+    c.loses_to_truth = std::isfinite(b) && std::isfinite(e) && e > (1.0 + kLoseTolerance) * b;
+    if (c.loses_to_truth && c.significant) {
+      char buf[160];
+      std::snprintf(buf, sizeof buf,
+                    "significant, but its extension raises the %s RMSE against the truth from "
+                    "%.2f to %.2f deg: not named",
+                    c.gain_metric().c_str(), b * 180.0 / std::numbers::pi,
+                    e * 180.0 / std::numbers::pi);
+      c.note += (c.note.empty() ? "" : "; ") + std::string(buf);
+    }
+  }
 }
 
 ImuStreamData FromSimulatedStream(const std::vector<sim::ImuStreamSample>& stream) {
@@ -761,7 +788,12 @@ TimeOffsetTest TestTimeOffset(const Context& c, double alpha_c, bool has_truth) 
       EstimateLag(c, w_truth, {motion_idx.begin() + static_cast<long>(h), motion_idx.end()});
   to.statistic = std::isfinite(sigma) && sigma > 0 ? std::abs(tau) / sigma : 0.0;
   to.critical = NormalQuantileUpper(alpha_c / 2.0);
-  to.significant = to.statistic > to.critical && std::abs(tau) >= c.s.min_offset_periods * c.dt;
+  const bool large = std::abs(tau) >= c.s.min_offset_periods * c.dt;
+  to.significant = to.statistic > to.critical && large;
+  if (to.statistic > to.critical && !large)
+    to.note = "the offset is measurable (z beyond critical) but |" + Fixed(tau * 1e3, 2) +
+              " ms| is below " + Fixed(c.s.min_offset_periods, 2) +
+              " sample periods: too small to matter, not significant as an effect";
   to.values = {{"time_offset_s", tau, sigma},
                {"time_offset_first_half_s", r.tau_first, sigma * std::sqrt(2.0)},
                {"time_offset_second_half_s", r.tau_second, sigma * std::sqrt(2.0)},
@@ -884,8 +916,8 @@ void StoreErrorSeries(const Context& c, const std::vector<Eigen::Vector4d>& q_ba
 // The gain of all selected extensions together (truth present), and the error series.
 void MeasureSelectionGain(const Context& c, const std::vector<Eigen::Vector4d>& q_base,
                           const TimeOffsetTest& t, ExtendedFilters& filters, ImuAnalysis& a) {
-  const bool sb = a.candidates[0].significant, sm = a.candidates[1].significant,
-             sa = a.candidates[2].significant, st = a.candidates[3].significant;
+  const bool sb = a.candidates[0].named(), sm = a.candidates[1].named(),
+             sa = a.candidates[2].named(), st = a.candidates[3].named();
   const auto& q_ext = filters.Run(sb, sm, sa);
   a.base_score = ScoreAgainstTruth(c.d, q_base);
   a.extended_score = st ? ScoreShifted(c, q_ext, t) : ScoreAgainstTruth(c.d, q_ext);
@@ -958,20 +990,24 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
   const TimeOffsetTest to = TestTimeOffset(c, alpha_c, a.has_truth);
   a.candidates = {gb, md, am, to.candidate};
 
-  a.gain_metric = md.significant ? "heading" : "total";  // the gate acts on heading only
   if (a.has_truth) {
     const ExtensionSettings ext{gb.values.back().value, a.mag_ref_norm_uT, a.mag_ref_dip_rad,
                                 a.mag_gate_norm_uT / a.mag_ref_norm_uT, a.mag_gate_dip_rad};
     ExtendedFilters filters(data, base_f, ext);
     MeasureCandidateGains(c, q_base, to, filters, a);
+    MarkLosingExtensions(a.candidates);
+    a.gain_metric = a.candidates[1].named() ? "heading" : "total";  // the gate acts on heading
     MeasureSelectionGain(c, q_base, to, filters, a);
+  } else {
+    a.gain_metric = a.candidates[1].named() ? "heading" : "total";
   }
   for (const auto& cnd : a.candidates)
-    spdlog::info("imu analysis: {} {} (statistic {:.2f}, critical {:.2f})", cnd.cause,
+    spdlog::info("imu analysis: {} {} (z {}, critical {:.2f}){}{}", cnd.cause,
                  !cnd.tested       ? "not tested"
-                 : cnd.significant ? "FOUND"
+                 : cnd.named()     ? "FOUND"
+                 : cnd.significant ? "significant but not named"
                                    : "not significant",
-                 cnd.statistic, cnd.critical);
+                 ZText(cnd.statistic, 2), cnd.critical, cnd.note.empty() ? "" : ": ", cnd.note);
   return a;
 }
 

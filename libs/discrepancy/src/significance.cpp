@@ -53,7 +53,8 @@ double NormalUpperQuantileLog(double log_p) {
 }
 
 WrittenZ WriteZ(double z) {
-  if (std::isinf(z)) return z > 0 ? WrittenZ{ZOfSmallestP(), ">"} : WrittenZ{ZOfLargestP(), "<"};
+  if (z > ZOfSmallestP()) return {ZOfSmallestP(), ">"};
+  if (z < ZOfLargestP()) return {ZOfLargestP(), "<"};
   return {z, ""};
 }
 

@@ -76,6 +76,8 @@ void OrientationKf::Reset() {
   const std::int64_t resets = counters_.resets;
   counters_ = {};
   counters_.resets = resets;
+  tilt_sigma_k_ = settings_.tilt_sigma;
+  heading_sigma_k_ = settings_.heading_sigma;
   last_tilt_nis_ = std::numeric_limits<double>::quiet_NaN();
   last_heading_nis_ = std::numeric_limits<double>::quiet_NaN();
   last_accel_used_ = false;
@@ -171,6 +173,8 @@ Status OrientationKf::Update(double t, const Eigen::Vector3d& gyro_B, const Eige
 
   // Accelerometer and magnetometer acceptance.
   const Eigen::Vector3d down_B = -R_EB().transpose() * UpVector(settings_.earth);
+  tilt_sigma_k_ = TiltSigma(f_B - f_meas_B);
+  heading_sigma_k_ = settings_.heading_sigma;  // MagAccepted inflates it with its evidence
   SensorUse use{AccelAccepted(f_meas_B), MagAccepted(m_B, f_B, down_B, dt)};
   if (use.mag) m_I_lp_ += LowPassGain(dt, settings_.mag_lowpass_tau) * (R_IB * m_B - m_I_lp_);
   const Eigen::Vector3d m_meas_B = R_IB.transpose() * m_I_lp_;
@@ -301,11 +305,16 @@ bool OrientationKf::MagAccepted(const Eigen::Vector3d& m_B, const Eigen::Vector3
   }
   if (!settings_.reject_mag) return true;
   const double dip = std::asin(std::clamp(m_B.dot(down_B) / m_norm, -1.0, 1.0));
-  if (std::abs(m_norm - mag_ref_norm_) > settings_.mag_norm_tolerance * mag_ref_norm_ ||
-      std::abs(dip - mag_ref_dip_) > settings_.mag_dip_tolerance) {
+  // Disturbance evidence: the departure from the reference in units of its tolerance.
+  const double evidence =
+      std::max(std::abs(m_norm - mag_ref_norm_) / (settings_.mag_norm_tolerance * mag_ref_norm_),
+               std::abs(dip - mag_ref_dip_) / settings_.mag_dip_tolerance);
+  if (evidence > 1.0) {
     FollowRejectedField(m_norm, dip, dt);
     return false;
   }
+  heading_sigma_k_ = settings_.heading_sigma *
+                     std::sqrt(1.0 + settings_.mag_evidence_inflation * evidence * evidence);
   FollowAcceptedField(m_norm, dip, dt);
   return true;
 }
@@ -323,8 +332,19 @@ void OrientationKf::LearnMagReference(const Eigen::Vector3d& m_B, const Eigen::V
   }
 }
 
+double OrientationKf::TiltSigma(const Eigen::Vector3d& f_motion_B) const {
+  double v = 1.0;
+  if (settings_.tilt_motion_accel > 0.0)
+    v += (f_motion_B / settings_.tilt_motion_accel).squaredNorm();
+  if (settings_.tilt_motion_rate > 0.0) {
+    const double r = omega_B_.norm() / settings_.tilt_motion_rate;
+    v += r * r;
+  }
+  return settings_.tilt_sigma * std::sqrt(v);
+}
+
 void OrientationKf::FollowAcceptedField(double m_norm, double dip, double dt) {
-  if (settings_.mag_reference_tau > 0.0) {
+  if (settings_.mag_reference_tau > 0.0 && still()) {
     const double a = LowPassGain(dt, settings_.mag_reference_tau);
     mag_ref_norm_ += a * (m_norm - mag_ref_norm_);
     mag_ref_dip_ += a * (dip - mag_ref_dip_);
@@ -379,7 +399,7 @@ OrientationKf::SensorUse OrientationKf::DecoupledFqaUpdate(const Eigen::Vector3d
     const auto q_tilt = Fqa(f_meas_B, m_pred_B, fqa);
     if (q_tilt.ok()) {
       const Eigen::Vector3d y = geometry::Log(QuatToMatrix(*q_tilt) * R_hat.transpose());
-      if (!GatedFqaUpdate(0, 2, y, settings_.tilt_sigma, settings_.tilt_gate_chi2)) {
+      if (!GatedFqaUpdate(0, 2, y, tilt_sigma_k_, settings_.tilt_gate_chi2)) {
         use.accel = false;
         ++counters_.accel_gated;
       }
@@ -395,7 +415,7 @@ OrientationKf::SensorUse OrientationKf::DecoupledFqaUpdate(const Eigen::Vector3d
     const auto q_head = Fqa(f_level_B, m_meas_B, fqa);
     if (q_head.ok()) {
       const Eigen::Vector3d y = geometry::Log(QuatToMatrix(*q_head) * R_hat.transpose());
-      if (!GatedFqaUpdate(2, 1, y, settings_.heading_sigma, settings_.heading_gate_chi2)) {
+      if (!GatedFqaUpdate(2, 1, y, heading_sigma_k_, settings_.heading_gate_chi2)) {
         use.mag = false;
         ++counters_.mag_gated;
       }
@@ -418,13 +438,13 @@ OrientationKf::SensorUse OrientationKf::PaperFqaUpdate(const Eigen::Vector3d& f_
   const auto q_meas = Fqa(use.accel ? f_meas_B : f_pred_B, use.mag ? m_meas_B : m_pred_B, fqa);
   if (!q_meas.ok()) return {false, false};
   const Eigen::Vector3d y = geometry::Log(QuatToMatrix(*q_meas) * R_hat.transpose());
-  if (use.accel && !GatedFqaUpdate(0, 2, y, settings_.tilt_sigma, settings_.tilt_gate_chi2)) {
+  if (use.accel && !GatedFqaUpdate(0, 2, y, tilt_sigma_k_, settings_.tilt_gate_chi2)) {
     use.accel = false;
     ++counters_.accel_gated;
   }
   // Sequential rows: the heading innovation is taken against the tilt-corrected state.
   const Eigen::Vector3d y2 = geometry::Log(QuatToMatrix(*q_meas) * R_EB().transpose());
-  if (use.mag && !GatedFqaUpdate(2, 1, y2, settings_.heading_sigma, settings_.heading_gate_chi2)) {
+  if (use.mag && !GatedFqaUpdate(2, 1, y2, heading_sigma_k_, settings_.heading_gate_chi2)) {
     use.mag = false;
     ++counters_.mag_gated;
   }

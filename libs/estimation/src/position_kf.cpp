@@ -6,6 +6,8 @@
 #include <sstream>
 #include <string>
 
+#include "rcal/geometry/so3.hpp"
+
 namespace rcal::estimation {
 namespace {
 
@@ -57,6 +59,8 @@ void PositionKf::Reset() {
   last_position_nis_ = 0.0;
   last_position_accepted_ = false;
   consecutive_rejections_ = 0;
+  has_last_omega_ = false;
+  last_omega_B_.setZero();
 }
 
 Eigen::Vector3d PositionKf::p_WM_W() const {
@@ -109,7 +113,7 @@ void PositionKf::PredictTo(double t) {
   Eigen::Matrix3d Q_axis;
   Q_axis << dt5 / 20, dt4 / 8, dt3 / 6, dt4 / 8, dt3 / 3, dt2 / 2, dt3 / 6, dt2 / 2, dt;
   Q_axis *= qj;
-  Mat9 Phi = Mat9::Zero(), Q = Mat9::Zero();
+  Mat9 Phi = Mat9::Identity(), Q = Mat9::Zero();  // r_B constant
   for (int i = 0; i < 3; ++i) {
     Phi.block<3, 3>(3 * i, 3 * i) = Phi_axis;
     Q.block<3, 3>(3 * i, 3 * i) = Q_axis;
@@ -120,8 +124,20 @@ void PositionKf::PredictTo(double t) {
 }
 
 void PositionKf::Initialise(double t, const Eigen::Vector3d& p) {
+  // The lever arm learned so far survives a re-initialisation of the position.
+  const Eigen::Vector3d r = initialized_ || counters_.position_samples > 0
+                                ? Eigen::Vector3d(x_.tail<3>())
+                                : settings_.lever_arm_B;
+  const Eigen::Matrix3d P_r = initialized_ || counters_.position_samples > 0
+                                  ? Eigen::Matrix3d(P_.bottomRightCorner<3, 3>())
+                                  : Eigen::Matrix3d::Identity() *
+                                        (settings_.estimate_lever_arm
+                                             ? settings_.lever_arm_sigma * settings_.lever_arm_sigma
+                                             : 0.0);
   x_.setZero();
   P_.setZero();
+  x_.tail<3>() = r;
+  P_.bottomRightCorner<3, 3>() = P_r;
   for (int i = 0; i < 3; ++i) {
     x_(IP(i)) = p(i);
     P_(IP(i), IP(i)) = settings_.position_sigma * settings_.position_sigma;
@@ -133,22 +149,36 @@ void PositionKf::Initialise(double t, const Eigen::Vector3d& p) {
   consecutive_rejections_ = 0;
 }
 
-Status PositionKf::UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen::Matrix3d& R_EB) {
+Status PositionKf::UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen::Matrix3d& R_EB,
+                               const Eigen::Vector3d& omega_B) {
   if (auto s = Check(t, f_B, "accelerometer f_B"); !s) return s;
+  if (auto s = Check(t, omega_B, "body rate omega_B"); !s) return s;
   if (!R_EB.allFinite()) {
     ++counters_.input_rejected;
     return Status::Error("position_kf: orientation R_EB is not finite");
   }
+  // α_B by differencing the rate between accelerometer updates (zero for the first).
+  const double dt = t - last_omega_t_;
+  const Eigen::Vector3d alpha_B = has_last_omega_ && dt > 0.0
+                                      ? Eigen::Vector3d((omega_B - last_omega_B_) / dt)
+                                      : Eigen::Vector3d::Zero();
+  last_omega_B_ = omega_B;
+  last_omega_t_ = t;
+  has_last_omega_ = true;
   if (!initialized_) return Status::Ok();
   PredictTo(t);
   const Eigen::Vector3d z = EarthAcceleration(f_B, R_EB);
-  Eigen::Matrix<double, 3, 9> H = Eigen::Matrix<double, 3, 9>::Zero();
+  // h = A − R_EB M r_B, M = [α]× + [ω]×² (header comment).
+  const Eigen::Matrix3d W = geometry::Skew(omega_B);
+  const Eigen::Matrix3d M = geometry::Skew(alpha_B) + W * W;
+  Eigen::Matrix<double, 3, 12> H = Eigen::Matrix<double, 3, 12>::Zero();
   for (int i = 0; i < 3; ++i) H(i, IA(i)) = 1.0;
+  H.rightCols<3>() = -R_EB * M;
   const Eigen::Matrix3d R =
       settings_.accel_sigma * settings_.accel_sigma * Eigen::Matrix3d::Identity();
   const Eigen::Vector3d y = z - H * x_;
   const Eigen::Matrix3d S = H * P_ * H.transpose() + R;
-  const Eigen::Matrix<double, 9, 3> K = P_ * H.transpose() * S.inverse();
+  const Eigen::Matrix<double, 12, 3> K = P_ * H.transpose() * S.inverse();
   x_ += K * y;
   const Mat9 IKH = Mat9::Identity() - K * H;
   P_ = IKH * P_ * IKH.transpose() + K * R * K.transpose();
@@ -178,7 +208,7 @@ Status PositionKf::UpdatePosition(double t, const Eigen::Vector3d& p_WM_W) {
     return Status::Ok();
   }
   PredictTo(t);
-  Eigen::Matrix<double, 3, 9> H = Eigen::Matrix<double, 3, 9>::Zero();
+  Eigen::Matrix<double, 3, 12> H = Eigen::Matrix<double, 3, 12>::Zero();
   for (int i = 0; i < 3; ++i) H(i, IP(i)) = 1.0;
   const Eigen::Matrix3d R =
       settings_.position_sigma * settings_.position_sigma * Eigen::Matrix3d::Identity();
@@ -198,7 +228,7 @@ Status PositionKf::UpdatePosition(double t, const Eigen::Vector3d& p_WM_W) {
     return Status::Ok();
   }
   consecutive_rejections_ = 0;
-  const Eigen::Matrix<double, 9, 3> K = P_ * H.transpose() * S_inv;
+  const Eigen::Matrix<double, 12, 3> K = P_ * H.transpose() * S_inv;
   x_ += K * y;
   const Mat9 IKH = Mat9::Identity() - K * H;
   P_ = IKH * P_ * IKH.transpose() + K * R * K.transpose();

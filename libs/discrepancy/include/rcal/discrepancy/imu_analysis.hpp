@@ -139,10 +139,24 @@ struct ImuCandidate {
   double log_p = std::numeric_limits<double>::quiet_NaN();
   double critical = 0.0;  ///< its critical value after Bonferroni
   bool significant = false;
+  /// With truth: its extension raised the error it acts on (heading for magnetic_disturbance,
+  /// total otherwise) over the movement samples by more than 10 %. A significant candidate whose
+  /// extension loses against the truth is not named as an effect (the test saw something; the
+  /// extension is not what it is).
+  bool loses_to_truth = false;
   bool tested = false;  ///< false: not testable on this stream (reason in note)
   std::string note;
   OrientationScore before, after;  ///< base filter vs base + this extension (movement samples)
+  /// Named as an effect: significant and not losing against the truth.
+  bool named() const { return significant && !loses_to_truth; }
+  /// "heading" for magnetic_disturbance (its gate acts on heading only), "total" otherwise.
+  std::string gain_metric() const;
 };
+
+/// Sets loses_to_truth on each tested candidate whose `after` is more than 10 % worse than its
+/// `before` in its gain_metric() (both finite; within 10 % it gains nothing, which is no loss),
+/// and says so in its note.
+void MarkLosingExtensions(std::vector<ImuCandidate>& candidates);
 
 struct AllanCurve {
   std::vector<double> tau_s;
@@ -168,6 +182,7 @@ struct ImuAnalysis {
   double mag_gate_norm_uT = 0.0, mag_gate_dip_rad = 0.0;  ///< the fitted gate half-widths
   AllanCurve allan;
   std::vector<ImuCandidate> candidates;  ///< all four, tested or not
+  /// The named candidates (ImuCandidate::named).
   std::vector<const ImuCandidate*> effects() const;
   // Gain of all selected extensions together.
   std::string gain_metric;  ///< "total" | "heading"

@@ -8,10 +8,13 @@
 // bound:
 //   - a p below 1e-300 is written "p < 1e-300" (text) and, in JSON, as "p_value": the double
 //     value (0 after underflow) with "p_value_bound": "< 1e-300" and the exact "log10_p_value";
-//   - a z that is infinite (p exactly 0: zero spread of a paired difference; p exactly 1: no count
-//     beyond the band) is written as the bound a double p could still express: "z > 38.47" (p =
-//     4.9e-324, the smallest double) or "z < -8.21" (p = 1 − 1.1e-16, the largest below 1); in JSON
-//     the bound is the number and "<key>_bound" is ">" or "<". Finite z are written as they are.
+//   - a z beyond what a double p can express (p below 4.9e-324, the smallest double, or above
+//     1 − 1.1e-16, the largest below 1) is written as that bound: "z > 38.47" or "z < -8.21"; in
+//     JSON the bound is the number and "<key>_bound" is ">" or "<". That covers the infinite z
+//     (p exactly 0: zero spread of a paired difference; p exactly 1: no count beyond the band)
+//     and a finite z such as 95 from a ratio |τ|/σ: its p (e^−4500) is no double, and a normal
+//     tail that far out is no model of anything measured, so only the bound is a statement.
+//     z within the bounds are written as they are.
 #pragma once
 
 #include <string>
@@ -26,7 +29,8 @@ double LogNormalUpper(double z);
 /// The z with ln P(Z > z) = log_p (log_p ≤ 0): +∞ for log_p = −∞ (p = 0), −∞ for log_p = 0.
 double NormalUpperQuantileLog(double log_p);
 
-/// A z as written: finite z as they are; ±∞ as the bound a double p can express (text above).
+/// A z as written: within [−8.21, 38.47] as it is; beyond, as the bound a double p can express
+/// (text above).
 struct WrittenZ {
   double value = 0;   ///< z, or the bound
   std::string bound;  ///< "" (exact), ">" or "<": the true z lies beyond `value` this way

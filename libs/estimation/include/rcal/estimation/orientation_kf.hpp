@@ -110,6 +110,14 @@ struct OrientationKfSettings {
   double mag_lowpass_tau = 3.0;
   /// See the header comment. false: one FQA(acc, mag) quaternion as in the paper.
   bool decoupled_fqa = true;
+  /// Accelerometer weighted by motion: the tilt rows' standard deviation grows with the motion
+  /// the accelerometer sees, σ_tilt,k = tilt_sigma · √(1 + (a_k / tilt_motion_accel)² +
+  /// (|ω̂_k| / tilt_motion_rate)²), a_k = |f_B − f̄_B| the raw specific force's departure from
+  /// the low-passed one [m/s²] (linear and centripetal acceleration the low-pass has not yet
+  /// averaged out), |ω̂_k| the rate [rad/s] (the low-pass's strapdown frame drifts with gyro
+  /// scale errors in proportion to it). 0 = that term off.
+  double tilt_motion_accel = 0.0;  ///< [m/s²]
+  double tilt_motion_rate = 0.0;   ///< [rad/s]
 
   // --- Rejection (beyond the paper; on by default) ---
   bool reject_accel = true;
@@ -124,6 +132,11 @@ struct OrientationKfSettings {
   double mag_dip_tolerance = 0.08;
   /// χ² gate on the 1-dof heading innovation (0 = off) [-].
   double heading_gate_chi2 = 0.0;
+  /// Disturbance evidence of an accepted magnetometer sample, e = max(|Δnorm| /
+  /// (mag_norm_tolerance · m_ref), |Δdip| / mag_dip_tolerance) ∈ [0, 1], inflates its heading
+  /// variance: σ_head,k² = heading_sigma² · (1 + mag_evidence_inflation · e²) [-]; 0 = off. A
+  /// field half-way to rejection is already suspect: it is weighted down, not trusted fully.
+  double mag_evidence_inflation = 0.0;
 
   // --- Magnetic reference ---
   /// Reference field norm [magnetometer unit] and dip angle [rad, positive down]. When the
@@ -133,8 +146,9 @@ struct OrientationKfSettings {
   double mag_ref_norm = 0.0;
   double mag_ref_dip = 0.0;
   int mag_reference_samples = 100;
-  /// After learning, the reference norm and dip follow accepted samples with this time
-  /// constant [s] (slow changes across a room); 0 = fixed.
+  /// After learning, the reference norm and dip follow accepted samples at rest with this time
+  /// constant [s] (slow changes across a room; at rest only, where the dip's gravity is not
+  /// bent by motion); 0 = fixed.
   double mag_reference_tau = 0.0;
   /// After this long [s] of continuous rejection with a steady field, the field seen is taken
   /// as the new reference (the sensor moved to a place with another field); 0 = never.
@@ -236,6 +250,8 @@ class OrientationKf {
   // Integrates the strapdown attitude q_IB; returns R_IB.
   Eigen::Matrix3d PropagateStrapdown(double dt);
   bool AccelAccepted(const Eigen::Vector3d& f_meas_B) const;
+  // σ of this sample's tilt rows given the motion f_B − f̄_B [m/s²] (tilt_motion_accel).
+  double TiltSigma(const Eigen::Vector3d& f_motion_B) const;
   // Learns, gates and follows the magnetic reference; whether m_B is used.
   bool MagAccepted(const Eigen::Vector3d& m_B, const Eigen::Vector3d& f_B,
                    const Eigen::Vector3d& down_B, double dt);
@@ -264,6 +280,8 @@ class OrientationKf {
   Eigen::Vector3d m_I_lp_ = Eigen::Vector3d::Zero();    // low-passed m in I
   Mat9 P_ = Mat9::Identity();
   Counters counters_;
+  double tilt_sigma_k_ = 0.0;  // this sample's tilt and heading σ [rad] (motion, evidence)
+  double heading_sigma_k_ = 0.0;
   double last_tilt_nis_ = 0.0;
   double last_heading_nis_ = 0.0;
   bool last_accel_used_ = false;

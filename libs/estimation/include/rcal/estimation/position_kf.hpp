@@ -18,11 +18,20 @@
 //   Φ_axis = [1 Δt Δt²/2; 0 1 Δt; 0 0 1],   x⁻ = Φ x,   P⁻ = Φ P Φᵀ + Q,
 //   Q_axis = q_j [Δt⁵/20 Δt⁴/8 Δt³/6; Δt⁴/8 Δt³/3 Δt²/2; Δt³/6 Δt²/2 Δt]  (white jerk, Eq. 30)
 // Measurements (H′ of Eq. 31, missing in the text): the position sensor observes p
-// (H = rows of p), the accelerometer observes A (H = rows of A). Update as NOTES.md Eqs. 15–17,
-// Joseph form. The position sensor is χ²-gated: NIS = yᵀS⁻¹y > position_gate_chi2 rejects it
-// (counted). Bad input and out-of-order time are refused with a Status; the state is unchanged.
-// A state that goes non-finite anyway is never kept: the filter resets (Counters::resets) and
-// the update returns an Error saying so; the next position sample initialises it again.
+// (H = rows of p), the accelerometer observes A (H = rows of A).
+// Lever arm (beyond the paper): the IMU is not at the marker. With r_B the IMU → marker
+// vector in the body frame [m], p_M = p_I + R_EB r_B, so the marker's acceleration is
+//   A = ä_I + R_EB ([α_B]× + [ω_B]×²) r_B,   ä_I = R_EB f_B + g_E (what the accelerometer gives),
+// ω_B the body rate [rad/s] (UpdateAccel's omega_B) and α_B its derivative, differenced between
+// accelerometer updates. The accelerometer's measurement is then z = R_EB f_B + g_E with
+// h = A − R_EB M r_B, M = [α_B]× + [ω_B]×². With estimate_lever_arm r_B joins the state
+// (constant; initial value lever_arm_B, σ lever_arm_sigma) and is observed whenever the body
+// turns; otherwise lever_arm_B is taken as known (zero: the paper's filter). Update as NOTES.md
+// Eqs. 15–17, Joseph form. The position sensor is χ²-gated: NIS = yᵀS⁻¹y > position_gate_chi2
+// rejects it (counted). Bad input and out-of-order time are refused with a Status; the state is
+// unchanged. A state that goes non-finite anyway is never kept: the filter resets
+// (Counters::resets) and the update returns an Error saying so; the next position sample
+// initialises it again.
 #pragma once
 
 #include <Eigen/Core>
@@ -57,6 +66,12 @@ struct PositionKfSettings {
   int max_consecutive_rejections = 20;
   double initial_velocity_sigma = 0.5;  ///< [m/s]
   double initial_accel_sigma = 5.0;     ///< [m/s²]
+  /// IMU → marker vector r_B in the body frame [m] (the initial value when estimated).
+  Eigen::Vector3d lever_arm_B = Eigen::Vector3d::Zero();
+  /// Estimate r_B as three constant states (see the header comment).
+  bool estimate_lever_arm = false;
+  /// Initial σ of each component of r_B when estimated [m].
+  double lever_arm_sigma = 0.2;
 };
 
 class PositionKf {
@@ -75,9 +90,11 @@ class PositionKf {
   void Reset();
 
   /// Accelerometer sample at t [s] (not before the last update): specific force f_B [m/s²] in
-  /// the body frame and the orientation estimate R_EB (body → earth) at t. Before the first
-  /// position sample the filter is not initialised and the sample is ignored (Ok).
-  Status UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen::Matrix3d& R_EB);
+  /// the body frame, the orientation estimate R_EB (body → earth) at t and the body rate
+  /// omega_B [rad/s] (for the lever arm; zero: no rotation). Before the first position sample
+  /// the filter is not initialised and the sample is ignored (Ok).
+  Status UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen::Matrix3d& R_EB,
+                     const Eigen::Vector3d& omega_B = Eigen::Vector3d::Zero());
 
   /// Position-sensor sample p_WM_W [m] at t [s] (not before the last update). The first one
   /// initialises the filter. Returns Ok also when gated (see last_position_accepted()).
@@ -89,9 +106,12 @@ class PositionKf {
   Eigen::Vector3d p_WM_W() const;
   Eigen::Vector3d v_W() const;
   Eigen::Vector3d a_W() const;
-  /// State x in Eq. 27 order and its covariance.
-  const Eigen::Matrix<double, 9, 1>& x() const { return x_; }
-  const Eigen::Matrix<double, 9, 9>& P() const { return P_; }
+  /// State x in Eq. 27 order and its covariance (without the lever arm).
+  Eigen::Matrix<double, 9, 1> x() const { return x_.head<9>(); }
+  Eigen::Matrix<double, 9, 9> P() const { return P_.topLeftCorner<9, 9>(); }
+  /// IMU → marker lever arm r_B [m] (body frame) and its covariance [m²] (zero when known).
+  Eigen::Vector3d lever_arm_B() const { return x_.tail<3>(); }
+  Eigen::Matrix3d lever_arm_covariance() const { return P_.bottomRightCorner<3, 3>(); }
   /// Covariance of p_WM_W [m²].
   Eigen::Matrix3d position_covariance() const;
   double last_position_nis() const { return last_position_nis_; }
@@ -102,8 +122,9 @@ class PositionKf {
   Eigen::Vector3d EarthAcceleration(const Eigen::Vector3d& f_B, const Eigen::Matrix3d& R_EB) const;
 
  private:
-  using Mat9 = Eigen::Matrix<double, 9, 9>;
-  using Vec9 = Eigen::Matrix<double, 9, 1>;
+  // State: the 9 of Eq. 27, then r_B (3; constant, uncertain only when estimated).
+  using Mat9 = Eigen::Matrix<double, 12, 12>;
+  using Vec9 = Eigen::Matrix<double, 12, 1>;
   void PredictTo(double t);
   Status Check(double t, const Eigen::Vector3d& v, const char* name);
   // After an update: Ok, or the state went non-finite and the filter was reset (an Error).
@@ -119,6 +140,9 @@ class PositionKf {
   double last_position_nis_ = 0.0;
   bool last_position_accepted_ = false;
   int consecutive_rejections_ = 0;
+  bool has_last_omega_ = false;  // for α_B by differencing
+  double last_omega_t_ = 0.0;
+  Eigen::Vector3d last_omega_B_ = Eigen::Vector3d::Zero();
 };
 
 }  // namespace rcal::estimation

@@ -1,0 +1,235 @@
+// rcal fuse-loo [DIR]: the orientation KF's settings for BROAD chosen by leave-one-trial-out
+// (issue 17). A grid of candidate settings (--grid NAME=v1,v2,…, the shipped grid by default)
+// is run on every trial of DIR (../shared/data/broad); each trial's figure is then reported
+// twice: in-sample (the candidate with the lowest mean total RMSE over all trials) and held out
+// (the candidate with the lowest mean over the other trials, discrepancy/loo_tuning.hpp), next
+// to VQF's figures from DIR/README.md. The held-out table is what to expect on trials not seen.
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <future>
+#include <iostream>
+#include <map>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <numbers>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "command.hpp"
+#include "fuse_settings.hpp"
+#include "rcal/discrepancy/imu_scoring.hpp"
+#include "rcal/discrepancy/loo_tuning.hpp"
+#include "rcal/estimation/orientation_kf.hpp"
+#include "rcal/io/atomic_file.hpp"
+#include "rcal/io/imu_csv.hpp"
+
+namespace rcal::tool {
+namespace {
+
+namespace est = rcal::estimation;
+constexpr double kRadToDeg = 180.0 / std::numbers::pi;
+
+struct LooOptions {
+  std::string data = "../shared/data/broad";
+  std::vector<std::string> grid;       // NAME=v1,v2,… (empty: the shipped grid)
+  std::vector<std::string> overrides;  // NAME=VALUE applied to every candidate
+  std::string json;
+  int jobs = 1;
+};
+
+// The shipped grid: the accelerometer's trust and its weighting by motion, the magnetometer's
+// trust and the time over which its field is averaged in the strapdown frame; two or three
+// values each (24 candidates). Every other setting is the OrientationKfSettings default.
+std::vector<std::string> ShippedGrid() {
+  return {"mag_lowpass_tau=3,6,9", "tilt_sigma=0.008,0.015", "heading_sigma=0.15,0.2",
+          "tilt_motion_accel=0,10"};
+}
+
+struct Axis {
+  std::string name;
+  std::vector<std::string> values;
+};
+
+std::vector<Axis> ParseGrid(const std::vector<std::string>& grid) {
+  std::vector<Axis> axes;
+  for (const auto& g : grid) {
+    const auto eq = g.find('=');
+    if (eq == std::string::npos || eq + 1 >= g.size())
+      throw std::runtime_error("fuse-loo: --grid expects NAME=v1,v2,..., got '" + g + "'");
+    Axis a{g.substr(0, eq), {}};
+    std::stringstream ss(g.substr(eq + 1));
+    for (std::string v; std::getline(ss, v, ',');) a.values.push_back(v);
+    axes.push_back(a);
+  }
+  return axes;
+}
+
+// Candidate c of the cartesian product, as --set strings.
+std::vector<std::string> Candidate(const std::vector<Axis>& axes, long c) {
+  std::vector<std::string> kv;
+  for (const Axis& a : axes) {
+    const long n = static_cast<long>(a.values.size());
+    kv.push_back(a.name + "=" + a.values[c % n]);
+    c /= n;
+  }
+  return kv;
+}
+
+// VQF's total / heading / inclination RMSE [deg] per trial, from the data's README table
+// ("| 01 | 2.06 / 1.95 / 0.69 | …"); empty when the README is missing.
+std::map<std::string, std::array<double, 3>> VqfFigures(const std::filesystem::path& readme) {
+  std::map<std::string, std::array<double, 3>> out;
+  std::ifstream in(readme);
+  const std::regex row(R"(^\| (\d\d) \| ([0-9.]+) / ([0-9.]+) / ([0-9.]+) \|)");
+  for (std::string line; std::getline(in, line);) {
+    std::smatch m;
+    if (std::regex_search(line, m, row))
+      out[m[1]] = {std::stod(m[2]), std::stod(m[3]), std::stod(m[4])};
+  }
+  return out;
+}
+
+discrepancy::OrientationScore Score(const io::ImuCsv& trial, const est::OrientationKfSettings& s) {
+  est::OrientationKf kf(s);
+  discrepancy::OrientationScore score;
+  for (std::size_t k = 0; k < trial.t.size(); ++k) {
+    if (!kf.Update(trial.t[k], trial.gyro[k], trial.accel[k], trial.mag_uT[k])) continue;
+    if (trial.movement[k] == 1 && trial.q_truth[k].allFinite())
+      score.Add(discrepancy::BroadErrors(kf.q_EB(), trial.q_truth[k]));
+  }
+  return score;
+}
+
+std::string Deg3(const discrepancy::OrientationScore& s) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.2f / %.2f / %.2f", s.total.value() * kRadToDeg,
+                s.heading.value() * kRadToDeg, s.inclination.value() * kRadToDeg);
+  return b;
+}
+
+int RunFuseLoo(const LooOptions& opt) {
+  const std::vector<Axis> axes = ParseGrid(opt.grid.empty() ? ShippedGrid() : opt.grid);
+  long n_cand = 1;
+  for (const Axis& a : axes) n_cand *= static_cast<long>(a.values.size());
+  // Every candidate's settings first: a bad name or value is refused before any trial is read.
+  std::vector<est::OrientationKfSettings> cand;
+  for (long c = 0; c < n_cand; ++c) {
+    auto kv = opt.overrides;
+    for (const auto& s : Candidate(axes, c)) kv.push_back(s);
+    cand.push_back(BroadSettingsWith(kv).orientation);
+  }
+  const std::filesystem::path dir = ResolvePath(opt.data);
+  std::vector<std::filesystem::path> files;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    const std::string f = e.path().filename().string();
+    if (f.starts_with("broad_") && f.ends_with("_100hz.csv")) files.push_back(e.path());
+  }
+  std::sort(files.begin(), files.end());
+  if (files.size() < 2)
+    throw std::runtime_error("fuse-loo: " + dir.string() + " holds " +
+                             std::to_string(files.size()) +
+                             " BROAD trials (broad_NN_100hz.csv); leave-one-out needs two");
+  std::vector<io::ImuCsv> trials;
+  std::vector<std::string> ids;
+  for (const auto& f : files) {
+    trials.push_back(io::LoadImuCsv(f));
+    if (!trials.back().has_truth || !trials.back().has_movement)
+      throw std::runtime_error("fuse-loo: " + f.string() + ": missing the truth or movement");
+    ids.push_back(f.filename().string().substr(6, 2));
+  }
+  const int n_trials = static_cast<int>(trials.size());
+  spdlog::info("fuse-loo: {} candidates × {} trials", n_cand, n_trials);
+
+  // Every (candidate, trial) cell, on --jobs threads; the figures do not depend on the order.
+  std::vector<discrepancy::OrientationScore> scores(n_cand * n_trials);
+  std::atomic<long> next{0};
+  auto worker = [&] {
+    for (long i; (i = next++) < n_cand * n_trials;)
+      scores[i] = Score(trials[i % n_trials], cand[i / n_trials]);
+  };
+  std::vector<std::future<void>> pool;
+  for (int k = 1; k < opt.jobs; ++k) pool.push_back(std::async(std::launch::async, worker));
+  worker();
+  for (auto& f : pool) f.get();
+
+  Eigen::MatrixXd cost(n_cand, n_trials);
+  for (long c = 0; c < n_cand; ++c)
+    for (int t = 0; t < n_trials; ++t) cost(c, t) = scores[c * n_trials + t].total.value();
+  const auto choice = discrepancy::LeaveOneOutSelect(cost);
+  const auto vqf = VqfFigures(dir / "README.md");
+
+  auto join = [](const std::vector<std::string>& v) {
+    std::string s;
+    for (const auto& x : v) s += (s.empty() ? "" : ", ") + x;
+    return s;
+  };
+  std::ostringstream md;
+  md << "Settings chosen in-sample (all " << n_trials
+     << " trials): " << join(Candidate(axes, choice.in_sample)) << "\n\n"
+     << "| trial | in-sample: total / heading / inclination [deg] | leave-one-out | VQF | "
+        "leave-one-out settings |\n| --- | ---: | ---: | ---: | --- |\n";
+  nlohmann::json j;
+  j["grid"] = opt.grid.empty() ? ShippedGrid() : opt.grid;
+  j["in_sample_settings"] = Candidate(axes, choice.in_sample);
+  double sum_vqf = 0.0;
+  int n_vqf = 0;
+  for (int t = 0; t < n_trials; ++t) {
+    const auto& in = scores[choice.in_sample * n_trials + t];
+    const auto& lo = scores[choice.held_out[t] * n_trials + t];
+    std::string v = "–";
+    if (auto it = vqf.find(ids[t]); it != vqf.end()) {
+      char b[64];
+      std::snprintf(b, sizeof b, "%.2f / %.2f / %.2f", it->second[0], it->second[1], it->second[2]);
+      v = b;
+      sum_vqf += it->second[0];
+      ++n_vqf;
+    }
+    md << "| " << ids[t] << " | " << Deg3(in) << " | " << Deg3(lo) << " | " << v << " | "
+       << join(Candidate(axes, choice.held_out[t])) << " |\n";
+    auto rad = [](const discrepancy::OrientationScore& s) {
+      return nlohmann::json{{"total_rmse_rad", s.total.value()},
+                            {"heading_rmse_rad", s.heading.value()},
+                            {"inclination_rmse_rad", s.inclination.value()}};
+    };
+    j["trials"][ids[t]] = {{"in_sample", rad(in)},
+                           {"leave_one_out", rad(lo)},
+                           {"leave_one_out_settings", Candidate(axes, choice.held_out[t])}};
+  }
+  md << "\nMean total RMSE: in-sample " << choice.in_sample_mean * kRadToDeg << "°, leave-one-out "
+     << choice.held_out_mean * kRadToDeg << "°";
+  if (n_vqf == n_trials) md << ", VQF " << sum_vqf / n_vqf << "°";
+  md << ".\n";
+  j["in_sample_mean_total_rmse_rad"] = choice.in_sample_mean;
+  j["leave_one_out_mean_total_rmse_rad"] = choice.held_out_mean;
+  std::cout << md.str();
+  if (!opt.json.empty()) io::AtomicWriteFile(opt.json, j.dump(2) + "\n");
+  return 0;
+}
+
+const RegisterCommand kRegisterFuseLoo(
+    "fuse-loo",
+    "orientation KF settings for BROAD chosen by leave-one-trial-out: in-sample and held-out "
+    "tables",
+    [](CLI::App& sub) -> std::function<int()> {
+      auto opt = std::make_shared<LooOptions>();
+      sub.add_option("data", opt->data, "folder of BROAD trials (broad_NN_100hz.csv, README.md)");
+      sub.add_option("--grid", opt->grid,
+                     "candidate values of one setting, NAME=v1,v2,... (repeatable; default: the "
+                     "shipped grid)");
+      sub.add_option("--set", opt->overrides, "NAME=VALUE for every candidate (as rcal fuse)");
+      sub.add_option("--json", opt->json, "write the figures (rad) and choices to this file");
+      sub.add_option("--jobs", opt->jobs, "worker threads (the figures do not depend on it)");
+      return [opt] { return RunFuseLoo(*opt); };
+    });
+
+}  // namespace
+}  // namespace rcal::tool
