@@ -15,5 +15,6 @@ inline constexpr const char* kIkRequest = "IK_REQUEST";                  ///< ik
 inline constexpr const char* kIkCommand = "IK_COMMAND";                  ///< ik_command_t
 inline constexpr const char* kHealth = "HEALTH";                         ///< health_t
 inline constexpr const char* kSupervisorState = "SUPERVISOR_STATE";      ///< supervisor_state_t
+inline constexpr const char* kNextPoses = "NEXT_POSES";                  ///< next_poses_t
 
 }  // namespace rcal::transport::channels
