@@ -52,7 +52,7 @@ int main(int argc, char** argv) {
   if (ns > 0)
     std::printf(
         "\nplanning 20 stops from 5000 candidates (positions only, random_dh_201): %.2f s "
-        "(budget 5 s, one core)\n",
+        "real time, median (budget 5 s on one core; on a shared machine read the CPU column)\n",
         ns * 1e-9);
   benchmark::Shutdown();
   return 0;

@@ -9,7 +9,6 @@
 #include "rcal/identification/batch_lm.hpp"
 #include "rcal/identification/metrics.hpp"
 #include "rcal/sim/pose_sim.hpp"
-#include "rcal/sim/random_arm.hpp"
 
 namespace rcal::identification {
 namespace {
@@ -19,7 +18,6 @@ using kinematics::MeasurementKind;
 double LogDet(const Eigen::MatrixXd& M) {
   return 2.0 * M.llt().matrixLLT().diagonal().array().log().sum();
 }
-
 
 struct Fixture {
   kinematics::KinematicModel model = testing::Ur10FromUrdf();
@@ -258,7 +256,7 @@ TEST(PosePlanning, NextBestPosesRankByTaskErrorReductionPerDistance) {
     const Eigen::MatrixXd K = P * H.transpose() * (H * P * H.transpose() + R).inverse();
     const Eigen::MatrixXd P_plus = P - K * H * P;
     const double gain = (G * P).trace() - (G * P_plus).trace();
-    const double score = gain / ((f.candidates[i] - q_now).norm() + 0.5);
+    const double score = gain / ((f.candidates[i] - q_now).norm() + 2.0);
     best_score = std::max(best_score, score);
     for (const auto& np : next) {
       if (np.candidate == static_cast<int>(i)) {
@@ -293,35 +291,6 @@ TEST(PosePlanning, BadInputIsRefusedNamingIt) {
   const PlanningProblem pp(f.model, f.model.Nominal(), f.candidates, f.settings);
   EXPECT_THROW(pp.Plan(51), std::invalid_argument);
   EXPECT_THROW(pp.Plan(0), std::invalid_argument);
-}
-
-TEST(PosePlanningTmp, Explore) {
-  for (unsigned arm = 1; arm <= 4; ++arm) {
-    const auto model = sim::RandomDhArm(arm);
-    sim::Rng rng(arm);
-    const auto cands = sim::SampleJoints(model, 3000, rng);
-    std::vector<Eigen::VectorXd> ws;
-    for (int i = 0; i < 3000; i += 10) ws.push_back(cands[i]);
-    PlanningSettings sd;
-    sd.position_sigma_m = 2e-5;
-    PlanningSettings si = sd;
-    si.criterion = PlanCriterion::kTaskRegion;
-    const PlanningProblem pd(model, model.Nominal(), cands, sd, ws), pi(model, model.Nominal(), cands, si, ws);
-    std::vector<int> idx(pd.size());
-    std::iota(idx.begin(), idx.end(), 0);
-    std::vector<double> r20, r40;
-    for (int t = 0; t < 21; ++t) {
-      std::shuffle(idx.begin(), idx.end(), rng);
-      r20.push_back(std::sqrt(pd.Evaluate({idx.begin(), idx.begin() + 20}).task_mean_squared_m2));
-      r40.push_back(std::sqrt(pd.Evaluate({idx.begin(), idx.begin() + 40}).task_mean_squared_m2));
-    }
-    std::sort(r20.begin(), r20.end());
-    std::sort(r40.begin(), r40.end());
-    printf("arm %u p=%zu: D %g  I %g  iroc %g  r20 %g r40 %g\n", arm, pd.identifiable().size(),
-           std::sqrt(pd.Evaluate(pd.Plan(20).chosen).task_mean_squared_m2),
-           std::sqrt(pd.Evaluate(pi.Plan(20).chosen).task_mean_squared_m2),
-           std::sqrt(pd.Evaluate(pd.IrocGreedy(20).chosen).task_mean_squared_m2), r20[10], r40[10]);
-  }
 }
 
 }  // namespace

@@ -141,9 +141,13 @@ int Run(const Options& o) {
           }
         if (nb == "–") nb = "> " + std::to_string(o.counts.back());
       }
+      const auto& path = plans[a].path20;
       arows.push_back({arms[a].name(), std::to_string(plans[a].identifiable), Fmt(r20 * 1e6, 1),
                        Fmt(r40 * 1e6, 1), Fmt(p20 * 1e6, 1), Fmt(g20 * 1e6, 1),
-                       p20 <= r40 ? "yes" : "**no**", nb, Fmt(plans[a].plan_seconds, 2)});
+                       p20 <= r40 ? "yes" : "**no**", nb,
+                       Fmt(path[kRandom], 0) + " / " + Fmt(path[kPlanned], 0) + " / " +
+                           Fmt(path[kNextBest], 0) + " / " + Fmt(path[kIroc], 0),
+                       Fmt(plans[a].plan_seconds, 2)});
       jarms.push_back({{"arm", arms[a].name()},
                        {"identifiable", plans[a].identifiable},
                        {"random20_m", r20},
@@ -151,11 +155,17 @@ int Run(const Options& o) {
                        {"planned20_m", p20},
                        {"iroc20_m", g20},
                        {"next_best_stops_to_random50", nb},
+                       {"path20_rad",
+                        {{"random", plans[a].path20[kRandom]},
+                         {"planned", plans[a].path20[kPlanned]},
+                         {"next_best", plans[a].path20[kNextBest]},
+                         {"iroc", plans[a].path20[kIroc]}}},
                        {"plan20_cpu_s", plans[a].plan_seconds}});
     }
     md += MdTable(
         {"arm", "identifiable", "random 20", "random 40", "planned 20", "IROC 20",
-         "planned 20 ≤ random 40", "next-best stops to reach random 50", "planning CPU [s]"},
+         "planned 20 ≤ random 40", "next-best stops to reach random 50",
+         "joint path of 20 stops [rad]: random / planned / next-best / IROC", "planning CPU [s]"},
         arows);
   }
 
@@ -194,7 +204,7 @@ int Run(const Options& o) {
                                                 {"first_arm", o.first_arm},
                                                 {"seeds", o.seeds},
                                                 {"candidates", o.candidates},
-                           {"criterion", o.criterion},
+                                                {"criterion", o.criterion},
                                                 {"position_noise_m", s.position_sigma_m},
                                                 {"test_poses", s.test_poses},
                                                 {"by_count", jc},

@@ -92,6 +92,7 @@ ArmPlans PlanArm(const kinematics::KinematicModel& model, const PlanningReportSe
   Eigen::VectorXd q_now(model.num_joints());
   for (int j = 0; j < model.num_joints(); ++j)
     q_now(j) = 0.5 * (model.joints()[j].lower + model.joints()[j].upper);
+  const Eigen::VectorXd start = q_now;
   std::vector<int> chosen;
   std::vector<char> taken(candidates.size(), 0);
   const Eigen::VectorXd& D = pp.scale();
@@ -108,6 +109,23 @@ ArmPlans PlanArm(const kinematics::KinematicModel& model, const PlanningReportSe
     q_now = candidates[it->candidate];
   }
   plans.next_best = Pick(candidates, chosen);
+  const int n20 =
+      std::find(s.counts.begin(), s.counts.end(), 20) != s.counts.end() ? 20 : s.counts[0];
+  const auto path = [&](const std::vector<Eigen::VectorXd>& v) {
+    Eigen::VectorXd at = start;
+    double length = 0;
+    for (int i = 0; i < n20 && i < static_cast<int>(v.size()); ++i) {
+      length += (v[i] - at).norm();
+      at = v[i];
+    }
+    return length;
+  };
+  const size_t c20 =
+      static_cast<size_t>(std::find(s.counts.begin(), s.counts.end(), n20) - s.counts.begin());
+  plans.path20[kRandom] = path(sim::SampleJoints(model, n20, rng));
+  plans.path20[kPlanned] = path(plans.planned[c20]);
+  plans.path20[kNextBest] = path(plans.next_best);
+  plans.path20[kIroc] = path(plans.iroc);
   return plans;
 }
 

@@ -43,7 +43,7 @@ struct PlanningReportSettings {
   int candidates = 5000;
   double position_sigma_m = 2e-5;  ///< positions only, per axis
   int test_poses = 200;            ///< held-out poses per cell
-  double settle_distance = 0.5;    ///< NextBestPoses' cost of a stop [rad]
+  double settle_distance = 2.0;    ///< NextBestPoses' cost of a stop [rad]
   /// The planned strategy's criterion: D-optimal, or the predicted error over the workspace (the
   /// task-region criterion with an even spread of the candidates as the region).
   identification::PlanCriterion criterion = identification::PlanCriterion::kDOptimal;
@@ -54,6 +54,9 @@ struct ArmPlans {
   std::vector<std::vector<Eigen::VectorXd>> planned;  ///< one plan per count
   std::vector<Eigen::VectorXd> iroc, next_best;       ///< max(counts) stops; prefixes are used
   int identifiable = 0;
+  /// Joint-space path [rad] from the middle of the limits through the first 20 stops (or the
+  /// first count), in visiting order, per strategy (random: its first draw).
+  std::array<double, 4> path20{};
   double plan_seconds = 0;  ///< CPU time of the planned plan at 20 stops (or the first count)
 };
 ArmPlans PlanArm(const kinematics::KinematicModel& model, const PlanningReportSettings& s,

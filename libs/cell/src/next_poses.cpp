@@ -29,13 +29,14 @@ NextPoseAdvisor::NextPoseAdvisor(const io::BuiltCell& cell, int candidates, unsi
 }
 
 NextPoseAdvice NextPoseAdvisor::Suggest(const identification::EkfIdentifier& ekf,
-                                        const Eigen::VectorXd& q_now, int k) const {
+                                        const Eigen::VectorXd& q_now, int k,
+                                        double settle_distance) const {
   NextPoseAdvice a;
   const Eigen::VectorXd& x = ekf.x();
   const std::vector<int>& id = ekf.identified();
   const Eigen::MatrixXd P = ekf.P().topLeftCorner(id.size(), id.size());
-  a.poses =
-      identification::NextBestPoses(model_, x, id, P, candidates_, task_, q_now, k, settings_);
+  a.poses = identification::NextBestPoses(model_, x, id, P, candidates_, task_, q_now, k, settings_,
+                                          settle_distance);
   for (const auto& p : a.poses) a.q.push_back(candidates_[p.candidate]);
   a.predicted_rms_m = std::sqrt(identification::PredictedTaskMeanSquared(model_, x, id, P, task_));
   return a;

@@ -28,9 +28,10 @@ class NextPoseAdvisor {
   /// too few configurations or none in the task region.
   explicit NextPoseAdvisor(const io::BuiltCell& cell, int candidates = 2000, unsigned seed = 1);
 
-  /// The k best next stops under `ekf`'s estimate and covariance, from joints q_now.
+  /// The k best next stops under `ekf`'s estimate and covariance, from joints q_now;
+  /// `settle_distance` [rad]: the cost of a stop (identification::NextBestPoses).
   NextPoseAdvice Suggest(const identification::EkfIdentifier& ekf, const Eigen::VectorXd& q_now,
-                         int k) const;
+                         int k, double settle_distance = 2.0) const;
 
   const std::vector<Eigen::VectorXd>& candidates() const { return candidates_; }
   const std::vector<Eigen::VectorXd>& task() const { return task_; }

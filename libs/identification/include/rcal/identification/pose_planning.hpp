@@ -170,8 +170,9 @@ struct NextPose {
 /// The k candidates that shrink the predicted mean squared position error over `task` (every
 /// candidate when `task` is empty) most under the parameter covariance P [m², rad²] of the
 /// parameters `identified` (model indices; P is |identified| square), per joint-space distance
-/// from q_now, best first. `settle_distance` [rad] stands for the cost of a stop itself (settling
-/// and measuring), so a stop next to the current one is not infinitely cheap. Candidates outside
+/// from q_now, best first. `settle_distance` [rad] stands for the cost of a stop itself
+/// (decelerating, settling, the still window, accelerating: about what a 2 rad move costs at
+/// typical joint speeds), so a stop next to the current one is not nearly free. Candidates outside
 /// the limits are skipped.
 std::vector<NextPose> NextBestPoses(const kinematics::KinematicModel& model,
                                     const Eigen::VectorXd& x, const std::vector<int>& identified,
@@ -179,6 +180,6 @@ std::vector<NextPose> NextBestPoses(const kinematics::KinematicModel& model,
                                     const std::vector<Eigen::VectorXd>& candidates,
                                     const std::vector<Eigen::VectorXd>& task,
                                     const Eigen::VectorXd& q_now, int k,
-                                    const PlanningSettings& settings, double settle_distance = 0.5);
+                                    const PlanningSettings& settings, double settle_distance = 2.0);
 
 }  // namespace rcal::identification
