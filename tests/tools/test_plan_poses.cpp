@@ -44,6 +44,23 @@ TEST(PlanPoses, WritesStopsInsideTheLimitsThatRaiseTheInformation) {
             2)
       << r.output;
   EXPECT_GT(planned, random + 1.0);
+  // The file drives a simulated run: rcal simulate measures at exactly these stops.
+  const fs::path data = out.parent_path() / "data.csv";
+  const auto sim = RunRcal("simulate --robot tests/data/arms/kr6_like.urdf --joints " +
+                               out.string() + " --out " + data.string(),
+                           120);
+  ASSERT_EQ(sim.exit_code, 0) << sim.output;
+  const io::CsvTable d = io::CsvTable::Load(data);
+  ASSERT_EQ(d.rows(), 12);
+  for (int i = 0; i < 12; ++i)
+    for (const auto& column : t.header()) EXPECT_EQ(d.At(i, column), t.At(i, column));
+  // A stop outside the limits is refused naming the row and the column.
+  std::string text = io::ReadFile(out);
+  std::ofstream(out.parent_path() / "bad.csv") << text << "0,0,99,0,0,0\n";
+  const auto bad = RunRcal("simulate --robot tests/data/arms/kr6_like.urdf --joints " +
+                           (out.parent_path() / "bad.csv").string() + " --out " + data.string());
+  EXPECT_NE(bad.exit_code, 0);
+  EXPECT_NE(bad.output.find("row 13, column q3"), std::string::npos) << bad.output;
 }
 
 TEST(PlanPoses, BadInputIsRefusedNamingIt) {

@@ -3,12 +3,14 @@
 #include <time.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <random>
 
 #include "calibration_sweep.hpp"
 #include "rcal/identification/calibration.hpp"
 #include "rcal/identification/metrics.hpp"
+#include "rcal/io/csv_table.hpp"
 #include "rcal/sim/pose_sim.hpp"
 
 namespace rcal::tool {
@@ -61,6 +63,30 @@ std::string JointsCsv(const std::vector<Eigen::VectorXd>& stops,
     s += "\n";
   }
   return s;
+}
+
+std::vector<Eigen::VectorXd> ReadJointsCsv(const std::string& path,
+                                           const kinematics::KinematicModel& model) {
+  const io::CsvTable t = io::CsvTable::Load(path);
+  if (t.rows() == 0) throw std::runtime_error(path + ": no stops");
+  const int nj = model.num_joints();
+  std::vector<Eigen::VectorXd> qs;
+  for (int i = 0; i < t.rows(); ++i) {
+    Eigen::VectorXd q(nj);
+    for (int j = 0; j < nj; ++j) {
+      std::string column = std::to_string(j + 1);
+      column.insert(0, 1, 'q');
+      q(j) = t.At(i, column);
+      const auto& J = model.joints()[j];
+      if (!std::isfinite(q(j)) || q(j) < J.lower || q(j) > J.upper)
+        throw std::runtime_error(path + ": row " + std::to_string(i + 1) + ", column " + column +
+                                 ": " + std::to_string(q(j)) + " is not inside " + J.name +
+                                 "'s limits [" + std::to_string(J.lower) + ", " +
+                                 std::to_string(J.upper) + "] (rad | m)");
+    }
+    qs.push_back(q);
+  }
+  return qs;
 }
 
 ArmPlans PlanArm(const kinematics::KinematicModel& model, const PlanningReportSettings& s,

@@ -33,6 +33,11 @@ PlanningInput PlanningInputFromCell(const io::BuiltCell& cell, bool position_onl
 std::string JointsCsv(const std::vector<Eigen::VectorXd>& stops,
                       const std::vector<std::string>& comments = {});
 
+/// Reads a stops file (JointsCsv's layout: columns q1..qN, N = the model's joints): each row
+/// finite and inside the joint limits. Throws std::runtime_error naming the file, row and column.
+std::vector<Eigen::VectorXd> ReadJointsCsv(const std::string& path,
+                                           const kinematics::KinematicModel& model);
+
 /// The four strategies of the report, in this order.
 enum Strategy { kRandom = 0, kPlanned = 1, kNextBest = 2, kIroc = 3 };
 inline constexpr std::array<const char*, 4> kStrategyNames = {
