@@ -38,12 +38,14 @@
 #include <memory>
 #include <optional>
 
+#include "rcal/cell/next_poses.hpp"
 #include "rcal/cell/online_identification.hpp"
 #include "rcal/estimation/time_gate.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
 #include "rcal/identification/metrics.hpp"
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/kinematics/identifiability.hpp"
+#include "rcal/next_poses_t.hpp"
 #include "rcal/services/common.hpp"
 #include "rcal/services/time_options.hpp"
 #include "rcal/transport/adapters.hpp"
@@ -74,7 +76,27 @@ struct Options {
   std::string lcm_url;
   std::string name = "ekf_identifier";
   estimation::TimeGateSettings time = PoseTimeGate();
+  int next_poses = 5;  // NEXT_POSES suggestions per pose (0: none)
 };
+
+// ---- NEXT_POSES (issue 16) ----------------------------------------------------------------------
+// The k stops that would shrink the predicted task-region error most (cell::NextPoseAdvisor).
+next_poses_t ToNextPoses(const cell::NextPoseAdvice& a, int64_t utime, int poses_used,
+                         int num_joints) {
+  next_poses_t m{};
+  m.utime = utime;
+  m.poses_used = poses_used;
+  m.num_joints = num_joints;
+  m.count = static_cast<int32_t>(a.poses.size());
+  m.num_values = m.count * num_joints;
+  for (size_t i = 0; i < a.poses.size(); ++i) {
+    for (int j = 0; j < num_joints; ++j) m.q.push_back(a.q[i](j));
+    m.gain.push_back(a.poses[i].gain_m2);
+    m.distance.push_back(a.poses[i].distance);
+  }
+  m.predicted_rms_position = a.predicted_rms_m;
+  return m;
+}
 
 class Identifier {
  public:
@@ -87,6 +109,7 @@ class Identifier {
         health_(o.name),
         gate_(o.time) {
     const io::BuiltCell& cell = id_.cell();
+    if (o.next_poses > 0) advisor_.emplace(cell);
     spdlog::info("cell {} ({}): chain {} → {}, {} of {} parameters identifiable{}", cell.spec.name,
                  cell.spec.source, cell.robot_spec.base_link, cell.robot_spec.tip_link,
                  id_.base().size(), id_.model().num_params(),
@@ -195,6 +218,7 @@ class Identifier {
     if (last_pose_index_ && msg.pose_index > *last_pose_index_ + 1)
       health_.Gap(msg.pose_index - *last_pose_index_ - 1);
     last_pose_index_ = msg.pose_index;
+    last_q_ = z->q;
     const auto out = id_.Add({std::move(*z), msg.utime, msg.pose_index},
                              [this](const cell::OnlineIdentification::Update& u) { Applied(u); });
     if (!out.rejected.empty()) {
@@ -227,6 +251,7 @@ class Identifier {
     fig.converged = ekf.accepted() * u.dimension >= 2 * static_cast<int>(id_.base().size()) &&
                     u.max_step_sigma < 0.1;
     Publish(u.utime, fig);
+    PublishNextPoses(u.utime);
     health_.Tick(u.utime, t_);
     // Poses are numbered from 1 as `rcal watch` numbers them (pose_index counts from 0).
     spdlog::info("pose {} (pose_index {}): {} (accepted {}, rejected {}, NIS {:.2f})",
@@ -264,6 +289,17 @@ class Identifier {
       health_.Published();
   }
 
+  // NEXT_POSES after each update, from the joints of the last pose received.
+  void PublishNextPoses(int64_t utime) {
+    if (!advisor_ || last_q_.size() != id_.model().num_joints()) return;
+    const auto advice = advisor_->Suggest(id_.ekf(), last_q_, o_.next_poses);
+    if (t_.Publish(channels_.next_poses,
+                   ToNextPoses(advice, utime, id_.ekf().accepted(), id_.model().num_joints())))
+      health_.Published();
+  }
+  std::optional<cell::NextPoseAdvisor> advisor_;
+  Eigen::VectorXd last_q_;
+
   Options o_;
   transport::Transport& t_;
   cell::OnlineIdentification id_;
@@ -280,7 +316,8 @@ int main(int argc, char** argv) {
   Options o;
   CLI::App app{
       "ekf_identifier: online EKF identification of the kinematic parameter errors.\n"
-      "Subscribes POSE_MEASUREMENT; publishes KINEMATIC_PARAMS, CALIBRATION_STATUS and HEALTH.\n"
+      "Subscribes POSE_MEASUREMENT; publishes KINEMATIC_PARAMS, CALIBRATION_STATUS, NEXT_POSES and "
+      "HEALTH.\n"
       "LCM URL: --lcm-url, else $RCAL_LCM_URL, else udpm://239.255.76.67:7667?ttl=0."};
   app.add_option("--cell", o.cell,
                  "cell file (schema rcal.cell/1): the robot, set-up frames, sensors, priors and "
@@ -292,6 +329,10 @@ int main(int argc, char** argv) {
   app.add_option("--lcm-url", o.lcm_url, "LCM URL");
   app.add_option("--name", o.name, "process name in HEALTH")->capture_default_str();
   services::AddTimeGateOptions(app, &o.time, "pose");
+  app.add_option("--next-poses", o.next_poses,
+                 "NEXT_POSES: suggested next stops published after each pose (0: none)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 100));
   CLI11_PARSE(app, argc, argv);
 
   try {

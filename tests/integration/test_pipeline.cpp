@@ -27,6 +27,7 @@
 #include "rcal/identification/metrics.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/kinematics/identifiability.hpp"
+#include "rcal/next_poses_t.hpp"
 #include "rcal/sim/pose_sim.hpp"
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
@@ -83,7 +84,10 @@ struct Listener {
   std::optional<calibration_status_t> status;
   std::vector<pose_measurement_t> poses;  // as published
   int statuses = 0;
+  std::optional<next_poses_t> next;  // NEXT_POSES (issue 16)
   Listener() {
+    t.Subscribe<next_poses_t>(transport::channels::kNextPoses,
+                              [this](const next_poses_t& m) { next = m; });
     t.Subscribe<pose_measurement_t>(transport::channels::kPoseMeasurement,
                                     [this](const pose_measurement_t& m) { poses.push_back(m); });
     t.Subscribe<kinematic_params_t>(transport::channels::kKinematicParams,
@@ -172,6 +176,26 @@ TEST_F(Pipeline, CalibratesToTheOfflineFigures) {
   const double e_online = off.TestError(x_online), e_offline = off.TestError(ekf.x());
   EXPECT_LE(e_online, e_offline * 1.0001 + 1e-9);
   EXPECT_LT(e_online, 0.02 * off.TestError(off.model.Nominal()));
+  // NEXT_POSES after the last pose: 5 suggestions inside the limits, best first by gain per
+  // distance, each with a positive gain.
+  ASSERT_TRUE(l.WaitFor([&] { return l.next && l.next->poses_used == kPoses; }, 30));
+  const next_poses_t& np = *l.next;
+  const int nj = off.model.num_joints();
+  ASSERT_EQ(np.count, 5);
+  ASSERT_EQ(np.num_joints, nj);
+  ASSERT_EQ(np.num_values, 5 * nj);
+  EXPECT_EQ(np.utime, l.params->utime);
+  EXPECT_GT(np.predicted_rms_position, 0.0);
+  EXPECT_LT(np.predicted_rms_position, 1e-3);
+  for (int i = 0; i < np.count; ++i) {
+    EXPECT_GT(np.gain[i], 0.0);
+    EXPECT_GE(np.distance[i], 0.0);
+    if (i > 0) {
+      EXPECT_GE(np.gain[i - 1] / (np.distance[i - 1] + 2.0), np.gain[i] / (np.distance[i] + 2.0));
+    }
+    EXPECT_TRUE(off.model.WithinLimits(
+        Eigen::Map<const Eigen::VectorXd>(np.q.data() + static_cast<size_t>(i) * nj, nj)));
+  }
 }
 
 // The shipped UR10 cell (config/cells/ur10.yaml): an optical tracker measuring positions only, two

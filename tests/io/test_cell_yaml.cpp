@@ -679,5 +679,82 @@ TEST(CellYaml, EmptyAndNonMapFilesAreRefused) {
       std::string::npos);
 }
 
+// ---------------------------------------------------------------------------------------------
+// constraints: (issue 16): where plan-poses may send the arm.
+
+TEST(CellYaml, ConstraintsAreReadInSi) {
+  const std::string text = std::string(kMinimalCell) + R"(constraints:
+  tool_box: {min: [-1, -1.5, 0.1], max: [1.2, 1.5, 2]}
+  min_base_distance: 0.4
+  home: {joints: [0, -pi/2, pi/2, 0, 0.5, 0], tolerance: [3, 1, 1, 2, 2, 3]}
+  task_region: {min: [0.4, -0.3, 0.2], max: [0.8, 0.3, 0.6]}
+)";
+  const CellSpec s = ParseCellYaml(text, "c.yaml");
+  const auto& c = s.constraints;
+  ASSERT_TRUE(c.tool_box && c.task_region);
+  EXPECT_EQ(c.tool_box->min, Eigen::Vector3d(-1, -1.5, 0.1));
+  EXPECT_EQ(c.tool_box->max, Eigen::Vector3d(1.2, 1.5, 2));
+  EXPECT_EQ(c.task_region->max, Eigen::Vector3d(0.8, 0.3, 0.6));
+  EXPECT_EQ(c.min_base_distance, 0.4);
+  ASSERT_EQ(c.home.size(), 6);
+  EXPECT_DOUBLE_EQ(c.home(1), -std::numbers::pi / 2);
+  EXPECT_EQ(c.home_tolerance(0), 3.0);
+  // One tolerance for all joints; no section: no constraint.
+  const CellSpec one =
+      ParseCellYaml(std::string(kMinimalCell) +
+                        "constraints: {home: {joints: [0, 0, 0, 0, 0, 0], tolerance: 1}}\n",
+                    "c.yaml");
+  EXPECT_EQ(one.constraints.home_tolerance, Eigen::VectorXd::Ones(6));
+  const CellSpec none = ParseCellYaml(kMinimalCell, "c.yaml");
+  EXPECT_FALSE(none.constraints.tool_box || none.constraints.task_region);
+  EXPECT_EQ(none.constraints.home.size(), 0);
+  EXPECT_EQ(none.constraints.min_base_distance, 0.0);
+  // NEXT_POSES' channel, renamed like the others.
+  EXPECT_EQ(none.channels.next_poses, transport::channels::kNextPoses);
+  EXPECT_EQ(ParseCellYaml(std::string(kMinimalCell) + "channels: {next_poses: PLAN_7}\n", "c.yaml")
+                .channels.next_poses,
+            "PLAN_7");
+}
+
+TEST(CellYaml, BadConstraintsNameTheKey) {
+  const auto error = [](const std::string& block) {
+    return ErrorOf([&] { ParseCellYaml(std::string(kMinimalCell) + block, "c.yaml"); });
+  };
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"constraints: {tool_bx: {min: [0, 0, 0], max: [1, 1, 1]}}\n",
+       "constraints.tool_bx: unknown key"},
+      {"constraints: {tool_box: {min: [0, 0, 0], max: [1, 1, 1], mid: 0}}\n",
+       "constraints.tool_box.mid: unknown key"},
+      {"constraints: {tool_box: {min: [0, 2, 0], max: [1, 1, 1]}}\n",
+       "constraints.tool_box: min[1] 2 m is not below max[1] 1 m"},
+      {"constraints: {task_region: {min: [0, 0, 0]}}\n",
+       "constraints.task_region.max: missing key"},
+      {"constraints: {task_region: {min: [0, 0, 0], max: [1, .nan, 1]}}\n",
+       "constraints.task_region.max[1]"},
+      {"constraints: {min_base_distance: 300}\n", "constraints.min_base_distance: 300 m is beyond"},
+      {"constraints: {min_base_distance: -1}\n", "constraints.min_base_distance: -1 m is below"},
+      {"constraints: {home: {joints: [0, 0], tolerance: [1, 1, 1]}}\n",
+       "constraints.home.tolerance: 3 tolerances for 2 joints"},
+      {"constraints: {home: {joints: [0, 0], tolerance: 0}}\n",
+       "constraints.home.tolerance: 0 rad | m is not above 0"},
+      {"constraints: {home: {tolerance: 1}}\n", "constraints.home.joints: missing key"},
+  };
+  for (const auto& [block, expected] : cases) {
+    const std::string msg = error(block);
+    EXPECT_EQ(msg.rfind("c.yaml: ", 0), 0u) << msg;
+    EXPECT_NE(msg.find(expected), std::string::npos) << block << " → " << msg;
+  }
+}
+
+TEST(CellYaml, HomeWithTheWrongJointCountIsRefusedWhenBuilt) {
+  std::string text = ReadFile(CellPath("grb3016.yaml"));
+  text += "constraints: {home: {joints: [0, 0, 0], tolerance: 1}}\n";
+  CellSpec spec = ParseCellYaml(text, "grb3016.yaml");
+  spec.robot.file = CellPath("grb3016.yaml").parent_path() / spec.robot.file;
+  const std::string msg = ErrorOf([&] { BuildCell(spec); });
+  EXPECT_NE(msg.find("constraints.home.joints: 3 values, the arm has 6 joints"), std::string::npos)
+      << msg;
+}
+
 }  // namespace
 }  // namespace rcal::io

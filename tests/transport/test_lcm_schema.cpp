@@ -19,6 +19,8 @@
 #include "rcal/imu_sample_t.hpp"
 #include "rcal/joint_state_t.hpp"
 #include "rcal/kinematic_params_t.hpp"
+#include "rcal/clock_offset_t.hpp"
+#include "rcal/next_poses_t.hpp"
 #include "rcal/orientation_estimate_t.hpp"
 #include "rcal/pose_measurement_t.hpp"
 #include "rcal/position_sample_t.hpp"
@@ -92,6 +94,8 @@ TEST(LcmSchema, EveryLcmFileIsParsedAndEachFingerprintIsTheGeneratedCodes) {
   expect("imu_sample_t", imu_sample_t::getHash());
   expect("joint_state_t", joint_state_t::getHash());
   expect("kinematic_params_t", kinematic_params_t::getHash());
+  expect("next_poses_t", next_poses_t::getHash());
+  expect("clock_offset_t", clock_offset_t::getHash());
   expect("orientation_estimate_t", orientation_estimate_t::getHash());
   expect("pose_measurement_t", pose_measurement_t::getHash());
   expect("position_sample_t", position_sample_t::getHash());

@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "command.hpp"
+#include "plan_poses.hpp"
 #include "rcal/geometry/so3.hpp"
 #include "rcal/identification/calibration.hpp"
 #include "rcal/io/atomic_file.hpp"
@@ -32,6 +33,7 @@ struct Options {
   unsigned seed = 1;
   std::string out = "out/simulate/data.csv";
   std::string truth_json;
+  std::string joints;  ///< a stops file (rcal plan-poses): measure there instead of at random
   std::string frames = "auto";
   std::string tip_link, base_link;
   double base_sigma_m = 0.05;
@@ -87,12 +89,15 @@ int Run(const Options& o) {
   gravity.link_density_kg_per_m = o.link_density;
   const sim::EffectTruth truth = sim::MakeEffectTruth(model, effects, gravity);
 
-  const auto qs = sim::SampleJoints(model, o.poses, rng);
+  // --joints: the stops of a plan (rcal plan-poses) instead of random ones.
+  const auto qs =
+      o.joints.empty() ? sim::SampleJoints(model, o.poses, rng) : ReadJointsCsv(o.joints, model);
+  const int poses = static_cast<int>(qs.size());
   sim::SessionSettings ss;
   ss.session_s = o.session_s;
   ss.temperature_rise_c = o.temperature_rise_c;
   ss.payloads_kg = o.payloads_kg;
-  const auto ctx = sim::SampleSession(model.num_joints(), o.poses, ss, rng);
+  const auto ctx = sim::SampleSession(model.num_joints(), poses, ss, rng);
   sim::PoseNoise noise;
   noise.position_sigma = o.position_sigma_mm * 1e-3;
   noise.orientation = o.orientation_sigma_deg > 0;
@@ -193,7 +198,7 @@ int Run(const Options& o) {
               {"position_noise_m", noise.position_sigma}})
             .dump(2));
   }
-  std::printf("rcal simulate: %d poses of %s (%zu rows) with %zu hidden effect(s) -> %s\n", o.poses,
+  std::printf("rcal simulate: %d poses of %s (%zu rows) with %zu hidden effect(s) -> %s\n", poses,
               model.name().c_str(), data.samples.size(), effects.size(), o.out.c_str());
   return 0;
 }
@@ -208,6 +213,9 @@ const RegisterCommand kSimulate(
                      "joint_periodic:j3=1e-4,0, joint_scale:j4=2e-4, backlash:j5=5e-5, "
                      "thermal=1.2e-5, thermal:time=3e-9 (repeatable)");
       sub.add_option("--poses", o->poses, "number of poses")->capture_default_str();
+      sub.add_option("--joints", o->joints,
+                     "measure at these stops (q1..qN, as rcal plan-poses writes) instead of "
+                     "--poses random ones");
       sub.add_option("--seed", o->seed, "random seed")->capture_default_str();
       sub.add_option("--out", o->out, "pose dataset CSV to write")->capture_default_str();
       sub.add_option("--truth-json", o->truth_json, "also write the truth (SI) here");

@@ -322,7 +322,8 @@ void ReadChannels(const Reader& r, const YAML::Node& n, const std::string& p, Ce
       {"ik_command", &c->ik_command},
       {"health", &c->health},
       {"supervisor_state", &c->supervisor_state},
-      {"clock_offset", &c->clock_offset}};
+      {"clock_offset", &c->clock_offset},
+      {"next_poses", &c->next_poses}};
   std::set<std::string> keys;
   for (const auto& f : fields) keys.insert(f.first);
   r.CheckMap(n, p, keys);
@@ -447,6 +448,55 @@ void ReadRos2(const Reader& r, const YAML::Node& n, const std::string& p, const 
       r.FailAt(p + ".frame_prefix", "'" + o->frame_prefix + "' is not [A-Za-z][A-Za-z0-9_-]*",
                n["frame_prefix"]);
   }
+// `constraints:` (issue 16): boxes and distances [m] in the base frame, a home [rad | m].
+identification::Box ReadBox(const Reader& r, const YAML::Node& n, const std::string& p) {
+  r.CheckMap(n, p, {"min", "max"});
+  identification::Box b;
+  b.min = r.Vec3(r.Require(n, p, "min"), p + ".min", false);
+  b.max = r.Vec3(r.Require(n, p, "max"), p + ".max", false);
+  for (int i = 0; i < 3; ++i)
+    if (!(b.min(i) < b.max(i)))
+      r.Fail(p,
+             "min[" + std::to_string(i) + "] " + ShortNumber(b.min(i)) + " m is not below max[" +
+                 std::to_string(i) + "] " + ShortNumber(b.max(i)) + " m",
+             &n);
+  return b;
+}
+
+void ReadConstraints(const Reader& r, const YAML::Node& n, const std::string& p,
+                     identification::PoseConstraints* c) {
+  r.CheckMap(n, p, {"tool_box", "min_base_distance", "home", "task_region"});
+  if (n["tool_box"]) c->tool_box = ReadBox(r, n["tool_box"], p + ".tool_box");
+  if (n["task_region"]) c->task_region = ReadBox(r, n["task_region"], p + ".task_region");
+  if (n["min_base_distance"])
+    c->min_base_distance = Bounded(r, n["min_base_distance"], p + ".min_base_distance", "m", 0.0,
+                                   10.0, "millimetres? (write metres)");
+  if (const YAML::Node h = n["home"]) {
+    const std::string hp = p + ".home";
+    r.CheckMap(h, hp, {"joints", "tolerance"});
+    const YAML::Node j = r.Require(h, hp, "joints");
+    if (!j.IsSequence() || j.size() == 0)
+      r.Fail(hp + ".joints", "expected a list of joint values, got " + Reader::Kind(j), &j);
+    c->home.resize(static_cast<Eigen::Index>(j.size()));
+    for (size_t i = 0; i < j.size(); ++i)
+      c->home(static_cast<Eigen::Index>(i)) =
+          r.Number(j[i], hp + ".joints[" + std::to_string(i) + "]", true);
+    const YAML::Node t = r.Require(h, hp, "tolerance");
+    c->home_tolerance.resize(c->home.size());
+    if (t.IsSequence()) {
+      if (t.size() != j.size())
+        r.Fail(hp + ".tolerance",
+               std::to_string(t.size()) + " tolerances for " + std::to_string(j.size()) + " joints",
+               &t);
+      for (size_t i = 0; i < t.size(); ++i)
+        c->home_tolerance(static_cast<Eigen::Index>(i)) =
+            Bounded(r, t[i], hp + ".tolerance[" + std::to_string(i) + "]", "rad | m", 0.0, 100.0,
+                    "degrees? (write radians)", "", true);
+    } else {
+      c->home_tolerance.setConstant(Bounded(r, t, hp + ".tolerance", "rad | m", 0.0, 100.0,
+                                            "degrees? (write radians)", "", true));
+    }
+  }
 }
 
 }  // namespace
@@ -456,7 +506,7 @@ CellSpec ParseCellYaml(const std::string& text, const std::string& source) {
   const YAML::Node root = detail::LoadYaml(text, source);
   r.CheckMap(root, "",
              {"schema", "name", "robot", "frames", "sensors", "still_window", "identifier",
-              "channels", "ros2"});
+              "channels", "ros2", "constraints"});
   const YAML::Node schema = r.Require(root, "", "schema");
   if (r.String(schema, "schema") != kSchema)
     r.Fail("schema", std::string("expected ") + kSchema + ", got '" + schema.Scalar() + "'",
@@ -569,6 +619,8 @@ CellSpec ParseCellYaml(const std::string& text, const std::string& source) {
     spec.ros2.emplace();
     ReadRos2(r, root["ros2"], "ros2", spec, &*spec.ros2);
   }
+  if (root["constraints"])
+    ReadConstraints(r, root["constraints"], "constraints", &spec.constraints);
   // A set-up guess needs poses enough to fit a rigid frame (GuessSetup: at least 3).
   bool guessed = spec.frames.world_from_base.mode == SetupMode::kGuess;
   for (const auto* f : {&spec.frames.earth_from_world, &spec.frames.flange_to_imu})
@@ -642,6 +694,10 @@ BuiltCell BuildCell(const CellSpec& spec) {
   } catch (const std::runtime_error& e) {
     throw std::runtime_error(src + ": robot.file: " + e.what());
   }
+  if (const auto& h = spec.constraints.home; h.size() > 0 && h.size() != c.model.num_joints())
+    throw std::runtime_error(src + ": constraints.home.joints: " + std::to_string(h.size()) +
+                             " values, the arm has " + std::to_string(c.model.num_joints()) +
+                             " joints");
 
   // The prior of every parameter: the arm's from identifier, the set-up's from its frame.
   const IdentifierSpec& id = spec.identifier;

@@ -91,8 +91,8 @@
 //     imu: IMU                             # and position, joints, orientation, tool_position,
 //                                          # pose_measurement, kinematic_params,
 //                                          # calibration_status, ik_request, ik_command, health,
-//                                          # supervisor_state, clock_offset; distinct,
-//                                          # [A-Za-z0-9_./-], ≤ 63
+//                                          # supervisor_state, clock_offset, next_poses;
+//                                          # distinct, [A-Za-z0-9_./-], ≤ 63
 //   ros2:                                  # optional: the cell's ROS 2 drivers, read by ros2_input
 //                                          #   over DDS (ROS 2 wire types, no ROS installation)
 //     domain: 0                            # DDS domain (ROS_DOMAIN_ID), 0 to 232
@@ -111,6 +111,15 @@
 //                                          #   none (the drivers share one clock)
 //     max_clock_offset: 0.5                # [s] the largest offset searched, 0.01 to 10
 //     frame_prefix: rcal_                  # optional: TF frame names (rcal_world, rcal_base, ...)
+//   constraints:                           # optional: where `rcal plan-poses` and NEXT_POSES may
+//                                          #   send the arm (identification::PoseConstraints);
+//                                          #   positions in the robot's base frame [m]
+//     tool_box: {min: [x, y, z], max: [x, y, z]}   # the marker stays inside; min < max
+//     min_base_distance: 0.3               # [m] marker at least this far from the base origin
+//     home: {joints: [0, -pi/2, ...], tolerance: 1.0}   # [rad | m] one per joint (checked by
+//                                          #   BuildCell); tolerance: one or one per joint, > 0
+//     task_region: {min: [...], max: [...]}   # where accuracy matters (plan-poses
+//                                          #   --task-weighting, NEXT_POSES)
 //
 // Plausibility (the likely unit mistake is named): frame positions within 100 m, marker offsets
 // within 2 m of the flange; angles within 2π ("degrees?"); σ of a length above 1 m (frames) or
@@ -131,6 +140,7 @@
 #include "rcal/estimation/fqa.hpp"
 #include "rcal/estimation/pose_pipeline.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
+#include "rcal/identification/pose_planning.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/io/robot_yaml.hpp"
 #include "rcal/kinematics/model.hpp"
@@ -241,6 +251,7 @@ struct CellChannels {
   std::string ik_request = "IK_REQUEST", ik_command = "IK_COMMAND";
   std::string health = "HEALTH", supervisor_state = "SUPERVISOR_STATE";
   std::string clock_offset = "CLOCK_OFFSET";
+  std::string next_poses = "NEXT_POSES";  ///< next_poses_t (issue 16)
 };
 
 /// One marker's ROS 2 topic (`ros2.positions[i]`).
@@ -276,6 +287,8 @@ struct CellSpec {
   IdentifierSpec identifier;
   CellChannels channels;
   std::optional<Ros2Spec> ros2;  ///< absent: no ROS 2 drivers
+  /// `constraints:` (issue 16); default: none. home is checked against the arm by BuildCell.
+  identification::PoseConstraints constraints;
 
   /// Where measured orientations come from: the IMU, the tracker (position.orientation), or
   /// nowhere (positions only).

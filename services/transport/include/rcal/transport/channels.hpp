@@ -16,5 +16,6 @@ inline constexpr const char* kIkCommand = "IK_COMMAND";                  ///< ik
 inline constexpr const char* kHealth = "HEALTH";                         ///< health_t
 inline constexpr const char* kSupervisorState = "SUPERVISOR_STATE";      ///< supervisor_state_t
 inline constexpr const char* kClockOffset = "CLOCK_OFFSET";              ///< clock_offset_t
+inline constexpr const char* kNextPoses = "NEXT_POSES";                  ///< next_poses_t
 
 }  // namespace rcal::transport::channels

@@ -1,0 +1,78 @@
+// `rcal plan-poses` and `rcal plan-poses-report` (issue 16), apart so that tests can call them:
+// the planning input of a cell, the stops file, and one seeded comparison of the strategies
+// (random, planned offline, online next-best, IROC-style greedy) on a simulated cell.
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "rcal/identification/pose_planning.hpp"
+#include "rcal/io/cell_yaml.hpp"
+#include "rcal/kinematics/model.hpp"
+
+namespace rcal::tool {
+
+/// What planning needs: the model (set-up frames included), the settings (noise, prior, kind)
+/// and the constraints.
+struct PlanningInput {
+  kinematics::KinematicModel model;
+  identification::PlanningSettings settings;
+  identification::PoseConstraints constraints;
+};
+
+/// From a cell: its model, the position sensor's largest σ, the orientation σ of a tracker that
+/// measures it (else the planning default), the identifier's prior σ, the constraints. Positions
+/// only when the cell measures no orientation or `position_only`.
+PlanningInput PlanningInputFromCell(const io::BuiltCell& cell, bool position_only);
+
+/// The stops file: '#' comment lines, the header q1..qN, one stop a row, SI, 17 digits.
+std::string JointsCsv(const std::vector<Eigen::VectorXd>& stops,
+                      const std::vector<std::string>& comments = {});
+
+/// Reads a stops file (JointsCsv's layout: columns q1..qN, N = the model's joints): each row
+/// finite and inside the joint limits. Throws std::runtime_error naming the file, row and column.
+std::vector<Eigen::VectorXd> ReadJointsCsv(const std::string& path,
+                                           const kinematics::KinematicModel& model);
+
+/// The four strategies of the report, in this order.
+enum Strategy { kRandom = 0, kPlanned = 1, kNextBest = 2, kIroc = 3 };
+inline constexpr std::array<const char*, 4> kStrategyNames = {
+    "random", "planned (D-optimal, greedy + exchange)", "online next-best", "IROC-style greedy"};
+
+struct PlanningReportSettings {
+  std::vector<int> counts{15, 20, 25, 30, 40, 50};  ///< stops, ascending
+  int candidates = 5000;
+  double position_sigma_m = 2e-5;  ///< positions only, per axis
+  int test_poses = 200;            ///< held-out poses per cell
+  double settle_distance = 2.0;    ///< NextBestPoses' cost of a stop [rad]
+  /// The planned strategy's criterion: D-optimal, or the predicted error over the workspace (the
+  /// task-region criterion with an even spread of the candidates as the region).
+  identification::PlanCriterion criterion = identification::PlanCriterion::kDOptimal;
+};
+
+/// The stops each strategy visits on one arm (independent of the truth: planned at the nominal).
+struct ArmPlans {
+  std::vector<std::vector<Eigen::VectorXd>> planned;  ///< one plan per count
+  std::vector<Eigen::VectorXd> iroc, next_best;       ///< max(counts) stops; prefixes are used
+  int identifiable = 0;
+  /// Joint-space path [rad] from the middle of the limits through the first 20 stops (or the
+  /// first count), in visiting order, per strategy (random: its first draw).
+  std::array<double, 4> path20{};
+  double plan_seconds = 0;  ///< CPU time of the planned plan at 20 stops (or the first count)
+};
+ArmPlans PlanArm(const kinematics::KinematicModel& model, const PlanningReportSettings& s,
+                 std::uint64_t seed);
+
+/// Held-out mean position error [m] against the truth, per strategy and count, on one simulated
+/// cell (calibration_sweep.hpp MakeSweepCell: truth, random stops, test poses) calibrated by
+/// identification::Calibrate from a wrong starting noise.
+std::array<std::vector<double>, 4> StrategyErrors(const kinematics::KinematicModel& model,
+                                                  std::string_view arm_name, const ArmPlans& plans,
+                                                  const PlanningReportSettings& s,
+                                                  unsigned seed_index);
+
+}  // namespace rcal::tool
