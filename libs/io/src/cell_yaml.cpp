@@ -448,6 +448,8 @@ void ReadRos2(const Reader& r, const YAML::Node& n, const std::string& p, const 
       r.FailAt(p + ".frame_prefix", "'" + o->frame_prefix + "' is not [A-Za-z][A-Za-z0-9_-]*",
                n["frame_prefix"]);
   }
+}
+
 // `constraints:` (issue 16): boxes and distances [m] in the base frame, a home [rad | m].
 identification::Box ReadBox(const Reader& r, const YAML::Node& n, const std::string& p) {
   r.CheckMap(n, p, {"min", "max"});
