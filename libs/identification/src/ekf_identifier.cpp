@@ -541,7 +541,8 @@ EkfUpdateResult EkfIdentifier::Update(const kinematics::PoseMeasurement& z,
       Measure(zq, context, x_, r_minus, H_unused);
       Hq.col(j) = (r_minus - r_plus) / (2 * h);  // r = z − h
     }
-    recent_.push_back({z, context, seq_, !gated, llt.matrixL().solve(r), llt.matrixL().solve(H),
+    // Marked refused only once the gate has counted it (a release retakes it uncounted).
+    recent_.push_back({z, context, seq_, true, llt.matrixL().solve(r), llt.matrixL().solve(H),
                        llt.matrixL().solve(Hq)});
     if (static_cast<int>(recent_.size()) > std::max(settings_.change_window, 1))
       recent_.erase(recent_.begin());
@@ -555,6 +556,7 @@ EkfUpdateResult EkfIdentifier::Update(const kinematics::PoseMeasurement& z,
   if (gated) {
     Reject(result, "innovation " + std::to_string(result.nis) + " beyond the gate " +
                        std::to_string(result.gate));
+    if (!recent_.empty() && recent_.back().seq == seq_) recent_.back().accepted = false;
     return result;
   }
   bool ok = true;
