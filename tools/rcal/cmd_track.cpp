@@ -274,7 +274,9 @@ int RunSweep(const Options& o) {
                         {"error_after_m", r.error_after_m},
                         {"false_alarms", r.false_alarms},
                         {"quiet_poses", r.quiet_poses},
-                        {"steady_ratio", r.steady_ratio}});
+                        {"steady_ratio", r.steady_ratio},
+                        {"stepped", r.stepped},
+                        {"seed_delay", r.seed_delay}});
       }
     }
   }

@@ -104,6 +104,9 @@ std::vector<TrackSweepResult> RunTrackSweep(const TrackSweepArm& arm, const Trac
         }
       }
       (void)changes_before;
+      r.stepped.push_back(kind == 0 ? run.model.joints()[joint_stepped].name
+                                    : run.model.parameters()[param_stepped].name);
+      r.seed_delay.push_back(delay);
       if (delay > 0) {
         ++r.detected;
         r.delays.push_back(delay);

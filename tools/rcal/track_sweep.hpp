@@ -45,6 +45,9 @@ struct TrackSweepResult {
   int false_alarms = 0;              ///< unchanged-arm runs: changes raised
   long quiet_poses = 0;              ///< unchanged-arm poses run
   std::vector<double> steady_ratio;  ///< steady-state error, this filter / the former filter
+  /// Per seed: the joint or parameter stepped, and the delay (−1: not detected within 30).
+  std::vector<std::string> stepped;
+  std::vector<int> seed_delay;
 };
 
 /// Runs the experiment on one arm: one result per step kind (joint offset, link length); the
