@@ -172,12 +172,8 @@ struct Tracked {
 
 Tracked MakeTracked(const kinematics::KinematicModel& model, sim::Rng& rng,
                     kinematics::MeasurementKind kind) {
-  Tracked t{model, {}, {}, {}};
-  const auto report = kinematics::AnalyzeIdentifiability(model, sim::SampleJoints(model, 80, rng),
-                                                         model.Nominal(), kind);
-  t.identified = report.identifiable;
-  t.x_true = sim::RandomErrors(model, rng, 0.001, 0.002);
-  for (const auto& c : report.unidentifiable) t.x_true(c.dropped) = 0;
+  const BaseSetTruth b = MakeBaseSetTruth(model, rng, kind);
+  Tracked t{model, b.identified, b.x_true, {}};
   t.test_q = sim::SampleJoints(model, 50, rng);
   return t;
 }

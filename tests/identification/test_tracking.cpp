@@ -4,9 +4,7 @@
 
 #include <cmath>
 
-#include "../kinematics/test_robots.hpp"
-#include "rcal/kinematics/identifiability.hpp"
-#include "rcal/sim/pose_sim.hpp"
+#include "identification_fixture.hpp"
 
 namespace rcal::identification {
 namespace {
@@ -20,11 +18,9 @@ using kinematics::testing::Grb3016;
 TEST(Tracking, TestRowsAreNeverFittedAndShowTheStepAndTheRecovery) {
   const auto model = Grb3016();
   sim::Rng rng(71);
-  const auto report =
-      kinematics::AnalyzeIdentifiability(model, sim::SampleJoints(model, 80, rng), model.Nominal(),
-                                         kinematics::MeasurementKind::kFullPose);
-  Eigen::VectorXd x_true = sim::RandomErrors(model, rng, 0.001, 0.002);
-  for (const auto& c : report.unidentifiable) x_true(c.dropped) = 0;
+  const testing::BaseSetTruth truth =
+      testing::MakeBaseSetTruth(model, rng, kinematics::MeasurementKind::kFullPose);
+  const Eigen::VectorXd& x_true = truth.x_true;
   std::vector<kinematics::PoseMeasurement> poses;
   std::vector<bool> is_test;
   for (int k = 0; k < 400; ++k) {
@@ -36,7 +32,7 @@ TEST(Tracking, TestRowsAreNeverFittedAndShowTheStepAndTheRecovery) {
     poses.push_back(m);
     is_test.push_back(k % 5 == 4);
   }
-  EkfIdentifier ekf(model, report.identifiable);
+  EkfIdentifier ekf(model, truth.identified);
   const std::vector<TrackRow> rows = Track(ekf, poses, is_test);
   ASSERT_EQ(rows.size(), poses.size());
   EXPECT_EQ(ekf.accepted() + ekf.rejected(), 320);  // the 80 test rows never reached the filter
