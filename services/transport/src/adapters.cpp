@@ -206,7 +206,7 @@ std::optional<Eigen::VectorXd> ParamsFromMessage(const kinematic_params_t& msg,
 
 calibration_status_t ToCalibrationStatus(const identification::EkfIdentifier& ekf,
                                          const StatusFigures& figures, int64_t utime) {
-  calibration_status_t msg;
+  calibration_status_t msg{};  // value-initialised: the generated struct leaves counts unset
   msg.utime = utime;
   msg.poses_accepted = ekf.accepted();
   msg.poses_rejected = ekf.rejected();
