@@ -168,7 +168,7 @@ std::optional<calibration_status_t> FromDds(const CalibrationStatus& d, std::str
   if (!CheckStatus(d, error)) return std::nullopt;
   const auto utime = UtimeFromStamp(d.header.stamp, "calibration_status.header.stamp", error);
   if (!utime) return std::nullopt;
-  calibration_status_t m;
+  calibration_status_t m{};  // value-initialised: fields the DDS type lacks stay 0 / empty
   m.utime = *utime;
   m.poses_accepted = d.poses_accepted;
   m.poses_rejected = d.poses_rejected;

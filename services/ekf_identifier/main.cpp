@@ -43,6 +43,7 @@
 #include "rcal/estimation/time_gate.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
 #include "rcal/identification/metrics.hpp"
+#include "rcal/identification/tracking.hpp"
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/kinematics/identifiability.hpp"
 #include "rcal/next_poses_t.hpp"
@@ -253,6 +254,12 @@ class Identifier {
     Publish(u.utime, fig);
     PublishNextPoses(u.utime);
     health_.Tick(u.utime, t_);
+    if (u.result.change) {  // issue 15: named, released, re-converging (CALIBRATION_STATUS too)
+      const auto names = identification::ChangeNames(id_.model(), *u.result.change);
+      for (size_t i = 0; i < names.size(); ++i)
+        spdlog::warn("pose {}: change detected: {} by {:.6g} [m | rad], released", u.pose_index + 1,
+                     names[i], u.result.change->step(i));
+    }
     // Poses are numbered from 1 as `rcal watch` numbers them (pose_index counts from 0).
     spdlog::info("pose {} (pose_index {}): {} (accepted {}, rejected {}, NIS {:.2f})",
                  u.pose_index + 1, u.pose_index, u.result.accepted ? "accepted" : "rejected",

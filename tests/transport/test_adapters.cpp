@@ -232,6 +232,46 @@ TEST(KinematicParamsAdapter, FromTheIdentifier) {
   EXPECT_TRUE(status.converged);
 }
 
+// CALIBRATION_STATUS carries the tracking state: converged, then joint 2 read 1 mrad off (an
+// encoder swap): change_detected or reconverging, the change named with its size.
+TEST(CalibrationStatusAdapter, CarriesTheTrackingStateAndTheChange) {
+  const Grb3016 g(300);
+  identification::EkfIdentifier ekf(g.model, g.base);
+  for (int k = 0; k < 290; ++k) ekf.Update(g.poses[k]);
+  auto status = ToCalibrationStatus(ekf, {}, 1);
+  EXPECT_EQ(status.tracking_status, "converged");
+  EXPECT_EQ(status.changes_detected, 0);
+  EXPECT_EQ(status.num_changed, 0);
+  sim::Rng rng(5);
+  for (int k = 290; k < 300; ++k) {
+    kinematics::PoseMeasurement m = g.poses[k];
+    Eigen::VectorXd q_arm = m.q;
+    q_arm(1) += 1e-3;
+    m = sim::MeasurePose(g.model, g.x_true, q_arm, sim::PoseNoise{}, rng);
+    m.q = g.poses[k].q;
+    ekf.Update(m);
+  }
+  status = ToCalibrationStatus(ekf, {}, 2);
+  EXPECT_TRUE(status.tracking_status == "change_detected" ||
+              status.tracking_status == "reconverging" || status.tracking_status == "converged")
+      << status.tracking_status;
+  EXPECT_EQ(status.changes_detected, 1);
+  ASSERT_EQ(status.num_changed, 1);
+  ASSERT_EQ(status.changed.size(), 1u);
+  EXPECT_TRUE(status.changed[0] == "theta2" || status.changed[0] == "offset of joint j2")
+      << status.changed[0];
+  EXPECT_NEAR(status.changed_step[0], 1e-3, 2e-4);
+  std::vector<uint8_t> bytes(status.getEncodedSize());
+  ASSERT_EQ(status.encode(bytes.data(), 0, static_cast<int>(bytes.size())),
+            static_cast<int>(bytes.size()));
+  calibration_status_t back;
+  ASSERT_EQ(back.decode(bytes.data(), 0, static_cast<int>(bytes.size())),
+            static_cast<int>(bytes.size()));
+  EXPECT_EQ(back.changed, status.changed);
+  EXPECT_EQ(back.changed_step, status.changed_step);
+  EXPECT_EQ(back.tracking_status, status.tracking_status);
+}
+
 TEST(ModelId, DependsOnTheParameterNames) {
   const Grb3016 g(1);
   const auto seven = io::LoadRobot(RCAL_SOURCE_DIR "/config/robots/seven_dof.yaml").model;

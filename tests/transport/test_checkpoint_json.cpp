@@ -43,6 +43,41 @@ TEST(Checkpoint, RestoredIdentifierContinuesBitForBit) {
   std::filesystem::remove_all(dir);
 }
 
+// The tracking state (status, a released change's inflation before its pose) round-trips; an
+// unknown status is refused naming the key.
+TEST(Checkpoint, TrackingStateRoundTrips) {
+  const Grb3016 g(12);
+  identification::EkfIdentifier ekf(g.model, g.base);
+  for (int k = 0; k < 12; ++k) ekf.Update(g.poses[k]);
+  CheckpointFile f{ModelId(g.model), 1, 11, ekf.Checkpoint(), {}};
+  const int n = static_cast<int>(g.base.size());
+  f.checkpoint.inflations.resize(f.checkpoint.history.size());
+  f.checkpoint.inflations[4] = Eigen::MatrixXd::Identity(n, n) * 1e-6;
+  f.checkpoint.inflations[4](0, 1) = f.checkpoint.inflations[4](1, 0) = 2.5e-7;
+  f.checkpoint.status = identification::TrackingStatus::kReconverging;
+  f.checkpoint.small_steps = 3;
+  const CheckpointFile back = ParseCheckpoint(CheckpointText(f));
+  EXPECT_EQ(back.checkpoint.status, identification::TrackingStatus::kReconverging);
+  EXPECT_EQ(back.checkpoint.small_steps, 3);
+  ASSERT_EQ(back.checkpoint.inflations.size(), f.checkpoint.inflations.size());
+  EXPECT_EQ(back.checkpoint.inflations[4], f.checkpoint.inflations[4]);
+  EXPECT_EQ(back.checkpoint.inflations[3].size(), 0);
+  identification::EkfIdentifier a(g.model, g.base), b(g.model, g.base);
+  a.Restore(f.checkpoint);
+  b.Restore(back.checkpoint);
+  EXPECT_EQ(b.status(), identification::TrackingStatus::kReconverging);
+  EXPECT_EQ(a.Refine(3), b.Refine(3));
+  EXPECT_EQ(a.x(), b.x());  // the inflation is used by the passes, identically
+  std::string text = CheckpointText(f);
+  text.replace(text.find("reconverging"), 12, "wandering");
+  try {
+    ParseCheckpoint(text);
+    FAIL() << "no exception";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("status"), std::string::npos) << e.what();
+  }
+}
+
 TEST(Checkpoint, MalformedTextIsAnErrorNamingTheKey) {
   EXPECT_THROW(ParseCheckpoint("not json"), std::runtime_error);
   try {

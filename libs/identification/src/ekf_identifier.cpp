@@ -1,9 +1,11 @@
 #include "rcal/identification/ekf_identifier.hpp"
 
 #include <Eigen/Cholesky>
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
+#include "rcal/identification/change_detection.hpp"
 #include "rcal/identification/chi_square.hpp"
 #include "rcal/identification/extended_measurement.hpp"
 
@@ -27,6 +29,20 @@ Eigen::VectorXd DefaultEffectPriorSigma(const kinematics::ExtendedModel& model) 
     s.segment(model.effect_offset(k), f.num_params()).setConstant(v);
   }
   return s;
+}
+
+const char* TrackingStatusName(TrackingStatus s) {
+  switch (s) {
+    case TrackingStatus::kConverging:
+      return "converging";
+    case TrackingStatus::kConverged:
+      return "converged";
+    case TrackingStatus::kChangeDetected:
+      return "change_detected";
+    case TrackingStatus::kReconverging:
+      return "reconverging";
+  }
+  return "unknown";
 }
 
 namespace {
@@ -96,6 +112,14 @@ void EkfIdentifier::Reset() {
   x_lin_ = x_;
   history_.clear();
   contexts_.clear();
+  inflations_.clear();
+  seqs_.clear();
+  recent_.clear();
+  seq_ = 0;
+  status_ = TrackingStatus::kConverging;
+  small_steps_ = 0;
+  changes_.clear();
+  candidate_count_ = 0;
 }
 
 void EkfIdentifier::SetState(const Eigen::VectorXd& state, const Eigen::MatrixXd& P) {
@@ -115,12 +139,31 @@ void EkfIdentifier::SetState(const Eigen::VectorXd& state, const Eigen::MatrixXd
   x_lin_ = x_;
   history_.clear();
   contexts_.clear();
+  inflations_.clear();
+  seqs_.clear();
+  recent_.clear();
+  status_ = TrackingStatus::kConverging;
+  small_steps_ = 0;
 }
 
 EkfCheckpoint EkfIdentifier::Checkpoint() const {
-  EkfCheckpoint c{x0_, x_,      x_lin_, P0_, P_, history_, accepted_, rejected_, relinearizations_,
-                  {},  x_fixed_};
+  EkfCheckpoint c;
+  c.x0 = x0_;
+  c.x = x_;
+  c.x_lin = x_lin_;
+  c.P0 = P0_;
+  c.P = P_;
+  c.history = history_;
+  c.accepted = accepted_;
+  c.rejected = rejected_;
+  c.relinearizations = relinearizations_;
+  c.x_fixed = x_fixed_;
   if (ext_.num_effect_params() > 0) c.contexts = contexts_;
+  if (std::any_of(inflations_.begin(), inflations_.end(),
+                  [](const Eigen::MatrixXd& v) { return v.size() > 0; }))
+    c.inflations = inflations_;
+  c.status = status_;
+  c.small_steps = small_steps_;
   return c;
 }
 
@@ -153,6 +196,17 @@ void EkfIdentifier::Restore(const EkfCheckpoint& c) {
     const std::string why = ValidateContext(ext_, c.contexts[k]);
     if (!why.empty()) throw std::invalid_argument("contexts[" + std::to_string(k) + "]." + why);
   }
+  if (!c.inflations.empty() && c.inflations.size() != c.history.size())
+    throw std::invalid_argument("inflations: " + std::to_string(c.inflations.size()) +
+                                " entries, expected one per history entry (" +
+                                std::to_string(c.history.size()) + ") or none");
+  for (size_t k = 0; k < c.inflations.size(); ++k) {
+    const Eigen::MatrixXd& v = c.inflations[k];
+    if (v.size() != 0 &&
+        (v.rows() != n || v.cols() != n || !v.allFinite() || (v.diagonal().array() < 0).any()))
+      throw std::invalid_argument("inflations[" + std::to_string(k) +
+                                  "]: wrong size, not finite or negative");
+  }
   if (c.x_fixed.size() != 0) x_fixed_ = c.x_fixed;
   x0_ = c.x0;
   x_ = c.x;
@@ -162,6 +216,14 @@ void EkfIdentifier::Restore(const EkfCheckpoint& c) {
   history_ = c.history;
   contexts_ = c.contexts;
   contexts_.resize(history_.size());  // none given: default contexts
+  inflations_ = c.inflations;
+  inflations_.resize(history_.size());
+  seqs_.resize(history_.size());
+  for (size_t k = 0; k < seqs_.size(); ++k) seqs_[k] = static_cast<long>(k);
+  seq_ = static_cast<long>(seqs_.size());
+  recent_.clear();  // the change test starts afresh (EkfCheckpoint)
+  status_ = c.status;
+  small_steps_ = c.small_steps;
   accepted_ = c.accepted;
   rejected_ = c.rejected;
   relinearizations_ = c.relinearizations;
@@ -203,6 +265,7 @@ int EkfIdentifier::Relinearize(int max_passes) {
     for (size_t k = 0; k < history_.size(); ++k) {
       const auto& m = history_[k];
       P += Eigen::MatrixXd(q_diag_.asDiagonal());
+      if (inflations_[k].size()) P += inflations_[k];
       Measure(m, contexts_[k], x_ref, r, H);
       const Eigen::MatrixXd S = H * P * H.transpose() + m.covariance;
       const Eigen::MatrixXd K = S.llt().solve(H * P).transpose();
@@ -238,68 +301,285 @@ Eigen::VectorXd EkfIdentifier::sigma_e() const {
   return P_.diagonal().tail(ne).cwiseSqrt();
 }
 
+void EkfIdentifier::FoldOldest() {
+  const int n = static_cast<int>(x_.size());
+  Eigen::VectorXd r;
+  Eigen::MatrixXd H;
+  P0_ += Eigen::MatrixXd(q_diag_.asDiagonal());
+  if (inflations_.front().size()) P0_ += inflations_.front();
+  const kinematics::PoseMeasurement& m = history_.front();
+  Measure(m, contexts_.front(), x_, r, H);
+  const Eigen::MatrixXd S = H * P0_ * H.transpose() + m.covariance;
+  const Eigen::MatrixXd K = S.llt().solve(H * P0_).transpose();
+  const Eigen::VectorXd x0 = x0_ + K * (r - H * (x0_ - x_));
+  if (x0.allFinite()) {
+    x0_ = x0;
+    const Eigen::MatrixXd IKH = Eigen::MatrixXd::Identity(n, n) - K * H;
+    P0_ = IKH * P0_ * IKH.transpose() + K * m.covariance * K.transpose();
+    P0_ = 0.5 * (P0_ + P0_.transpose());
+  }
+  history_.erase(history_.begin());
+  contexts_.erase(contexts_.begin());
+  inflations_.erase(inflations_.begin());
+  seqs_.erase(seqs_.begin());
+}
+
+int EkfIdentifier::Absorb(const kinematics::PoseMeasurement& z,
+                          const kinematics::EffectContext& context,
+                          const Eigen::MatrixXd& inflation, bool& ok, const Eigen::VectorXd* r0,
+                          const Eigen::MatrixXd* H0) {
+  const int n = static_cast<int>(x_.size());
+  const Eigen::MatrixXd& R = z.covariance;
+  // Eq. (42): random-walk prediction (and a released change's inflation).
+  Eigen::MatrixXd P_prior = P_ + Eigen::MatrixXd(q_diag_.asDiagonal());
+  if (inflation.size()) P_prior += inflation;
+  const Eigen::VectorXd x_prior = x_;
+  Eigen::VectorXd r;
+  Eigen::MatrixXd H;
+  Eigen::VectorXd x_i = x_prior;
+  Eigen::MatrixXd K;
+  int iterations = 0;
+  for (int it = 0; it < std::max(1, settings_.max_iterations); ++it) {
+    if (it == 0 && r0 && H0) {
+      r = *r0;  // already measured at x_prior
+      H = *H0;
+    } else {
+      Measure(z, context, x_i, r, H);
+    }
+    const Eigen::MatrixXd S = H * P_prior * H.transpose() + R;
+    K = S.llt().solve(H * P_prior).transpose();  // P⁻ Hᵀ S⁻¹ (S and P⁻ symmetric)
+    const Eigen::VectorXd x_next = x_prior + K * (r - H * (x_prior - x_i));
+    const double step = (x_next - x_i).norm();
+    x_i = x_next;
+    iterations = it + 1;
+    if (step < settings_.iteration_tolerance) break;
+  }
+  ok = x_i.allFinite();
+  if (!ok) return iterations;
+  const Eigen::MatrixXd IKH = Eigen::MatrixXd::Identity(n, n) - K * H;
+  P_ = IKH * P_prior * IKH.transpose() + K * R * K.transpose();
+  P_ = 0.5 * (P_ + P_.transpose());
+  x_ = x_i;
+  ++accepted_;
+  history_.push_back(z);
+  contexts_.push_back(context);
+  inflations_.push_back(inflation);
+  seqs_.push_back(seq_);
+  return iterations;
+}
+
+std::optional<DetectedChange> EkfIdentifier::TestForChange() {
+  if (!settings_.detect_changes || status_ == TrackingStatus::kConverging) return std::nullopt;
+  const int ng = static_cast<int>(identified_.size()), n = static_cast<int>(x_.size());
+  const int nq = model().num_joints();
+  // Candidate directions in the state: each identified geometric parameter, and each joint's
+  // offset (an encoder swap) as the state change that reproduces it best over the window (the
+  // base set may spread one joint's offset over several parameters; for a D–H arm it is θ_j).
+  Eigen::MatrixXd AtA = Eigen::MatrixXd::Zero(ng, ng), AtQ = Eigen::MatrixXd::Zero(ng, nq);
+  for (const Recent& p : recent_) {
+    AtA.noalias() += p.A.leftCols(ng).transpose() * p.A.leftCols(ng);
+    AtQ.noalias() += p.A.leftCols(ng).transpose() * p.Aq;
+  }
+  const Eigen::MatrixXd D_joint =
+      AtA.completeOrthogonalDecomposition().solve(AtQ);   // ng × nq, one direction per joint
+  Eigen::MatrixXd U = Eigen::MatrixXd::Zero(n, ng + nq);  // state direction of each column
+  U.topLeftCorner(ng, ng).setIdentity();
+  U.block(0, ng, ng, nq) = D_joint;
+  std::vector<Eigen::VectorXd> e;
+  std::vector<Eigen::MatrixXd> A;
+  for (const Recent& p : recent_) {
+    e.push_back(p.e);
+    A.push_back(p.A.leftCols(ng) * U.topRows(ng));
+  }
+  StepTestSettings ts;
+  ts.false_alarm = settings_.change_false_alarm;
+  ts.min_poses = settings_.change_min_poses;
+  ts.max_params = settings_.change_max_params;
+  ts.fit_probability = settings_.change_fit_probability;
+  const StepTestResult t = TestForStep(e, A, ts);
+  if (!t.detected) {
+    candidate_count_ = 0;
+    return std::nullopt;
+  }
+  std::vector<int> sorted = t.columns;
+  std::sort(sorted.begin(), sorted.end());
+  const long onset_seq = recent_[t.onset].seq;
+  if (candidate_count_ > 0 && onset_seq == candidate_onset_ && sorted == candidate_params_) {
+    ++candidate_count_;
+  } else {
+    candidate_onset_ = onset_seq;
+    candidate_params_ = sorted;
+    candidate_count_ = 1;
+  }
+  if (candidate_count_ < settings_.change_confirmations) return std::nullopt;
+  candidate_count_ = 0;
+  DetectedChange c;
+  c.step = t.step;
+  c.step_sigma = t.step_sigma;
+  c.glr = t.glr;
+  c.threshold = t.threshold;
+  c.onset_poses_ago = static_cast<int>(recent_.size()) - 1 - t.onset;
+  c.directions.resize(n, static_cast<int>(t.columns.size()));
+  for (size_t i = 0; i < t.columns.size(); ++i) {
+    const int col = t.columns[i];
+    c.parameters.push_back(col < ng ? identified_[col] : -1);
+    c.joints.push_back(col < ng ? -1 : col - ng);
+    c.directions.col(static_cast<int>(i)) = U.col(col);
+  }
+  // A parameter direction that is a joint's offset (θ_j of a D–H arm) names that joint too: the
+  // two columns agree over the window (|cos| > 0.99).
+  for (size_t i = 0; i < t.columns.size(); ++i) {
+    if (c.joints[i] >= 0) continue;
+    for (int j = 0; j < nq; ++j) {
+      double ab = 0, aa = 0, bb = 0;
+      for (const Eigen::MatrixXd& Ak : A) {
+        ab += Ak.col(t.columns[i]).dot(Ak.col(ng + j));
+        aa += Ak.col(t.columns[i]).squaredNorm();
+        bb += Ak.col(ng + j).squaredNorm();
+      }
+      if (aa > 0 && bb > 0 && std::abs(ab) > 0.99 * std::sqrt(aa * bb)) c.joints[i] = j;
+    }
+  }
+  Release(c, static_cast<size_t>(t.onset));
+  return c;
+}
+
+void EkfIdentifier::Release(const DetectedChange& change, size_t onset) {
+  const int n = static_cast<int>(x_.size());
+  const long onset_seq = recent_[onset].seq;
+  while (!seqs_.empty() && seqs_.back() >= onset_seq) {
+    history_.pop_back();
+    contexts_.pop_back();
+    inflations_.pop_back();
+    seqs_.pop_back();
+    --accepted_;
+  }
+  // The jump's prior along each released direction: wide enough that the poses since the onset,
+  // not the prior, set its size.
+  Eigen::MatrixXd inflation = Eigen::MatrixXd::Zero(n, n);
+  for (int i = 0; i < change.directions.cols(); ++i) {
+    const Eigen::VectorXd u = change.directions.col(i);
+    inflation +=
+        (4 * change.step(i) * change.step(i) + 9 * change.step_sigma(i) * change.step_sigma(i)) *
+        u * u.transpose();
+    x_ += change.step(i) * u;  // a better point to relinearise at
+  }
+  for (size_t k = onset; k < recent_.size(); ++k) {
+    Recent& p = recent_[k];
+    history_.push_back(p.z);
+    contexts_.push_back(p.context);
+    inflations_.push_back(k == onset ? inflation : Eigen::MatrixXd());
+    seqs_.push_back(p.seq);
+    ++accepted_;
+    if (!p.accepted) --rejected_;
+    p.accepted = true;
+  }
+  Relinearize(std::max(settings_.max_relinearize_passes, 1));
+  recent_.clear();  // the test restarts on innovations after the release
+  candidate_count_ = 0;
+  small_steps_ = 0;
+  status_ = TrackingStatus::kChangeDetected;
+  changes_.push_back(change);
+}
+
+void EkfIdentifier::UpdateStatus(double max_step_sigma) {
+  small_steps_ = max_step_sigma < settings_.converged_step_sigma ? small_steps_ + 1 : 0;
+  const bool settled = small_steps_ >= settings_.converged_poses;
+  switch (status_) {
+    case TrackingStatus::kConverging:
+      if (settled) {
+        status_ = TrackingStatus::kConverged;
+        recent_.clear();  // innovations of a converging filter are not the test's
+      }
+      break;
+    case TrackingStatus::kChangeDetected:
+    case TrackingStatus::kReconverging:
+      status_ = settled ? TrackingStatus::kConverged : TrackingStatus::kReconverging;
+      break;
+    case TrackingStatus::kConverged:
+      break;
+  }
+}
+
 EkfUpdateResult EkfIdentifier::Update(const kinematics::PoseMeasurement& z,
                                       const kinematics::EffectContext& context) {
   EkfUpdateResult result;
+  result.status = status_;
   std::string invalid = kinematics::Validate(model(), z);
   if (invalid.empty()) invalid = ValidateContext(ext_, context);
   if (!invalid.empty()) {
     Reject(result, invalid);
     return result;
   }
-  const int n = static_cast<int>(x_.size());
-  const Eigen::MatrixXd& R = z.covariance;
+  ++seq_;
+  const Eigen::VectorXd x_before = x_;
 
-  // Eq. (42): random-walk prediction.
+  // The innovation at the prior (Eq. 42–43), whitened for the change test.
   const Eigen::MatrixXd P_prior = P_ + Eigen::MatrixXd(q_diag_.asDiagonal());
-  const Eigen::VectorXd x_prior = x_;
-
   Eigen::VectorXd r;
   Eigen::MatrixXd H;
-  Measure(z, context, x_prior, r, H);
-
-  Eigen::MatrixXd S = H * P_prior * H.transpose() + R;
-  Eigen::LLT<Eigen::MatrixXd> llt(S);
+  Measure(z, context, x_, r, H);
+  const Eigen::MatrixXd S = H * P_prior * H.transpose() + z.covariance;
+  const Eigen::LLT<Eigen::MatrixXd> llt(S);
   result.nis = r.dot(llt.solve(r));
   result.gate = settings_.gate_probability < 1.0
                     ? ChiSquareQuantile(settings_.gate_probability, z.dimension())
                     : std::numeric_limits<double>::infinity();
-  if (accepted_ >= settings_.gate_after && result.nis > result.gate) {
+  const bool gated = accepted_ >= settings_.gate_after && result.nis > result.gate;
+  if (settings_.detect_changes && status_ != TrackingStatus::kConverging &&
+      std::isfinite(result.nis)) {
+    // ∂h/∂q by central differences: a joint offset's signature (no analytic ∂h/∂q needed).
+    const int nq = model().num_joints();
+    Eigen::MatrixXd Hq(r.size(), nq), H_unused;
+    Eigen::VectorXd r_plus, r_minus;
+    for (int j = 0; j < nq; ++j) {
+      const double h = 1e-6;  // [rad or m]
+      kinematics::PoseMeasurement zq = z;
+      zq.q(j) += h;
+      Measure(zq, context, x_, r_plus, H_unused);
+      zq.q(j) -= 2 * h;
+      Measure(zq, context, x_, r_minus, H_unused);
+      Hq.col(j) = (r_minus - r_plus) / (2 * h);  // r = z − h
+    }
+    // Marked refused only once the gate has counted it (a release retakes it uncounted).
+    recent_.push_back({z, context, seq_, true, llt.matrixL().solve(r), llt.matrixL().solve(H),
+                       llt.matrixL().solve(Hq)});
+    if (static_cast<int>(recent_.size()) > std::max(settings_.change_window, 1))
+      recent_.erase(recent_.begin());
+    if (std::optional<DetectedChange> change = TestForChange()) {
+      result.accepted = true;
+      result.change = std::move(change);
+      result.status = status_;
+      return result;
+    }
+  }
+  if (gated) {
     Reject(result, "innovation " + std::to_string(result.nis) + " beyond the gate " +
                        std::to_string(result.gate));
+    if (!recent_.empty() && recent_.back().seq == seq_) recent_.back().accepted = false;
     return result;
   }
-
-  Eigen::VectorXd x_i = x_prior;
-  Eigen::MatrixXd K;
-  for (int it = 0; it < std::max(1, settings_.max_iterations); ++it) {
-    if (it > 0) {
-      Measure(z, context, x_i, r, H);
-      S = H * P_prior * H.transpose() + R;
-      llt.compute(S);
-    }
-    K = llt.solve(H * P_prior).transpose();  // P⁻ Hᵀ S⁻¹ (S and P⁻ symmetric)
-    const Eigen::VectorXd x_next = x_prior + K * (r - H * (x_prior - x_i));
-    const double step = (x_next - x_i).norm();
-    x_i = x_next;
-    result.iterations = it + 1;
-    if (step < settings_.iteration_tolerance) break;
-  }
-  if (!x_i.allFinite()) {
+  bool ok = true;
+  result.iterations = Absorb(z, context, Eigen::MatrixXd(), ok, &r, &H);
+  if (!ok) {
     Reject(result, "update diverged (non-finite state)");
+    if (!recent_.empty() && recent_.back().seq == seq_) recent_.pop_back();
     return result;
   }
-  const Eigen::MatrixXd IKH = Eigen::MatrixXd::Identity(n, n) - K * H;
-  P_ = IKH * P_prior * IKH.transpose() + K * R * K.transpose();
-  P_ = 0.5 * (P_ + P_.transpose());
-  x_ = x_i;
-  ++accepted_;
   result.accepted = true;
-  history_.push_back(z);
-  contexts_.push_back(context);
   if (settings_.relinearize_threshold > 0 &&
       (x_ - x_lin_).cwiseAbs().maxCoeff() > settings_.relinearize_threshold)
     Relinearize(settings_.max_relinearize_passes);
+  // Bounded cost: the window keeps at least the change test's poses.
+  const int keep = std::max(settings_.window_poses, settings_.change_window);
+  if (settings_.window_poses > 0)
+    while (static_cast<int>(history_.size()) > keep) FoldOldest();
+  double max_step = 0;
+  for (int i = 0; i < static_cast<int>(identified_.size()); ++i)
+    max_step =
+        std::max(max_step, std::abs(x_(i) - x_before(i)) / std::sqrt(std::max(P_(i, i), 1e-300)));
+  UpdateStatus(max_step);
+  result.status = status_;
   return result;
 }
 

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <vector>
 
+#include "rcal/identification/tracking.hpp"
 #include "rcal/transport/lcm_schema.hpp"
 
 namespace rcal::transport {
@@ -205,7 +206,7 @@ std::optional<Eigen::VectorXd> ParamsFromMessage(const kinematic_params_t& msg,
 
 calibration_status_t ToCalibrationStatus(const identification::EkfIdentifier& ekf,
                                          const StatusFigures& figures, int64_t utime) {
-  calibration_status_t msg;
+  calibration_status_t msg{};  // value-initialised: the generated struct leaves counts unset
   msg.utime = utime;
   msg.poses_accepted = ekf.accepted();
   msg.poses_rejected = ekf.rejected();
@@ -216,6 +217,14 @@ calibration_status_t ToCalibrationStatus(const identification::EkfIdentifier& ek
   msg.last_nis = figures.last_nis;
   msg.relinearizations = ekf.relinearizations();
   msg.converged = figures.converged;
+  msg.tracking_status = identification::TrackingStatusName(ekf.status());
+  msg.changes_detected = static_cast<int32_t>(ekf.changes().size());
+  if (!ekf.changes().empty()) {
+    const identification::DetectedChange& c = ekf.changes().back();
+    msg.changed = identification::ChangeNames(ekf.model(), c);
+    msg.changed_step.assign(c.step.data(), c.step.data() + c.step.size());
+    msg.num_changed = static_cast<int32_t>(msg.changed.size());
+  }
   return msg;
 }
 

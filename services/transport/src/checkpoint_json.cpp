@@ -101,7 +101,15 @@ std::string CheckpointText(const CheckpointFile& f) {
             {"relinearizations", c.relinearizations},
             {"history", history},
             {"held", held},
-            {"x_fixed", Vec(c.x_fixed)}};
+            {"x_fixed", Vec(c.x_fixed)},
+            {"status", identification::TrackingStatusName(c.status)},
+            {"small_steps", c.small_steps}};
+  // A released change's covariance before its pose (additive key; none: no change released).
+  if (!c.inflations.empty()) {
+    json inflations = json::array();
+    for (const Eigen::MatrixXd& m : c.inflations) inflations.push_back(Mat(m));
+    j["inflations"] = inflations;
+  }
   return j.dump() + "\n";
 }
 
@@ -136,6 +144,24 @@ CheckpointFile ParseCheckpoint(const std::string& text) {
       c.history.push_back(MeasurementFromJson(history[i], path));
     }
     if (schema == kSchema) c.x_fixed = ToVec(At(j, "x_fixed", ""), "x_fixed");
+    // Tracking (additive keys; absent in checkpoints written before change detection).
+    if (j.contains("status")) {
+      const std::string status = At(j, "status", "").get<std::string>();
+      bool known = false;
+      for (auto t :
+           {identification::TrackingStatus::kConverging, identification::TrackingStatus::kConverged,
+            identification::TrackingStatus::kChangeDetected,
+            identification::TrackingStatus::kReconverging})
+        if (status == identification::TrackingStatusName(t)) c.status = t, known = true;
+      if (!known) throw std::runtime_error("checkpoint: status: unknown value '" + status + "'");
+    }
+    if (j.contains("small_steps")) c.small_steps = At(j, "small_steps", "").get<int>();
+    if (j.contains("inflations")) {
+      const json& inflations = At(j, "inflations", "");
+      if (!inflations.is_array()) throw std::runtime_error("checkpoint: inflations: not an array");
+      for (size_t i = 0; i < inflations.size(); ++i)
+        c.inflations.push_back(ToMat(inflations[i], "inflations[" + std::to_string(i) + "]"));
+    }
     if (schema != kSchemaV1) {
       const json& held = At(j, "held", "");
       if (!held.is_array()) throw std::runtime_error("checkpoint: held: not an array");

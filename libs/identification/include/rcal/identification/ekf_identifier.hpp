@@ -20,6 +20,18 @@
 //   MAP cost, in information form), until a pass moves it less than the threshold. This is what
 //   the paper's "EKF for 200 iterations" over 50 poses amounts to, and it makes the online
 //   estimate agree with the batch optimum; once converged, the passes stop costing anything.
+// - bounded cost: the passes run over a window of the `window_poses` most recent accepted poses;
+//   an older pose is folded into the window's prior (x0, P0) by one update linearised at the
+//   current estimate (its information marginalised), so memory, time per update and checkpoint
+//   size stop growing. Up to window_poses poses this is exactly the filter above (the batch
+//   optimum); beyond, the folded poses keep their last linearisation.
+// - change detection (change_detection.hpp): the whitened innovations of the recent poses
+//   (accepted or gated out) are tested for a step in a few of the identified parameters from an
+//   onset pose on (a generalised likelihood ratio, the false-alarm rate a setting). On a
+//   detection the named parameters are released from that onset on (their variance inflated by
+//   the size of the step, as a process-noise event between two poses), the poses since the onset
+//   are taken again (also those the gate refused), and the filter re-converges. status() says
+//   converging, converged, change_detected (the update that named it) or reconverging.
 // - innovation gate: a pose whose normalised innovation squared ỹᵀ S⁻¹ ỹ exceeds the χ² quantile
 //   `gate_probability` is rejected and counted, not absorbed.
 // - invalid input (wrong joint count, NaN, bad covariance) is rejected with a reason naming the
@@ -37,6 +49,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -57,6 +70,28 @@ struct EkfSettings {
   double iteration_tolerance = 1e-12;   ///< stop when |Δx| [m | rad] falls below
   double relinearize_threshold = 1e-4;  ///< [m | rad] max |Δx| since the last pass; ≤ 0: never
   int max_relinearize_passes = 5;
+  /// Accepted poses kept for the relinearisation passes; older ones are folded into the prior
+  /// (file comment). ≤ 0: keep all (cost grows with the number of poses).
+  int window_poses = 100;
+  /// Change detection (file comment and change_detection.hpp).
+  bool detect_changes = true;
+  /// Probability per pose that an unchanged arm raises a change (the test's threshold is this,
+  /// shared over the parameters and onsets tested: Bonferroni).
+  double change_false_alarm = 1e-7;
+  int change_window = 10;    ///< recent poses the test looks at (onsets tried: all of them)
+  int change_min_poses = 2;  ///< poses since the onset before a step can be claimed
+  /// Consecutive poses whose test must find the same step (onset and parameters) before it is
+  /// claimed: a step fitted with the wrong onset (a pose before the change taken in, the step
+  /// diluted and more parameters needed) moves on at the next pose; a real one stays.
+  int change_confirmations = 2;
+  int change_max_params = 3;  ///< parameters a change may name (forward selection)
+  /// The step's fit must explain the window: post-fit χ² below this quantile (else more
+  /// parameters are tried; an outlier pose explains nothing and raises no change).
+  double change_fit_probability = 0.9999;
+  /// Converged: `converged_poses` consecutive accepted updates each moved every identified
+  /// parameter by less than converged_step_sigma of its σ.
+  double converged_step_sigma = 0.5;
+  int converged_poses = 5;
   /// Extended models: initial σ of each effect parameter [SI, joint_effects.hpp]; empty:
   /// DefaultEffectPriorSigma(model).
   Eigen::VectorXd prior_sigma_effects;
@@ -70,12 +105,36 @@ struct EkfSettings {
 /// industrial arms, so the data, not the prior, sets the estimate.
 Eigen::VectorXd DefaultEffectPriorSigma(const kinematics::ExtendedModel& model);
 
+/// Where the identification stands (the CALIBRATION_STATUS states).
+enum class TrackingStatus { kConverging, kConverged, kChangeDetected, kReconverging };
+/// "converging", "converged", "change_detected", "reconverging".
+const char* TrackingStatusName(TrackingStatus s);
+
+/// A change the identifier detected and released.
+/// Each direction of the change is either one identified parameter or one joint's offset (an
+/// encoder swap, as the state change that reproduces it: θ_j on a D–H arm, a combination of the
+/// base set where the base set spreads it).
+struct DetectedChange {
+  std::vector<int> parameters;  ///< per direction: index into model.parameters(), or −1
+  std::vector<int> joints;      ///< per direction: the joint whose offset it is, or −1
+  Eigen::VectorXd step;         ///< estimated step along each [m | rad], at detection
+  Eigen::VectorXd step_sigma;   ///< its 1σ [m | rad]
+  Eigen::MatrixXd directions;   ///< state change per unit step, one column per direction
+  double glr = 0;               ///< the likelihood-ratio statistic (2 ln Λ)
+  double threshold = 0;         ///< what it was compared with
+  int onset_poses_ago = 0;      ///< the first changed pose, counted back from this one (0: this)
+};
+
 struct EkfUpdateResult {
   bool accepted = false;
   double nis = 0;      ///< normalised innovation squared at the prior
   double gate = 0;     ///< the χ² threshold it was compared with
   int iterations = 0;  ///< relinearisations done
   std::string reason;  ///< why it was rejected, naming the field
+  TrackingStatus status = TrackingStatus::kConverging;  ///< after this update
+  /// Set on the update that detected a change (status kChangeDetected); the update's pose is
+  /// then taken (accepted) with the poses since the onset.
+  std::optional<DetectedChange> change;
 };
 
 /// Everything needed to resume an identifier exactly where it stopped (a restarted process
@@ -92,6 +151,13 @@ struct EkfCheckpoint {
   /// Values of the parameters not identified, full length [m | rad] (the start the identifier
   /// was given, e.g. a set-up guess); empty: keep the identifier's own.
   Eigen::VectorXd x_fixed;
+  /// Covariance added to the state before each history entry [m² | rad²] beyond the drift (a
+  /// released change), one per history entry or none; an empty entry adds nothing.
+  std::vector<Eigen::MatrixXd> inflations;
+  /// The tracking status and its count of consecutive small steps. The change detector's recent
+  /// innovations are not kept: a restored identifier starts its test afresh.
+  TrackingStatus status = TrackingStatus::kConverging;
+  int small_steps = 0;
 };
 
 class EkfIdentifier {
@@ -153,6 +219,11 @@ class EkfIdentifier {
   int Refine(int max_passes);
   /// Relinearisation passes run so far.
   int relinearizations() const { return relinearizations_; }
+  /// Accepted poses in the window (the others are folded into the prior).
+  int window_size() const { return static_cast<int>(history_.size()); }
+  TrackingStatus status() const { return status_; }
+  /// Changes detected so far, oldest first.
+  const std::vector<DetectedChange>& changes() const { return changes_; }
 
  private:
   int Relinearize(int max_passes);
@@ -160,6 +231,32 @@ class EkfIdentifier {
   void Measure(const kinematics::PoseMeasurement& z, const kinematics::EffectContext& context,
                const Eigen::VectorXd& state, Eigen::VectorXd& r, Eigen::MatrixXd& H) const;
   void Reject(EkfUpdateResult& result, std::string reason);
+  /// Folds the oldest window pose into the prior (x0, P0), linearised at the current estimate.
+  void FoldOldest();
+  /// Applies one accepted pose: iterated update from (x_, P_ + Q + inflation), history append.
+  /// Returns the iterations; false in `ok` when the update diverged (state untouched). r0, H0:
+  /// the measurement at x_, when already computed.
+  int Absorb(const kinematics::PoseMeasurement& z, const kinematics::EffectContext& context,
+             const Eigen::MatrixXd& inflation, bool& ok, const Eigen::VectorXd* r0 = nullptr,
+             const Eigen::MatrixXd* H0 = nullptr);
+  /// Records the whitened innovation of a pose for the change test; runs the test and, on a
+  /// detection, releases the change. Returns the change (or nothing).
+  std::optional<DetectedChange> TestForChange();
+  /// Releases a detected change from the recent pose `onset` on: the history from there is
+  /// replaced by the recent poses (gated ones included), the first with the inflation, and the
+  /// window is relinearised.
+  void Release(const DetectedChange& change, size_t onset);
+  void UpdateStatus(double max_step_sigma);
+
+  struct Recent {  // a pose the change test looks at
+    kinematics::PoseMeasurement z;
+    kinematics::EffectContext context;
+    long seq = 0;
+    bool accepted = false;
+    Eigen::VectorXd e;   // whitened innovation at the estimate before it
+    Eigen::MatrixXd A;   // whitened Jacobian
+    Eigen::MatrixXd Aq;  // whitened ∂h/∂q (a joint offset's signature)
+  };
 
   kinematics::ExtendedModel ext_;
   std::vector<int> identified_;
@@ -174,6 +271,17 @@ class EkfIdentifier {
   Eigen::VectorXd x_lin_;  // estimate at the last pass
   std::vector<kinematics::PoseMeasurement> history_;
   std::vector<kinematics::EffectContext> contexts_;  // one per history entry
+  std::vector<Eigen::MatrixXd> inflations_;          // one per history entry (may be empty)
+  std::vector<long> seqs_;                           // pose sequence number per history entry
+  std::vector<Recent> recent_;                       // the change test's window
+  long seq_ = 0;                                     // poses seen (valid ones)
+  TrackingStatus status_ = TrackingStatus::kConverging;
+  int small_steps_ = 0;
+  std::vector<DetectedChange> changes_;
+  // The last test's step (onset pose and parameters) and how many consecutive tests found it.
+  long candidate_onset_ = -1;
+  std::vector<int> candidate_params_;
+  int candidate_count_ = 0;
   int relinearizations_ = 0;
   int accepted_ = 0;
   int rejected_ = 0;

@@ -1,0 +1,325 @@
+// rcal track DATA --robot R [--cell FILE] [--trace T.csv] [--json F]: the online identification
+// (change detection included) run over a pose dataset's rows in time order (`time` column, else
+// file order), the offline twin of the ekf_identifier process. Rows with set=test are never
+// fitted: at each one the tool position predicted with the estimate of that moment is compared
+// with the measurement. With --cell the identification is cell::OnlineIdentification on the
+// cell's model (its base set, set-up guess and checks, exactly as the process runs it); without,
+// an EkfIdentifier on the robot's identifiable set (default settings).
+// The trace has one row per data row: time, set, prediction_error_m (test rows), status,
+// changed (the parameters or joint named on the row that detected a change), nis.
+//
+// rcal track --sweep [--seeds N] [--quiet-poses N] [--out DIR]: the seeded tracking experiment
+// (track_sweep.hpp) on the shipped arms, full poses and positions only; prints the table and
+// writes DIR/track_sweep.json.
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "command.hpp"
+#include "rcal/cell/online_identification.hpp"
+#include "rcal/identification/calibration.hpp"
+#include "rcal/identification/tracking.hpp"
+#include "rcal/io/atomic_file.hpp"
+#include "rcal/io/cell_yaml.hpp"
+#include "rcal/io/pose_dataset.hpp"
+#include "rcal/io/robot_urdf.hpp"
+#include "rcal/kinematics/identifiability.hpp"
+#include "report.hpp"
+#include "robot_setup.hpp"
+#include "track_sweep.hpp"
+
+namespace rcal::tool {
+namespace {
+
+namespace fs = std::filesystem;
+using identification::TrackRow;
+using nlohmann::json;
+
+struct Options {
+  std::string data, robot, cell, trace, json_path;
+  std::string tip_link, base_link, frames = "auto";
+  double position_sigma_mm = 0.05;
+  double orientation_sigma_deg = 0.1;
+  bool sweep = false;
+  int seeds = 20;
+  int quiet_poses = 10000;
+  std::vector<std::string> arms;
+  std::string out = "out/track";
+};
+
+std::string Join(const std::vector<std::string>& v, const char* sep) {
+  std::string s;
+  for (size_t i = 0; i < v.size(); ++i) s += (i ? sep : "") + v[i];
+  return s;
+}
+
+// The cell's online identification over the rows (the process's logic).
+std::vector<TrackRow> TrackCell(cell::OnlineIdentification& id,
+                                const std::vector<kinematics::PoseMeasurement>& ms,
+                                const std::vector<bool>& is_test) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  std::vector<TrackRow> rows;
+  for (size_t k = 0; k < ms.size(); ++k) {
+    TrackRow row;
+    row.test = is_test[k];
+    row.prediction_error_m = row.nis = nan;
+    if (row.test) {
+      row.rejected = kinematics::Validate(id.model(), ms[k]);
+      if (row.rejected.empty())
+        row.prediction_error_m = identification::PositionError(id.model(), ms[k], id.ekf().x());
+    } else {
+      // Sensor time: the row order (rows are sorted by time already), 1 ms apart.
+      const auto out = id.Add({ms[k], static_cast<int64_t>(k + 1) * 1000, static_cast<int64_t>(k)});
+      row.rejected = out.rejected;
+      for (const auto& u : out.updates) {
+        if (u.pose_index != static_cast<int64_t>(k)) continue;
+        row.nis = u.result.nis;
+        row.accepted = u.result.accepted;
+        if (!u.result.accepted) row.rejected = u.result.reason;
+        if (u.result.change) {
+          row.changed = identification::ChangeNames(id.model(), *u.result.change);
+          const auto& st = u.result.change->step;
+          row.steps.assign(st.data(), st.data() + st.size());
+        }
+      }
+      if (out.held) row.rejected = "held for the set-up guess";
+    }
+    row.status = id.ekf().status();
+    rows.push_back(std::move(row));
+  }
+  return rows;
+}
+
+int RunData(const Options& o) {
+  if (o.robot.empty() && o.cell.empty())
+    throw std::runtime_error("rcal track: --robot or --cell is required with DATA");
+  io::LoadedRobot robot;
+  std::unique_ptr<cell::OnlineIdentification> id;
+  if (!o.cell.empty()) {
+    // The cell's model (its set-up frames, markers and priors), as the process has it.
+    id = std::make_unique<cell::OnlineIdentification>(io::LoadCell(ResolvePath(o.cell)));
+    robot.model = id->model();
+  } else {
+    robot = LoadRobotForCell(o.robot, o.tip_link, o.base_link, o.frames);
+  }
+  io::PoseDataset data = LoadPoseDataFor(robot, o.data);
+  if (!id) {
+    SetUpMarkers(robot, data, {}, o.frames == "auto");
+    if (o.frames == "auto" && data.has_orientation) AddOrientationFrame(robot);
+  }
+  // Time order: the `time` column when every row has one (stable: ties keep file order).
+  const bool timed = std::all_of(data.samples.begin(), data.samples.end(),
+                                 [](const io::PoseSample& s) { return std::isfinite(s.time); });
+  if (timed)
+    std::stable_sort(
+        data.samples.begin(), data.samples.end(),
+        [](const io::PoseSample& a, const io::PoseSample& b) { return a.time < b.time; });
+  const kinematics::KinematicModel& model = robot.model;
+  std::vector<kinematics::PoseMeasurement> ms = ToMeasurements(data, model);
+  identification::SetNoise(ms, o.position_sigma_mm / kMm, o.orientation_sigma_deg / kDeg);
+  std::vector<bool> is_test;
+  for (const auto& s : data.samples) is_test.push_back(s.set == io::PoseSample::kTest);
+
+  std::vector<TrackRow> rows;
+  if (id) {
+    rows = TrackCell(*id, ms, is_test);
+  } else {
+    std::vector<kinematics::PoseMeasurement> fit;
+    for (size_t k = 0; k < ms.size(); ++k)
+      if (!is_test[k]) fit.push_back(ms[k]);
+    const auto kind = data.has_orientation ? kinematics::MeasurementKind::kFullPose
+                                           : kinematics::MeasurementKind::kPositionOnly;
+    std::vector<Eigen::VectorXd> qs;
+    for (const auto& m : fit) qs.push_back(m.q);
+    const std::vector<int> base =
+        kinematics::AnalyzeIdentifiability(model, qs, model.Nominal(), kind).identifiable;
+    identification::EkfIdentifier ekf(model, base);
+    rows = identification::Track(ekf, ms, is_test);
+  }
+
+  // The trace.
+  std::ostringstream csv;
+  csv << "time,set,prediction_error_m,status,changed,nis\n";
+  char buf[64];
+  for (size_t k = 0; k < rows.size(); ++k) {
+    const TrackRow& r = rows[k];
+    const auto& s = data.samples[k];
+    if (std::isfinite(s.time)) {
+      std::snprintf(buf, sizeof buf, "%.6f", s.time);
+      csv << buf;
+    } else {
+      csv << k;
+    }
+    csv << ','
+        << (s.set == io::PoseSample::kTest  ? "test"
+            : s.set == io::PoseSample::kCal ? "cal"
+                                            : "")
+        << ',';
+    if (r.test && std::isfinite(r.prediction_error_m)) {
+      std::snprintf(buf, sizeof buf, "%.9g", r.prediction_error_m);
+      csv << buf;
+    }
+    csv << ',' << identification::TrackingStatusName(r.status) << ",\"" << Join(r.changed, ";")
+        << "\",";
+    if (!r.test && std::isfinite(r.nis)) {
+      std::snprintf(buf, sizeof buf, "%.6g", r.nis);
+      csv << buf;
+    }
+    csv << '\n';
+  }
+  if (!o.trace.empty()) io::AtomicWriteFile(o.trace, csv.str());
+
+  // The summary: each change, the test error between changes, re-convergence.
+  json changes = json::array();
+  std::vector<size_t> change_rows;
+  for (size_t k = 0; k < rows.size(); ++k) {
+    if (rows[k].changed.empty()) continue;
+    change_rows.push_back(k);
+    json steps = json::array();
+    for (size_t i = 0; i < rows[k].changed.size(); ++i)
+      steps.push_back({{"name", rows[k].changed[i]}, {"step", rows[k].steps[i]}});
+    int reconverged = -1, poses = 0;
+    for (size_t j = k + 1; j < rows.size() && reconverged < 0; ++j) {
+      if (rows[j].test) continue;
+      ++poses;
+      if (rows[j].status == identification::TrackingStatus::kConverged) reconverged = poses;
+      if (!rows[j].changed.empty()) break;
+    }
+    json c = {{"row", data.samples[k].row}, {"changed", steps}};
+    if (std::isfinite(data.samples[k].time)) c["time_s"] = data.samples[k].time;
+    if (reconverged > 0) c["reconverged_after_poses"] = reconverged;
+    changes.push_back(c);
+  }
+  json segments = json::array();
+  change_rows.push_back(rows.size());
+  size_t from = 0;
+  for (size_t end : change_rows) {
+    std::vector<double> e;
+    for (size_t k = from; k < end; ++k)
+      if (rows[k].test && std::isfinite(rows[k].prediction_error_m))
+        e.push_back(rows[k].prediction_error_m);
+    if (end > from)
+      segments.push_back({{"first_row", data.samples[from].row},
+                          {"last_row", data.samples[end - 1].row},
+                          {"test_rows", e.size()},
+                          {"median_test_error_m", e.empty() ? json(nullptr) : json(Median(e))}});
+    from = end;
+  }
+  int fitted = 0, accepted = 0;
+  for (const auto& r : rows)
+    if (!r.test) ++fitted, accepted += r.accepted;
+  json j = {{"data", o.data},
+            {"robot", o.robot},
+            {"rows", rows.size()},
+            {"fitted_rows", fitted},
+            {"accepted", accepted},
+            {"changes", changes},
+            {"segments", segments},
+            {"final_status",
+             rows.empty() ? "converging" : identification::TrackingStatusName(rows.back().status)}};
+  if (!o.json_path.empty()) io::AtomicWriteFile(o.json_path, j.dump(2) + "\n");
+  std::printf("%zu rows (%d fitted, %d accepted), %zu change(s) detected, final status %s\n",
+              rows.size(), fitted, accepted, changes.size(),
+              j["final_status"].get<std::string>().c_str());
+  for (const auto& c : changes)
+    std::printf("  row %d: %s\n", c["row"].get<int>(), c["changed"].dump().c_str());
+  return 0;
+}
+
+int RunSweep(const Options& o) {
+  std::vector<std::string> arms = o.arms;
+  if (arms.empty())
+    arms = {"config/robots/grb3016.yaml", "config/robots/ur10.urdf",
+            "tests/data/arms/panda_like.urdf", "tests/data/arms/kr6_like.urdf"};
+  TrackSweepSettings s;
+  s.seeds = o.seeds;
+  s.quiet_poses = o.quiet_poses;
+  json jres = json::array();
+  std::printf(
+      "| arm | measured | step | detected | delay median (max) [poses] | right joint/link named "
+      "| error after 30 / before, median | false alarms / poses | steady state / former filter, "
+      "median |\n|---|---|---|---:|---:|---:|---:|---:|---:|\n");
+  for (const std::string& path : arms) {
+    for (bool full : {true, false}) {
+      io::LoadedRobot robot = LoadRobotForCell(path, "", "", "auto");
+      if (full) AddOrientationFrame(robot);
+      const TrackSweepArm arm{fs::path(path).stem().string(), robot.model, full};
+      for (const TrackSweepResult& r : RunTrackSweep(arm, s)) {
+        std::vector<double> d(r.delays.begin(), r.delays.end());
+        const double max_delay = d.empty() ? 0 : *std::max_element(d.begin(), d.end());
+        const bool quiet = r.quiet_poses > 0;
+        std::printf(
+            "| %s | %s | %s | %d/%d | %.0f (%.0f) | %.0f %% | %.2f | %s | %s |\n", r.arm.c_str(),
+            full ? "full pose" : "positions", r.kind.c_str(), r.detected, r.seeds, Median(d),
+            max_delay, r.seeds ? 100.0 * r.named_right / r.seeds : 0.0, Median(r.recovery),
+            quiet ? (std::to_string(r.false_alarms) + " / " + std::to_string(r.quiet_poses)).c_str()
+                  : "",
+            quiet ? (std::to_string(Median(r.steady_ratio)).substr(0, 5)).c_str() : "");
+        std::fflush(stdout);
+        jres.push_back({{"arm", r.arm},
+                        {"full_pose", full},
+                        {"step", r.kind},
+                        {"seeds", r.seeds},
+                        {"detected", r.detected},
+                        {"delays_poses", r.delays},
+                        {"named_right", r.named_right},
+                        {"recovery_ratio", r.recovery},
+                        {"error_before_m", r.error_before_m},
+                        {"error_after_m", r.error_after_m},
+                        {"false_alarms", r.false_alarms},
+                        {"quiet_poses", r.quiet_poses},
+                        {"steady_ratio", r.steady_ratio},
+                        {"stepped", r.stepped},
+                        {"seed_delay", r.seed_delay}});
+      }
+    }
+  }
+  io::AtomicWriteFile(fs::path(o.out) / "track_sweep.json", json{{"results", jres}}.dump(1) + "\n");
+  return 0;
+}
+
+const RegisterCommand kTrack(
+    "track",
+    "Run the online identification (change detection, re-convergence) over a pose dataset in "
+    "time order, or the seeded tracking sweep",
+    [](CLI::App& sub) -> std::function<int()> {
+      auto o = std::make_shared<Options>();
+      sub.add_option("data", o->data, "pose dataset CSV (rcal or FIGAROH layout)");
+      sub.add_option("--robot", o->robot, "robot file (YAML or URDF)");
+      sub.add_option("--cell", o->cell,
+                     "cell file: run the cell's online identification (as ekf_identifier does)");
+      sub.add_option("--trace", o->trace,
+                     "write the trace CSV (time, set, prediction_error_m, status, changed, nis)");
+      sub.add_option("--json", o->json_path, "write the summary JSON (changes, segments)");
+      sub.add_option("--tip", o->tip_link, "URDF: last link of the chain (the flange)");
+      sub.add_option("--base-link", o->base_link, "URDF: first link of the chain");
+      sub.add_option("--frames", o->frames,
+                     "auto: add world←base, marker and IMU frames the robot file lacks; none")
+          ->capture_default_str();
+      sub.add_option("--position-sigma-mm", o->position_sigma_mm, "position noise per axis")
+          ->capture_default_str();
+      sub.add_option("--orientation-sigma-deg", o->orientation_sigma_deg,
+                     "orientation noise per axis")
+          ->capture_default_str();
+      sub.add_flag("--sweep", o->sweep, "run the seeded tracking sweep instead (no DATA)");
+      sub.add_option("--seeds", o->seeds, "sweep: seeds per arm and step")->capture_default_str();
+      sub.add_option("--quiet-poses", o->quiet_poses,
+                     "sweep: poses of the unchanged arm per seed (false alarms)")
+          ->capture_default_str();
+      sub.add_option("--arm", o->arms, "sweep: robot files (default: four shipped arms)");
+      sub.add_option("--out", o->out, "sweep: output folder")->capture_default_str();
+      return [o]() {
+        if (o->sweep) return RunSweep(*o);
+        if (o->data.empty()) throw std::runtime_error("rcal track: DATA is required (or --sweep)");
+        return RunData(*o);
+      };
+    });
+
+}  // namespace
+}  // namespace rcal::tool

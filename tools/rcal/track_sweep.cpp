@@ -1,0 +1,143 @@
+#include "track_sweep.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "rcal/identification/tracking.hpp"
+#include "rcal/kinematics/identifiability.hpp"
+#include "rcal/sim/pose_sim.hpp"
+
+namespace rcal::tool {
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return std::nan("");
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+namespace {
+
+// An arm with a truth on the base set, test joints, and a pose source whose joints may read off.
+struct Run {
+  const kinematics::KinematicModel& model;
+  std::vector<int> identified;
+  Eigen::VectorXd x_true, dq;
+  std::vector<Eigen::VectorXd> test_q;
+  sim::PoseNoise noise;
+  sim::Rng rng;
+
+  Run(const TrackSweepArm& arm, unsigned seed) : model(arm.model), rng(seed) {
+    noise.orientation = arm.full_pose;
+    const auto kind = arm.full_pose ? kinematics::MeasurementKind::kFullPose
+                                    : kinematics::MeasurementKind::kPositionOnly;
+    const auto report = kinematics::AnalyzeIdentifiability(model, sim::SampleJoints(model, 80, rng),
+                                                           model.Nominal(), kind);
+    identified = report.identifiable;
+    x_true = sim::RandomErrors(model, rng, 0.001, 0.002);
+    for (const auto& c : report.unidentifiable) x_true(c.dropped) = 0;
+    dq = Eigen::VectorXd::Zero(model.num_joints());
+    test_q = sim::SampleJoints(model, 50, rng);
+  }
+  kinematics::PoseMeasurement Pose() {
+    const Eigen::VectorXd q = sim::SampleJoints(model, 1, rng)[0];
+    kinematics::PoseMeasurement m = sim::MeasurePose(model, x_true, q + dq, noise, rng);
+    m.q = q;  // the joints as read
+    return m;
+  }
+  double TestError(const Eigen::VectorXd& x) const {
+    double sum = 0;
+    for (const auto& q : test_q)
+      sum += (model.Forward(q, x).p_WM_W - model.Forward(q + dq, x_true).p_WM_W).norm();
+    return sum / test_q.size();
+  }
+};
+
+// The link lengths of the arm itself (not a set-up frame) in the identified set.
+std::vector<int> LinkLengths(const kinematics::KinematicModel& model,
+                             const std::vector<int>& identified) {
+  std::vector<int> out;
+  for (int i : identified) {
+    const auto& p = model.parameters()[i];
+    if (!p.is_angle && !kinematics::IsSetupGroup(p.group) && p.group != "tool") out.push_back(i);
+  }
+  return out;
+}
+
+}  // namespace
+
+std::vector<TrackSweepResult> RunTrackSweep(const TrackSweepArm& arm, const TrackSweepSettings& s) {
+  TrackSweepResult joint, length;
+  joint.arm = length.arm = arm.name;
+  joint.full_pose = length.full_pose = arm.full_pose;
+  joint.kind = "joint offset";
+  length.kind = "link length";
+  const int nq = arm.model.num_joints();
+  for (int seed = 0; seed < s.seeds; ++seed) {
+    for (int kind = 0; kind < 2; ++kind) {
+      TrackSweepResult& r = kind == 0 ? joint : length;
+      Run run(arm, 1000u * static_cast<unsigned>(kind + 1) + static_cast<unsigned>(seed));
+      identification::EkfIdentifier ekf(run.model, run.identified, s.ekf);
+      for (int k = 0; k < s.converge_poses; ++k) ekf.Update(run.Pose());
+      const size_t changes_before = ekf.changes().size();
+      const double before = run.TestError(ekf.x());
+      int joint_stepped = -1, param_stepped = -1;
+      if (kind == 0) {
+        joint_stepped = seed % nq;
+        run.dq(joint_stepped) = s.joint_step_rad;
+      } else {
+        const std::vector<int> lengths = LinkLengths(run.model, run.identified);
+        if (lengths.empty()) continue;
+        param_stepped = lengths[seed % lengths.size()];
+        run.x_true(param_stepped) += s.length_step_m;
+      }
+      ++r.seeds;
+      int delay = -1;
+      bool right = false;
+      for (int k = 0; k < s.after_poses; ++k) {
+        const identification::EkfUpdateResult u = ekf.Update(run.Pose());
+        if (u.change && delay < 0) {
+          delay = k + 1;
+          const auto& c = *u.change;
+          right = kind == 0 ? (!c.joints.empty() && c.joints[0] == joint_stepped)
+                            : (!c.parameters.empty() && c.parameters[0] == param_stepped);
+        }
+      }
+      (void)changes_before;
+      r.stepped.push_back(kind == 0 ? run.model.joints()[joint_stepped].name
+                                    : run.model.parameters()[param_stepped].name);
+      r.seed_delay.push_back(delay);
+      if (delay > 0) {
+        ++r.detected;
+        r.delays.push_back(delay);
+        r.named_right += right;
+      }
+      const double after = run.TestError(ekf.x());
+      r.error_before_m.push_back(before);
+      r.error_after_m.push_back(after);
+      r.recovery.push_back(after / before);
+    }
+    // The unchanged arm: false alarms over quiet_poses; the steady state against the former
+    // filter (all poses kept, no change detection) at steady_poses.
+    if (s.quiet_poses > 0) {
+      Run run(arm, 5000u + static_cast<unsigned>(seed));
+      identification::EkfSettings former = s.ekf;
+      former.window_poses = 0;
+      former.detect_changes = false;
+      identification::EkfIdentifier ekf(run.model, run.identified, s.ekf),
+          old(run.model, run.identified, former);
+      for (int k = 0; k < s.quiet_poses; ++k) {
+        const kinematics::PoseMeasurement m = run.Pose();
+        ekf.Update(m);
+        if (k < s.steady_poses) old.Update(m);
+        if (k + 1 == s.steady_poses)
+          joint.steady_ratio.push_back(run.TestError(ekf.x()) / run.TestError(old.x()));
+      }
+      joint.false_alarms += static_cast<int>(ekf.changes().size());
+      joint.quiet_poses += s.quiet_poses;
+    }
+  }
+  return {joint, length};
+}
+
+}  // namespace rcal::tool
