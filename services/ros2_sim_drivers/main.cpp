@@ -121,16 +121,11 @@ int main(int argc, char** argv) {
     if (domain < 0) domain = ros.domain;
 
     // The programme of sensor_acquisition --source sim --level sensors.
-    const cell::Cell cell = cell::MakeSimCell(built, sim_spec);
+    const cell::SimProgramme programme =
+        cell::MakeSimProgramme(built, sim_spec, seed, poses, test_poses);
+    const cell::Cell& cell = programme.cell;
     const auto& model = cell.model;
-    sim::Rng rng(seed * 1000 + 3);
-    std::vector<Eigen::VectorXd> waypoints;
-    waypoints.push_back(sim::SampleJoints(model, 1, rng).front());
-    const auto stops = sim::SampleJoints(model, poses + test_poses, rng);
-    for (int k = 0; k < poses + std::min(test_poses, 1); ++k) waypoints.push_back(stops[k]);
-    sim::TrajectorySettings ts;
-    ts.still_time = cell::SimRunSettings(built, sim_spec).still_time;
-    const sim::ToolMotionTruth truth(model, cell.x_true, sim::JointTrajectory(waypoints, ts));
+    const sim::ToolMotionTruth& truth = programme.truth;
     const sim::SensorSimSettings ss = cell::SimSensorSettings(built, sim_spec);
     sim::SensorSim sensors(truth, ss, seed);
     const double duration = truth.trajectory().duration();

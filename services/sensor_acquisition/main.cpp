@@ -178,18 +178,12 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
                  unsigned seed, int num_cal, int num_test, bool linger, int64_t start_utime,
                  double speed, const Resume& resume, rcal::transport::LcmTransport& t) {
   using namespace rcal;
-  const cell::Cell cell = cell::MakeSimCell(built, sim_spec);
-  const auto& model = cell.model;
-  const io::CellChannels& channels = built.spec.channels;
   // SimulateWindows' programme: the home pose, then the calibration and test stops.
-  sim::Rng rng(seed * 1000 + 3);
-  std::vector<Eigen::VectorXd> waypoints;
-  waypoints.push_back(sim::SampleJoints(model, 1, rng).front());
-  const auto stops = sim::SampleJoints(model, num_cal + num_test, rng);
-  for (int k = 0; k < num_cal + std::min(num_test, 1); ++k) waypoints.push_back(stops[k]);
-  sim::TrajectorySettings ts;
-  ts.still_time = cell::SimRunSettings(built, sim_spec).still_time;
-  const sim::ToolMotionTruth truth(model, cell.x_true, sim::JointTrajectory(waypoints, ts));
+  const cell::SimProgramme sim_run =
+      cell::MakeSimProgramme(built, sim_spec, seed, num_cal, num_test);
+  const auto& model = sim_run.cell.model;
+  const io::CellChannels& channels = built.spec.channels;
+  const sim::ToolMotionTruth& truth = sim_run.truth;
   const sim::SensorSimSettings ss = cell::SimSensorSettings(built, sim_spec);
   sim::SensorSim sensors(truth, ss, seed);
   const Eigen::Matrix3d pos_cov =

@@ -30,6 +30,7 @@
 #include <sstream>
 #include <thread>
 
+#include "dds_reader.hpp"
 #include "process_helpers.hpp"
 #include "rcal/dds/convert.hpp"
 #include "rcal/dds/dds_common.hpp"
@@ -150,31 +151,7 @@ std::string ReadAll(const fs::path& p) {
   return s.str();
 }
 
-// A DDS reader inside the test: how the test knows what the bridge has forwarded.
-template <typename T>
-class Reader {
- public:
-  Reader(dds_entity_t participant, const char* topic, dds_qos_t* qos) {
-    const dds_entity_t t = dds_create_topic(participant, Descriptor<T>(), topic, qos, nullptr);
-    reader_ = dds_create_reader(participant, t, qos, nullptr);
-    dds_delete_qos(qos);
-    EXPECT_GT(reader_, 0);
-  }
-  // Takes every available sample; calls `f` on each valid one.
-  void Take(const std::function<void(const T&)>& f) {
-    for (;;) {
-      void* samples[1] = {nullptr};
-      dds_sample_info_t info;
-      const int n = dds_take(reader_, samples, &info, 1, 1);
-      if (n <= 0) return;
-      if (info.valid_data) f(*static_cast<const T*>(samples[0]));
-      dds_return_loan(reader_, samples, n);
-    }
-  }
-
- private:
-  dds_entity_t reader_ = 0;
-};
+using dds::testing::Reader;
 
 class DdsBridge : public ::testing::Test {
  protected:

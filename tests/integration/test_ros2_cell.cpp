@@ -21,6 +21,7 @@
 #include <optional>
 #include <set>
 
+#include "dds_reader.hpp"
 #include "netns.hpp"
 #include "rcal/calibration_status_t.hpp"
 #include "rcal/cell/cell_sim_yaml.hpp"
@@ -50,30 +51,7 @@ constexpr const char* kSim = RCAL_SOURCE_DIR "/config/cells/grb3016.sim.yaml";
 constexpr unsigned kSeed = 1;
 constexpr int kCal = 25, kTest = 50;
 
-// A DDS reader in the test.
-template <typename T>
-class Reader {
- public:
-  Reader(dds_entity_t participant, const char* topic, dds_qos_t* qos) {
-    const dds_entity_t t = dds_create_topic(participant, dds::Descriptor<T>(), topic, qos, nullptr);
-    reader_ = dds_create_reader(participant, t, qos, nullptr);
-    dds_delete_qos(qos);
-    EXPECT_GT(reader_, 0) << topic;
-  }
-  void Take(const std::function<void(const T&)>& f) {
-    for (;;) {
-      void* samples[1] = {nullptr};
-      dds_sample_info_t info;
-      const int n = dds_take(reader_, samples, &info, 1, 1);
-      if (n <= 0) return;
-      if (info.valid_data) f(*static_cast<const T*>(samples[0]));
-      dds_return_loan(reader_, samples, n);
-    }
-  }
-
- private:
-  dds_entity_t reader_ = 0;
-};
+using dds::testing::Reader;
 
 dds_qos_t* Reliable(bool transient_local) {
   dds_qos_t* q = dds_create_qos();

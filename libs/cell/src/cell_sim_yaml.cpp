@@ -303,3 +303,21 @@ sim::SensorSimSettings SimSensorSettings(const io::BuiltCell& cell, const CellSi
 }
 
 }  // namespace rcal::cell
+
+namespace rcal::cell {
+
+SimProgramme MakeSimProgramme(const io::BuiltCell& cell, const CellSimSpec& sim, unsigned seed,
+                              int num_cal, int num_test) {
+  Cell c = MakeSimCell(cell, sim);
+  sim::Rng rng(seed * 1000 + 3);
+  std::vector<Eigen::VectorXd> waypoints;
+  waypoints.push_back(sim::SampleJoints(c.model, 1, rng).front());
+  std::vector<Eigen::VectorXd> stops = sim::SampleJoints(c.model, num_cal + num_test, rng);
+  for (int k = 0; k < num_cal + std::min(num_test, 1); ++k) waypoints.push_back(stops[k]);
+  sim::TrajectorySettings ts;
+  ts.still_time = SimRunSettings(cell, sim).still_time;
+  sim::ToolMotionTruth truth(c.model, c.x_true, sim::JointTrajectory(waypoints, ts));
+  return SimProgramme{std::move(c), std::move(stops), std::move(truth)};
+}
+
+}  // namespace rcal::cell

@@ -109,4 +109,17 @@ RunSettings SimRunSettings(const io::BuiltCell& cell, const CellSimSpec& sim);
 /// dropout switches (RunSettings' values).
 sim::SensorSimSettings SimSensorSettings(const io::BuiltCell& cell, const CellSimSpec& sim);
 
+/// The sensor-level programme of a simulated cell (sensor_acquisition --source sim --level
+/// sensors and ros2_sim_drivers play the same one): the cell at its truth (MakeSimCell), a home
+/// pose then `num_cal` calibration stops drawn with `num_test` test stops from
+/// mt19937_64(seed·1000 + 3), driven to the calibration stops and the first test stop (the last
+/// calibration window closes as offline), the sim file's still time at each.
+struct SimProgramme {
+  Cell cell;
+  std::vector<Eigen::VectorXd> stops;  ///< the calibration stops, then the test stops [rad | m]
+  sim::ToolMotionTruth truth;          ///< the truth motion along the programme
+};
+SimProgramme MakeSimProgramme(const io::BuiltCell& cell, const CellSimSpec& sim, unsigned seed,
+                              int num_cal, int num_test);
+
 }  // namespace rcal::cell
