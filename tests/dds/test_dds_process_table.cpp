@@ -95,9 +95,11 @@ TEST(DdsProcessTable, TheRos2DemoRunsOneCellFromTheDriversIn) {
     const auto it = exe.find(s.name);
     if (it == exe.end()) continue;
     const std::string help = Output(it->second + " --help");
-    for (const auto& arg : a)
-      if (arg.rfind("--", 0) == 0)
+    for (const auto& arg : a) {
+      if (arg.rfind("--", 0) == 0) {
         EXPECT_NE(help.find(arg), std::string::npos) << s.name << " " << arg;
+      }
+    }
   }
 }
 #endif
