@@ -177,7 +177,6 @@ Ros2InputSettings FromCell(const io::BuiltCell& cell) {
 Ros2Input::Ros2Input(const Ros2InputSettings& settings, const kinematics::KinematicModel& model,
                      transport::Health& health)
     : s_(settings),
-      model_(model),
       health_(health),
       names_(settings.joint_names),
       joints_{settings.joint_topic, estimation::TimeGate(settings.gate)},

@@ -102,7 +102,7 @@ class ClockOffsetTracker;  // the estimator behind the clock statuses (ros2_inpu
 
 class Ros2Input {
  public:
-  /// `model`: the cell's arm (kinematics for the clock-offset estimate), outlives this.
+  /// `model`: the cell's arm (the nominal kinematics of the clock-offset estimate; copied).
   Ros2Input(const Ros2InputSettings& settings, const kinematics::KinematicModel& model,
             transport::Health& health);
   ~Ros2Input();
@@ -146,7 +146,6 @@ class Ros2Input {
                   const std::string& error);
 
   Ros2InputSettings s_;
-  const kinematics::KinematicModel& model_;
   transport::Health& health_;
   dds::JointNameMap names_;
   Stream joints_, imu_, mag_;  // the streams' time gates

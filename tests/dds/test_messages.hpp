@@ -47,7 +47,7 @@ inline kinematic_params_t TestParams(int version, const std::string& robot_id = 
 }
 
 inline calibration_status_t TestStatus(int version) {
-  calibration_status_t m;
+  calibration_status_t m{};  // value-initialised: every field set, also those added later
   m.utime = TestUtime(version);
   m.poses_accepted = 10 * version;
   m.poses_rejected = version;

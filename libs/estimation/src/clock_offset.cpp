@@ -10,8 +10,6 @@
 namespace rcal::estimation {
 namespace {
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
-
 std::string Fmt(const char* format, double a, double b = 0.0, double c = 0.0) {
   char buf[256];
   std::snprintf(buf, sizeof buf, format, a, b, c);
