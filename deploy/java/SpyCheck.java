@@ -78,11 +78,11 @@ public class SpyCheck {
       if (!Modifier.isStatic(m) && !Modifier.isFinal(m)) fields.add(f);
     }
     for (Field f : fields) {  // lengths first
-      if (f.getType() == int.class && f.getName().startsWith("num_")) f.setInt(o, 2);
+      if (f.getType() == int.class && IsLength(f.getName())) f.setInt(o, 2);
     }
     for (Field f : fields) {
       Class<?> t = f.getType();
-      if (t == int.class && f.getName().startsWith("num_")) continue;
+      if (t == int.class && IsLength(f.getName())) continue;
       if (t.isArray()) {
         Object a = f.get(o);
         if (a == null) a = Array.newInstance(t.getComponentType(), 2);
@@ -93,6 +93,11 @@ public class SpyCheck {
       }
     }
     return o;
+  }
+
+  // The array length fields of rcal's types: num_* and NEXT_POSES' count.
+  static boolean IsLength(String name) {
+    return name.startsWith("num_") || name.equals("count");
   }
 
   static void fail(String what, Throwable e) {
