@@ -13,6 +13,7 @@
 #include <type_traits>
 
 #include "rcal/calibration_status_t.hpp"
+#include "rcal/clock_offset_t.hpp"
 #include "rcal/health_t.hpp"
 #include "rcal/ik_command_t.hpp"
 #include "rcal/ik_request_t.hpp"
@@ -20,6 +21,7 @@
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/joint_state_t.hpp"
 #include "rcal/kinematic_params_t.hpp"
+#include "rcal/next_poses_t.hpp"
 #include "rcal/orientation_estimate_t.hpp"
 #include "rcal/pose_measurement_t.hpp"
 #include "rcal/position_sample_t.hpp"
@@ -78,9 +80,9 @@ void Decode(const std::uint8_t* data, std::size_t size) {
   }
 }
 
-/// Decodes as the type with this index (mod 12).
+/// Decodes as the type with this index (mod 14).
 inline void DecodeAs(unsigned index, const std::uint8_t* data, std::size_t size) {
-  switch (index % 12) {
+  switch (index % 14) {
     case 0:
       return Decode<calibration_status_t>(data, size);
     case 1:
@@ -103,6 +105,10 @@ inline void DecodeAs(unsigned index, const std::uint8_t* data, std::size_t size)
       return Decode<position_sample_t>(data, size);
     case 10:
       return Decode<supervisor_state_t>(data, size);
+    case 12:
+      return Decode<clock_offset_t>(data, size);
+    case 13:
+      return Decode<next_poses_t>(data, size);
     default:
       return Decode<tool_position_estimate_t>(data, size);
   }
@@ -111,7 +117,7 @@ inline void DecodeAs(unsigned index, const std::uint8_t* data, std::size_t size)
 /// Decodes as the type the pipeline publishes on `channel` (pose_measurement_t if none).
 inline void DecodeChannel(std::string_view channel, const std::uint8_t* data, std::size_t size) {
   namespace ch = transport::channels;
-  const std::string_view names[12] = {ch::kCalibrationStatus,
+  const std::string_view names[14] = {ch::kCalibrationStatus,
                                       ch::kHealth,
                                       ch::kIkCommand,
                                       ch::kIkRequest,
@@ -122,8 +128,10 @@ inline void DecodeChannel(std::string_view channel, const std::uint8_t* data, st
                                       "",
                                       ch::kPosition,
                                       ch::kSupervisorState,
-                                      ch::kToolPosition};
-  for (unsigned i = 0; i < 12; ++i)
+                                      ch::kToolPosition,
+                                      ch::kClockOffset,
+                                      ch::kNextPoses};
+  for (unsigned i = 0; i < 14; ++i)
     if (!names[i].empty() && names[i] == channel) return DecodeAs(i, data, size);
   DecodeAs(8, data, size);
 }
