@@ -126,14 +126,7 @@ class Bridge {
  private:
   static dds_entity_t Writer(dds_entity_t participant, const dds_topic_descriptor_t* desc,
                              const char* name, const dds_qos_t* qos) {
-    const dds_entity_t topic = dds_create_topic(participant, desc, name, qos, nullptr);
-    if (topic < 0)
-      throw std::runtime_error(std::string("dds_create_topic ") + name + ": " +
-                               dds_strretcode(topic));
-    const dds_entity_t w = dds_create_writer(participant, topic, qos, nullptr);
-    if (w < 0)
-      throw std::runtime_error(std::string("dds_create_writer ") + name + ": " + dds_strretcode(w));
-    return w;
+    return dds::CreateEndpoint(participant, desc, name, qos, true);
   }
 
   void Reject(const std::string& reason) {

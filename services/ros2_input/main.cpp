@@ -23,6 +23,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <memory>
 
 #include "rcal/dds/dds_common.hpp"
 #include "rcal/dds/ros2_convert.hpp"
@@ -36,16 +37,6 @@
 namespace {
 
 using namespace rcal;
-
-// The ROS 2 sensor-data QoS (rclcpp::SensorDataQoS: best effort, volatile), a deeper history so
-// that a burst between two takes is not overwritten.
-dds_qos_t* SensorDataQos() {
-  dds_qos_t* q = dds_create_qos();
-  dds_qset_reliability(q, DDS_RELIABILITY_BEST_EFFORT, 0);
-  dds_qset_durability(q, DDS_DURABILITY_VOLATILE);
-  dds_qset_history(q, DDS_HISTORY_KEEP_LAST, 256);
-  return q;
-}
 
 struct Reader {
   std::string topic;  // the ROS 2 name
@@ -84,18 +75,11 @@ class LatencyHistogram {
 template <typename T>
 Reader MakeReader(dds_entity_t participant, const std::string& ros_topic,
                   std::function<void(const T&)> on) {
-  const std::string dds_topic = "rt" + ros_topic;
-  dds_qos_t* qos = SensorDataQos();
-  const dds_entity_t topic =
-      dds_create_topic(participant, dds::Descriptor<T>(), dds_topic.c_str(), qos, nullptr);
-  if (topic < 0) {
-    dds_delete_qos(qos);
-    throw std::runtime_error("dds_create_topic " + dds_topic + ": " + dds_strretcode(topic));
-  }
-  const dds_entity_t reader = dds_create_reader(participant, topic, qos, nullptr);
-  dds_delete_qos(qos);
-  if (reader < 0)
-    throw std::runtime_error("dds_create_reader " + dds_topic + ": " + dds_strretcode(reader));
+  // A deep history: a burst between two takes is not overwritten.
+  const std::unique_ptr<dds_qos_t, void (*)(dds_qos_t*)> qos(dds::SensorDataQos(256),
+                                                             dds_delete_qos);
+  const dds_entity_t reader = dds::CreateEndpoint(participant, dds::Descriptor<T>(),
+                                                  dds::DdsTopicName(ros_topic), qos.get(), false);
   Reader r;
   r.topic = ros_topic;
   r.reader = reader;

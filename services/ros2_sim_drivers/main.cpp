@@ -18,6 +18,7 @@
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
+#include <memory>
 #include <numeric>
 #include <random>
 #include <thread>
@@ -36,22 +37,12 @@ namespace {
 
 using namespace rcal;
 
+// What ROS 2 sensor drivers publish with (rclcpp::SensorDataQoS: best effort, keep last 5).
 template <typename T>
 dds_entity_t Writer(dds_entity_t participant, const std::string& ros_topic) {
-  const std::string name = "rt" + ros_topic;
-  dds_qos_t* qos = dds_create_qos();
-  // What ROS 2 sensor drivers use (rclcpp::SensorDataQoS): best effort, keep last 5.
-  dds_qset_reliability(qos, DDS_RELIABILITY_BEST_EFFORT, 0);
-  dds_qset_history(qos, DDS_HISTORY_KEEP_LAST, 5);
-  const dds_entity_t topic =
-      dds_create_topic(participant, dds::Descriptor<T>(), name.c_str(), qos, nullptr);
-  if (topic < 0) {
-    dds_delete_qos(qos);
-    throw std::runtime_error("dds_create_topic " + name + ": " + dds_strretcode(topic));
-  }
-  const dds_entity_t w = dds_create_writer(participant, topic, qos, nullptr);
-  dds_delete_qos(qos);
-  if (w < 0) throw std::runtime_error("dds_create_writer " + name + ": " + dds_strretcode(w));
+  const std::unique_ptr<dds_qos_t, void (*)(dds_qos_t*)> qos(dds::SensorDataQos(5), dds_delete_qos);
+  const dds_entity_t w = dds::CreateEndpoint(participant, dds::Descriptor<T>(),
+                                             dds::DdsTopicName(ros_topic), qos.get(), true);
   return w;
 }
 

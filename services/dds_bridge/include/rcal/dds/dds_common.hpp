@@ -23,6 +23,22 @@ dds_qos_t* LatchedQos();
 /// the newest pose, never a backlog). The caller owns the result (dds_delete_qos).
 dds_qos_t* StreamQos();
 
+/// The ROS 2 sensor-data QoS (rclcpp::SensorDataQoS: best effort, volatile, keep last `depth`),
+/// what ROS 2 sensor drivers publish with and ros2_input reads with (a deep history there, so a
+/// burst between two takes is not overwritten). StreamQos() is this with depth 1. The caller owns
+/// the result (dds_delete_qos).
+dds_qos_t* SensorDataQos(int depth);
+
+/// The ROS 2 topic name /x as its DDS topic name rt/x.
+inline std::string DdsTopicName(const std::string& ros_topic) {
+  return "rt" + ros_topic;
+}
+
+/// A topic and a writer (`writer` true) or reader on it, `qos` for both. Throws
+/// std::runtime_error naming the topic and Cyclone's return code.
+dds_entity_t CreateEndpoint(dds_entity_t participant, const dds_topic_descriptor_t* desc,
+                            const std::string& topic_name, const dds_qos_t* qos, bool writer);
+
 /// The repository's loopback-only configuration: config/cyclonedds-loopback.xml as a file://
 /// URI (found next to the working directory or in the source tree the binary was built from).
 /// Throws std::runtime_error naming the path when the file does not exist.
