@@ -199,24 +199,23 @@ class Bridge {
 
   void OnClock(const clock_offset_t& m) {
     health_.Received();
-    const auto n = static_cast<size_t>(std::max(m.num_sources, 0));
-    if (m.source.size() != n || m.state.size() != n || m.offset.size() != n || m.sigma.size() != n)
-      return Reject("clock_offset: sizes disagree with num_sources");
+    std::string error;
+    const auto clocks = transport::ClockOffsetsFromMessage(m, &error);
+    if (!clocks) return Reject(error);
     health_t h{};
     h.utime = m.utime;
     h.process = "clock_offsets";
     dds::DiagnosticEntry e{h, dds::DiagnosticLevel::kOk, {}};
-    static const char* kState[] = {"unknown", "estimating", "locked", "fixed"};
-    for (size_t i = 0; i < n; ++i) {
-      const int st = m.state[i] >= 0 && m.state[i] <= 3 ? m.state[i] : 0;
-      if (st < 2) e.level = dds::DiagnosticLevel::kWarn;
-      e.extra.emplace_back(m.source[i] + ".state", kState[st]);
-      e.extra.emplace_back(m.source[i] + ".offset_s", std::to_string(m.offset[i]));
-      e.extra.emplace_back(m.source[i] + ".sigma_s", std::to_string(m.sigma[i]));
+    for (const transport::SourceClock& c : *clocks) {
+      if (!c.fixed && c.offset.state != estimation::ClockState::kLocked)
+        e.level = dds::DiagnosticLevel::kWarn;
+      e.extra.emplace_back(c.source + ".state",
+                           c.fixed ? "fixed" : estimation::ClockStateName(c.offset.state));
+      e.extra.emplace_back(c.source + ".offset_s", std::to_string(c.offset.offset_s));
+      e.extra.emplace_back(c.source + ".sigma_s", std::to_string(c.offset.sigma_s));
     }
     e.health.last_error =
         e.level == dds::DiagnosticLevel::kOk ? "" : "a clock offset is not locked";
-    std::string error;
     Write(diagnostics_w_, dds::ToRos({e}, o_.robot_id, m.utime, &error), error, "diagnostics");
   }
 

@@ -168,33 +168,23 @@ class StillWindowNode {
   }
   void OnClock(const clock_offset_t& m) {
     health_.Received();
-    const auto n = static_cast<size_t>(std::max(m.num_sources, 0));
-    if (m.source.size() != n || m.state.size() != n || m.offset.size() != n || m.sigma.size() != n)
-      return Bad("clock_offset: sizes disagree with num_sources");
-    for (size_t i = 0; i < n; ++i)
-      if (std::isnan(m.sigma[i]) || !std::isfinite(m.offset[i]) || m.state[i] < 0 || m.state[i] > 3)
-        return Bad("clock_offset." + m.source[i] + ": not finite or unknown state");
-    clock_ = m;
+    std::string error;
+    auto clocks = transport::ClockOffsetsFromMessage(m, &error);
+    if (!clocks) return Bad(error);
+    clocks_ = std::move(*clocks);
   }
   // Why a window of `length_s` may not be formed with the clocks as they are ("" when it may):
   // estimation::MayFormStillWindow for every source whose offset is estimated.
   std::string ClockVeto(double length_s) const {
-    if (!clock_) return "";
-    for (int i = 0; i < clock_->num_sources; ++i) {
-      if (clock_->state[i] == 3) continue;  // fixed: one clock
-      estimation::ClockOffset o;
-      o.state = clock_->state[i] == 2   ? estimation::ClockState::kLocked
-                : clock_->state[i] == 1 ? estimation::ClockState::kEstimating
-                                        : estimation::ClockState::kUnknown;
-      o.usable = o.state == estimation::ClockState::kLocked;
-      o.offset_s = clock_->offset[i];
-      o.sigma_s = clock_->sigma[i];
-      const auto source = clock_->source[i] == "imu" ? estimation::ClockSource::kImu
-                                                     : estimation::ClockSource::kMarker;
+    if (!clocks_) return "";
+    for (const transport::SourceClock& c : *clocks_) {
+      if (c.fixed) continue;  // one clock
+      const auto source =
+          c.source == "imu" ? estimation::ClockSource::kImu : estimation::ClockSource::kMarker;
       if (const estimation::Status st =
-              estimation::MayFormStillWindow(o, source, length_s, clock_fraction_);
+              estimation::MayFormStillWindow(c.offset, source, length_s, clock_fraction_);
           !st.ok())
-        return clock_->source[i] + ": " + st.error();
+        return c.source + ": " + st.error();
     }
     return "";
   }
@@ -224,7 +214,8 @@ class StillWindowNode {
 
   estimation::PosePipeline pipeline_;
   double clock_fraction_;
-  std::optional<clock_offset_t> clock_;  // the input's latest CLOCK_OFFSET, if it sends one
+  // The input's latest CLOCK_OFFSET, if it sends one.
+  std::optional<std::vector<transport::SourceClock>> clocks_;
   double warmup_;
   Eigen::Matrix3d R_IS_;
   io::CellChannels channels_;

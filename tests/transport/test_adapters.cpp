@@ -334,5 +334,54 @@ TEST(JointStateAdapter, NamesFromTheModel) {
   EXPECT_EQ(msg.dq, std::vector<double>(6, 0.0));
 }
 
+// CLOCK_OFFSET → the sources' clocks (ros2_input's message, read by still_window and dds_bridge).
+TEST(ClockOffsetAdapter, SourcesAndRefusals) {
+  clock_offset_t m{};
+  m.utime = 5;
+  m.num_sources = 3;
+  m.source = {"imu", "position/0", "position/2"};
+  m.state = {2, 1, 3};
+  m.offset = {0.037, -0.12, 0.0};
+  m.sigma = {7e-4, 0.02, 0.0};
+  m.resets = {1, 0, 0};
+  std::string error;
+  const auto c = ClockOffsetsFromMessage(m, &error);
+  ASSERT_TRUE(c) << error;
+  ASSERT_EQ(c->size(), 3u);
+  EXPECT_EQ((*c)[0].source, "imu");
+  EXPECT_EQ((*c)[0].offset.state, estimation::ClockState::kLocked);
+  EXPECT_TRUE((*c)[0].offset.usable);
+  EXPECT_EQ((*c)[0].offset.offset_s, 0.037);
+  EXPECT_EQ((*c)[0].offset.sigma_s, 7e-4);
+  EXPECT_EQ((*c)[0].resets, 1);
+  EXPECT_EQ((*c)[1].offset.state, estimation::ClockState::kEstimating);
+  EXPECT_FALSE((*c)[1].offset.usable);
+  EXPECT_TRUE((*c)[2].fixed);
+  // Unknown: σ = +inf is allowed.
+  m.state[1] = 0;
+  m.sigma[1] = std::numeric_limits<double>::infinity();
+  EXPECT_TRUE(ClockOffsetsFromMessage(m, &error));
+  auto bad = m;
+  bad.state[2] = 7;
+  EXPECT_FALSE(ClockOffsetsFromMessage(bad, &error));
+  EXPECT_EQ(error, "clock_offset.source[2] (position/2).state: 7 is not 0 to 3");
+  bad = m;
+  bad.offset[0] = std::nan("");
+  EXPECT_FALSE(ClockOffsetsFromMessage(bad, &error));
+  EXPECT_EQ(error, "clock_offset.source[0] (imu).offset: not finite");
+  bad = m;
+  bad.sigma[0] = -1;
+  EXPECT_FALSE(ClockOffsetsFromMessage(bad, &error));
+  EXPECT_EQ(error, "clock_offset.source[0] (imu).sigma: NaN or negative");
+  bad = m;
+  bad.resets.pop_back();
+  EXPECT_FALSE(ClockOffsetsFromMessage(bad, &error));
+  EXPECT_EQ(error, "clock_offset.num_sources: 3, the arrays disagree");
+  bad = m;
+  bad.num_sources = -1;
+  EXPECT_FALSE(ClockOffsetsFromMessage(bad, &error));
+  EXPECT_EQ(error, "clock_offset.num_sources: -1 is not 0 to 4096");
+}
+
 }  // namespace
 }  // namespace rcal::transport

@@ -293,4 +293,39 @@ ik_command_t ToIkCommand(const ik_request_t& request, const ik::IkResult& calibr
   return msg;
 }
 
+// ---- clock offsets ----------------------------------------------------------------------------
+
+std::optional<std::vector<SourceClock>> ClockOffsetsFromMessage(const clock_offset_t& m,
+                                                                std::string* error) {
+  auto fail = [&](const std::string& why) {
+    if (error) *error = "clock_offset." + why;
+    return std::nullopt;
+  };
+  if (m.num_sources < 0 || m.num_sources > 4096)
+    return fail("num_sources: " + std::to_string(m.num_sources) + " is not 0 to 4096");
+  const auto n = static_cast<size_t>(m.num_sources);
+  if (m.source.size() != n || m.state.size() != n || m.offset.size() != n || m.sigma.size() != n ||
+      m.resets.size() != n)
+    return fail("num_sources: " + std::to_string(n) + ", the arrays disagree");
+  std::vector<SourceClock> out(n);
+  for (size_t i = 0; i < n; ++i) {
+    const std::string at = "source[" + std::to_string(i) + "] (" + m.source[i] + ")";
+    if (m.state[i] < 0 || m.state[i] > 3)
+      return fail(at + ".state: " + std::to_string(m.state[i]) + " is not 0 to 3");
+    if (!std::isfinite(m.offset[i])) return fail(at + ".offset: not finite");
+    if (std::isnan(m.sigma[i]) || m.sigma[i] < 0) return fail(at + ".sigma: NaN or negative");
+    SourceClock& c = out[i];
+    c.source = m.source[i];
+    c.fixed = m.state[i] == 3;
+    c.resets = m.resets[i];
+    c.offset.state = m.state[i] == 2   ? estimation::ClockState::kLocked
+                     : m.state[i] == 1 ? estimation::ClockState::kEstimating
+                                       : estimation::ClockState::kUnknown;
+    c.offset.usable = c.offset.state == estimation::ClockState::kLocked;
+    c.offset.offset_s = m.offset[i];
+    c.offset.sigma_s = m.sigma[i];
+  }
+  return out;
+}
+
 }  // namespace rcal::transport

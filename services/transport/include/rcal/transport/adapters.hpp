@@ -13,6 +13,8 @@
 #include <vector>
 
 #include "rcal/calibration_status_t.hpp"
+#include "rcal/clock_offset_t.hpp"
+#include "rcal/estimation/clock_offset.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
 #include "rcal/ik/levenberg_marquardt_ik.hpp"
 #include "rcal/ik_command_t.hpp"
@@ -115,5 +117,20 @@ ik_request_t ToMessage(const IkQuery& query, int64_t utime);
 ik_command_t ToIkCommand(const ik_request_t& request, const ik::IkResult& calibrated,
                          const ik::IkResult& nominal, double nominal_tool_error,
                          int64_t params_utime);
+
+// ---- clock offsets ----------------------------------------------------------------------------
+
+/// One source of CLOCK_OFFSET: its name, whether it shares the joints' clock (`fixed`: no offset
+/// estimated), else the estimate as estimation::ClockOffset (state, offset [s], σ [s]).
+struct SourceClock {
+  std::string source;
+  bool fixed = false;
+  estimation::ClockOffset offset;
+  int32_t resets = 0;
+};
+/// CLOCK_OFFSET → its sources. Checks: 0 ≤ num_sources ≤ 4096 and every array that long, finite
+/// offsets, σ ≥ 0 (+inf: unknown), state 0 to 3 (clock_offset.lcm); the reason names the field.
+std::optional<std::vector<SourceClock>> ClockOffsetsFromMessage(const clock_offset_t& msg,
+                                                                std::string* error);
 
 }  // namespace rcal::transport
