@@ -10,6 +10,7 @@
 // fields are read from; the stream ends when the bytes do.
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <limits>
@@ -93,7 +94,11 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     resyncs = health.resyncs();
     for (const auto& e : in.Ready(flush)) {
       const std::int64_t u = sensors::Utime(e);
-      if (u < last_out) std::abort();  // the pipeline needs one time order
+      if (u < last_out) {
+        std::fprintf(stderr, "out of order: %lld µs after %lld µs\n", static_cast<long long>(u),
+                     static_cast<long long>(last_out));
+        std::abort();  // the pipeline needs one time order
+      }
       last_out = u;
     }
   };

@@ -14,8 +14,14 @@ namespace {
 
 constexpr uint32_t kMaxJoints = 4096;  // a JointState longer than this is not an arm's
 
+// A driver's stamp: ROS time is never negative (rclcpp refuses it), so a negative second is a
+// broken driver, not a time before 1970.
 std::optional<int64_t> Stamp(const std_msgs_msg_dds__Header_& h, const std::string& topic,
                              std::string* error) {
+  if (h.stamp.sec < 0)
+    return Fail(error,
+                topic + ".header.stamp.sec: " + std::to_string(h.stamp.sec) + " is negative"),
+           std::nullopt;
   return UtimeFromStamp(h.stamp, topic + ".header.stamp", error);
 }
 

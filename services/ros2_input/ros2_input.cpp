@@ -201,10 +201,14 @@ bool Ros2Input::Admit(Stream& st, int64_t utime, int clock_source) {
   if (!estimation::Usable(v)) return false;
   if (v == estimation::TimeVerdict::kResynchronised) {
     // A restarted driver: its clock is a new one.
-    if (&st == &joints_)
+    if (&st == &joints_) {
+      // The arm's clock is the pipeline's: what waits in the buffer belongs to the old time base.
       clocks_->ResetAll();
-    else if (clock_source >= 0)
+      queue_.clear();
+      released_ = newest_ = std::numeric_limits<int64_t>::min();
+    } else if (clock_source >= 0) {
       clocks_->Reset(clock_source);
+    }
   }
   return true;
 }
@@ -223,6 +227,8 @@ void Ros2Input::Queue(int64_t utime, sensors::SensorEvent e) {
 
 std::vector<sensors::SensorEvent> Ros2Input::Ready(bool flush) {
   std::vector<sensors::SensorEvent> out;
+  // newest_ is a real stamp (|utime| < 2.2e15 µs: int32 seconds) once anything was queued.
+  if (queue_.empty()) return out;
   const int64_t until =
       flush ? std::numeric_limits<int64_t>::max() : newest_ - std::llround(s_.reorder_delay * 1e6);
   while (!queue_.empty() && queue_.begin()->first.first <= until) {
@@ -239,11 +245,6 @@ void Ros2Input::OnJointState(const dds::JointState& m) {
   auto js = dds::FromRos(m, names_, s_.joint_topic, &error);
   if (!js) return Refuse(error);
   if (!Admit(joints_, js->utime, -1)) return;
-  if (js->utime < joints_utime_) {
-    // The arm's clock restarted: what waits in the buffer belongs to the old time base.
-    queue_.clear();
-    released_ = newest_ = std::numeric_limits<int64_t>::min();
-  }
   joints_utime_ = js->utime;
   clocks_->SetJointVelocities(m.velocity._length > 0);
   clocks_->PushJoints(js->utime, *js);

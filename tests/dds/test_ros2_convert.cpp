@@ -81,6 +81,10 @@ TEST(Ros2Convert, BadJointStatesAreRefusedNamingTheField) {
     EXPECT_FALSE(FromRos(ros->get(), map, "joint_states", &error));
     EXPECT_EQ(error, "joint_states.header.stamp.nanosec: 1000000000 is not below 1e9");
     ros->get().header.stamp.nanosec = 0;
+    ros->get().header.stamp.sec = -3;  // ROS time is never negative
+    EXPECT_FALSE(FromRos(ros->get(), map, "joint_states", &error));
+    EXPECT_EQ(error, "joint_states.header.stamp.sec: -3 is negative");
+    ros->get().header.stamp.sec = 0;
     // The same joint twice.
     dds_free(ros->get().name._buffer[4]);
     ros->get().name._buffer[4] = dds_string_dup("elbow");
