@@ -9,6 +9,8 @@
 #include <limits>
 #include <random>
 
+#include "rcal/sim/draw.hpp"
+
 namespace rcal::dds {
 namespace {
 
@@ -176,7 +178,8 @@ TEST(Ros2Convert, TransformsRoundTrip) {
     t.parent = "rcal_world";
     t.child = child;
     t.p_PC_P = {g(rng), g(rng), g(rng)};
-    t.q_PC = Eigen::Quaterniond(g(rng), g(rng), g(rng), g(rng)).normalized();
+    const Eigen::Vector4d q_wxyz = sim::Draw4(g, rng);
+    t.q_PC = Eigen::Quaterniond(q_wxyz(0), q_wxyz(1), q_wxyz(2), q_wxyz(3)).normalized();
     in.push_back(t);
   }
   std::string error;

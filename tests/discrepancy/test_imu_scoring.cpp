@@ -3,6 +3,7 @@
 // total 2 acos(cos(ψ/2) cos(φ/2)); the quaternions are built with Eigen, not with rcal's own
 // quaternion code. Sign and scale of the quaternions do not matter; half turns are finite.
 #include "rcal/discrepancy/imu_scoring.hpp"
+#include "rcal/sim/draw.hpp"
 
 #include <gtest/gtest.h>
 
@@ -31,8 +32,8 @@ Eigen::Quaterniond Error(double psi, double phi, double beta) {
 
 Eigen::Quaterniond RandomRotation(std::mt19937& rng) {
   std::normal_distribution<double> n(0.0, 1.0);
-  Eigen::Quaterniond q(n(rng), n(rng), n(rng), n(rng));
-  return q.normalized();
+  const Eigen::Vector4d q_wxyz = sim::Draw4(n, rng);
+  return Eigen::Quaterniond(q_wxyz(0), q_wxyz(1), q_wxyz(2), q_wxyz(3)).normalized();
 }
 
 TEST(ImuScoring, HeadingInclinationAndTotalOfAnEarthFrameErrorMatchTheClosedForm) {

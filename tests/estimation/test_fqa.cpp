@@ -9,6 +9,7 @@
 
 #include "rcal/geometry/so3.hpp"
 #include "rcal/io/csv_table.hpp"
+#include "rcal/sim/draw.hpp"
 
 namespace rcal::estimation {
 namespace {
@@ -23,7 +24,7 @@ double QuatAngle(const Eigen::Vector4d& a, const Eigen::Vector4d& b) {
 
 Eigen::Matrix3d RandomRotation(std::mt19937_64& rng) {
   std::normal_distribution<double> n(0.0, 1.0);
-  Eigen::Vector4d q(n(rng), n(rng), n(rng), n(rng));
+  Eigen::Vector4d q = sim::Draw4(n, rng);
   return geometry::QuatToMatrix(q.normalized());
 }
 
@@ -115,7 +116,7 @@ TEST(Fqa, MagnetometerDoesNotChangeTilt) {
   const Eigen::Vector3d f_B(1.0, -2.0, -9.3);
   const Eigen::Vector3d up_N(0, 0, -1);
   for (int i = 0; i < 500; ++i) {
-    const Eigen::Vector3d m_B(n(rng), n(rng), n(rng));
+    const Eigen::Vector3d m_B = sim::Draw3(n, rng);
     const auto q = Fqa(f_B, m_B);
     if (!q.ok()) continue;
     // The measured gravity direction must map exactly onto the vertical, whatever m_B is.

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <numbers>
@@ -12,6 +13,7 @@
 
 #include "rcal/geometry/so3.hpp"
 #include "rcal/io/csv_table.hpp"
+#include "rcal/sim/draw.hpp"
 
 namespace rcal::estimation {
 namespace {
@@ -39,7 +41,7 @@ struct Sim {
     const double dip = 60 * kDeg;
     m_E = 45.0 * (std::cos(dip) * MagneticNorth(earth) - std::sin(dip) * UpVector(earth));
     Eigen::Matrix3d R = geometry::FromRpy(0.2, -0.1, 1.0);
-    Eigen::Vector3d phase(N(rng), N(rng), N(rng));
+    Eigen::Vector3d phase = sim::Draw3(N, rng);
     for (int k = 0; k < n; ++k) {
       const double tk = k * dt;
       Eigen::Vector3d w_mean = Eigen::Vector3d::Zero();
@@ -57,10 +59,9 @@ struct Sim {
       }
       t.push_back(tk);
       R_EB.push_back(R);
-      gyro.push_back(w_mean + bias + sigma_gyro * Eigen::Vector3d(N(rng), N(rng), N(rng)));
-      acc.push_back(R.transpose() * (kG * UpVector(earth)) +
-                    sigma_acc * Eigen::Vector3d(N(rng), N(rng), N(rng)));
-      mag.push_back(R.transpose() * m_E + sigma_mag * Eigen::Vector3d(N(rng), N(rng), N(rng)));
+      gyro.push_back(w_mean + bias + sigma_gyro * sim::Draw3(N, rng));
+      acc.push_back(R.transpose() * (kG * UpVector(earth)) + sigma_acc * sim::Draw3(N, rng));
+      mag.push_back(R.transpose() * m_E + sigma_mag * sim::Draw3(N, rng));
     }
   }
 };
@@ -103,13 +104,28 @@ double WorstErrorAfter(const Sim& sim, const OrientationKfSettings& s, size_t fr
   return worst;
 }
 
+// The RMS tilt error [rad] (the horizontal part of δθ_E) of a filter with settings s over sim
+// from sample `from` on.
+double RmsTiltAfter(const Sim& sim, const OrientationKfSettings& s, size_t from) {
+  OrientationKf kf(s);
+  double sum = 0;
+  size_t n = 0;
+  for (size_t k = 0; k < sim.t.size(); ++k) {
+    EXPECT_TRUE(kf.Update(sim.t[k], sim.gyro[k], sim.acc[k], sim.mag[k]).ok());
+    if (k < from) continue;
+    sum += AttitudeError(kf, sim.R_EB[k]).head<2>().squaredNorm();
+    ++n;
+  }
+  return std::sqrt(sum / static_cast<double>(n));
+}
+
 TEST(PaperPhiOri, Row2ErratumMatchesFiniteDifferenceOfQuaternionKinematics) {
   std::mt19937_64 rng(3);
   std::normal_distribution<double> N(0.0, 1.0);
   const double dt = 0.01;
   for (int i = 0; i < 20; ++i) {
-    const Eigen::Vector4d q = Eigen::Vector4d(N(rng), N(rng), N(rng), N(rng)).normalized();
-    const Eigen::Vector3d w(N(rng), N(rng), N(rng));
+    const Eigen::Vector4d q = sim::Draw4(N, rng).normalized();
+    const Eigen::Vector3d w = sim::Draw3(N, rng);
     // One Euler step of q̇ = ½ q ⊗ [0, ω]; Φ's columns 5–7 are its derivative in ω.
     auto step = [&](const Eigen::Vector3d& ww) {
       return Eigen::Vector4d(
@@ -234,7 +250,7 @@ TEST(OrientationKf, RejectsAccelerationBurstsAndMagneticDisturbance) {
 TEST(OrientationKf, LearnsBiasAndMagneticReferenceAtRestOnly) {
   std::mt19937_64 rng(17);
   std::normal_distribution<double> N(0.0, 1.0);
-  auto n3 = [&] { return Eigen::Vector3d(N(rng), N(rng), N(rng)); };
+  auto n3 = [&] { return sim::Draw3(N, rng); };
   const EarthFrame earth = EarthFrame::kNed;
   const double dip = 60 * kDeg;
   const Eigen::Vector3d m_E =
@@ -373,50 +389,73 @@ TEST(OrientationKf, ResetsWhenTheStateGoesNonFinite) {
 
 // BROAD trial 02 (real IMU, optical truth) with the default settings, scored as the benchmark
 // scores. Thresholds: the published Madgwick figures for this trial (1.50 / 1.26 / 0.80°).
-// Issue 17: the accelerometer weighted by motion. Linear accelerations of 3.6 m/s² (one 1 Hz
-// period on, one off; the norm test is off here) bend the measured gravity, and the 3 s
-// low-pass does not average a period away; weighting the tilt rows by |f_B − f̄_B| keeps the
-// tilt closer to the truth than the same filter trusting every sample alike.
-TEST(OrientationKf, MotionWeightedAccelerometerKeepsTiltThroughLinearAcceleration) {
-  Sim sim;
-  sim.Run(6000, 11);
-  for (int k = 1000; k < 6000; ++k)
-    if ((k / 100) % 2 == 0)
-      sim.acc[k] += sim.R_EB[k].transpose() * Eigen::Vector3d(3.0, -2.0, 0.0) *
-                    std::sin(k * sim.dt * 2.0 * std::numbers::pi);
-  OrientationKfSettings s = MatchedSettings(sim);
-  s.accel_lowpass_tau = 3.0;
-  auto tilt = [](const Eigen::Vector3d& e) { return e.head<2>().norm(); };
-  const double plain = WorstErrorAfter(sim, s, 1000, tilt);
-  s.tilt_motion_accel = 0.3;
-  const double weighted = WorstErrorAfter(sim, s, 1000, tilt);
-  std::printf("worst tilt: %.3f° trusting every sample, %.3f° weighted by motion\n", plain / kDeg,
-              weighted / kDeg);
-  // Measured (seed 11): 2.54° → 2.00°. What is left is the low-pass's memory of each period
-  // after it ends, where the accelerometer is trusted again.
-  EXPECT_LT(weighted, 0.85 * plain);
+// Issue 17: the accelerometer weighted by motion, σ_tilt inflated by |f_B − f̄_B| (the raw
+// specific force's departure from its low-pass). Linear accelerations of 3.6 m/s² (one 1 Hz period
+// on, one off) bend the measured gravity. Over 16 trajectories the weighting does not keep the
+// tilt closer to the truth than the same filter trusting every sample alike: what the update uses
+// is the low-passed force, which a 3 s low-pass already holds near gravity, and the weighting
+// takes trust away exactly while the raw force swings. This is why the default leaves it off and
+// why `rcal fuse-loo` (leave-one-trial-out on BROAD) leaves it off too. An earlier version of this
+// test claimed a gain on one trajectory (seed 11: 2.54° → 2.00° worst) that was the exception:
+// clang, drawing that seed's noise in another order, read 1.79° → 3.86°.
+TEST(OrientationKf, MotionWeightedAccelerometerDoesNotBeatTrustingEverySample) {
+  EXPECT_EQ(OrientationKfSettings{}.tilt_motion_accel, 0.0);
+  std::vector<double> ratios;
+  for (int seed = 1; seed <= 16; ++seed) {
+    Sim sim;
+    sim.Run(6000, seed);
+    for (int k = 1000; k < 6000; ++k)
+      if ((k / 100) % 2 == 0)
+        sim.acc[k] += sim.R_EB[k].transpose() * Eigen::Vector3d(3.0, -2.0, 0.0) *
+                      std::sin(k * sim.dt * 2.0 * std::numbers::pi);
+    OrientationKfSettings s = MatchedSettings(sim);
+    s.accel_lowpass_tau = 3.0;
+    const double plain = RmsTiltAfter(sim, s, 1000);
+    s.tilt_motion_accel = 0.3;
+    const double weighted = RmsTiltAfter(sim, s, 1000);
+    ratios.push_back(weighted / plain);
+  }
+  std::sort(ratios.begin(), ratios.end());
+  const double median = 0.5 * (ratios[7] + ratios[8]);
+  std::printf(
+      "RMS tilt weighted by motion / trusting every sample, 16 seeds: median %.3f, "
+      "best %.3f, worst %.3f\n",
+      median, ratios.front(), ratios.back());
+  // Measured: median 1.35 (0.72–3.49 over 24 seeds).
+  EXPECT_GT(median, 1.0);
 }
 
 // Issue 17: a field disturbed within the rejection gate (3 µT east and 3 µT down in NED: the
 // norm moves by ~2.6 µT of 45, 58 % of the 10 % tolerance; the dip by ~1.9° of 4.6°) turns the
 // horizontal field by 7.6°; weighting each accepted sample down by its disturbance evidence
-// (its departure from the reference in units of the tolerance) keeps heading closer.
+// (its departure from the reference in units of the tolerance) keeps heading closer, on every one
+// of 16 trajectories.
 TEST(OrientationKf, DisturbanceEvidenceWeightsTheMagnetometerDown) {
-  Sim sim;
-  sim.Run(6000, 13);
-  for (int k = 3000; k < 4500; ++k)
-    sim.mag[k] += sim.R_EB[k].transpose() * Eigen::Vector3d(0.0, 3.0, 3.0);
-  OrientationKfSettings s = MatchedSettings(sim);
-  s.reject_mag = true;
-  s.mag_norm_tolerance = 0.1;
-  s.mag_dip_tolerance = 0.08;
   auto heading = [](const Eigen::Vector3d& e) { return std::abs(e.z()); };
-  const double plain = WorstErrorAfter(sim, s, 1000, heading);
-  s.mag_evidence_inflation = 100.0;
-  const double weighted = WorstErrorAfter(sim, s, 1000, heading);
-  std::printf("worst heading: %.3f° plain, %.3f° weighted by evidence\n", plain / kDeg,
-              weighted / kDeg);
-  EXPECT_LT(weighted, 0.5 * plain);  // measured (seed 13): 5.86° → 0.78°
+  std::vector<double> ratios;
+  for (int seed = 1; seed <= 16; ++seed) {
+    Sim sim;
+    sim.Run(6000, seed);
+    for (int k = 3000; k < 4500; ++k)
+      sim.mag[k] += sim.R_EB[k].transpose() * Eigen::Vector3d(0.0, 3.0, 3.0);
+    OrientationKfSettings s = MatchedSettings(sim);
+    s.reject_mag = true;
+    s.mag_norm_tolerance = 0.1;
+    s.mag_dip_tolerance = 0.08;
+    const double plain = WorstErrorAfter(sim, s, 1000, heading);
+    s.mag_evidence_inflation = 100.0;
+    const double weighted = WorstErrorAfter(sim, s, 1000, heading);
+    ratios.push_back(weighted / plain);
+  }
+  std::sort(ratios.begin(), ratios.end());
+  const double median = 0.5 * (ratios[7] + ratios[8]);
+  std::printf(
+      "worst heading weighted by evidence / plain, 16 seeds: median %.3f, best %.3f, "
+      "worst %.3f\n",
+      median, ratios.front(), ratios.back());
+  // Measured: median 0.133, 0.098–0.147 (about 6° → 0.8° worst on every seed).
+  EXPECT_LT(median, 0.25);
+  EXPECT_LT(ratios.back(), 0.4);
 }
 
 TEST(OrientationKf, BeatsMadgwickOnBroadTrial02) {

@@ -17,6 +17,7 @@
 #include "rcal/cell/sim_cell.hpp"
 #include "rcal/geometry/so3.hpp"
 #include "rcal/io/robot_urdf.hpp"
+#include "rcal/sim/draw.hpp"
 #include "rcal/sim/pose_sim.hpp"
 #include "rcal/sim/sensor_sim.hpp"
 #include "rcal/sim/trajectory.hpp"
@@ -50,7 +51,7 @@ Outcome Simulate(int num_stops, unsigned seed, double still_s = 1.5, double move
   std::mt19937_64 rng(seed), rng_loss(seed + 1000);
   std::bernoulli_distribution lost(position_loss);
   std::normal_distribution<double> n(0, 1);
-  auto n3 = [&] { return Eigen::Vector3d(n(rng), n(rng), n(rng)); };
+  auto n3 = [&] { return sim::Draw3(n, rng); };
   const double dt = 0.01;
   const Eigen::Vector3d g_E(0, 0, 9.81), m_E(20, 0, 44);
   const double sg = 0.01 * M_PI / 180 * 10, sa = 60e-6 * 9.81 * 10, sm = 0.02 * 10, sp = 5e-4;

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "rcal/geometry/so3.hpp"
+#include "rcal/sim/draw.hpp"
 
 namespace rcal::estimation {
 namespace {
@@ -79,19 +80,18 @@ SimRun Simulate(std::uint64_t seed, const std::vector<int>& outlier_steps,
           std::pow(dt, 3) / 3, dt * dt / 2, std::pow(dt, 3) / 6, dt * dt / 2, dt;
       const Eigen::Matrix3d L = (q * Q).llt().matrixL();
       for (int i = 0; i < 3; ++i) {
-        const Eigen::Vector3d w = L * Eigen::Vector3d(N(rng), N(rng), N(rng));
+        const Eigen::Vector3d w = L * sim::Draw3(N, rng);
         p(i) += v(i) * dt + a(i) * dt * dt / 2 + w(0);
         v(i) += a(i) * dt + w(1);
         a(i) += w(2);
       }
     }
     const Eigen::Matrix3d R_EB = geometry::FromRpy(0.1 * std::sin(t), 0.2, 0.3 * t);
-    const Eigen::Vector3d f_B =
-        R_EB.transpose() * (a + kG * UpVector(EarthFrame::kEnu) +
-                            s.accel_sigma * Eigen::Vector3d(N(rng), N(rng), N(rng)));
+    const Eigen::Vector3d f_B = R_EB.transpose() * (a + kG * UpVector(EarthFrame::kEnu) +
+                                                    s.accel_sigma * sim::Draw3(N, rng));
     EXPECT_TRUE(kf.UpdateAccel(t, f_B, R_EB).ok());
     if (k % 5 == 0) {  // 20 Hz position sensor
-      Eigen::Vector3d z = p + s.position_sigma * Eigen::Vector3d(N(rng), N(rng), N(rng));
+      Eigen::Vector3d z = p + s.position_sigma * sim::Draw3(N, rng);
       const bool outlier =
           std::find(outlier_steps.begin(), outlier_steps.end(), k) != outlier_steps.end();
       if (outlier) z += Eigen::Vector3d(0.05, -0.03, 0.02);  // a marker glitch: 50σ
@@ -215,11 +215,10 @@ TEST(PositionKf, EstimatesTheImuToMarkerLeverArm) {
       const Eigen::Vector3d omega_B(W(2, 1), W(0, 2), W(1, 0));
       const Eigen::Vector3d a_I = -Rddot * r_true;
       const Eigen::Vector3d g_E(0, 0, -kG);
-      const Eigen::Vector3d f_B =
-          R.transpose() * (a_I - g_E) + Eigen::Vector3d(n_acc(rng), n_acc(rng), n_acc(rng));
+      const Eigen::Vector3d f_B = R.transpose() * (a_I - g_E) + sim::Draw3(n_acc, rng);
       EXPECT_TRUE(kf.UpdateAccel(t, f_B, R, omega_B).ok());
       if (k % 5 == 0) {
-        EXPECT_TRUE(kf.UpdatePosition(t, Eigen::Vector3d(n_pos(rng), n_pos(rng), n_pos(rng))).ok());
+        EXPECT_TRUE(kf.UpdatePosition(t, sim::Draw3(n_pos, rng)).ok());
       }
       if (t > 30.0) {
         sum2 += kf.p_WM_W().squaredNorm();

@@ -7,6 +7,7 @@
 #include <random>
 
 #include "rcal/geometry/so3.hpp"
+#include "rcal/sim/draw.hpp"
 
 namespace rcal::estimation {
 namespace {
@@ -56,9 +57,8 @@ TEST(StillWindow, MeanPoseAndCovariance) {
   const Eigen::Matrix3d P_p = 1e-6 * Eigen::Matrix3d::Identity();
   const Eigen::Matrix3d P_th = 1e-4 * Eigen::Matrix3d::Identity();
   for (int k = 0; k < 200; ++k) {
-    const Eigen::Vector3d p = p_true + 1e-3 * Eigen::Vector3d(N(rng), N(rng), N(rng));
-    const Eigen::Matrix3d R =
-        geometry::Exp(0.01 * Eigen::Vector3d(N(rng), N(rng), N(rng))) * R_true;
+    const Eigen::Vector3d p = p_true + 1e-3 * sim::Draw3(N, rng);
+    const Eigen::Matrix3d R = geometry::Exp(0.01 * sim::Draw3(N, rng)) * R_true;
     Eigen::Vector4d q = geometry::MatrixToQuat(R);
     if (k % 2) q = -q;  // q and −q are one rotation
     ASSERT_TRUE(w.Add(0.01 * k, p, P_p, q, P_th).ok());

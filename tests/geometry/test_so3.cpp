@@ -6,13 +6,15 @@
 #include <numbers>
 #include <random>
 
+#include "rcal/sim/draw.hpp"
+
 namespace rcal::geometry {
 namespace {
 
 Eigen::Vector3d RandomRotationVector(std::mt19937& rng, double max_angle) {
   std::normal_distribution<double> n(0.0, 1.0);
   std::uniform_real_distribution<double> u(0.0, max_angle);
-  Eigen::Vector3d axis(n(rng), n(rng), n(rng));
+  Eigen::Vector3d axis = sim::Draw3(n, rng);
   return axis.normalized() * u(rng);
 }
 
@@ -61,7 +63,7 @@ TEST(So3, RpyRoundTripAndConvention) {
   std::mt19937 rng(4);
   std::uniform_real_distribution<double> u(-1.5, 1.5);
   for (int i = 0; i < 100; ++i) {
-    const Eigen::Vector3d rpy(2 * u(rng), u(rng), 2 * u(rng));
+    const Eigen::Vector3d rpy = sim::Draw3(u, rng).cwiseProduct(Eigen::Vector3d(2, 1, 2));
     EXPECT_LT((ToRpy(FromRpy(rpy)) - rpy).norm(), 1e-12);
   }
 }

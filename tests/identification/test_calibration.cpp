@@ -6,6 +6,7 @@
 #include "rcal/geometry/so3.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/kinematics/identifiability.hpp"
+#include "rcal/sim/draw.hpp"
 
 namespace rcal::identification {
 namespace {
@@ -20,7 +21,7 @@ TEST(Calibration, RigidTransformIsRecoveredExactly) {
   T.translation() = Eigen::Vector3d(1.5, -0.4, 0.8);
   std::vector<Eigen::Vector3d> a, b;
   for (int i = 0; i < 10; ++i) {
-    a.emplace_back(n(rng), n(rng), n(rng));
+    a.push_back(sim::Draw3(n, rng));
     b.push_back(T * a.back());
   }
   const Eigen::Isometry3d F = FitRigidTransform(a, b);

@@ -16,6 +16,7 @@
 #include "../kinematics/test_robots.hpp"
 #include "rcal/identification/extended_measurement.hpp"
 #include "rcal/kinematics/identifiability.hpp"
+#include "rcal/sim/draw.hpp"
 #include "rcal/sim/effects.hpp"
 
 namespace rcal::identification {
@@ -74,8 +75,8 @@ std::vector<PoseMeasurement> Measure(const Problem& p, double noise, unsigned se
     const kinematics::ToolPose pose = p.ext.Forward(p.qs[k], p.ctx[k], p.x_true, p.e_true);
     PoseMeasurement z;
     z.q = p.qs[k];
-    z.p_WM_W = pose.p_WM_W + noise * kSigmaP * Eigen::Vector3d(n(rng), n(rng), n(rng));
-    const Eigen::Vector3d w = noise * kSigmaR * Eigen::Vector3d(n(rng), n(rng), n(rng));
+    z.p_WM_W = pose.p_WM_W + noise * kSigmaP * sim::Draw3(n, rng);
+    const Eigen::Vector3d w = noise * kSigmaR * sim::Draw3(n, rng);
     z.R_EI = (w.norm() > 0 ? Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix()
                            : Eigen::Matrix3d::Identity()) *
              pose.R_EI;

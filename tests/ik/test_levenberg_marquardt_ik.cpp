@@ -12,6 +12,7 @@
 
 #include "../kinematics/test_robots.hpp"
 #include "rcal/geometry/so3.hpp"
+#include "rcal/sim/draw.hpp"
 
 namespace rcal::ik {
 namespace {
@@ -141,11 +142,11 @@ TEST_P(IkRoundTrip, UnreachableTargetsFailClearly) {
   std::normal_distribution<double> n(0.0, 1.0);
   for (int t = 0; t < 50; ++t) {
     // 5 m from a point the arm reaches; every test arm reaches less than 1.5 m from its base.
-    const Eigen::Vector3d dir = Eigen::Vector3d(n(rng), n(rng), n(rng)).normalized();
+    const Eigen::Vector3d dir = sim::Draw3(n, rng).normalized();
     Eigen::Isometry3d T_WT = Eigen::Isometry3d::Identity();
     T_WT.translation() =
         m.ToolFrame(Eigen::VectorXd::Zero(m.num_joints()), x).translation() + 5.0 * dir;
-    T_WT.linear() = geometry::Exp(Eigen::Vector3d(n(rng), n(rng), n(rng)));
+    T_WT.linear() = geometry::Exp(sim::Draw3(n, rng));
     const Eigen::VectorXd seed = RandomJoints(m, rng);
     for (const IkResult& res : {ik.Solve(T_WT, seed), ik.SolvePosition(T_WT.translation(), seed)}) {
       EXPECT_FALSE(res.converged);

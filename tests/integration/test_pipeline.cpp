@@ -283,6 +283,15 @@ TEST_F(Pipeline, IdentifierSurvivesSigkillAndResumesFromItsCheckpoint) {
   kill(id, SIGKILL);
   EXPECT_EQ(Wait(id), -SIGKILL);
   Reaped(id);
+  // Poses go on while it is down (at least 3, seen by the listener: they are lost to it). Then
+  // the sensor is paused until the restarted identifier is up, so that a slow start on a loaded
+  // machine cannot let the stream end before it listens (the test used to race the 6 s stream
+  // against the restart). Paced against its wall clock, the sensor sends what fell due in the
+  // pause as one burst when it continues.
+  const size_t published_at_kill = l.poses.size();
+  ASSERT_TRUE(l.WaitFor([&] { return l.poses.size() >= published_at_kill + 3; }));
+  ASSERT_EQ(kill(sensor, SIGSTOP), 0);
+  ASSERT_LT(l.poses.size(), static_cast<size_t>(kPoses)) << "the stream ended before the pause";
 
   // The checkpoint on disk is the offline EKF after exactly the poses it says it holds.
   const auto ck = transport::LoadCheckpoint(checkpoint);
@@ -298,6 +307,7 @@ TEST_F(Pipeline, IdentifierSurvivesSigkillAndResumesFromItsCheckpoint) {
   const int seen = l.statuses;
   id = Start(Identifier(checkpoint), "ekf_identifier.2.log");
   ASSERT_TRUE(l.WaitFor([&] { return l.statuses > seen; }));
+  ASSERT_EQ(kill(sensor, SIGCONT), 0);
   EXPECT_GE(l.status->poses_accepted, n) << "restarted from zero instead of the checkpoint";
 
   // It keeps identifying until the last pose of the stream.

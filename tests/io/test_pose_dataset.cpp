@@ -14,6 +14,7 @@
 #include "io_test_util.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/robot_urdf.hpp"
+#include "rcal/sim/draw.hpp"
 
 namespace rcal::io {
 namespace {
@@ -48,11 +49,11 @@ PoseDataset RichDataset() {
   d.comments = {" made by a test", " second line"};
   for (int i = 0; i < 7; ++i) {
     PoseSample p;
-    p.q = Eigen::Vector3d(n(rng), n(rng), n(rng));
-    p.p_WM_W = Eigen::Vector3d(n(rng), n(rng), n(rng)) * 0.5;
+    p.q = sim::Draw3(n, rng);
+    p.p_WM_W = sim::Draw3(n, rng) * 0.5;
     p.has_orientation = i != 3;  // one pose without orientation
     if (p.has_orientation) {
-      p.q_EI_wxyz = Eigen::Vector4d(n(rng), n(rng), n(rng), n(rng)).normalized();
+      p.q_EI_wxyz = sim::Draw4(n, rng).normalized();
     }
     p.marker = i % 2;
     p.temperature = i == 2 ? PoseSample::kAbsent : 20.0 + i * 0.1;

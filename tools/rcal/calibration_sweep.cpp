@@ -13,6 +13,7 @@
 #include "rcal/identification/metrics.hpp"
 #include "rcal/kinematics/identifiability.hpp"
 #include "rcal/kinematics/measurement.hpp"
+#include "rcal/sim/draw.hpp"
 #include "rcal/sim/pose_sim.hpp"
 
 namespace rcal::tool {
@@ -37,7 +38,7 @@ double ThreadCpuSeconds() {
 // A rotation uniform on SO(3) (a normalised Gaussian quaternion) as roll, pitch, yaw.
 Eigen::Vector3d RandomRpy(sim::Rng& rng) {
   std::normal_distribution<double> n(0.0, 1.0);
-  const Eigen::Vector4d q(n(rng), n(rng), n(rng), n(rng));
+  const Eigen::Vector4d q = sim::Draw4(n, rng);
   return geometry::ToRpy(geometry::QuatToMatrix(q));
 }
 
@@ -57,8 +58,7 @@ Eigen::VectorXd DrawTruth(const kinematics::KinematicModel& model,
   const Eigen::Vector3d rpy_WB(in(-0.1, 0.1), in(-0.1, 0.1), in(-kPi, kPi));
   // Flange → marker: 5–15 cm in any direction.
   std::normal_distribution<double> n(0.0, 1.0);
-  const Eigen::Vector3d p_FM =
-      Eigen::Vector3d(n(rng), n(rng), n(rng)).normalized() * in(0.05, 0.15);
+  const Eigen::Vector3d p_FM = sim::Draw3(n, rng).normalized() * in(0.05, 0.15);
   // Flange → IMU and earth ← world: any rotation.
   const Eigen::Vector3d rpy_FI = RandomRpy(rng), rpy_EW = RandomRpy(rng);
   const auto set = [&](const char* name, double value) {

@@ -31,6 +31,7 @@
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/imu_csv.hpp"
 #include "rcal/io/plot.hpp"
+#include "rcal/sim/draw.hpp"
 
 namespace rcal::tool {
 namespace {
@@ -122,7 +123,7 @@ int RunFuse(const FuseOptions& opt) {
     const Eigen::Vector3d& p_truth = trial.p_truth[k];
     if (t_k >= next_pos_t - 1e-9 && p_truth.allFinite()) {
       next_pos_t = (std::isfinite(next_pos_t) ? next_pos_t : t_k) + pos_period;
-      const Eigen::Vector3d noise(pos_noise(rng), pos_noise(rng), pos_noise(rng));
+      const Eigen::Vector3d noise = sim::Draw3(pos_noise, rng);
       (void)pkf.UpdatePosition(t_k, p_truth + noise);
       ++pos_samples;
     }

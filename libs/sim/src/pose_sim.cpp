@@ -4,9 +4,9 @@
 #include <numbers>
 #include <string>
 
-#include "draw3.hpp"
 #include "rcal/geometry/so3.hpp"
 #include "rcal/kinematics/identifiability.hpp"
+#include "rcal/sim/draw.hpp"
 
 namespace rcal::sim {
 

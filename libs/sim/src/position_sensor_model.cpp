@@ -1,6 +1,6 @@
 #include "rcal/sim/position_sensor_model.hpp"
 
-#include "draw3.hpp"
+#include "rcal/sim/draw.hpp"
 
 namespace rcal::sim {
 

@@ -3,8 +3,8 @@
 #include <cmath>
 #include <stdexcept>
 
-#include "draw3.hpp"
 #include "rcal/geometry/so3.hpp"
+#include "rcal/sim/draw.hpp"
 
 namespace rcal::sim {
 

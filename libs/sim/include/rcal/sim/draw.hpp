@@ -1,4 +1,5 @@
-// Three random draws as a vector, in a fixed order.
+/// Random draws as a fixed-size vector, in a fixed order: one seed, one dataset, whatever the
+/// compiler.
 #pragma once
 
 #include <Eigen/Core>
@@ -17,6 +18,17 @@ Eigen::Vector3d Draw3(Dist& dist, Engine& rng) {
   const double y = dist(rng);
   const double x = dist(rng);
   return {x, y, z};
+}
+
+/// Four draws as Eigen::Vector4d(n(rng), n(rng), n(rng), n(rng)) gave them with gcc: last element
+/// first.
+template <class Dist, class Engine>
+Eigen::Vector4d Draw4(Dist& dist, Engine& rng) {
+  const double d = dist(rng);
+  const double c = dist(rng);
+  const double b = dist(rng);
+  const double a = dist(rng);
+  return {a, b, c, d};
 }
 
 }  // namespace rcal::sim
