@@ -279,19 +279,18 @@ TEST_F(Pipeline, IdentifierSurvivesSigkillAndResumesFromItsCheckpoint) {
   pid_t id = Start(Identifier(checkpoint), "ekf_identifier.1.log");
   ASSERT_TRUE(l.WaitFor([&] { return l.statuses > 0; }));
   const pid_t sensor = Start(Sensor(kPoses, kRate), "sensor_acquisition.log");
+  // The stream is paused (SIGSTOP) at 20 poses and continued (SIGCONT) once the restarted
+  // identifier is up: however slow the machine (a sanitizer build, tests side by side), the
+  // identifier is killed mid-stream and comes back before the stream ends. The test used to race
+  // a restart against a 6 s real-time stream. Poses the identifier had received but not taken in
+  // when it was killed are lost to it; paced against its wall clock, the sensor sends what fell
+  // due in the pause as one burst when it continues.
+  ASSERT_TRUE(l.WaitFor([&] { return l.poses.size() >= 20; }));
+  ASSERT_EQ(kill(sensor, SIGSTOP), 0);
   ASSERT_TRUE(l.WaitFor([&] { return l.status && l.status->poses_accepted >= 15; }));
   kill(id, SIGKILL);
   EXPECT_EQ(Wait(id), -SIGKILL);
   Reaped(id);
-  // Poses go on while it is down (at least 3, seen by the listener: they are lost to it). Then
-  // the sensor is paused until the restarted identifier is up, so that a slow start on a loaded
-  // machine cannot let the stream end before it listens (the test used to race the 6 s stream
-  // against the restart). Paced against its wall clock, the sensor sends what fell due in the
-  // pause as one burst when it continues.
-  const size_t published_at_kill = l.poses.size();
-  ASSERT_TRUE(l.WaitFor([&] { return l.poses.size() >= published_at_kill + 3; }));
-  ASSERT_EQ(kill(sensor, SIGSTOP), 0);
-  ASSERT_LT(l.poses.size(), static_cast<size_t>(kPoses)) << "the stream ended before the pause";
 
   // The checkpoint on disk is the offline EKF after exactly the poses it says it holds.
   const auto ck = transport::LoadCheckpoint(checkpoint);
