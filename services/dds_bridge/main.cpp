@@ -72,6 +72,8 @@ struct Options {
 
 class Bridge {
  public:
+  /// The final HEALTH (on a clean stop): the counts up to the end.
+  void Finish() { health_.Final(t_); }
   Bridge(const Options& o, transport::Transport& t, dds_entity_t participant)
       : o_(o), t_(t), health_(o.name) {
     dds_qos_t* latched = dds::LatchedQos();
@@ -319,6 +321,7 @@ int main(int argc, char** argv) {
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
         rc != 0)
       return rc;
+    bridge.Finish();
     spdlog::info("stopped");
     return 0;
   } catch (const std::exception& e) {

@@ -128,6 +128,8 @@ class Identifier {
 
   /// At start: the restored estimate (if any) and a CALIBRATION_STATUS that tells listeners the
   /// process is up and how many poses it resumed with.
+  /// The final HEALTH (on a clean stop): the counts up to the end.
+  void Finish() { health_.Final(t_); }
   void PublishCurrent() {
     const auto& ekf = id_.ekf();
     const int64_t utime = ekf.accepted() > 0 ? id_.last_utime() : 0;
@@ -352,6 +354,7 @@ int main(int argc, char** argv) {
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
         rc != 0)
       return rc;
+    id.Finish();
     spdlog::info("stopped");
     return 0;
   } catch (const std::exception& e) {

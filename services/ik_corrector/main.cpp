@@ -66,6 +66,7 @@ int main(int argc, char** argv) {
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
         rc != 0)
       return rc;
+    node.Finish();
     return 0;
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());

@@ -147,6 +147,7 @@ int main(int argc, char** argv) {
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
         rc != 0)
       return rc;
+    health.Final(t);
     spdlog::info("stopped after {} events", event);
     return 0;
   } catch (const std::exception& e) {

@@ -162,6 +162,7 @@ int main(int argc, char** argv) {
         });
         rc != 0)
       return rc;
+    node.Finish();
     const auto& h = node.health();
     spdlog::info("stopped: received {}, rejected {}, published {}", h.received(), h.rejected(),
                  h.published());

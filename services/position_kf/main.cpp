@@ -37,7 +37,14 @@ int main(int argc, char** argv) {
   app.add_option("--accel-sigma", settings.accel_sigma, "earth-frame acceleration σ [m/s²]")
       ->capture_default_str();
   app.add_option("--orientation-wait", orientation_wait,
-                 "sensor time a position sample waits for the orientation stream [s]")
+                 "IMU sensor time a position sample waits for a stopped orientation stream [s]")
+      ->check(CLI::Range(0.0, 3600.0))
+      ->capture_default_str();
+  double orientation_timeout = 1.0;
+  app.add_option("--orientation-timeout", orientation_timeout,
+                 "host time without an orientation before the stream counts as stopped and "
+                 "positions go in without it (after --orientation-wait of IMU time) [s]")
+      ->check(CLI::Range(0.0, 3600.0))
       ->capture_default_str();
   app.add_option("--sensor-id", options.sensor_id, "IMU to follow")->capture_default_str();
   app.add_option("--marker-id", options.marker_id, "marker to follow")->capture_default_str();
@@ -52,6 +59,7 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   settings.earth = earth == "enu" ? estimation::EarthFrame::kEnu : estimation::EarthFrame::kNed;
   options.orientation_wait_us = static_cast<int64_t>(orientation_wait * 1e6);
+  options.orientation_timeout_us = static_cast<int64_t>(orientation_timeout * 1e6);
 
   try {
     if (!cell_path.empty()) {
@@ -76,6 +84,7 @@ int main(int argc, char** argv) {
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
         rc != 0)
       return rc;
+    node.Finish();
     const auto& h = node.health();
     spdlog::info("stopped: received {}, rejected {}, published {}", h.received(), h.rejected(),
                  h.published());

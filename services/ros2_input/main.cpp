@@ -250,6 +250,7 @@ int main(int argc, char** argv) {
       t.HandleTimeout(0);
     }
     publish(input.Ready(true));
+    health.Final(t, ch.health);
     for (const ros2::ClockStatus& c : input.Clocks())
       spdlog::info("clock {} at the end: state {} offset {:.2f} ms σ {:.2f} ms (resets {})",
                    c.source, static_cast<int>(c.state), 1e3 * c.offset, 1e3 * c.sigma, c.resets);

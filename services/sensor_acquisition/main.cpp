@@ -107,6 +107,7 @@ int RunSource(rcal::sensors::SensorSource& source, rcal::transport::Transport& t
     health.Tick(utime, t);
     t.HandleTimeout(0);  // keeps LCM's receive queue empty
   }
+  health.Final(t);
   spdlog::info("done: {} samples published", published);
   return 0;
 }
@@ -244,6 +245,7 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
     t.HandleTimeout(0);  // keeps LCM's receive queue empty
   }
   lease.Stopped(k, k >= sensors.num_ticks());
+  health.Final(t);
   spdlog::info("done: {} samples published", published);
   if (linger) {
     // Under a supervisor: stay up (an exit would be restarted, and without --checkpoint replay

@@ -60,6 +60,8 @@ namespace ch = transport::channels;
 
 class StillWindowNode {
  public:
+  /// The final HEALTH (on a clean stop): the counts up to the end.
+  void Finish() { health_.Final(t_); }
   StillWindowNode(const io::BuiltCell& cell, const estimation::TimeGateSettings& time,
                   transport::Transport& t, const std::string& name, double clock_fraction)
       : pipeline_(cell.pipeline),
@@ -265,6 +267,7 @@ int main(int argc, char** argv) {
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
         rc != 0)
       return rc;
+    node.Finish();
     spdlog::info("stopped: {} poses published", node.emitted());
     return 0;
   } catch (const std::exception& e) {

@@ -212,5 +212,116 @@ TEST(PositionKfNode, AccelerometerSamplesWithoutTheirOrientationAreCountedAsMiss
   EXPECT_EQ(node.health().rejected(), 0);
 }
 
+// Imu() is level with the specific force up: an ENU earth frame.
+estimation::PositionKfSettings EnuPositionKfSettings() {
+  estimation::PositionKfSettings settings;
+  settings.earth = estimation::EarthFrame::kEnu;
+  return settings;
+}
+
+// The orientation estimate at `utime`: level (identity).
+orientation_estimate_t OrientationAt(int64_t utime) {
+  orientation_estimate_t o{};
+  o.utime = utime;
+  o.q_EI[0] = 1.0;
+  return o;
+}
+
+position_sample_t PositionAt(int64_t utime, int k) {
+  PositionSample s;
+  s.utime = utime;
+  s.p = Eigen::Vector3d(1.0 + 1e-4 * std::sin(0.1 * k), 0.5, 0.2);
+  s.covariance = 1e-8 * Eigen::Matrix3d::Identity();
+  return ToMessage(s);
+}
+
+// A driver (or a replay) that stalled sends what fell due at once: 6 s of IMU and POSITION
+// samples reach position_kf before orientation_kf has answered any of them. The orientation
+// stream is behind, not stopped (the host clock did not move), so every update waits for its
+// orientation and the result is the in-order reference, update for update. Taking IMU sensor time
+// alone for the fallback (as before) applied the positions ahead and lost 118 accelerometer
+// updates in a 4x replay with a 1.5 s stall.
+TEST(PositionKfNode, ABurstAheadOfTheOrientationsLosesNothing) {
+  LcmTransport t("memq://");
+  Outputs out(t);
+  int64_t now_us = 0;  // the host clock, frozen: the burst takes no time
+  PositionKfNode::Options options;
+  options.steady_now_us = [&] { return now_us; };
+  PositionKfNode node(t, EnuPositionKfSettings(), options);
+  estimation::PositionKf reference(EnuPositionKfSettings());
+  int reference_updates = 0;
+  constexpr int kSamples = 700;  // 7 s at 100 Hz, positions at 20 Hz
+  // The first second in step, so the orientation stream is known to be alive.
+  auto in_step = [&](int k) {
+    const int64_t u = k * kPeriod;
+    node.OnImu(Imu(u, k));
+    if (k % 5 == 0) node.OnPosition(PositionAt(u, k));
+    node.OnOrientation(OrientationAt(u));
+    Drain(t);
+  };
+  for (int k = 0; k < 100; ++k) in_step(k);
+  // Then the burst: all IMU and POSITION samples first, their orientations after.
+  for (int k = 100; k < kSamples; ++k) {
+    node.OnImu(Imu(k * kPeriod, k));
+    if (k % 5 == 0) node.OnPosition(PositionAt(k * kPeriod, k));
+  }
+  for (int k = 100; k < kSamples; ++k) {
+    node.OnOrientation(OrientationAt(k * kPeriod));
+    Drain(t);  // memq
+  }
+  for (int k = 0; k < kSamples; ++k) {
+    const int64_t u = k * kPeriod;
+    const ImuSample s = *ImuFromMessage(Imu(u, k), nullptr);
+    if (reference.UpdateAccel(SensorSeconds(u), s.f_B, Eigen::Matrix3d::Identity()) &&
+        reference.initialized())
+      ++reference_updates;
+    if (k % 5 == 0 && reference.UpdatePosition(
+                          SensorSeconds(u), Eigen::Map<const Eigen::Vector3d>(PositionAt(u, k).p)))
+      ++reference_updates;
+  }
+  EXPECT_EQ(node.health().rejected(), 0) << node.health().last_error();
+  EXPECT_EQ(node.health().gaps(), 0);
+  EXPECT_EQ(node.unpaired_accel(), 0);
+  EXPECT_EQ(static_cast<int>(out.tool.size()), reference_updates);
+  EXPECT_EQ(node.filter().p_WM_W(), reference.p_WM_W());
+  EXPECT_EQ(node.filter().P(), reference.P());
+}
+
+// orientation_kf stops (killed, hung): once no ORIENTATION came for orientation_timeout_us of the
+// host clock, positions go in when the IMU stream is orientation_wait_us past them; before that
+// they wait, however far the IMU stream runs ahead.
+TEST(PositionKfNode, AStoppedOrientationStreamLetsPositionsInAfterTheTimeout) {
+  LcmTransport t("memq://");
+  Outputs out(t);
+  int64_t now_us = 0;
+  PositionKfNode::Options options;
+  options.steady_now_us = [&] { return now_us; };
+  PositionKfNode node(t, EnuPositionKfSettings(), options);
+  for (int k = 0; k < 100; ++k) {
+    const int64_t u = k * kPeriod;
+    node.OnImu(Imu(u, k));
+    if (k % 5 == 0) node.OnPosition(PositionAt(u, k));
+    node.OnOrientation(OrientationAt(u));
+    Drain(t);
+  }
+  const size_t before = out.tool.size();
+  ASSERT_GT(before, 0u);
+  // The orientations stop; 3 s of IMU and positions arrive within 0.9 s of host time.
+  for (int k = 100; k < 400; ++k) {
+    now_us = (k - 100) * 3'000;
+    node.OnImu(Imu(k * kPeriod, k));
+    if (k % 5 == 0) node.OnPosition(PositionAt(k * kPeriod, k));
+  }
+  Drain(t);
+  EXPECT_EQ(out.tool.size(), before) << "applied while the orientation stream might be late";
+  // Past the timeout, the next IMU sample lets in the positions 1 s behind it (utime ≤ 3.0 s).
+  now_us = options.orientation_timeout_us + 1;
+  node.OnImu(Imu(400 * kPeriod, 400));
+  Drain(t);
+  ASSERT_EQ(out.tool.size(), before + (300 - 100) / 5 + 1);  // positions at 1.00 … 3.00 s
+  EXPECT_EQ(out.tool.back().utime, 300 * kPeriod);
+  EXPECT_EQ(node.health().rejected(), 0) << node.health().last_error();
+}
+
 }  // namespace
 }  // namespace rcal::transport

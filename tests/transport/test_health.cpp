@@ -95,6 +95,30 @@ TEST(Health, TheTransportsDropsAreInTheBeat) {
   EXPECT_EQ(h.Message(2'000'000).dropped, 40);
 }
 
+// A process that stops publishes its final counts at once, whatever the schedule: losses after
+// the last scheduled beat (here 0.9 s of sensor time of them) are on record too.
+TEST(Health, TheFinalBeatCarriesTheCountsUpToTheEnd) {
+  LossyTransport t;
+  std::vector<health_t> got;
+  t.Subscribe<health_t>("HEALTH_C", [&](const health_t& m) { got.push_back(m); });
+  Health h("position_kf");
+  EXPECT_TRUE(h.Tick(1'000'000, t, "HEALTH_C"));
+  h.Rejected("imu_sample.utime: late");
+  h.Gap(3);
+  t.dropped = 5;
+  EXPECT_FALSE(h.Tick(1'900'000, t, "HEALTH_C"));  // none due
+  EXPECT_TRUE(h.Final(t, "HEALTH_C"));
+  while (t.HandleTimeout(0) > 0) {
+  }
+  ASSERT_EQ(got.size(), 2u);
+  EXPECT_EQ(got[1].utime, 1'900'000);
+  EXPECT_EQ(got[1].rejected, 1);
+  EXPECT_EQ(got[1].gaps, 3);
+  EXPECT_EQ(got[1].dropped, 5);
+  EXPECT_EQ(got[1].published, 2);  // both beats
+  EXPECT_EQ(got[1].last_error, "imu_sample.utime: late");
+}
+
 // The new counts (issue 11, item 6) reach the message: a gate's verdicts counted apart and in
 // rejected, gaps from the gate, stale and filter resets.
 TEST(Health, TimeGateVerdictsAndLossesAreCountedInTheMessage) {

@@ -2,6 +2,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 
 namespace rcal::transport {
@@ -206,6 +207,20 @@ void OrientationKfNode::OnImu(const imu_sample_t& msg) {
 
 // ---- position node ----------------------------------------------------------------------------
 
+int64_t SteadyNowUs() {
+  return std::chrono::duration_cast<std::chrono::microseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+int64_t PositionKfNode::ImuWatermark() const {
+  if (!last_imu_) return INT64_MIN;
+  const bool stopped =
+      !last_orientation_arrival_us_ ||
+      o_.steady_now_us() - *last_orientation_arrival_us_ > o_.orientation_timeout_us;
+  return stopped ? *last_imu_ - o_.orientation_wait_us : INT64_MIN;
+}
+
 PositionKfNode::PositionKfNode(Transport& t, const estimation::PositionKfSettings& settings,
                                Options options)
     : t_(t),
@@ -285,7 +300,7 @@ void PositionKfNode::OnImu(const imu_sample_t& msg) {
     ++unpaired_accel_;
   }
   // Without orientations, positions still go in after orientation_wait_us of IMU time.
-  Flush(std::max(last_orientation_.value_or(INT64_MIN), msg.utime - o_.orientation_wait_us));
+  Flush(std::max(last_orientation_.value_or(INT64_MIN), ImuWatermark()));
 }
 
 void PositionKfNode::OnOrientation(const orientation_estimate_t& msg) {
@@ -295,12 +310,13 @@ void PositionKfNode::OnOrientation(const orientation_estimate_t& msg) {
   if (!R) return Reject(error);
   if (!Admit(orientation_gate_, msg.utime, "orientation_estimate.utime")) return;
   last_orientation_ = msg.utime;
+  last_orientation_arrival_us_ = o_.steady_now_us();
   latest_ = std::max(latest_, msg.utime);
   // Accelerometer samples before this orientation never got theirs: drop them.
   auto it = pending_accel_.begin();
   while (it != pending_accel_.end() && it->first < msg.utime) {
     // Every loss counted, as missing (gaps): its orientation never came, or came after the
-    // filter had moved on (orientation_kf more than --orientation-wait of sensor time behind).
+    // filter had moved on (orientation_kf stopped for --orientation-timeout and then came back).
     health_.Gap(1);
     it = pending_accel_.erase(it);
     ++unpaired_accel_;
@@ -309,8 +325,7 @@ void PositionKfNode::OnOrientation(const orientation_estimate_t& msg) {
     ready_accel_.emplace(msg.utime, std::make_pair(it->second, *R));
     pending_accel_.erase(it);
   }
-  Flush(std::max(msg.utime, last_imu_ ? *last_imu_ - o_.orientation_wait_us
-                                      : static_cast<int64_t>(INT64_MIN)));
+  Flush(std::max(msg.utime, ImuWatermark()));
 }
 
 void PositionKfNode::OnPosition(const position_sample_t& msg) {
@@ -326,9 +341,7 @@ void PositionKfNode::OnPosition(const position_sample_t& msg) {
   last_position_ = msg.utime;
   latest_ = std::max(latest_, msg.utime);
   pending_position_.emplace(msg.utime, s->p);
-  Flush(std::max(last_orientation_.value_or(INT64_MIN), last_imu_
-                                                            ? *last_imu_ - o_.orientation_wait_us
-                                                            : static_cast<int64_t>(INT64_MIN)));
+  Flush(std::max(last_orientation_.value_or(INT64_MIN), ImuWatermark()));
 }
 
 void PositionKfNode::Applied(int64_t utime) {

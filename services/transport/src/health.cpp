@@ -90,6 +90,12 @@ bool Health::Tick(int64_t utime, Transport& transport, const std::string& channe
   return transport.Publish(channel, *beat);
 }
 
+bool Health::Final(Transport& transport, const std::string& channel) {
+  dropped_ = transport.Dropped();
+  ++published_;
+  return transport.Publish(channel, Message(latest_));
+}
+
 health_t Health::Message(int64_t utime) const {
   health_t m;
   m.utime = utime;

@@ -17,6 +17,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <optional>
 #include <string>
@@ -112,6 +113,8 @@ class OrientationKfNode {
   /// Publishes one HEALTH with utime 0 (outside the 1 Hz schedule) so listeners know the process
   /// is up before any sample came.
   void Announce();
+  /// Publishes the final HEALTH (on a clean stop): the counts up to the end.
+  void Finish() { health_.Final(t_, o_.health_channel); }
   /// Handles one IMU message (what the subscription calls; public for tests).
   void OnImu(const imu_sample_t& msg);
   /// Handles bytes on the IMU channel that did not decode.
@@ -130,25 +133,37 @@ class OrientationKfNode {
   estimation::TimeGate gate_;
 };
 
+/// The host's steady (monotonic) clock [µs]: only to tell a stopped stream from a late one.
+int64_t SteadyNowUs();
+
 /// IMU + ORIENTATION + POSITION → PositionKf → TOOL_POSITION, HEALTH at 1 Hz of sensor time.
 ///
 /// The accelerometer of IMU sample k needs the orientation estimate at the same utime, which
 /// arrives later from orientation_kf: accelerometer samples wait until their ORIENTATION comes
 /// (matched by utime; an accelerometer sample whose orientation never comes is dropped when a
 /// later orientation arrives). Position samples wait until the orientation stream has reached
-/// their utime (or, without orientations, until the IMU stream is `orientation_wait_us` past
-/// them), so updates are applied in sensor-time order, accelerometer before position at equal
-/// utime, whatever order the messages arrive in. A position sample that comes after a later
-/// update was applied is rejected as out of order. The position sensor frame is taken as the
-/// orientation's earth frame (the filter's convention). One TOOL_POSITION per applied update,
-/// once initialised.
+/// their utime, so updates are applied in sensor-time order, accelerometer before position at
+/// equal utime, whatever order the messages arrive in and at whatever speed. Without
+/// orientations (none yet, or none for `orientation_timeout_us` of the host's steady clock: an
+/// orientation_kf that stopped) positions go in once the IMU stream is `orientation_wait_us`
+/// past them. The wall-clock condition is what tells a stopped orientation stream from one
+/// that is merely behind a burst of sensor samples (a driver or a replay catching up after a
+/// stall: 1.5 s of a 4x replay sent at once moved the IMU stream 6 s ahead of the orientations,
+/// and 118 accelerometer updates were lost when the fallback took sensor time alone). A position
+/// sample that comes after a later update was applied is rejected as out of order. The position
+/// sensor frame is taken as the orientation's earth frame (the filter's convention). One
+/// TOOL_POSITION per applied update, once initialised.
 class PositionKfNode {
  public:
   struct Options {
     std::string name = "position_kf";
     int32_t sensor_id = 0;
-    int32_t marker_id = 0;  ///< other markers' samples are ignored (not rejected)
-    int64_t orientation_wait_us = 1'000'000;
+    int32_t marker_id = 0;                    ///< other markers' samples are ignored (not rejected)
+    int64_t orientation_wait_us = 1'000'000;  ///< IMU sensor time before the fallback [µs]
+    /// Host steady-clock time without an ORIENTATION before the stream counts as stopped [µs].
+    int64_t orientation_timeout_us = 1'000'000;
+    /// The host's steady clock [µs] (tests inject one).
+    std::function<int64_t()> steady_now_us = SteadyNowUs;
     size_t max_pending = 10'000;  ///< pending accelerometer samples kept at most
     std::string imu_channel = "IMU";
     std::string orientation_channel = "ORIENTATION";
@@ -164,6 +179,8 @@ class PositionKfNode {
 
   /// As OrientationKfNode::Announce().
   void Announce();
+  /// As OrientationKfNode::Finish().
+  void Finish() { health_.Final(t_, o_.health_channel); }
   void OnImu(const imu_sample_t& msg);
   void OnOrientation(const orientation_estimate_t& msg);
   void OnPosition(const position_sample_t& msg);
@@ -177,6 +194,9 @@ class PositionKfNode {
  private:
   void Reject(const std::string& reason);
   void Flush(int64_t watermark);
+  // Sensor time up to which positions may go in without their orientation: the IMU stream less
+  // orientation_wait_us while the orientation stream is stopped, else none.
+  int64_t ImuWatermark() const;
   void Applied(int64_t utime);
   // Offers utime to `gate`; false when refused. On a re-synchronisation the filter starts over.
   bool Admit(estimation::TimeGate& gate, int64_t utime, const char* field);
@@ -188,7 +208,8 @@ class PositionKfNode {
   Health health_;
   std::optional<int64_t> last_imu_, last_orientation_, last_position_, last_applied_;
   int64_t latest_ = 0;
-  std::map<int64_t, Eigen::Vector3d> pending_accel_;  // utime → f_B
+  std::optional<int64_t> last_orientation_arrival_us_;  // host steady clock [µs]
+  std::map<int64_t, Eigen::Vector3d> pending_accel_;    // utime → f_B
   // Ready accelerometer updates (with their orientation) and waiting position samples.
   std::multimap<int64_t, std::pair<Eigen::Vector3d, Eigen::Matrix3d>> ready_accel_;
   std::multimap<int64_t, Eigen::Vector3d> pending_position_;

@@ -60,6 +60,10 @@ class Health {
   /// Tick, and publishes the heartbeat on `channel` when due (counted as published).
   bool Tick(int64_t utime, Transport& transport, const std::string& channel = "HEALTH");
 
+  /// Publishes the heartbeat now, whatever the schedule, at the latest sensor time seen: the
+  /// final counts of a process that stops cleanly, so every loss up to its end is on record.
+  bool Final(Transport& transport, const std::string& channel = "HEALTH");
+
   /// The heartbeat for sensor time `utime` with the current counts.
   health_t Message(int64_t utime) const;
 

@@ -64,6 +64,8 @@ class IkCorrectorNode {
   /// Publishes one HEALTH with utime 0 (outside the 1 Hz schedule) so listeners know the process
   /// is up before any estimate or request came (as the filter nodes do).
   void Announce();
+  /// Publishes the final HEALTH (on a clean stop): the counts up to the end.
+  void Finish() { health_.Final(t_, o_.health_channel); }
 
   void OnParams(const kinematic_params_t& msg);
   void OnRequest(const ik_request_t& msg);
