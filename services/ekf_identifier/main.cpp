@@ -126,10 +126,10 @@ class Identifier {
         });
   }
 
-  /// At start: the restored estimate (if any) and a CALIBRATION_STATUS that tells listeners the
-  /// process is up and how many poses it resumed with.
   /// The final HEALTH (on a clean stop): the counts up to the end.
   void Finish() { health_.Final(t_); }
+  /// At start: the restored estimate (if any) and a CALIBRATION_STATUS that tells listeners the
+  /// process is up and how many poses it resumed with.
   void PublishCurrent() {
     const auto& ekf = id_.ekf();
     const int64_t utime = ekf.accepted() > 0 ? id_.last_utime() : 0;

@@ -80,20 +80,19 @@ std::optional<health_t> Health::Tick(int64_t utime) {
 }
 
 bool Health::Tick(int64_t utime, Transport& transport, const std::string& channel) {
-  auto beat = Tick(utime);
-  if (!beat) return false;
-  // Read when a beat is due (a system call), not per message.
-  dropped_ = transport.Dropped();
-  beat->dropped = dropped_;
-  ++published_;
-  beat->published = published_;
-  return transport.Publish(channel, *beat);
+  if (!Tick(utime)) return false;
+  return Publish(utime, transport, channel);
 }
 
 bool Health::Final(Transport& transport, const std::string& channel) {
+  return Publish(latest_, transport, channel);
+}
+
+bool Health::Publish(int64_t utime, Transport& transport, const std::string& channel) {
+  // Read when a beat goes out (a system call), not per message.
   dropped_ = transport.Dropped();
-  ++published_;
-  return transport.Publish(channel, Message(latest_));
+  ++published_;  // the beat itself counts
+  return transport.Publish(channel, Message(utime));
 }
 
 health_t Health::Message(int64_t utime) const {

@@ -81,6 +81,8 @@ class Health {
   const std::string& last_error() const { return last_error_; }
 
  private:
+  // Publishes the heartbeat for `utime` with the transport's drop count (counted as published).
+  bool Publish(int64_t utime, Transport& transport, const std::string& channel);
   std::string process_;
   int64_t period_us_;
   std::optional<int64_t> last_beat_;  // utime of the last heartbeat
