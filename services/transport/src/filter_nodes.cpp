@@ -213,6 +213,11 @@ int64_t SteadyNowUs() {
       .count();
 }
 
+int64_t PositionKfNode::PairedUpTo() const {
+  if (!last_imu_ || !last_orientation_) return INT64_MIN;
+  return std::min(*last_imu_, *last_orientation_);
+}
+
 int64_t PositionKfNode::ImuWatermark() const {
   if (!last_imu_) return INT64_MIN;
   const bool stopped =
@@ -269,6 +274,7 @@ void PositionKfNode::StartOver() {
   // One stream's time base moved: the queued samples and the filter belong to the old one.
   kf_.Reset();
   pending_accel_.clear();
+  early_orientation_.clear();
   ready_accel_.clear();
   pending_position_.clear();
   last_applied_.reset();
@@ -293,14 +299,24 @@ void PositionKfNode::OnImu(const imu_sample_t& msg) {
   if (!Admit(imu_gate_, msg.utime, "imu_sample.utime")) return;
   last_imu_ = msg.utime;
   latest_ = std::max(latest_, msg.utime);
-  pending_accel_[msg.utime] = s->f_B;
+  // Its orientation may have come first (two senders: the multicast copy of this sample can reach
+  // this socket after orientation_kf has already answered it).
+  auto early = early_orientation_.begin();
+  while (early != early_orientation_.end() && early->first < msg.utime)
+    early = early_orientation_.erase(early);  // their IMU sample never came: nothing to pair
+  if (early != early_orientation_.end() && early->first == msg.utime) {
+    ready_accel_.emplace(msg.utime, std::make_pair(s->f_B, early->second));
+    early_orientation_.erase(early);
+  } else {
+    pending_accel_[msg.utime] = s->f_B;
+  }
   while (pending_accel_.size() > o_.max_pending) {
     health_.Gap(1);  // a sample the filter never used: counted as missing
     pending_accel_.erase(pending_accel_.begin());
     ++unpaired_accel_;
   }
   // Without orientations, positions still go in after orientation_wait_us of IMU time.
-  Flush(std::max(last_orientation_.value_or(INT64_MIN), ImuWatermark()));
+  Flush(std::max(PairedUpTo(), ImuWatermark()));
 }
 
 void PositionKfNode::OnOrientation(const orientation_estimate_t& msg) {
@@ -324,8 +340,13 @@ void PositionKfNode::OnOrientation(const orientation_estimate_t& msg) {
   if (it != pending_accel_.end() && it->first == msg.utime) {
     ready_accel_.emplace(msg.utime, std::make_pair(it->second, *R));
     pending_accel_.erase(it);
+  } else if (!last_imu_ || msg.utime > *last_imu_) {
+    // Ahead of its IMU sample: kept until the sample comes (OnImu pairs it).
+    early_orientation_[msg.utime] = *R;
+    while (early_orientation_.size() > o_.max_pending)
+      early_orientation_.erase(early_orientation_.begin());
   }
-  Flush(std::max(msg.utime, ImuWatermark()));
+  Flush(std::max(PairedUpTo(), ImuWatermark()));
 }
 
 void PositionKfNode::OnPosition(const position_sample_t& msg) {
@@ -341,7 +362,7 @@ void PositionKfNode::OnPosition(const position_sample_t& msg) {
   last_position_ = msg.utime;
   latest_ = std::max(latest_, msg.utime);
   pending_position_.emplace(msg.utime, s->p);
-  Flush(std::max(last_orientation_.value_or(INT64_MIN), ImuWatermark()));
+  Flush(std::max(PairedUpTo(), ImuWatermark()));
 }
 
 void PositionKfNode::Applied(int64_t utime) {

@@ -141,11 +141,12 @@ int64_t SteadyNowUs();
 /// The accelerometer of IMU sample k needs the orientation estimate at the same utime, which
 /// arrives later from orientation_kf: accelerometer samples wait until their ORIENTATION comes
 /// (matched by utime; an accelerometer sample whose orientation never comes is dropped when a
-/// later orientation arrives). Position samples wait until the orientation stream has reached
-/// their utime, so updates are applied in sensor-time order, accelerometer before position at
-/// equal utime, whatever order the messages arrive in and at whatever speed. Without
-/// orientations (none yet, or none for `orientation_timeout_us` of the host's steady clock: an
-/// orientation_kf that stopped) positions go in once the IMU stream is `orientation_wait_us`
+/// later orientation arrives; an orientation that overtakes its IMU sample, which two senders
+/// cannot rule out, waits for it). Position samples wait until both the IMU and the orientation
+/// stream have reached their utime, so updates are applied in sensor-time order, accelerometer
+/// before position at equal utime, whatever order the messages arrive in and at whatever speed.
+/// Without orientations (none yet, or none for `orientation_timeout_us` of the host's steady clock:
+/// an orientation_kf that stopped) positions go in once the IMU stream is `orientation_wait_us`
 /// past them. The wall-clock condition is what tells a stopped orientation stream from one
 /// that is merely behind a burst of sensor samples (a driver or a replay catching up after a
 /// stall: 1.5 s of a 4x replay sent at once moved the IMU stream 6 s ahead of the orientations,
@@ -194,6 +195,9 @@ class PositionKfNode {
  private:
   void Reject(const std::string& reason);
   void Flush(int64_t watermark);
+  // Sensor time up to which every accelerometer sample is settled (paired with its orientation,
+  // or known never to get one): both streams have reached it. INT64_MIN before both have begun.
+  int64_t PairedUpTo() const;
   // Sensor time up to which positions may go in without their orientation: the IMU stream less
   // orientation_wait_us while the orientation stream is stopped, else none.
   int64_t ImuWatermark() const;
@@ -208,8 +212,9 @@ class PositionKfNode {
   Health health_;
   std::optional<int64_t> last_imu_, last_orientation_, last_position_, last_applied_;
   int64_t latest_ = 0;
-  std::optional<int64_t> last_orientation_arrival_us_;  // host steady clock [µs]
-  std::map<int64_t, Eigen::Vector3d> pending_accel_;    // utime → f_B
+  std::optional<int64_t> last_orientation_arrival_us_;    // host steady clock [µs]
+  std::map<int64_t, Eigen::Vector3d> pending_accel_;      // utime → f_B
+  std::map<int64_t, Eigen::Matrix3d> early_orientation_;  // utime → R_EI, ahead of its IMU sample
   // Ready accelerometer updates (with their orientation) and waiting position samples.
   std::multimap<int64_t, std::pair<Eigen::Vector3d, Eigen::Matrix3d>> ready_accel_;
   std::multimap<int64_t, Eigen::Vector3d> pending_position_;
