@@ -46,13 +46,16 @@
 #include <functional>
 #include <limits>
 #include <optional>
+#include <string>
 #include <thread>
+#include <vector>
 
 #include "rcal/cell/cell_sim_yaml.hpp"
 #include "rcal/cell/sim_cell.hpp"
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/services/common.hpp"
+#include "rcal/sim/effects.hpp"
 #include "rcal/sim/pose_sim.hpp"
 #include "rcal/sim/sensor_sim.hpp"
 #include "rcal/transport/adapters.hpp"
@@ -176,7 +179,8 @@ class Lease {
 // The sensor-level simulation of a cell (see the file comment): the cell file's model and sensors,
 // the sim file's truth.
 int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec& sim_spec,
-                 unsigned seed, int num_cal, int num_test, bool linger, int64_t start_utime,
+                 unsigned seed, int num_cal, int num_test,
+                 const std::vector<std::string>& step_offsets, bool linger, int64_t start_utime,
                  double speed, const Resume& resume, rcal::transport::LcmTransport& t) {
   using namespace rcal;
   // SimulateWindows' programme: the home pose, then the calibration and test stops.
@@ -185,7 +189,16 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
   const auto& model = sim_run.cell.model;
   const io::CellChannels& channels = built.spec.channels;
   const sim::ToolMotionTruth& truth = sim_run.truth;
-  const sim::SensorSimSettings ss = cell::SimSensorSettings(built, sim_spec);
+  sim::SensorSimSettings ss = cell::SimSensorSettings(built, sim_spec);
+  for (const std::string& text : step_offsets) {
+    const sim::JointOffsetStep step =
+        cell::OffsetStepInProgramme(sim_run, sim::ParseJointOffsetStep(text, model));
+    ss.offset_steps.push_back(step);
+    spdlog::info(
+        "joint {} reads {:+.6g} [rad | m] off from sensor time {:.2f} s ({}): its offset "
+        "steps mid-run",
+        model.joints()[step.joint].name, -step.delta, step.t_s, text);
+  }
   sim::SensorSim sensors(truth, ss, seed);
   const Eigen::Matrix3d pos_cov =
       ss.position.sigma * ss.position.sigma * Eigen::Matrix3d::Identity();
@@ -350,6 +363,12 @@ int main(int argc, char** argv) {
   bool include_test = false;
   app.add_flag("--include-test", include_test,
                "replay of a pose dataset: also the rows of the test set");
+  std::vector<std::string> step_offsets;
+  app.add_option("--step-offset", step_offsets,
+                 "sim: JOINT=DELTA@STOP (e.g. j2=1e-3@25): from the approach to calibration stop "
+                 "STOP on, joint JOINT (j1..jN or its name) reads DELTA [rad | m] less than where "
+                 "it stands, as after an encoder swap and re-mastering: the joint's offset steps "
+                 "by DELTA mid-run (repeatable)");
   CLI11_PARSE(app, argc, argv);
   if (source == "replay" && replay_file.empty()) {
     std::fprintf(stderr, "sensor_acquisition: --source replay needs FILE\n");
@@ -399,7 +418,7 @@ int main(int argc, char** argv) {
     if (app.get_option("--seed")->count() == 0) seed = sim_spec.seed;
     if (level == "sensors")
       return RunSensorSim(built, sim_spec, seed, poses > 0 ? poses : sim_spec.num_cal, test_poses,
-                          linger, start_utime, speed, resume, t);
+                          step_offsets, linger, start_utime, speed, resume, t);
     // Pose level: the cell's model at the sim file's truth, measured as the cell's position sensor
     // measures (its largest σ per axis; orientation when it is a 6-DoF tracker), one pose per stop.
     const auto& model = built.model;
@@ -416,6 +435,16 @@ int main(int argc, char** argv) {
     std::vector<int> slots;
     for (int id : built.spec.position.markers)
       slots.push_back(model.markers().empty() ? 0 : model.MarkerSlot(id));
+    // Offset steps: pose k is stop k + 1; its "time" for the step is its stop number.
+    std::vector<sim::JointOffsetStep> steps;
+    for (const std::string& text : step_offsets) {
+      const sim::JointOffsetStepSpec spec = sim::ParseJointOffsetStep(text, model);
+      steps.push_back({static_cast<double>(spec.stop), spec.joint, spec.delta});
+      spdlog::info(
+          "joint {} reads {:+.6g} [rad | m] off from stop {} ({}): its offset steps "
+          "mid-run",
+          model.joints()[spec.joint].name, -spec.delta, spec.stop, text);
+    }
     sim::Rng rng(seed * 1000 + 3);
     transport::Health health("sensor_acquisition");
     spdlog::info("sensor_acquisition sim on {}: {} poses at {} Hz, speed {}", t.url(),
@@ -457,7 +486,8 @@ int main(int argc, char** argv) {
       }
       if (services::StopRequested()) break;
       lease.Before(k);
-      if (t.Publish(built.spec.channels.joints, transport::ToJointState(model, q, utime)))
+      const Eigen::VectorXd q_read = sim::JointsAsRead(q, static_cast<double>(k + 1), steps);
+      if (t.Publish(built.spec.channels.joints, transport::ToJointState(model, q_read, utime)))
         health.Published();
       // Each marker the tracker measures at this stop, in the cell's order, 1 µs apart (a tracker
       // measures its reflectors one after the other); pose_index counts the measurements.

@@ -53,7 +53,8 @@ Loaded Load(const std::string& name) {
 TEST(CellSimYaml, DemoSimFileIsTodaysSimulatedCell) {
   const Loaded d = Load("grb3016");
   const Cell a = MakeSimCell(d.cell, d.sim);
-  const Cell b = MakeCell(d.cell.robot.spec, 1);  // the seed-built cell of sim_cell (rcal experiment paper --sensors)
+  const Cell b = MakeCell(d.cell.robot.spec,
+                          1);  // the seed-built cell of sim_cell (rcal experiment paper --sensors)
   ASSERT_EQ(a.model.num_params(), b.model.num_params());
   for (int i = 0; i < a.model.num_params(); ++i) {
     EXPECT_EQ(a.model.parameters()[i].name, b.model.parameters()[i].name);
@@ -249,6 +250,21 @@ TEST(CellSimYaml, PoseLevelSimFileIsTheTable3Arm) {
     EXPECT_LT((a.p_WM_W - b.p_WM_W).norm(), 1e-12);
     EXPECT_LT((a.R_EI - b.R_EI).cwiseAbs().maxCoeff(), 1e-12);
   }
+}
+
+// A step "at stop 3" starts while the arm moves from stop 2 to stop 3: stop 2's still interval is
+// wholly before it, stop 3's wholly after it; a stop the programme does not have is refused.
+TEST(CellSimYaml, AnOffsetStepStartsOnTheWayToItsStop) {
+  const Loaded d = Load("grb3016");
+  const SimProgramme p = MakeSimProgramme(d.cell, d.sim, 1, 5, 2);
+  const auto step = OffsetStepInProgramme(p, sim::ParseJointOffsetStep("j2=1e-3@3", p.cell.model));
+  EXPECT_EQ(step.joint, 1);
+  EXPECT_DOUBLE_EQ(step.delta, 1e-3);
+  const auto& trajectory = p.truth.trajectory();
+  EXPECT_LE(trajectory.StillInterval(2).second, step.t_s);
+  EXPECT_LT(step.t_s, trajectory.StillInterval(3).first);
+  EXPECT_EQ(trajectory.StillAt(step.t_s + 0.01), -1);  // moving
+  EXPECT_THROW(OffsetStepInProgramme(p, {1, 1e-3, 9}), std::invalid_argument);
 }
 
 TEST(CellSimYaml, TruthMustFitTheCell) {

@@ -35,6 +35,27 @@ TEST(Metrics, ErrorsAgainstTruthAndMeasurementsAgreeWithoutNoise) {
   EXPECT_GT(a.mean_position_m, 0.01);  // Table 3 moves the tool by centimetres
 }
 
+// A joint that reads 1 mrad less than where it stands: the model with that joint's offset 1 mrad
+// larger, at the readings, is the truth (θ2 of a D–H arm is the offset of joint 2); the model
+// without it misses.
+TEST(Metrics, ErrorsAgainstTruthWhereTheReadingsAreOff) {
+  const auto model = kinematics::testing::Grb3016();
+  sim::Rng rng(6);
+  const Eigen::VectorXd x_true = sim::Table3Errors(model);
+  const auto qs = sim::SampleJoints(model, 20, rng);
+  std::vector<Eigen::VectorXd> qs_true;
+  for (const auto& q : qs) qs_true.push_back(q + 1e-3 * Eigen::VectorXd::Unit(q.size(), 1));
+  Eigen::VectorXd x_shifted = x_true;
+  x_shifted(model.FindParameter("theta2")) += 1e-3;
+  const auto shifted = ErrorsAgainstTruth(model, x_shifted, x_true, qs, qs_true);
+  EXPECT_LT(shifted.max_position_m, 1e-12);
+  EXPECT_LT(shifted.max_orientation_rad, 1e-12);
+  const auto unshifted = ErrorsAgainstTruth(model, x_true, x_true, qs, qs_true);
+  EXPECT_GT(unshifted.mean_position_m, 3e-4);  // 1 mrad at the arm's reach
+  EXPECT_NEAR(unshifted.mean_orientation_rad, 1e-3, 1e-9);
+  EXPECT_THROW(ErrorsAgainstTruth(model, x_true, x_true, qs, {qs.front()}), std::invalid_argument);
+}
+
 TEST(Metrics, PredictionMatchesAnalyticMeanForIsotropicCase) {
   // One parameter moving the marker along x with σ = 1 mm: E|δp| = σ·sqrt(2/π).
   kinematics::ModelBuilder b("slide");

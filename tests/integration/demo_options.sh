@@ -40,5 +40,18 @@ grep -q "no/such.sim.yaml: no such file" "$bin/err" ||
 out=$(PATH=$bin "$repo/deploy/rcal-up" --sim "$repo/config/cells/panda.sim.yaml" 2>"$bin/err")
 rc=$?
 [ "$rc" -eq 2 ] || { echo "rcal-up --sim without --demo: exit $rc, expected 2"; fail=1; }
+# --step-offset: described, needs its value, only with --demo, not through ROS 2, and no shell
+# metacharacters reach the process table.
+printf '%s\n' "$(PATH=$bin "$repo/deploy/demo" --help 2>&1)" | grep -q 'deploy/demo --step-offset' ||
+  { echo "deploy/demo --help: --step-offset not described"; fail=1; }
+for args in "demo --step-offset" "rcal-up --step-offset j2=1e-3@25" \
+            "rcal-up --demo --ros2 --step-offset j2=1e-3@25" "rcal-up --demo --step-offset j2=1e-3@25;rm" \
+            "rcal-up --demo --step-offset"; do
+  # shellcheck disable=SC2086
+  out=$(PATH=$bin "$repo/deploy/"$args 2>"$bin/err")
+  rc=$?
+  [ "$rc" -eq 2 ] || { echo "$args: exit $rc, expected 2 ($(cat "$bin/err"))"; fail=1; }
+  grep -q "step-offset" "$bin/err" || { echo "$args: stderr does not name --step-offset: $(cat "$bin/err")"; fail=1; }
+done
 [ "$fail" = 0 ] && echo "ok: deploy/demo --help and a bad option, rcal-up --sim refusals, nothing installed or built"
 exit $fail

@@ -39,6 +39,31 @@ TEST(SimEffects, ParsesTheCommandLineSyntax) {
     EXPECT_THROW(ParseEffectSpec(bad, m), std::invalid_argument) << bad;
 }
 
+TEST(SimEffects, ParsesAnOffsetStepAndNamesWhatIsWrong) {
+  const auto m = kinematics::testing::UrLikeUrdf();
+  auto s = ParseJointOffsetStep("j2=1e-3@25", m);
+  EXPECT_EQ(s.joint, 1);
+  EXPECT_DOUBLE_EQ(s.delta, 1e-3);
+  EXPECT_EQ(s.stop, 25);
+  s = ParseJointOffsetStep("elbow=-5e-4@1", m);
+  EXPECT_EQ(s.joint, 2);
+  EXPECT_DOUBLE_EQ(s.delta, -5e-4);
+  const std::pair<const char*, const char*> bad[] = {
+      {"j2=1e-3", "JOINT=DELTA@STOP"}, {"j9=1e-3@3", "no joint 'j9'"},
+      {"j2=abc@3", "DELTA 'abc'"},     {"j2=0.5@3", "beyond 0.1"},
+      {"j2=nan@3", "beyond 0.1"},      {"j2=1e-3@0", "STOP must be"},
+      {"j2=1e-3@x", "STOP 'x'"},       {"j2@3=1e-3", "JOINT=DELTA@STOP"}};
+  for (const auto& [text, why] : bad) {
+    try {
+      ParseJointOffsetStep(text, m);
+      ADD_FAILURE() << text << " was accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(text), std::string::npos) << e.what();
+    }
+  }
+}
+
 TEST(SimEffects, JointEffectsMoveTheJointsByHand) {
   const auto m = kinematics::testing::UrLikeUrdf();
   Rng rng(11);

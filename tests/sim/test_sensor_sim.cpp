@@ -125,6 +125,39 @@ TEST(SensorSim, ImuAtRestReadsGravityAndTheFieldAndStreamsAreDeterministic) {
   EXPECT_LT((m_sum - m_exp).norm() / n, 5 * 0.2 / std::sqrt(n));
 }
 
+// An encoder swapped mid-run: from t_s on, joint 2 reads 1 mrad less than where the arm stands.
+// Independent truth: the model at the truth errors with θ2 1 mrad larger, evaluated at the
+// readings, is where the arm is (to rounding); before t_s the readings are the truth's joints.
+TEST(SensorSim, AnOffsetStepMovesTheReadingsNotTheArm) {
+  const auto m = Cell();
+  const Eigen::VectorXd x = Truth(m);
+  const ToolMotionTruth truth(m, x, Program(m, 4, 3));
+  SensorSimSettings s;
+  const double t_s = truth.trajectory().StillInterval(1).second;  // leaving stop 1
+  s.offset_steps.push_back({t_s, 1, 1e-3});
+  SensorSim sim(truth, s, 7);
+  Eigen::VectorXd x_after = x;
+  x_after(m.FindParameter("theta2")) += 1e-3;
+  int before = 0, after = 0;
+  while (const auto f = sim.Next()) {
+    if (f->t < t_s) {
+      EXPECT_EQ(f->q, f->truth.q) << f->t;
+      ++before;
+      continue;
+    }
+    EXPECT_NEAR(f->truth.q(1) - f->q(1), 1e-3, 1e-15);
+    EXPECT_LT((TrueJoints(f->q, f->t, s.offset_steps) - f->truth.q).norm(), 1e-15);
+    const kinematics::ToolPose read = m.Forward(f->q, x_after);
+    EXPECT_LT((read.p_WM_W - f->truth.p_WM_W).norm(), 1e-12) << f->t;
+    EXPECT_LT((read.R_EI - f->truth.R_EI).norm(), 1e-12) << f->t;
+    // The model before the step, at the readings, misses by about 1 mrad times the reach.
+    EXPECT_GT((m.Forward(f->q, x).p_WM_W - f->truth.p_WM_W).norm(), 2e-4) << f->t;
+    ++after;
+  }
+  EXPECT_GT(before, 100);
+  EXPECT_GT(after, 100);
+}
+
 TEST(SensorSim, MagneticDisturbanceOnlyAtChosenStops) {
   const auto m = Cell();
   const ToolMotionTruth truth(m, Truth(m), Program(m, 20, 9));

@@ -126,6 +126,7 @@ TEST(PoseLog, ReadsValidPosesBitExactAndCountsEveryBadEvent) {
   ASSERT_EQ(d.samples.size(), 3u);
   EXPECT_TRUE(d.has_orientation);
   EXPECT_DOUBLE_EQ(d.samples[2].time, 4.0);
+  for (int k = 0; k < 3; ++k) EXPECT_EQ(d.samples[k].row, k + 1);  // rcal track's JSON rows
 
   // Not a log: a CSV, an empty file, a missing file.
   const fs::path csv = path.parent_path() / "poses.csv";

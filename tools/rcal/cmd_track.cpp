@@ -4,7 +4,9 @@
 // fitted: at each one the tool position predicted with the estimate of that moment is compared
 // with the measurement. With --cell the identification is cell::OnlineIdentification on the
 // cell's model (its base set, set-up guess and checks, exactly as the process runs it); without,
-// an EkfIdentifier on the robot's identifiable set (default settings).
+// an EkfIdentifier on the robot's identifiable set (default settings). An LCM log of the pipeline
+// (its POSE_MEASUREMENT events) is taken in the order logged, each pose with its own covariance:
+// with --cell, the identifier's input and logic, so the trace's NIS are the live ones.
 // The trace has one row per data row: time, set, prediction_error_m (test rows), status,
 // changed (the parameters or joint named on the row that detected a change), nis.
 //
@@ -19,9 +21,11 @@
 #include <filesystem>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
 
 #include "command.hpp"
+#include "pose_log.hpp"
 #include "rcal/cell/online_identification.hpp"
 #include "rcal/identification/calibration.hpp"
 #include "rcal/identification/tracking.hpp"
@@ -30,6 +34,7 @@
 #include "rcal/io/pose_dataset.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/kinematics/identifiability.hpp"
+#include "rcal/transport/channels.hpp"
 #include "report.hpp"
 #include "robot_setup.hpp"
 #include "track_sweep.hpp"
@@ -109,20 +114,31 @@ int RunData(const Options& o) {
     robot = LoadRobotForCell(o.robot, o.tip_link, o.base_link, o.frames);
   }
   io::PoseDataset data = LoadPoseDataFor(robot, o.data);
+  // A log of the pipeline is the process's own input: each pose with the covariance its still
+  // window gave, in the order logged (the order the identifier received them). Through the
+  // dataset path it got the fixed --position-sigma-mm instead, and the replay was another filter.
+  std::optional<PoseLog> log;
+  if (IsLcmLog(ResolvePath(o.data)))
+    log = ReadPoseLog(ResolvePath(o.data), robot.model, transport::channels::kPoseMeasurement);
   if (!id) {
     SetUpMarkers(robot, data, {}, o.frames == "auto");
     if (o.frames == "auto" && data.has_orientation) AddOrientationFrame(robot);
   }
   // Time order: the `time` column when every row has one (stable: ties keep file order).
-  const bool timed = std::all_of(data.samples.begin(), data.samples.end(),
-                                 [](const io::PoseSample& s) { return std::isfinite(s.time); });
+  const bool timed = !log && std::all_of(data.samples.begin(), data.samples.end(),
+                                         [](const auto& s) { return std::isfinite(s.time); });
   if (timed)
     std::stable_sort(
         data.samples.begin(), data.samples.end(),
         [](const io::PoseSample& a, const io::PoseSample& b) { return a.time < b.time; });
   const kinematics::KinematicModel& model = robot.model;
-  std::vector<kinematics::PoseMeasurement> ms = ToMeasurements(data, model);
-  identification::SetNoise(ms, o.position_sigma_mm / kMm, o.orientation_sigma_deg / kDeg);
+  std::vector<kinematics::PoseMeasurement> ms;
+  if (log) {
+    for (const auto& p : log->poses) ms.push_back(p.measurement);
+  } else {
+    ms = ToMeasurements(data, model);
+    identification::SetNoise(ms, o.position_sigma_mm / kMm, o.orientation_sigma_deg / kDeg);
+  }
   std::vector<bool> is_test;
   for (const auto& s : data.samples) is_test.push_back(s.set == io::PoseSample::kTest);
 
@@ -302,7 +318,8 @@ const RegisterCommand kTrack(
       sub.add_option("--frames", o->frames,
                      "auto: add world←base, marker and IMU frames the robot file lacks; none")
           ->capture_default_str();
-      sub.add_option("--position-sigma-mm", o->position_sigma_mm, "position noise per axis")
+      sub.add_option("--position-sigma-mm", o->position_sigma_mm,
+                     "position noise per axis (a CSV's rows; an LCM log's poses carry their own)")
           ->capture_default_str();
       sub.add_option("--orientation-sigma-deg", o->orientation_sigma_deg,
                      "orientation noise per axis")

@@ -11,12 +11,19 @@
 // The cell (--cell FILE, or the sim file's cell) gives the channels, which parameters are angles,
 // and whether orientation is measured: a positions-only cell has no orientation residual, shown
 // as "(positions only)" instead of the status message's 0.
+// With --step-offset (the same as sensor_acquisition's): after the step's sensor time (the sim's
+// default --start-utime 0), the truth the test error is judged against is where the arm stands
+// when its joints read the test stops (sim::TrueJoints). Each line ends with the identifier's
+// tracking status and, on a detection, what it named and by how much.
 #include <atomic>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
 #include <memory>
 #include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
 
 #include "command.hpp"
 #include "experiment_sensors.hpp"
@@ -25,7 +32,9 @@
 #include "rcal/identification/metrics.hpp"
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/kinematic_params_t.hpp"
+#include "rcal/sim/effects.hpp"
 #include "rcal/sim/pose_sim.hpp"
+#include "rcal/sim/sensor_sim.hpp"
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/lcm_transport.hpp"
@@ -45,6 +54,7 @@ struct Options {
   int poses = 0, test_poses = 50;
   int min_poses = -1;  // success with this many when the stream ends early (-1: --poses)
   double idle_s = 30.0;
+  std::vector<std::string> step_offsets;  ///< JOINT=DELTA@STOP, as the sim's --step-offset
 };
 
 int Run(const Options& o) {
@@ -54,6 +64,7 @@ int Run(const Options& o) {
   std::optional<cell::Cell> cell;
   std::optional<io::BuiltCell> built;
   std::vector<Eigen::VectorXd> test_q;
+  std::vector<sim::JointOffsetStep> steps;
   unsigned seed = 0;
   if (!o.sim.empty() && !o.cell.empty())
     throw std::runtime_error("watch: --sim names its cell; give --sim or --cell, not both");
@@ -67,10 +78,20 @@ int Run(const Options& o) {
     sim::SampleJoints(cell->model, 1, rng);  // home
     const auto stops = sim::SampleJoints(cell->model, o.poses + o.test_poses, rng);
     test_q.assign(stops.begin() + o.poses, stops.end());
+    if (!o.step_offsets.empty()) {
+      const cell::SimProgramme programme =
+          cell::MakeSimProgramme(*built, sim_spec, seed, o.poses, o.test_poses);
+      for (const std::string& text : o.step_offsets)
+        steps.push_back(cell::OffsetStepInProgramme(
+            programme, sim::ParseJointOffsetStep(text, programme.cell.model)));
+    }
+  } else if (!o.step_offsets.empty()) {
+    throw std::invalid_argument("--step-offset needs --sim (the truth it changes)");
   }
   std::optional<kinematic_params_t> params, previous;
   std::optional<double> last_test_mm;
   int last_poses = 0;
+  int changes_seen = 0, last_rejected = 0;
   auto last_heard = std::chrono::steady_clock::now();
   bool heard = false;
   const io::CellChannels channels = built ? built->spec.channels : io::CellChannels{};
@@ -83,6 +104,13 @@ int Run(const Options& o) {
   t.Subscribe<calibration_status_t>(
       channels.calibration_status, [&](const calibration_status_t& s) {
         last_heard = std::chrono::steady_clock::now();
+        if (s.poses_rejected > last_rejected) {
+          // A refused pose publishes no new parameters: its own line, with the reason.
+          std::printf("refused   t %8.2f s  (%d so far): %s  %s\n", s.utime * 1e-6,
+                      s.poses_rejected, s.last_rejection.c_str(), s.tracking_status.c_str());
+          std::fflush(stdout);
+        }
+        last_rejected = s.poses_rejected;  // a change retakes refused poses: the count can fall
         if (!params || params->utime != s.utime || params->poses_used == last_poses) return;
         const kinematic_params_t& p = *params;
         double max_step = 0, d_len = 0, d_ang = 0;
@@ -103,7 +131,11 @@ int Run(const Options& o) {
           std::string error;
           const auto x = transport::ParamsFromMessage(p, cell->model, &error);
           if (x) {
-            last_test_mm = identification::ErrorsAgainstTruth(cell->model, *x, cell->x_true, test_q)
+            std::vector<Eigen::VectorXd> test_q_true;
+            for (const auto& q : test_q)
+              test_q_true.push_back(sim::TrueJoints(q, s.utime * 1e-6, steps));
+            last_test_mm = identification::ErrorsAgainstTruth(cell->model, *x, cell->x_true, test_q,
+                                                              test_q_true)
                                .mean_position_m *
                            1e3;
             char b[64];
@@ -117,12 +149,36 @@ int Run(const Options& o) {
         if (orientation)
           std::snprintf(rms_orientation, sizeof rms_orientation, "%6.3f mrad",
                         s.rms_orientation_residual * 1e3);
+        // The tracking state; on the pose that detected a change, what it named and by how much
+        // (mm and mrad: a human report).
+        std::string status =
+            s.tracking_status.empty() ? (s.converged ? "converged" : "") : s.tracking_status;
+        if (s.changes_detected > changes_seen) {
+          changes_seen = s.changes_detected;
+          status += ":";
+          for (int i = 0; i < s.num_changed; ++i) {
+            const std::string& name = s.changed[i];
+            const int index = built ? built->model.FindParameter(name) : -1;
+            bool angle = index >= 0 ? built->model.parameters()[index].is_angle
+                                    : name.find("theta") != std::string::npos ||
+                                          name.find("alpha") != std::string::npos ||
+                                          name.find("beta") != std::string::npos;
+            if (built && name.rfind("offset of joint ", 0) == 0)
+              for (const auto& joint : built->model.joints())
+                if (name == "offset of joint " + joint.name)
+                  angle = joint.type == kinematics::JointType::kRevolute;
+            char b[160];
+            std::snprintf(b, sizeof b, " %s %+.3f %s", name.c_str(), s.changed_step[i] * 1e3,
+                          angle ? "mrad" : "mm");
+            status += b;
+          }
+        }
         std::printf(
             "pose %3d  t %8.2f s  change max %7.2f σ (|Δ| %7.3f mm, %7.3f mrad)  RMS residual "
-            "%6.3f mm %s  rejected %d%s%s\n",
+            "%6.3f mm %s  rejected %d%s  %s\n",
             p.poses_used, s.utime * 1e-6, max_step, std::sqrt(d_len) * 1e3, std::sqrt(d_ang) * 1e3,
             s.rms_position_residual * 1e3, rms_orientation, s.poses_rejected, test.c_str(),
-            s.converged ? "  converged" : "");
+            status.c_str());
         std::fflush(stdout);
         last_poses = p.poses_used;
         previous = p;
@@ -168,6 +224,9 @@ const RegisterCommand kWatch(
           ->check(CLI::NonNegativeNumber);
       sub.add_option("--idle", o->idle_s, "stop when nothing heard this long [s] (0: never)")
           ->capture_default_str();
+      sub.add_option("--step-offset", o->step_offsets,
+                     "with --sim: the sim's --step-offset JOINT=DELTA@STOP, so that the test "
+                     "error after it is judged against where the arm now stands");
       return [o]() { return Run(*o); };
     });
 

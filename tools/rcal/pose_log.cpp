@@ -87,6 +87,7 @@ io::PoseDataset ToPoseDataset(const PoseLog& log, int num_joints) {
       s.q_EI_wxyz = Eigen::Vector4d(q.w(), q.x(), q.y(), q.z());
     }
     s.time = static_cast<double>(p.utime) * 1e-6;
+    s.row = static_cast<int>(d.samples.size()) + 1;  // the k-th pose read from the log
     d.has_orientation = d.has_orientation && s.has_orientation;
     d.samples.push_back(std::move(s));
   }

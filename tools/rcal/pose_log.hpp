@@ -48,8 +48,9 @@ void CheckLogGaps(const std::string& path, const io::LcmLogStats& stats, bool al
 PoseLog ReadPoseLog(const std::filesystem::path& path, const kinematics::KinematicModel& model,
                     const std::string& channel);
 
-/// The poses as a pose dataset (time = utime [s]; no temperature, payload or approach sign: the
-/// pipeline's messages do not carry them).
+/// The poses as a pose dataset (time = utime [s], row = 1 for the first pose read, as a file's
+/// data rows; no temperature, payload or approach sign: the pipeline's messages do not carry
+/// them).
 io::PoseDataset ToPoseDataset(const PoseLog& log, int num_joints);
 
 }  // namespace rcal::tool

@@ -320,4 +320,16 @@ SimProgramme MakeSimProgramme(const io::BuiltCell& cell, const CellSimSpec& sim,
   return SimProgramme{std::move(c), std::move(stops), std::move(truth)};
 }
 
+sim::JointOffsetStep OffsetStepInProgramme(const SimProgramme& programme,
+                                           const sim::JointOffsetStepSpec& spec) {
+  // Waypoint 0 is the home pose, waypoint k calibration stop k.
+  const int stops = std::min(programme.truth.trajectory().num_waypoints() - 1,
+                             static_cast<int>(programme.stops.size()));
+  if (spec.stop < 1 || spec.stop > stops)
+    throw std::invalid_argument("offset step at stop " + std::to_string(spec.stop) +
+                                ": the programme has calibration stops 1.." +
+                                std::to_string(stops));
+  return {programme.truth.trajectory().StillInterval(spec.stop - 1).second, spec.joint, spec.delta};
+}
+
 }  // namespace rcal::cell

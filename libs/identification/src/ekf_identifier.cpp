@@ -368,8 +368,9 @@ int EkfIdentifier::Absorb(const kinematics::PoseMeasurement& z,
   return iterations;
 }
 
-std::optional<DetectedChange> EkfIdentifier::TestForChange() {
-  if (!settings_.detect_changes || status_ == TrackingStatus::kConverging) return std::nullopt;
+std::optional<DetectedChange> EkfIdentifier::TestForChange(bool stuck) {
+  if (!settings_.detect_changes || (status_ == TrackingStatus::kConverging && !stuck))
+    return std::nullopt;
   const int ng = static_cast<int>(identified_.size()), n = static_cast<int>(x_.size());
   const int nq = model().num_joints();
   // Candidate directions in the state: each identified geometric parameter, and each joint's
@@ -526,8 +527,14 @@ EkfUpdateResult EkfIdentifier::Update(const kinematics::PoseMeasurement& z,
                     ? ChiSquareQuantile(settings_.gate_probability, z.dimension())
                     : std::numeric_limits<double>::infinity();
   const bool gated = accepted_ >= settings_.gate_after && result.nis > result.gate;
-  if (settings_.detect_changes && status_ != TrackingStatus::kConverging &&
-      std::isfinite(result.nis)) {
+  // While converging the test does not run: a converging filter's innovations carry the
+  // linearisation of a state still poorly known. It runs all the same once the gate has refused
+  // `change_min_poses` of the poses in the test's window: a consistent filter refuses one pose in
+  // 1/(1 − gate_probability), so a converging filter that refuses poses again and again is stuck
+  // (the arm changed before the filter settled: the demo's arm stepped at its 25th of 50 stops
+  // was refused to the end, with nothing said), and only the test can tell a change from
+  // outliers.
+  if (settings_.detect_changes && std::isfinite(result.nis)) {
     // ∂h/∂q by central differences: a joint offset's signature (no analytic ∂h/∂q needed).
     const int nq = model().num_joints();
     Eigen::MatrixXd Hq(r.size(), nq), H_unused;
@@ -546,7 +553,10 @@ EkfUpdateResult EkfIdentifier::Update(const kinematics::PoseMeasurement& z,
                        llt.matrixL().solve(Hq)});
     if (static_cast<int>(recent_.size()) > std::max(settings_.change_window, 1))
       recent_.erase(recent_.begin());
-    if (std::optional<DetectedChange> change = TestForChange()) {
+    int refused = gated ? 1 : 0;
+    for (size_t k = 0; k + 1 < recent_.size(); ++k) refused += recent_[k].accepted ? 0 : 1;
+    const bool stuck = refused >= settings_.change_min_poses;
+    if (std::optional<DetectedChange> change = TestForChange(stuck)) {
       result.accepted = true;
       result.change = std::move(change);
       result.status = status_;

@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 #include <numeric>
+#include <stdexcept>
+#include <string>
 
 #include "rcal/geometry/so3.hpp"
 
@@ -45,9 +47,20 @@ PoseErrorStats ErrorsAgainstMeasurements(const kinematics::KinematicModel& model
 PoseErrorStats ErrorsAgainstTruth(const kinematics::KinematicModel& model, const Eigen::VectorXd& x,
                                   const Eigen::VectorXd& x_true,
                                   const std::vector<Eigen::VectorXd>& qs) {
+  return ErrorsAgainstTruth(model, x, x_true, qs, qs);
+}
+
+PoseErrorStats ErrorsAgainstTruth(const kinematics::KinematicModel& model, const Eigen::VectorXd& x,
+                                  const Eigen::VectorXd& x_true,
+                                  const std::vector<Eigen::VectorXd>& qs,
+                                  const std::vector<Eigen::VectorXd>& qs_true) {
+  if (qs.size() != qs_true.size())
+    throw std::invalid_argument("ErrorsAgainstTruth: " + std::to_string(qs.size()) +
+                                " readings but " + std::to_string(qs_true.size()) +
+                                " true joint vectors");
   std::vector<double> p, o;
-  for (const auto& q : qs) {
-    const kinematics::ToolPose a = model.Forward(q, x), b = model.Forward(q, x_true);
+  for (size_t i = 0; i < qs.size(); ++i) {
+    const kinematics::ToolPose a = model.Forward(qs[i], x), b = model.Forward(qs_true[i], x_true);
     p.push_back((a.p_WM_W - b.p_WM_W).norm());
     o.push_back(geometry::AngleBetween(a.R_EI, b.R_EI));
   }

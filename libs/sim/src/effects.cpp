@@ -20,7 +20,7 @@ std::vector<std::string> Split(const std::string& s, char sep) {
 }
 
 int JointIndex(const std::string& name, const kinematics::KinematicModel& model,
-               const std::string& text) {
+               const std::string& text, const char* what = "effect") {
   for (int j = 0; j < model.num_joints(); ++j)
     if (model.joints()[j].name == name) return j;
   if (name.size() >= 2 && name[0] == 'j') {
@@ -31,8 +31,9 @@ int JointIndex(const std::string& name, const kinematics::KinematicModel& model,
     } catch (const std::exception&) {
     }
   }
-  throw std::invalid_argument("effect '" + text + "': no joint '" + name + "' (use j1..j" +
-                              std::to_string(model.num_joints()) + " or a joint name)");
+  throw std::invalid_argument(std::string(what) + " '" + text + "': no joint '" + name +
+                              "' (use j1..j" + std::to_string(model.num_joints()) +
+                              " or a joint name)");
 }
 
 }  // namespace
@@ -85,6 +86,39 @@ TruthEffect ParseEffectSpec(const std::string& text, const kinematics::Kinematic
     }
   }
   return t;
+}
+
+JointOffsetStepSpec ParseJointOffsetStep(const std::string& text,
+                                         const kinematics::KinematicModel& model) {
+  const size_t eq = text.find('='), at = text.rfind('@');
+  if (eq == std::string::npos || at == std::string::npos || at < eq)
+    throw std::invalid_argument("offset step '" + text + "': expected JOINT=DELTA@STOP");
+  JointOffsetStepSpec spec;
+  spec.joint = JointIndex(text.substr(0, eq), model, text, "offset step");
+  const std::string delta = text.substr(eq + 1, at - eq - 1), stop = text.substr(at + 1);
+  try {
+    size_t used = 0;
+    spec.delta = std::stod(delta, &used);
+    if (used != delta.size()) throw std::invalid_argument("");
+  } catch (const std::exception&) {
+    throw std::invalid_argument("offset step '" + text + "': DELTA '" + delta +
+                                "' is not a number [rad | m]");
+  }
+  // An encoder re-mastered a few mrad off, not a different arm: beyond 0.1 it is a unit mistake.
+  if (!std::isfinite(spec.delta) || std::abs(spec.delta) > 0.1)
+    throw std::invalid_argument("offset step '" + text + "': DELTA " + delta +
+                                " is beyond 0.1 [rad | m] (SI units: 1 mrad is 1e-3)");
+  try {
+    size_t used = 0;
+    spec.stop = std::stoi(stop, &used);
+    if (used != stop.size()) throw std::invalid_argument("");
+  } catch (const std::exception&) {
+    throw std::invalid_argument("offset step '" + text + "': STOP '" + stop +
+                                "' is not a stop number");
+  }
+  if (spec.stop < 1)
+    throw std::invalid_argument("offset step '" + text + "': STOP must be 1 or more");
+  return spec;
 }
 
 EffectTruth MakeEffectTruth(const kinematics::KinematicModel& model,

@@ -57,6 +57,22 @@ ImuModelSettings WithRate(ImuModelSettings s, double rate) {
 }
 }  // namespace
 
+Eigen::VectorXd JointsAsRead(const Eigen::VectorXd& q_true, double t,
+                             const std::vector<JointOffsetStep>& steps) {
+  Eigen::VectorXd q = q_true;
+  for (const JointOffsetStep& s : steps)
+    if (t >= s.t_s && s.joint >= 0 && s.joint < q.size()) q(s.joint) -= s.delta;
+  return q;
+}
+
+Eigen::VectorXd TrueJoints(const Eigen::VectorXd& q_read, double t,
+                           const std::vector<JointOffsetStep>& steps) {
+  Eigen::VectorXd q = q_read;
+  for (const JointOffsetStep& s : steps)
+    if (t >= s.t_s && s.joint >= 0 && s.joint < q.size()) q(s.joint) += s.delta;
+  return q;
+}
+
 SensorSim::SensorSim(const ToolMotionTruth& truth, const SensorSimSettings& settings,
                      std::uint64_t seed)
     : truth_(truth),
@@ -88,7 +104,7 @@ std::optional<SensorFrame> SensorSim::Next() {
   f.t = static_cast<double>(k_) / settings_.rate_hz;
   ++k_;
   f.truth = truth_.At(f.t);
-  f.q = f.truth.q;
+  f.q = JointsAsRead(f.truth.q, f.t, settings_.offset_steps);
   if (settings_.joint_resolution > 0)
     for (int i = 0; i < f.q.size(); ++i)
       f.q(i) = settings_.joint_resolution * std::round(f.q(i) / settings_.joint_resolution);

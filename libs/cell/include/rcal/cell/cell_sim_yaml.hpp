@@ -45,6 +45,7 @@
 
 #include "rcal/cell/sim_cell.hpp"
 #include "rcal/io/cell_yaml.hpp"
+#include "rcal/sim/effects.hpp"
 #include "rcal/sim/sensor_sim.hpp"
 
 namespace rcal::cell {
@@ -121,5 +122,12 @@ struct SimProgramme {
 };
 SimProgramme MakeSimProgramme(const io::BuiltCell& cell, const CellSimSpec& sim, unsigned seed,
                               int num_cal, int num_test);
+
+/// The offset step `spec` in the programme's sensor time: the joint reads off from the moment the
+/// arm leaves the stop before calibration stop `spec.stop` (the home pose for stop 1), so every
+/// window at that stop and after it sees the step and none before. Throws std::invalid_argument
+/// when the programme has no such calibration stop.
+sim::JointOffsetStep OffsetStepInProgramme(const SimProgramme& programme,
+                                           const sim::JointOffsetStepSpec& spec);
 
 }  // namespace rcal::cell

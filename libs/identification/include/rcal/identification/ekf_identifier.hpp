@@ -31,7 +31,9 @@
 //   detection the named parameters are released from that onset on (their variance inflated by
 //   the size of the step, as a process-noise event between two poses), the poses since the onset
 //   are taken again (also those the gate refused), and the filter re-converges. status() says
-//   converging, converged, change_detected (the update that named it) or reconverging.
+//   converging, converged, change_detected (the update that named it) or reconverging. The test
+//   runs once converged, and while converging only when the gate has refused change_min_poses
+//   of the poses in its window (a filter stuck behind a change it met before it settled).
 // - innovation gate: a pose whose normalised innovation squared ỹᵀ S⁻¹ ỹ exceeds the χ² quantile
 //   `gate_probability` is rejected and counted, not absorbed.
 // - invalid input (wrong joint count, NaN, bad covariance) is rejected with a reason naming the
@@ -239,9 +241,10 @@ class EkfIdentifier {
   int Absorb(const kinematics::PoseMeasurement& z, const kinematics::EffectContext& context,
              const Eigen::MatrixXd& inflation, bool& ok, const Eigen::VectorXd* r0 = nullptr,
              const Eigen::MatrixXd* H0 = nullptr);
-  /// Records the whitened innovation of a pose for the change test; runs the test and, on a
-  /// detection, releases the change. Returns the change (or nothing).
-  std::optional<DetectedChange> TestForChange();
+  /// Runs the change test on the recent poses' whitened innovations and, on a detection,
+  /// releases the change. Returns the change (or nothing). Not while converging unless `stuck`
+  /// (the gate refused change_min_poses of the window's poses).
+  std::optional<DetectedChange> TestForChange(bool stuck);
   /// Releases a detected change from the recent pose `onset` on: the history from there is
   /// replaced by the recent poses (gated ones included), the first with the inflation, and the
   /// window is relinearised.

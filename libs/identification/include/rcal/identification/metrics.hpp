@@ -33,6 +33,13 @@ PoseErrorStats ErrorsAgainstMeasurements(const kinematics::KinematicModel& model
 PoseErrorStats ErrorsAgainstTruth(const kinematics::KinematicModel& model, const Eigen::VectorXd& x,
                                   const Eigen::VectorXd& x_true,
                                   const std::vector<Eigen::VectorXd>& qs);
+/// The same where the truth stands elsewhere than the joints read (a joint whose reading stepped,
+/// sim::TrueJoints): the model at x at the readings qs[i] against the truth at qs_true[i].
+/// Throws std::invalid_argument when the lists differ in size.
+PoseErrorStats ErrorsAgainstTruth(const kinematics::KinematicModel& model, const Eigen::VectorXd& x,
+                                  const Eigen::VectorXd& x_true,
+                                  const std::vector<Eigen::VectorXd>& qs,
+                                  const std::vector<Eigen::VectorXd>& qs_true);
 
 /// Expected mean position and orientation error at joints qs of an estimate whose error is
 /// N(0, C) on the `identified` parameters around x (C from CramerRaoBound): E|Jₚ δx|, E|J_θ δx|

@@ -33,6 +33,19 @@ struct TruthEffect {
 /// time_offset: "streamed data only").
 TruthEffect ParseEffectSpec(const std::string& text, const kinematics::KinematicModel& model);
 
+/// A joint offset that steps while the arm works (see JointOffsetStep), as a command line gives
+/// it: `JOINT=DELTA@STOP`, e.g. `j2=1e-3@25` (JOINT j1..jN or the joint's name, DELTA [rad | m],
+/// STOP the 1-based calibration stop from whose approach on the joint reads off).
+struct JointOffsetStepSpec {
+  int joint = 0;  ///< 0-based
+  double delta = 0.0;
+  int stop = 1;
+};
+/// Parses `JOINT=DELTA@STOP`. Throws std::invalid_argument naming the text and what is wrong
+/// (no joint of that name, a DELTA that is not a finite number or beyond 0.1 rad | m, STOP < 1).
+JointOffsetStepSpec ParseJointOffsetStep(const std::string& text,
+                                         const kinematics::KinematicModel& model);
+
 /// The extended truth model and its effect vector for a list of truth effects.
 struct EffectTruth {
   kinematics::ExtendedModel model;

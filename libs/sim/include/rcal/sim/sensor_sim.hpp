@@ -69,6 +69,23 @@ class ToolMotionTruth {
   Eigen::Matrix3d R_EW_;
 };
 
+/// An encoder swapped and re-mastered (or slipped in a collision) while the arm works: from sensor
+/// time t_s on, joint `joint` reads `delta` less than where it stands, so the model's offset of
+/// that joint (θ_j of a D–H arm) grows by `delta`. The arm's motion is unchanged; only its
+/// readings move, as on a real arm.
+struct JointOffsetStep {
+  double t_s = 0.0;    ///< [s] sensor time from which the reading is off
+  int joint = 0;       ///< 0-based
+  double delta = 0.0;  ///< [rad | m] the offset's step (the reading is this much less)
+};
+/// The joints as read at sensor time t [s] of an arm standing at q_true [rad | m].
+Eigen::VectorXd JointsAsRead(const Eigen::VectorXd& q_true, double t,
+                             const std::vector<JointOffsetStep>& steps);
+/// Where the arm stands at sensor time t [s] when its joints read q_read (the inverse of
+/// JointsAsRead): the truth a commanded (read) configuration reaches.
+Eigen::VectorXd TrueJoints(const Eigen::VectorXd& q_read, double t,
+                           const std::vector<JointOffsetStep>& steps);
+
 struct SensorSimSettings {
   double rate_hz = 100.0;  ///< common clock of the joint, IMU and position streams [Hz]
   ImuModelSettings imu;    ///< rate_hz is overwritten with the clock rate
@@ -79,7 +96,8 @@ struct SensorSimSettings {
     p.sigma = 5e-4;
     return p;
   }();
-  double joint_resolution = 0.0;  ///< encoder quantum [rad]; 0: exact readings
+  double joint_resolution = 0.0;              ///< encoder quantum [rad]; 0: exact readings
+  std::vector<JointOffsetStep> offset_steps;  ///< readings that step while the arm works
   bool mag_disturbance = false;
   double mag_disturbance_uT = 15.0;       ///< |d_E| [µT]
   double mag_disturbance_fraction = 0.2;  ///< fraction of the still stops disturbed [-]
