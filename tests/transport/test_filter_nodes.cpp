@@ -235,6 +235,23 @@ position_sample_t PositionAt(int64_t utime, int k) {
   return ToMessage(s);
 }
 
+// The library filter fed sample k in order (its accelerometer unless `accel` is false, level;
+// the position of every fifth sample): what position_kf must equal, update for update.
+struct InOrderReference {
+  estimation::PositionKf kf{EnuPositionKfSettings()};
+  int updates = 0;  // those that publish a TOOL_POSITION (the filter initialised)
+  void Step(int k, bool accel = true) {
+    const int64_t u = k * kPeriod;
+    const ImuSample s = *ImuFromMessage(Imu(u, k), nullptr);
+    if (accel && kf.UpdateAccel(SensorSeconds(u), s.f_B, Eigen::Matrix3d::Identity()) &&
+        kf.initialized())
+      ++updates;
+    if (k % 5 == 0 &&
+        kf.UpdatePosition(SensorSeconds(u), Eigen::Map<const Eigen::Vector3d>(PositionAt(u, k).p)))
+      ++updates;
+  }
+};
+
 // A driver (or a replay) that stalled sends what fell due at once: 6 s of IMU and POSITION
 // samples reach position_kf before orientation_kf has answered any of them. The orientation
 // stream is behind, not stopped (the host clock did not move), so every update waits for its
@@ -248,8 +265,7 @@ TEST(PositionKfNode, ABurstAheadOfTheOrientationsLosesNothing) {
   PositionKfNode::Options options;
   options.steady_now_us = [&] { return now_us; };
   PositionKfNode node(t, EnuPositionKfSettings(), options);
-  estimation::PositionKf reference(EnuPositionKfSettings());
-  int reference_updates = 0;
+  InOrderReference reference;
   constexpr int kSamples = 700;  // 7 s at 100 Hz, positions at 20 Hz
   // The first second in step, so the orientation stream is known to be alive.
   auto in_step = [&](int k) {
@@ -269,22 +285,13 @@ TEST(PositionKfNode, ABurstAheadOfTheOrientationsLosesNothing) {
     node.OnOrientation(OrientationAt(k * kPeriod));
     Drain(t);  // memq
   }
-  for (int k = 0; k < kSamples; ++k) {
-    const int64_t u = k * kPeriod;
-    const ImuSample s = *ImuFromMessage(Imu(u, k), nullptr);
-    if (reference.UpdateAccel(SensorSeconds(u), s.f_B, Eigen::Matrix3d::Identity()) &&
-        reference.initialized())
-      ++reference_updates;
-    if (k % 5 == 0 && reference.UpdatePosition(
-                          SensorSeconds(u), Eigen::Map<const Eigen::Vector3d>(PositionAt(u, k).p)))
-      ++reference_updates;
-  }
+  for (int k = 0; k < kSamples; ++k) reference.Step(k);
   EXPECT_EQ(node.health().rejected(), 0) << node.health().last_error();
   EXPECT_EQ(node.health().gaps(), 0);
   EXPECT_EQ(node.unpaired_accel(), 0);
-  EXPECT_EQ(static_cast<int>(out.tool.size()), reference_updates);
-  EXPECT_EQ(node.filter().p_WM_W(), reference.p_WM_W());
-  EXPECT_EQ(node.filter().P(), reference.P());
+  EXPECT_EQ(static_cast<int>(out.tool.size()), reference.updates);
+  EXPECT_EQ(node.filter().p_WM_W(), reference.kf.p_WM_W());
+  EXPECT_EQ(node.filter().P(), reference.kf.P());
 }
 
 // Two senders are not ordered: the multicast copy of an IMU sample can reach position_kf after
@@ -297,29 +304,22 @@ TEST(PositionKfNode, AnOrientationAheadOfItsImuSampleWaitsForIt) {
   LcmTransport t("memq://");
   Outputs out(t);
   PositionKfNode node(t, EnuPositionKfSettings());
-  estimation::PositionKf reference(EnuPositionKfSettings());
-  int reference_updates = 0;
+  InOrderReference reference;
   for (int k = 0; k < 300; ++k) {
     const int64_t u = k * kPeriod;
     node.OnOrientation(OrientationAt(u));
     if (k % 5 == 0) node.OnPosition(PositionAt(u, k));
     node.OnImu(Imu(u, k));
     Drain(t);
-    const ImuSample s = *ImuFromMessage(Imu(u, k), nullptr);
-    if (reference.UpdateAccel(SensorSeconds(u), s.f_B, Eigen::Matrix3d::Identity()) &&
-        reference.initialized())
-      ++reference_updates;
-    if (k % 5 == 0 && reference.UpdatePosition(
-                          SensorSeconds(u), Eigen::Map<const Eigen::Vector3d>(PositionAt(u, k).p)))
-      ++reference_updates;
+    reference.Step(k);
   }
   EXPECT_EQ(node.health().rejected(), 0) << node.health().last_error();
   EXPECT_EQ(node.health().gaps(), 0);
   EXPECT_EQ(node.unpaired_accel(), 0);
-  ASSERT_GT(reference_updates, 300);
-  EXPECT_EQ(static_cast<int>(out.tool.size()), reference_updates);
-  EXPECT_EQ(node.filter().p_WM_W(), reference.p_WM_W());
-  EXPECT_EQ(node.filter().P(), reference.P());
+  ASSERT_GT(reference.updates, 300);
+  EXPECT_EQ(static_cast<int>(out.tool.size()), reference.updates);
+  EXPECT_EQ(node.filter().p_WM_W(), reference.kf.p_WM_W());
+  EXPECT_EQ(node.filter().P(), reference.kf.P());
 }
 
 // An orientation whose IMU sample never comes (refused, or lost on the way) pairs with nothing:
@@ -328,27 +328,20 @@ TEST(PositionKfNode, AnEarlyOrientationWhoseSampleNeverComesPairsWithNothing) {
   LcmTransport t("memq://");
   Outputs out(t);
   PositionKfNode node(t, EnuPositionKfSettings());
-  estimation::PositionKf reference(EnuPositionKfSettings());
-  int reference_updates = 0;
+  InOrderReference reference;
   for (int k = 0; k < 100; ++k) {
     const int64_t u = k * kPeriod;
     node.OnOrientation(OrientationAt(u));
     if (k % 5 == 0) node.OnPosition(PositionAt(u, k));
     if (k != 42) node.OnImu(Imu(u, k));  // sample 42 never reaches position_kf
     Drain(t);
-    const ImuSample s = *ImuFromMessage(Imu(u, k), nullptr);
-    if (k != 42 && reference.UpdateAccel(SensorSeconds(u), s.f_B, Eigen::Matrix3d::Identity()) &&
-        reference.initialized())
-      ++reference_updates;
-    if (k % 5 == 0 && reference.UpdatePosition(
-                          SensorSeconds(u), Eigen::Map<const Eigen::Vector3d>(PositionAt(u, k).p)))
-      ++reference_updates;
+    reference.Step(k, /*accel=*/k != 42);
   }
   EXPECT_EQ(node.health().rejected(), 0) << node.health().last_error();
   EXPECT_EQ(node.unpaired_accel(), 0);
-  EXPECT_EQ(static_cast<int>(out.tool.size()), reference_updates);
-  EXPECT_EQ(node.filter().p_WM_W(), reference.p_WM_W());
-  EXPECT_EQ(node.filter().P(), reference.P());
+  EXPECT_EQ(static_cast<int>(out.tool.size()), reference.updates);
+  EXPECT_EQ(node.filter().p_WM_W(), reference.kf.p_WM_W());
+  EXPECT_EQ(node.filter().P(), reference.kf.P());
 }
 
 // orientation_kf stops (killed, hung): once no ORIENTATION came for orientation_timeout_us of the
