@@ -56,6 +56,12 @@ inline void Adapt(const kinematic_params_t& m) {
   std::string error;
   (void)transport::ParamsFromMessage(m, Grb3016(), &error);
 }
+// sensor_acquisition --follow-next-poses: the advice checked against the model, then followed.
+inline void Adapt(const next_poses_t& m) {
+  std::string error;
+  if (auto n = transport::NextPosesFromMessage(m, Grb3016(), &error))
+    (void)cell::NextStopToFollow(n->q, {Eigen::VectorXd::Zero(Grb3016().num_joints())});
+}
 template <typename Msg>
 void Adapt(const Msg&) {}
 

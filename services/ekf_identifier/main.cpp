@@ -78,26 +78,9 @@ struct Options {
   std::string name = "ekf_identifier";
   estimation::TimeGateSettings time = PoseTimeGate();
   int next_poses = 5;  // NEXT_POSES suggestions per pose (0: none)
+  // NEXT_POSES: a stop's cost as joint-space distance [rad | m]
+  double stop_cost = identification::kDefaultStopCost;
 };
-
-// ---- NEXT_POSES (issue 16) ----------------------------------------------------------------------
-// The k stops that would shrink the predicted task-region error most (cell::NextPoseAdvisor).
-next_poses_t ToNextPoses(const cell::NextPoseAdvice& a, int64_t utime, int poses_used,
-                         int num_joints) {
-  next_poses_t m{};
-  m.utime = utime;
-  m.poses_used = poses_used;
-  m.num_joints = num_joints;
-  m.count = static_cast<int32_t>(a.poses.size());
-  m.num_values = m.count * num_joints;
-  for (size_t i = 0; i < a.poses.size(); ++i) {
-    for (int j = 0; j < num_joints; ++j) m.q.push_back(a.q[i](j));
-    m.gain.push_back(a.poses[i].gain_m2);
-    m.distance.push_back(a.poses[i].distance);
-  }
-  m.predicted_rms_position = a.predicted_rms_m;
-  return m;
-}
 
 class Identifier {
  public:
@@ -222,6 +205,7 @@ class Identifier {
       health_.Gap(msg.pose_index - *last_pose_index_ - 1);
     last_pose_index_ = msg.pose_index;
     last_q_ = z->q;
+    if (advisor_) advisor_->Measured(*z);
     const auto out = id_.Add({std::move(*z), msg.utime, msg.pose_index},
                              [this](const cell::OnlineIdentification::Update& u) { Applied(u); });
     if (!out.rejected.empty()) {
@@ -301,9 +285,9 @@ class Identifier {
   // NEXT_POSES after each update, from the joints of the last pose received.
   void PublishNextPoses(int64_t utime) {
     if (!advisor_ || last_q_.size() != id_.model().num_joints()) return;
-    const auto advice = advisor_->Suggest(id_.ekf(), last_q_, o_.next_poses);
-    if (t_.Publish(channels_.next_poses,
-                   ToNextPoses(advice, utime, id_.ekf().accepted(), id_.model().num_joints())))
+    const auto advice = advisor_->Suggest(id_.ekf(), last_q_, o_.next_poses, o_.stop_cost);
+    if (t_.Publish(channels_.next_poses, transport::ToNextPoses(advice, utime, id_.ekf().accepted(),
+                                                                id_.model().num_joints())))
       health_.Published();
   }
   std::optional<cell::NextPoseAdvisor> advisor_;
@@ -342,6 +326,12 @@ int main(int argc, char** argv) {
                  "NEXT_POSES: suggested next stops published after each pose (0: none)")
       ->capture_default_str()
       ->check(CLI::Range(0, 100));
+  app.add_option(
+         "--next-poses-stop-cost", o.stop_cost,
+         "NEXT_POSES: what a stop costs, as joint-space distance [rad | m]: suggestions are "
+         "ranked by gain / (distance + this); large: by gain alone")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   CLI11_PARSE(app, argc, argv);
 
   try {

@@ -29,6 +29,19 @@
 // receivers' socket buffers is dropped: use a finite speed or recv_buf_size=N in the LCM URL).
 // A real sensor driver implements rcal::sensors::SensorSource.
 //
+// Following the identifier (--follow-next-poses, sim sources; issue 16): the simulated cell goes
+// where ekf_identifier's NEXT_POSES asks instead of to the programme's next random stop, once the
+// identifier advises (before that, and whenever no usable advice came, the programme's stop; each
+// stop's choice is logged). Pose level: after each stop the process waits up to --follow-timeout
+// of wall time for the advice computed after that stop, then goes to its best suggestion. Sensor
+// level: a still window's pose is published when the arm leaves the stop, so the advice of a stop
+// arrives while the arm moves on; leaving stop k the arm takes the newest advice (computed after
+// stop k − 1, one stop behind) and goes to its best suggestion it has not stood at since
+// (cell::NextStopToFollow); the programme's timing after that stop follows the new move. The
+// suggestions are joints as read; the arm goes where it reads so (sim::TrueJoints). NEXT_POSES
+// messages that do not decode or fit the model (joint count, limits, non-finite values) are
+// refused naming the field and counted in HEALTH. Test stops are never replaced.
+//
 // Restarts (--checkpoint FILE, sim sources): a killed simulator must not replay from t = 0 (the
 // pipeline rejects sensor time going backwards, and a real sensor just continues). Before
 // publishing, the process writes atomically the first tick it may not yet publish (a lease of
@@ -38,7 +51,9 @@
 // ticks (shorter than the pose pipeline's max_gap, so a still window around it keeps its pose
 // or is dropped, never averaged across a move); SIGINT loses nothing. A finished programme stays
 // finished (with --linger the restarted process just lingers). A checkpoint of another
-// programme (seed, stop counts, start time, rate) is an error naming the key (exit 1).
+// programme (seed, stop counts, start time, rate) is an error naming the key (exit 1). The stops a
+// following cell chose are not in the checkpoint: a restarted one resumes on the programme's own
+// stops, its sensor time continuing.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -51,9 +66,11 @@
 #include <vector>
 
 #include "rcal/cell/cell_sim_yaml.hpp"
+#include "rcal/cell/next_poses.hpp"
 #include "rcal/cell/sim_cell.hpp"
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/io/robot_urdf.hpp"
+#include "rcal/next_poses_t.hpp"
 #include "rcal/services/common.hpp"
 #include "rcal/sim/effects.hpp"
 #include "rcal/sim/pose_sim.hpp"
@@ -126,6 +143,61 @@ void Pace(int64_t utime, int64_t utime0, long long wall0, double speed) {
   }
 }
 
+// --follow-next-poses: the newest usable NEXT_POSES. A message that does not decode or fit the
+// model is refused and counted (HEALTH, naming the field); one older than the newest is stale.
+class NextPosesInbox {
+ public:
+  NextPosesInbox(rcal::transport::Transport& t, const std::string& channel,
+                 const rcal::kinematics::KinematicModel& model, rcal::transport::Health& health)
+      : t_(t), model_(model), health_(health) {
+    t.Subscribe<rcal::next_poses_t>(
+        channel, [this](const rcal::next_poses_t& m) { OnMessage(m); },
+        [this](const std::string& e) {
+          health_.Received();
+          health_.Rejected(e);
+          spdlog::warn("{}", e);
+        });
+  }
+  const std::optional<rcal::transport::NextPoses>& newest() const { return newest_; }
+  /// Handles messages until the newest advice was computed at or after sensor time `utime` [µs],
+  /// for at most `timeout_s` of wall time. Returns whether it came.
+  bool WaitFor(int64_t utime, double timeout_s) {
+    const long long end =
+        rcal::services::MonotonicMicros() + static_cast<long long>(timeout_s * 1e6);
+    while (!(newest_ && newest_->utime >= utime) && !rcal::services::StopRequested() &&
+           rcal::services::MonotonicMicros() < end)
+      t_.HandleTimeout(10);
+    return newest_ && newest_->utime >= utime;
+  }
+
+ private:
+  void OnMessage(const rcal::next_poses_t& m) {
+    health_.Received();
+    std::string error;
+    auto n = rcal::transport::NextPosesFromMessage(m, model_, &error);
+    if (!n) {
+      health_.Rejected(error);
+      spdlog::warn("NEXT_POSES refused: {}", error);
+      return;
+    }
+    if (newest_ && n->utime < newest_->utime) {
+      health_.Stale("next_poses.utime " + std::to_string(n->utime) + " before the newest " +
+                    std::to_string(newest_->utime));
+      return;
+    }
+    newest_ = std::move(n);
+  }
+  rcal::transport::Transport& t_;
+  const rcal::kinematics::KinematicModel& model_;
+  rcal::transport::Health& health_;
+  std::optional<rcal::transport::NextPoses> newest_;
+};
+
+// The figures a following cell reports at its end.
+struct FollowCount {
+  int followed = 0, programme = 0;
+};
+
 // --checkpoint: where a restarted simulated source resumes (sensors::SimCheckpoint, a lease
 // written before the ticks it covers are published).
 struct Resume {
@@ -180,15 +252,19 @@ class Lease {
 // the sim file's truth.
 int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec& sim_spec,
                  unsigned seed, int num_cal, int num_test,
-                 const std::vector<std::string>& step_offsets, bool linger, int64_t start_utime,
-                 double speed, const Resume& resume, rcal::transport::LcmTransport& t) {
+                 const std::vector<std::string>& step_offsets, bool follow, bool linger,
+                 int64_t start_utime, double speed, const Resume& resume,
+                 rcal::transport::LcmTransport& t) {
   using namespace rcal;
   // SimulateWindows' programme: the home pose, then the calibration and test stops.
-  const cell::SimProgramme sim_run =
-      cell::MakeSimProgramme(built, sim_spec, seed, num_cal, num_test);
+  cell::SimProgramme sim_run = cell::MakeSimProgramme(built, sim_spec, seed, num_cal, num_test);
   const auto& model = sim_run.cell.model;
   const io::CellChannels& channels = built.spec.channels;
-  const sim::ToolMotionTruth& truth = sim_run.truth;
+  sim::ToolMotionTruth& truth = sim_run.truth;
+  if (follow && !step_offsets.empty())
+    throw std::runtime_error(
+        "--follow-next-poses and --step-offset: not both at --level sensors (the step's time is "
+        "the programme's stop, which following moves); use --level poses");
   sim::SensorSimSettings ss = cell::SimSensorSettings(built, sim_spec);
   for (const std::string& text : step_offsets) {
     const sim::JointOffsetStep step =
@@ -205,9 +281,15 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
   transport::Health health("sensor_acquisition");
   spdlog::info(
       "sensor_acquisition sim sensors on {}: cell {} ({}), seed {}, {} calibration stops, {} "
-      "ticks ({:.1f} s of sensor time), speed {}",
+      "ticks ({:.1f} s of sensor time), speed {}{}",
       t.url(), built.spec.name, sim_spec.source, seed, num_cal, sensors.num_ticks(),
-      truth.trajectory().duration(), speed);
+      truth.trajectory().duration(), speed,
+      follow ? ", following NEXT_POSES (the programme's timing after the first followed stop "
+               "changes)"
+             : "");
+  std::optional<NextPosesInbox> advice;
+  if (follow) advice.emplace(t, channels.next_poses, model, health);
+  FollowCount followed;
   const sensors::SimProgramme programme{"sensors", seed,        num_cal,
                                         num_test,  start_utime, ss.rate_hz};
   auto tick_utime = [&](int64_t k) {
@@ -226,6 +308,40 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
   const long long wall0 = services::MonotonicMicros();
   const int64_t utime0 = tick_utime(first);
   int64_t published = 0, k = first;
+  // Following: the calibration stop the arm leaves next (waypoint 0 is home; 1..num_cal the
+  // calibration stops; the last waypoint, the first test stop, is never replaced).
+  int leaving = 1;
+  while (leaving < num_cal &&
+         truth.trajectory().StillInterval(leaving).second < static_cast<double>(first) / ss.rate_hz)
+    ++leaving;
+  auto choose_next = [&](int stop) {
+    const auto& a = advice->newest();
+    if (!a) {
+      ++followed.programme;
+      return;  // the identifier does not advise yet: the programme's stop
+    }
+    // The stops stood at after the pose the advice was computed for (it cannot know them).
+    std::vector<Eigen::VectorXd> since;
+    for (int j = 1; j <= stop; ++j)
+      if (tick_utime(std::llround(truth.trajectory().StillInterval(j).first * ss.rate_hz)) >
+          a->utime)
+        since.push_back(truth.trajectory().waypoint(j));
+    const auto q = cell::NextStopToFollow(a->q, since);
+    if (!q) {
+      ++followed.programme;
+      spdlog::info(
+          "stop {}: the programme's (NEXT_POSES after utime {} has no stop not yet "
+          "measured)",
+          stop + 1, a->utime);
+      return;
+    }
+    truth.Retarget(stop + 1, *q);
+    ++followed.followed;
+    spdlog::info(
+        "stop {}: NEXT_POSES after utime {} ({} poses used, {} stop(s) behind), predicted task "
+        "RMS {:.4f} mm",
+        stop + 1, a->utime, a->poses_used, since.size(), a->predicted_rms_m * 1e3);
+  };
   auto count = [&](bool ok) {
     if (ok) {
       health.Published();
@@ -233,6 +349,11 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
     }
   };
   while (!services::StopRequested()) {
+    // Leaving a calibration stop: where to next (before the first tick of the move).
+    while (advice && leaving<num_cal&& static_cast<double>(k) / ss.rate_hz> truth.trajectory()
+                         .StillInterval(leaving)
+                         .second)
+      choose_next(leaving++);
     const auto f = sensors.Next();
     if (!f) break;
     const int64_t utime = start_utime + std::llround(f->t * 1e6);
@@ -260,6 +381,9 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
   lease.Stopped(k, k >= sensors.num_ticks());
   health.Final(t);
   spdlog::info("done: {} samples published", published);
+  if (follow)
+    spdlog::info("following NEXT_POSES: {} stops followed, {} the programme's", followed.followed,
+                 followed.programme);
   if (linger) {
     // Under a supervisor: stay up (an exit would be restarted, and without --checkpoint replay
     // the programme).
@@ -369,6 +493,16 @@ int main(int argc, char** argv) {
                  "STOP on, joint JOINT (j1..jN or its name) reads DELTA [rad | m] less than where "
                  "it stands, as after an encoder swap and re-mastering: the joint's offset steps "
                  "by DELTA mid-run (repeatable)");
+  bool follow = false;
+  app.add_flag("--follow-next-poses", follow,
+               "sim: go where ekf_identifier's NEXT_POSES asks (its best suggestion) instead of to "
+               "the programme's next random stop, once it advises (issue 16)");
+  double follow_timeout_s = 2.0;
+  app.add_option("--follow-timeout", follow_timeout_s,
+                 "sim poses, --follow-next-poses: wall time to wait for the advice after a stop "
+                 "[s]; without it the last advice's next best stop")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   if (source == "replay" && replay_file.empty()) {
     std::fprintf(stderr, "sensor_acquisition: --source replay needs FILE\n");
@@ -418,7 +552,7 @@ int main(int argc, char** argv) {
     if (app.get_option("--seed")->count() == 0) seed = sim_spec.seed;
     if (level == "sensors")
       return RunSensorSim(built, sim_spec, seed, poses > 0 ? poses : sim_spec.num_cal, test_poses,
-                          step_offsets, linger, start_utime, speed, resume, t);
+                          step_offsets, follow, linger, start_utime, speed, resume, t);
     // Pose level: the cell's model at the sim file's truth, measured as the cell's position sensor
     // measures (its largest σ per axis; orientation when it is a 6-DoF tracker), one pose per stop.
     const auto& model = built.model;
@@ -447,6 +581,9 @@ int main(int argc, char** argv) {
     }
     sim::Rng rng(seed * 1000 + 3);
     transport::Health health("sensor_acquisition");
+    std::optional<NextPosesInbox> advice;
+    if (follow) advice.emplace(t, built.spec.channels.next_poses, model, health);
+    FollowCount followed;
     spdlog::info("sensor_acquisition sim on {}: {} poses at {} Hz, speed {}", t.url(),
                  poses > 0 ? std::to_string(poses) : "unlimited", rate, speed);
 
@@ -464,12 +601,13 @@ int main(int argc, char** argv) {
       spdlog::info("resumed at pose {} (sensor time {} µs)", first, pose_utime(first));
     const long long wall0 = services::MonotonicMicros();
     int64_t k = 0;
+    Eigen::VectorXd q_last;  // where the arm stood last (truth)
     for (; (poses == 0 || k < poses) && !services::StopRequested(); ++k) {
       if (next == qs.size()) {
         qs = sim::SampleJoints(model, block, rng);
         next = 0;
       }
-      const Eigen::VectorXd& q = qs[next++];
+      Eigen::VectorXd q = qs[next++];
       const int64_t utime = pose_utime(k);
       if (k < first) {
         // Fast-forward: the same random numbers as the uninterrupted programme.
@@ -485,6 +623,32 @@ int main(int argc, char** argv) {
         }
       }
       if (services::StopRequested()) break;
+      // Following: once the identifier advises, wait for its advice after the last stop's
+      // measurements, then go to its best suggestion (joints as read; the arm stands where they
+      // read so).
+      if (advice && advice->newest() && k > first) {
+        const int64_t last = pose_utime(k - 1) + static_cast<int64_t>(slots.size()) - 1;
+        const bool came = advice->WaitFor(last, follow_timeout_s);
+        std::vector<Eigen::VectorXd> since;
+        if (!came) since.push_back(sim::JointsAsRead(q_last, static_cast<double>(k), steps));
+        const auto choice = cell::NextStopToFollow(advice->newest()->q, since);
+        if (choice) {
+          q = sim::TrueJoints(*choice, static_cast<double>(k + 1), steps);
+          ++followed.followed;
+          spdlog::info(
+              "pose {}: NEXT_POSES after utime {} ({} poses used){}, predicted task "
+              "RMS {:.4f} mm",
+              k + 1, advice->newest()->utime, advice->newest()->poses_used,
+              came ? "" : " (the advice of the last stop did not come in time)",
+              advice->newest()->predicted_rms_m * 1e3);
+        } else {
+          ++followed.programme;
+          spdlog::info("pose {}: the programme's stop (no usable NEXT_POSES)", k + 1);
+        }
+      } else if (advice) {
+        ++followed.programme;
+      }
+      q_last = q;
       lease.Before(k);
       const Eigen::VectorXd q_read = sim::JointsAsRead(q, static_cast<double>(k + 1), steps);
       if (t.Publish(built.spec.channels.joints, transport::ToJointState(model, q_read, utime)))
@@ -505,6 +669,9 @@ int main(int argc, char** argv) {
       t.HandleTimeout(0);  // keeps LCM's receive queue empty
     }
     lease.Stopped(k, poses > 0 && k >= poses);
+    if (follow)
+      spdlog::info("following NEXT_POSES: {} stops followed, {} the programme's", followed.followed,
+                   followed.programme);
     spdlog::info("done");
     return 0;
   } catch (const std::exception& e) {

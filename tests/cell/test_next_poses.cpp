@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include "rcal/cell/online_identification.hpp"
 #include "rcal/identification/metrics.hpp"
 #include "rcal/io/atomic_file.hpp"
@@ -87,6 +89,66 @@ TEST(NextPoses, FollowingTheAdviceShrinksTheTaskErrorAndShortensThePath) {
         .mean_position_m;
   };
   EXPECT_LT(task_error(greedy), task_error(random));
+}
+
+// A cell one stop behind the advice skips the suggestions it has already measured (within
+// min_move) and takes the best of the rest; with nothing left it has no advice to follow.
+TEST(NextPoses, AFollowerSkipsWhatItMeasuredSinceTheAdvice) {
+  const Eigen::VectorXd a = Eigen::VectorXd::Constant(6, 0.1),
+                        b = Eigen::VectorXd::Constant(6, -0.4),
+                        c = Eigen::VectorXd::Constant(6, 1.0);
+  EXPECT_EQ(NextStopToFollow({a, b, c}, {}), a);
+  Eigen::VectorXd near_a = a;
+  near_a(3) += 0.04;  // within 0.05 of a: measured already
+  EXPECT_EQ(NextStopToFollow({a, b, c}, {near_a}), b);
+  EXPECT_EQ(NextStopToFollow({a, b, c}, {near_a, b}), c);
+  near_a(3) += 0.02;  // 0.06 away: a different stop
+  EXPECT_EQ(NextStopToFollow({a, b, c}, {near_a}), a);
+  EXPECT_EQ(NextStopToFollow({a, b}, {a, b}), std::nullopt);
+  EXPECT_EQ(NextStopToFollow({}, {}), std::nullopt);
+  EXPECT_EQ(NextStopToFollow({a, b}, {a}, 0.0), b);  // exactly there is measured
+}
+
+// The advice weighs a stop by the noise the cell's poses actually carry (Measured), not the cell
+// file's per-sample σ: an advisor of a 0.2 mm-per-axis cell told of poses with 0.03 mm suggests
+// exactly what an advisor of a 0.03 mm cell suggests (the RMS σ of the poses it was told of), and
+// its predicted error differs from the untold one's.
+TEST(NextPoses, TheAdviceUsesTheNoiseOfThePosesMeasured) {
+  const io::BuiltCell coarse_cell = Ur10CellWithConstraints();
+  io::BuiltCell fine_cell = coarse_cell;
+  fine_cell.spec.position.sigma = Eigen::Vector3d::Constant(3e-5);
+  NextPoseAdvisor told(coarse_cell, 800, 4), untold(coarse_cell, 800, 4);
+  const NextPoseAdvisor fine(fine_cell, 800, 4);
+  const std::vector<int> base = CellBaseSet(coarse_cell);
+  identification::EkfIdentifier ekf(coarse_cell.model, base, coarse_cell.ekf);
+  sim::Rng rng(3);
+  const Eigen::VectorXd x_true = sim::RandomErrors(coarse_cell.model, rng, 5e-4, 1e-3);
+  sim::PoseNoise noise;
+  noise.orientation = false;
+  noise.position_sigma = 3e-5;
+  const auto qs = identification::SampleCandidates(coarse_cell.model, coarse_cell.model.Nominal(),
+                                                   coarse_cell.spec.constraints, 12, rng);
+  for (size_t k = 0; k < qs.size(); ++k) {
+    auto z = sim::MeasurePose(coarse_cell.model, x_true, qs[k], noise, rng);
+    // Window covariances vary about their RMS: (2.5e-5)² and (3.4e-5)² average to (3e-5)².
+    const double s = k % 2 == 0 ? 2.5e-5 : std::sqrt(2 * 9e-10 - 6.25e-10);
+    z.covariance = s * s * Eigen::Matrix3d::Identity();
+    told.Measured(z);
+    ekf.Update(z);
+  }
+  kinematics::PoseMeasurement bad;
+  bad.covariance = Eigen::Matrix3d::Constant(std::nan(""));
+  told.Measured(bad);  // ignored
+  const Eigen::VectorXd q_now = qs.back();
+  const NextPoseAdvice a = told.Suggest(ekf, q_now, 5), b = fine.Suggest(ekf, q_now, 5),
+                       c = untold.Suggest(ekf, q_now, 5);
+  ASSERT_EQ(a.poses.size(), 5u);
+  for (size_t i = 0; i < a.poses.size(); ++i) {
+    EXPECT_EQ(a.poses[i].candidate, b.poses[i].candidate);
+    EXPECT_NEAR(a.poses[i].gain_m2, b.poses[i].gain_m2, 1e-9 * b.poses[i].gain_m2);
+  }
+  // A less noisy measurement removes more: the untold advisor under-rates every stop.
+  EXPECT_GT(a.poses[0].gain_m2, 1.5 * c.poses[0].gain_m2);
 }
 
 }  // namespace

@@ -238,8 +238,9 @@ TEST(PosePlanning, NextBestPosesRankByTaskErrorReductionPerDistance) {
                             pp.Information({1, 2, 3, 4, 5, 6, 7, 8}).inverse() *
                             pp.scale().asDiagonal();
   const Eigen::VectorXd q_now = f.candidates[0];
-  const auto next =
-      NextBestPoses(f.model, f.model.Nominal(), id, P, f.candidates, f.task, q_now, 5, f.settings);
+  constexpr double kStopCost = 3.0;  // [rad]: a cost at which distance matters
+  const auto next = NextBestPoses(f.model, f.model.Nominal(), id, P, f.candidates, f.task, q_now, 5,
+                                  f.settings, kStopCost);
   ASSERT_EQ(next.size(), 5u);
   Eigen::MatrixXd J6(6, f.model.num_params()), G = Eigen::MatrixXd::Zero(n, n), Jp(3, n);
   for (const auto& q : f.task) {
@@ -256,7 +257,7 @@ TEST(PosePlanning, NextBestPosesRankByTaskErrorReductionPerDistance) {
     const Eigen::MatrixXd K = P * H.transpose() * (H * P * H.transpose() + R).inverse();
     const Eigen::MatrixXd P_plus = P - K * H * P;
     const double gain = (G * P).trace() - (G * P_plus).trace();
-    const double score = gain / ((f.candidates[i] - q_now).norm() + 2.0);
+    const double score = gain / ((f.candidates[i] - q_now).norm() + kStopCost);
     best_score = std::max(best_score, score);
     for (const auto& np : next) {
       if (np.candidate == static_cast<int>(i)) {

@@ -53,5 +53,16 @@ for args in "demo --step-offset" "rcal-up --step-offset j2=1e-3@25" \
   [ "$rc" -eq 2 ] || { echo "$args: exit $rc, expected 2 ($(cat "$bin/err"))"; fail=1; }
   grep -q "step-offset" "$bin/err" || { echo "$args: stderr does not name --step-offset: $(cat "$bin/err")"; fail=1; }
 done
+# --follow-next-poses: described, only with --demo, not through ROS 2, not with --step-offset.
+printf '%s\n' "$(PATH=$bin "$repo/deploy/demo" --help 2>&1)" | grep -q 'deploy/demo --follow-next-poses' ||
+  { echo "deploy/demo --help: --follow-next-poses not described"; fail=1; }
+for args in "rcal-up --follow-next-poses" "rcal-up --demo --ros2 --follow-next-poses" \
+            "rcal-up --demo --follow-next-poses --step-offset j2=1e-3@25" "demo --follow-next-poses x"; do
+  # shellcheck disable=SC2086
+  out=$(PATH=$bin "$repo/deploy/"$args 2>"$bin/err")
+  rc=$?
+  [ "$rc" -eq 2 ] || { echo "$args: exit $rc, expected 2 ($(cat "$bin/err"))"; fail=1; }
+  grep -q "follow-next-poses\|unknown option" "$bin/err" || { echo "$args: stderr does not name --follow-next-poses: $(cat "$bin/err")"; fail=1; }
+done
 [ "$fail" = 0 ] && echo "ok: deploy/demo --help and a bad option, rcal-up --sim refusals, nothing installed or built"
 exit $fail

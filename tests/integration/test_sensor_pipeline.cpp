@@ -34,6 +34,7 @@
 #include "rcal/identification/metrics.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/kinematic_params_t.hpp"
+#include "rcal/next_poses_t.hpp"
 #include "rcal/pose_measurement_t.hpp"
 #include "rcal/sim/pose_sim.hpp"
 #include "rcal/transport/adapters.hpp"
@@ -55,6 +56,7 @@ struct LiveRun {
   std::vector<pose_measurement_t> poses;
   std::optional<kinematic_params_t> params;
   std::optional<calibration_status_t> status;
+  std::vector<next_poses_t> next;  // every NEXT_POSES
   std::filesystem::path checkpoint;
 };
 
@@ -73,6 +75,8 @@ class SensorPipeline : public ProcessFixture {
                                     [&](const kinematic_params_t& m) { run.params = m; });
     t.Subscribe<calibration_status_t>(transport::channels::kCalibrationStatus,
                                       [&](const calibration_status_t& s) { run.status = s; });
+    t.Subscribe<next_poses_t>(transport::channels::kNextPoses,
+                              [&](const next_poses_t& m) { run.next.push_back(m); });
     run.checkpoint = dir_ / "ekf_identifier.checkpoint.json";
     const pid_t ekf = Start({RCAL_EKF_IDENTIFIER, "--lcm-url", kUrl, "--cell", cell_file,
                              "--checkpoint", run.checkpoint.string()},
@@ -113,6 +117,31 @@ class SensorPipeline : public ProcessFixture {
   }
 };
 
+// The identifier's logic in the library on the poses a live run published, in their order.
+cell::OnlineIdentification OfflineOn(const LiveRun& run, const io::BuiltCell& built) {
+  cell::OnlineIdentification offline(built);
+  for (const auto& m : run.poses) {
+    std::string error;
+    const auto z = transport::FromMessage(m, &error, &built.model);
+    if (!z) {
+      ADD_FAILURE() << error;
+      continue;
+    }
+    offline.Add({*z, m.utime, m.pose_index});
+  }
+  return offline;
+}
+
+// The live estimate is the library's on the same poses (integration::kSameAsOffline).
+void ExpectSameAsOffline(const LiveRun& run, const cell::OnlineIdentification& offline) {
+  ASSERT_TRUE(run.params.has_value());
+  const kinematic_params_t off =
+      transport::ToKinematicParams(offline.ekf(), offline.model().name(), run.params->utime);
+  ASSERT_EQ(off.num_params, run.params->num_params);
+  for (int i = 0; i < off.num_params; ++i)
+    EXPECT_NEAR(run.params->values[i], off.values[i], integration::kSameAsOffline) << off.names[i];
+}
+
 TEST_F(SensorPipeline, CalibratesToTheOfflineFigure) {
   RCAL_IN_NAMESPACE("SensorPipeline.CalibratesToTheOfflineFigure");
   const auto robot = io::LoadRobot(RCAL_SOURCE_DIR "/config/robots/grb3016.yaml");
@@ -130,7 +159,7 @@ TEST_F(SensorPipeline, CalibratesToTheOfflineFigure) {
   const LiveRun run = RunCell(RCAL_SOURCE_DIR "/config/cells/grb3016.yaml",
                               RCAL_SOURCE_DIR "/config/cells/grb3016.sim.yaml", kCal, kTest,
                               {"--seed", std::to_string(kSeed)});
-  const auto& [poses, params, status, checkpoint] = run;
+  const auto& [poses, params, status, next, checkpoint] = run;
 
   ASSERT_TRUE(status.has_value());
   ASSERT_TRUE(params.has_value());
@@ -203,19 +232,9 @@ TEST_F(SensorPipeline, AnArmSteppedMidRunIsDetectedNamedAndFollowed) {
       << status.tracking_status;
   // The same poses through the library, in order: the same estimate and the same change.
   const io::BuiltCell& built = integration::DemoCell();
-  cell::OnlineIdentification offline(built);
-  for (const auto& m : run.poses) {
-    std::string error;
-    const auto z = transport::FromMessage(m, &error, &built.model);
-    ASSERT_TRUE(z) << error;
-    offline.Add({*z, m.utime, m.pose_index});
-  }
+  const cell::OnlineIdentification offline = OfflineOn(run, built);
   ASSERT_EQ(offline.ekf().changes().size(), 1u);
-  const kinematic_params_t off =
-      transport::ToKinematicParams(offline.ekf(), offline.model().name(), run.params->utime);
-  ASSERT_EQ(off.num_params, run.params->num_params);
-  for (int i = 0; i < off.num_params; ++i)
-    EXPECT_NEAR(run.params->values[i], off.values[i], integration::kSameAsOffline) << off.names[i];
+  ExpectSameAsOffline(run, offline);
   // Against the simulator's truth, before and after the change.
   const cell::CellSimSpec sim_spec = cell::LoadCellSimSpec(sim_file);
   const cell::SimProgramme programme =
@@ -244,6 +263,68 @@ TEST_F(SensorPipeline, AnArmSteppedMidRunIsDetectedNamedAndFollowed) {
   EXPECT_GT(before_mm, 0.4);
 }
 
+// The demo's cell following the identifier's advice (sensor_acquisition --follow-next-poses,
+// issue 16): once the identifier advises, every stop is one of the suggestions of an advice
+// published before the arm left the stop before (the arm follows one stop behind: a window's pose
+// is published as the arm leaves); the identifier equals the library on the poses it got (1e-9),
+// and the calibrated model is accurate at the programme's test stops against the truth.
+TEST_F(SensorPipeline, ACellFollowingNextPosesStopsWhereTheIdentifierAdvised) {
+  RCAL_IN_NAMESPACE("SensorPipeline.ACellFollowingNextPosesStopsWhereTheIdentifierAdvised");
+  constexpr int kFollowCal = 20;
+  const std::string sim_file = RCAL_SOURCE_DIR "/config/cells/grb3016.sim.yaml";
+  const LiveRun run = RunCell(RCAL_SOURCE_DIR "/config/cells/grb3016.yaml", sim_file, kFollowCal,
+                              kTest, {"--seed", std::to_string(kSeed), "--follow-next-poses"});
+  ASSERT_TRUE(run.params.has_value());
+  ASSERT_EQ(run.poses.size(), static_cast<size_t>(kFollowCal));
+  ASSERT_FALSE(run.next.empty());
+  const io::BuiltCell& built = integration::DemoCell();
+  const int nj = built.model.num_joints();
+  int advised = 0;
+  // The window's q is the mean reading over it, which takes in the first samples of the next move
+  // (below the still detector's rate threshold): within 1e-6 rad of the stop, while suggestions
+  // lie a radian or more apart.
+  for (size_t k = 1; k < run.poses.size(); ++k) {
+    const auto& pose = run.poses[k];
+    const Eigen::Map<const Eigen::VectorXd> q(pose.q.data(), nj);
+    bool found = false;
+    for (const auto& m : run.next) {
+      // Advice computed after a pose at least two stops back: the arm was leaving the stop before.
+      if (m.utime > run.poses[k - 1].utime - 1) continue;
+      for (int i = 0; i < m.count; ++i)
+        found =
+            found || (Eigen::Map<const Eigen::VectorXd>(m.q.data() + i * nj, nj) - q).norm() < 1e-5;
+    }
+    if (found) ++advised;
+    // Before the first advice the programme's stops; after the first followed stop, every one.
+    if (advised > 0) {
+      double nearest = 1e9;
+      for (const auto& m : run.next)
+        for (int i = 0; i < m.count; ++i)
+          nearest = std::min(
+              nearest, (Eigen::Map<const Eigen::VectorXd>(m.q.data() + i * nj, nj) - q).norm());
+      EXPECT_TRUE(found) << "pose " << k + 1 << " is no stop the identifier advised (nearest "
+                         << nearest << ")";
+    }
+  }
+  EXPECT_GE(advised, kFollowCal - 9);  // 6 held for the set-up guess, then one stop behind
+  ExpectSameAsOffline(run, OfflineOn(run, built));
+  const cell::CellSimSpec sim_spec = cell::LoadCellSimSpec(sim_file);
+  const cell::SimProgramme programme =
+      cell::MakeSimProgramme(built, sim_spec, kSeed, kFollowCal, kTest);
+  const std::vector<Eigen::VectorXd> test_q(programme.stops.begin() + kFollowCal,
+                                            programme.stops.end());
+  std::string error;
+  const auto x = transport::ParamsFromMessage(*run.params, programme.cell.model, &error);
+  ASSERT_TRUE(x) << error;
+  const double test_mm =
+      identification::ErrorsAgainstTruth(programme.cell.model, *x, programme.cell.x_true, test_q)
+          .mean_position_m *
+      1e3;
+  std::printf("following NEXT_POSES: %d of %d stops advised; test error %.4f mm\n", advised,
+              kFollowCal, test_mm);
+  EXPECT_LT(test_mm, 0.1);  // 20 random stops: 0.036 mm; the nominal model: 21 mm
+}
+
 // Another shipped cell through the same processes, nothing but its files: the Panda-like 7-DoF arm
 // with a MEMS IMU mounted with swapped axes, a 0.03 mm tracker whose frame faces the robot (a
 // prior), the earth frame guessed (config/cells/panda.yaml; its simulated counterpart
@@ -267,7 +348,7 @@ TEST_F(SensorPipeline, ThePandaCellCalibratesLiveAndItsLogGivesTheSameOffline) {
   const std::vector<Eigen::VectorXd> test_q(stops.begin() + kPandaCal, stops.end());
 
   const LiveRun run = RunCell(cell_file, sim_file, kPandaCal, kPandaTest);
-  const auto& [poses, params, status, checkpoint] = run;
+  const auto& [poses, params, status, next, checkpoint] = run;
   ASSERT_TRUE(params.has_value());
   ASSERT_TRUE(status.has_value());
   EXPECT_EQ(status->poses_accepted, kPandaCal);

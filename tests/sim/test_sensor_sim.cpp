@@ -158,6 +158,40 @@ TEST(SensorSim, AnOffsetStepMovesTheReadingsNotTheArm) {
   EXPECT_GT(after, 100);
 }
 
+// A cell that picks its next stop while it runs (issue 16): the truth retargeted while the arm
+// stands at stop 1 streams exactly what a simulation programmed with that stop streams (same seed,
+// so the same noise), including the longer run.
+TEST(SensorSim, ARetargetedStopStreamsAsTheProgramWrittenWithIt) {
+  const auto m = Cell();
+  const Eigen::VectorXd x = Truth(m);
+  Rng rng(5);
+  std::vector<Eigen::VectorXd> w = SampleJoints(m, 4, rng);
+  ToolMotionTruth live(m, x, JointTrajectory(w));
+  const Eigen::VectorXd q2 = SampleJoints(m, 1, rng)[0];
+  w[2] = q2;
+  const ToolMotionTruth written(m, x, JointTrajectory(w));
+  const SensorSimSettings s;
+  SensorSim a(live, s, 9), b(written, s, 9);
+  const double t_retarget = live.trajectory().StillInterval(1).first;  // standing at stop 1
+  bool retargeted = false;
+  int64_t n = 0;
+  while (auto fa = a.Next()) {
+    if (!retargeted && fa->t >= t_retarget) {
+      live.Retarget(2, q2);
+      retargeted = true;
+    }
+    const auto fb = b.Next();
+    ASSERT_TRUE(fb);
+    EXPECT_EQ(fa->q, fb->q) << fa->t;
+    EXPECT_EQ(fa->imu.gyro_S, fb->imu.gyro_S) << fa->t;
+    EXPECT_EQ(fa->imu.accel_S, fb->imu.accel_S) << fa->t;
+    ++n;
+  }
+  EXPECT_FALSE(b.Next());
+  EXPECT_EQ(n, b.num_ticks());
+  EXPECT_EQ(a.num_ticks(), b.num_ticks());
+}
+
 TEST(SensorSim, MagneticDisturbanceOnlyAtChosenStops) {
   const auto m = Cell();
   const ToolMotionTruth truth(m, Truth(m), Program(m, 20, 9));

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <random>
 
 namespace rcal::sim {
@@ -53,6 +54,39 @@ TEST(Trajectory, DerivativesMatchFiniteDifferencesAndRespectLimits) {
   EXPECT_LE(max_speed, s.max_joint_speed * (1 + 1e-6));
   EXPECT_LE(max_accel, s.max_joint_accel * (1 + 1e-3));
   EXPECT_GT(max_speed, 0.5 * s.max_joint_speed);  // the limit is used, not merely respected
+}
+
+// A program that picks its next stop while it runs moves exactly as the program written with that
+// stop from the start, and nothing before the move into the stop changes.
+TEST(Trajectory, ARetargetedStopMovesAsTheProgramWrittenWithIt) {
+  TrajectorySettings s;
+  auto w = Waypoints(6, 3);
+  JointTrajectory live(w, s);
+  const JointTrajectory before = live;
+  const Eigen::VectorXd q3 = Waypoints(1, 4)[0] * 0.3;  // a shorter move: the timing changes
+  live.Retarget(3, q3);
+  w[3] = q3;
+  const JointTrajectory written(w, s);
+  EXPECT_NEAR(live.duration(), written.duration(), 1e-12);
+  EXPECT_GT(std::abs(live.duration() - before.duration()), 0.1);
+  Eigen::VectorXd a, b, ad, bd;
+  for (double t = 0; t <= written.duration(); t += 0.01) {
+    live.Sample(t, a, &ad);
+    written.Sample(t, b, &bd);
+    EXPECT_LT((a - b).norm(), 1e-12) << "t = " << t;
+    EXPECT_LT((ad - bd).norm(), 1e-12) << "t = " << t;
+    EXPECT_EQ(live.StillAt(t), written.StillAt(t));
+  }
+  const double move_into_3 = before.StillInterval(2).second;
+  for (double t = 0; t < move_into_3; t += 0.01) {
+    live.Sample(t, a);
+    before.Sample(t, b);
+    EXPECT_LT((a - b).norm(), 1e-12) << "t = " << t;
+  }
+  EXPECT_THROW(live.Retarget(0, q3), std::invalid_argument);  // the start is where the arm is
+  EXPECT_THROW(live.Retarget(6, q3), std::invalid_argument);
+  EXPECT_THROW(live.Retarget(2, Eigen::VectorXd::Zero(5)), std::invalid_argument);
+  EXPECT_THROW(live.Retarget(2, Eigen::VectorXd::Constant(6, NAN)), std::invalid_argument);
 }
 
 TEST(Trajectory, RejectsBadWaypoints) {

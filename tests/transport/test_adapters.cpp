@@ -383,5 +383,73 @@ TEST(ClockOffsetAdapter, SourcesAndRefusals) {
   EXPECT_EQ(error, "clock_offset.num_sources: -1 is not 0 to 4096");
 }
 
+// NEXT_POSES: the advice round-trips through the encoded bytes; each malformed field is refused
+// by name, and a suggestion outside the joint limits is never passed on to a cell.
+TEST(NextPosesAdapter, RoundTripAndRefusals) {
+  const Grb3016 g(2);
+  cell::NextPoseAdvice a;
+  for (int i = 0; i < 2; ++i) {
+    a.q.push_back(g.poses[i].q);
+    identification::NextPose p;
+    p.gain_m2 = 1e-9 * (2 - i);
+    p.distance = 0.5 + i;
+    a.poses.push_back(p);
+  }
+  a.predicted_rms_m = 3e-5;
+  const int nj = g.model.num_joints();
+  const next_poses_t m = ThroughLcm(ToNextPoses(a, 1234, 17, nj));
+  std::string error;
+  const auto n = NextPosesFromMessage(m, g.model, &error);
+  ASSERT_TRUE(n) << error;
+  EXPECT_EQ(n->utime, 1234);
+  EXPECT_EQ(n->poses_used, 17);
+  ASSERT_EQ(n->q.size(), 2u);
+  for (int i = 0; i < 2; ++i) {
+    EXPECT_EQ(n->q[i], g.poses[i].q);
+    EXPECT_EQ(n->gain_m2[i], a.poses[i].gain_m2);
+    EXPECT_EQ(n->distance[i], a.poses[i].distance);
+  }
+  EXPECT_EQ(n->predicted_rms_m, 3e-5);
+  auto refused = [&](next_poses_t bad, const std::string& why) {
+    std::string e;
+    EXPECT_FALSE(NextPosesFromMessage(bad, g.model, &e));
+    EXPECT_EQ(e, why);
+  };
+  auto bad = m;
+  bad.num_joints = 5;
+  refused(bad, "next_poses.num_joints: 5, the model has 6");
+  bad = m;
+  bad.count = 1 << 20;
+  refused(bad, "next_poses.count: 1048576 is not 0 to 1000");
+  bad = m;
+  bad.q.pop_back();
+  refused(bad, "next_poses.num_values: 12 is not count × num_joints (12) or q disagrees");
+  bad = m;
+  bad.gain.pop_back();
+  refused(bad, "next_poses.count: 2, gain or distance disagrees");
+  bad = m;
+  bad.gain[1] = std::nan("");
+  refused(bad, "next_poses.gain[1]: not a finite value ≥ 0");
+  bad = m;
+  bad.distance[0] = -1;
+  refused(bad, "next_poses.distance[0]: not a finite value ≥ 0");
+  bad = m;
+  bad.predicted_rms_position = std::numeric_limits<double>::infinity();
+  refused(bad, "next_poses.predicted_rms_position: not a finite value ≥ 0");
+  bad = m;
+  bad.q[nj + 1] = std::numeric_limits<double>::quiet_NaN();
+  refused(bad, "next_poses.q[1] joint j2: not finite");
+  bad = m;
+  bad.q[2] = g.model.joints()[2].upper + 0.1;
+  EXPECT_FALSE(NextPosesFromMessage(bad, g.model, &error));
+  EXPECT_NE(error.find("next_poses.q[0] joint j3: "), std::string::npos) << error;
+  EXPECT_NE(error.find("outside its limits"), std::string::npos) << error;
+  // No suggestion is a valid message (an identifier with nothing to advise).
+  cell::NextPoseAdvice none;
+  const auto empty = NextPosesFromMessage(ToNextPoses(none, 5, 0, nj), g.model, &error);
+  ASSERT_TRUE(empty) << error;
+  EXPECT_TRUE(empty->q.empty());
+}
+
 }  // namespace
 }  // namespace rcal::transport

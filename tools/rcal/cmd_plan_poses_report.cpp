@@ -36,6 +36,7 @@ struct Options {
   double position_sigma_mm = 0.02;
   int jobs = 1;
   std::string criterion = "d-optimal";
+  double stop_cost = identification::kDefaultStopCost;
   std::string out = "out/plan_poses_report";
 };
 
@@ -60,6 +61,7 @@ int Run(const Options& o) {
   s.counts = o.counts;
   s.candidates = o.candidates;
   s.position_sigma_m = o.position_sigma_mm / kMm;
+  s.settle_distance = o.stop_cost;
   if (o.criterion == "workspace")
     s.criterion = identification::PlanCriterion::kTaskRegion;
   else if (o.criterion != "d-optimal")
@@ -205,6 +207,7 @@ int Run(const Options& o) {
                                                 {"seeds", o.seeds},
                                                 {"candidates", o.candidates},
                                                 {"criterion", o.criterion},
+                                                {"stop_cost_rad", o.stop_cost},
                                                 {"position_noise_m", s.position_sigma_m},
                                                 {"test_poses", s.test_poses},
                                                 {"by_count", jc},
@@ -236,6 +239,11 @@ const RegisterCommand kPlanPosesReport(
       sub.add_option("--criterion", o->criterion,
                      "planned stops: d-optimal, or workspace (predicted error over the workspace)")
           ->capture_default_str();
+      sub.add_option("--stop-cost", o->stop_cost,
+                     "online next-best: a stop's cost as joint-space distance [rad | m] "
+                     "(ekf_identifier --next-poses-stop-cost)")
+          ->capture_default_str()
+          ->check(CLI::NonNegativeNumber);
       sub.add_option("--out", o->out, "report folder")->capture_default_str();
       return [o]() { return Run(*o); };
     });

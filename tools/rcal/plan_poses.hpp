@@ -46,9 +46,9 @@ inline constexpr std::array<const char*, 4> kStrategyNames = {
 struct PlanningReportSettings {
   std::vector<int> counts{15, 20, 25, 30, 40, 50};  ///< stops, ascending
   int candidates = 5000;
-  double position_sigma_m = 2e-5;  ///< positions only, per axis
-  int test_poses = 200;            ///< held-out poses per cell
-  double settle_distance = 2.0;    ///< NextBestPoses' cost of a stop [rad]
+  double position_sigma_m = 2e-5;                             ///< positions only, per axis
+  int test_poses = 200;                                       ///< held-out poses per cell
+  double settle_distance = identification::kDefaultStopCost;  ///< a stop's cost [rad]
   /// The planned strategy's criterion: D-optimal, or the predicted error over the workspace (the
   /// task-region criterion with an even spread of the candidates as the region).
   identification::PlanCriterion criterion = identification::PlanCriterion::kDOptimal;

@@ -28,6 +28,20 @@ NextPoseAdvisor::NextPoseAdvisor(const io::BuiltCell& cell, int candidates, unsi
     settings_.orientation_sigma_rad = cell.spec.position.orientation_sigma;
 }
 
+void NextPoseAdvisor::Measured(const kinematics::PoseMeasurement& z) {
+  const Eigen::MatrixXd& C = z.covariance;
+  if (C.rows() < 3 || C.rows() != C.cols() || !C.allFinite()) return;
+  const double position_var = C.topLeftCorner(3, 3).trace() / 3;
+  if (!(position_var > 0)) return;
+  position_var_sum_ += position_var;
+  settings_.position_sigma_m = std::sqrt(position_var_sum_ / ++positions_);
+  if (!z.has_orientation || C.rows() != 6) return;
+  const double orientation_var = C.bottomRightCorner(3, 3).trace() / 3;
+  if (!(orientation_var > 0)) return;
+  orientation_var_sum_ += orientation_var;
+  settings_.orientation_sigma_rad = std::sqrt(orientation_var_sum_ / ++orientations_);
+}
+
 NextPoseAdvice NextPoseAdvisor::Suggest(const identification::EkfIdentifier& ekf,
                                         const Eigen::VectorXd& q_now, int k,
                                         double settle_distance) const {
@@ -40,6 +54,18 @@ NextPoseAdvice NextPoseAdvisor::Suggest(const identification::EkfIdentifier& ekf
   for (const auto& p : a.poses) a.q.push_back(candidates_[p.candidate]);
   a.predicted_rms_m = std::sqrt(identification::PredictedTaskMeanSquared(model_, x, id, P, task_));
   return a;
+}
+
+std::optional<Eigen::VectorXd> NextStopToFollow(const std::vector<Eigen::VectorXd>& suggested,
+                                                const std::vector<Eigen::VectorXd>& measured_since,
+                                                double min_move) {
+  for (const Eigen::VectorXd& q : suggested) {
+    bool measured = false;
+    for (const Eigen::VectorXd& m : measured_since)
+      measured = measured || (m.size() == q.size() && (m - q).norm() <= min_move);
+    if (!measured) return q;
+  }
+  return std::nullopt;
 }
 
 }  // namespace rcal::cell

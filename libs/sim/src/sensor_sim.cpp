@@ -80,8 +80,6 @@ SensorSim::SensorSim(const ToolMotionTruth& truth, const SensorSimSettings& sett
       imu_(WithRate(settings.imu, settings.rate_hz), seed * 7919 + 11),
       position_(settings.position, seed * 7919 + 13) {
   if (!(settings_.rate_hz > 0)) throw std::invalid_argument("SensorSim: rate_hz must be > 0");
-  num_ticks_ =
-      static_cast<std::int64_t>(std::floor(truth_.trajectory().duration() * settings_.rate_hz)) + 1;
   const int n = truth_.trajectory().num_waypoints();
   disturbance_E_.assign(n, Eigen::Vector3d::Zero());
   if (settings_.mag_disturbance) {
@@ -98,8 +96,13 @@ SensorSim::SensorSim(const ToolMotionTruth& truth, const SensorSimSettings& sett
   }
 }
 
+std::int64_t SensorSim::num_ticks() const {
+  return static_cast<std::int64_t>(std::floor(truth_.trajectory().duration() * settings_.rate_hz)) +
+         1;
+}
+
 std::optional<SensorFrame> SensorSim::Next() {
-  if (k_ >= num_ticks_) return std::nullopt;
+  if (k_ >= num_ticks()) return std::nullopt;
   SensorFrame f;
   f.t = static_cast<double>(k_) / settings_.rate_hz;
   ++k_;

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 
 namespace rcal::sim {
 
@@ -13,8 +14,13 @@ JointTrajectory::JointTrajectory(std::vector<Eigen::VectorXd> waypoints,
   for (const auto& w : waypoints_)
     if (w.size() != waypoints_[0].size() || !w.allFinite())
       throw std::invalid_argument("waypoints: sizes differ or values not finite");
-  double t = 0;
-  for (size_t k = 0; k < waypoints_.size(); ++k) {
+  TimeFrom(0, 0.0);
+}
+
+void JointTrajectory::TimeFrom(int from, double t) {
+  // Segment 2k is the still at waypoint k, 2k + 1 the move from k to k + 1.
+  segments_.resize(2 * static_cast<size_t>(from));
+  for (size_t k = from; k < waypoints_.size(); ++k) {
     segments_.push_back({t, t + settings_.still_time, static_cast<int>(k), static_cast<int>(k)});
     t += settings_.still_time;
     if (k + 1 == waypoints_.size()) break;
@@ -24,6 +30,17 @@ JointTrajectory::JointTrajectory(std::vector<Eigen::VectorXd> waypoints,
     segments_.push_back({t, t + T, static_cast<int>(k), static_cast<int>(k + 1)});
     t += T;
   }
+}
+
+void JointTrajectory::Retarget(int k, const Eigen::VectorXd& q) {
+  if (k < 1 || k >= num_waypoints())
+    throw std::invalid_argument("Retarget: waypoint " + std::to_string(k) + " is not in 1.." +
+                                std::to_string(num_waypoints() - 1));
+  if (q.size() != waypoints_[0].size() || !q.allFinite())
+    throw std::invalid_argument("Retarget: q has the wrong size or is not finite");
+  waypoints_[k] = q;
+  // From the still at k − 1 on: its start is unchanged, the move out of it is re-timed.
+  TimeFrom(k - 1, segments_[2 * static_cast<size_t>(k - 1)].t_start);
 }
 
 void JointTrajectory::Sample(double t, Eigen::VectorXd& q, Eigen::VectorXd* qd,

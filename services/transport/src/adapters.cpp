@@ -328,4 +328,69 @@ std::optional<std::vector<SourceClock>> ClockOffsetsFromMessage(const clock_offs
   return out;
 }
 
+next_poses_t ToNextPoses(const cell::NextPoseAdvice& a, int64_t utime, int32_t poses_used,
+                         int num_joints) {
+  next_poses_t m{};
+  m.utime = utime;
+  m.poses_used = poses_used;
+  m.num_joints = num_joints;
+  m.count = static_cast<int32_t>(a.poses.size());
+  m.num_values = m.count * num_joints;
+  for (size_t i = 0; i < a.poses.size(); ++i) {
+    for (int j = 0; j < num_joints; ++j) m.q.push_back(a.q[i](j));
+    m.gain.push_back(a.poses[i].gain_m2);
+    m.distance.push_back(a.poses[i].distance);
+  }
+  m.predicted_rms_position = a.predicted_rms_m;
+  return m;
+}
+
+std::optional<NextPoses> NextPosesFromMessage(const next_poses_t& m,
+                                              const kinematics::KinematicModel& model,
+                                              std::string* error) {
+  auto fail = [&](const std::string& why) {
+    if (error) *error = "next_poses." + why;
+    return std::nullopt;
+  };
+  const int nj = model.num_joints();
+  if (m.num_joints != nj)
+    return fail("num_joints: " + std::to_string(m.num_joints) + ", the model has " +
+                std::to_string(nj));
+  if (m.count < 0 || m.count > 1000)
+    return fail("count: " + std::to_string(m.count) + " is not 0 to 1000");
+  const auto n = static_cast<size_t>(m.count);
+  if (m.num_values != m.count * nj || m.q.size() != n * static_cast<size_t>(nj))
+    return fail("num_values: " + std::to_string(m.num_values) + " is not count × num_joints (" +
+                std::to_string(m.count * nj) + ") or q disagrees");
+  if (m.gain.size() != n || m.distance.size() != n)
+    return fail("count: " + std::to_string(n) + ", gain or distance disagrees");
+  if (!(std::isfinite(m.predicted_rms_position) && m.predicted_rms_position >= 0))
+    return fail("predicted_rms_position: not a finite value ≥ 0");
+  NextPoses out;
+  out.utime = m.utime;
+  out.poses_used = m.poses_used;
+  out.predicted_rms_m = m.predicted_rms_position;
+  for (size_t i = 0; i < n; ++i) {
+    const std::string at = "[" + std::to_string(i) + "]";
+    if (!(std::isfinite(m.gain[i]) && m.gain[i] >= 0))
+      return fail("gain" + at + ": not a finite value ≥ 0");
+    if (!(std::isfinite(m.distance[i]) && m.distance[i] >= 0))
+      return fail("distance" + at + ": not a finite value ≥ 0");
+    Eigen::VectorXd q(nj);
+    for (int j = 0; j < nj; ++j) {
+      q(j) = m.q[i * nj + j];
+      const kinematics::Joint& joint = model.joints()[j];
+      if (!std::isfinite(q(j))) return fail("q" + at + " joint " + joint.name + ": not finite");
+      if (q(j) < joint.lower || q(j) > joint.upper)
+        return fail("q" + at + " joint " + joint.name + ": " + std::to_string(q(j)) +
+                    " outside its limits [" + std::to_string(joint.lower) + ", " +
+                    std::to_string(joint.upper) + "]");
+    }
+    out.q.push_back(std::move(q));
+    out.gain_m2.push_back(m.gain[i]);
+    out.distance.push_back(m.distance[i]);
+  }
+  return out;
+}
+
 }  // namespace rcal::transport

@@ -58,6 +58,10 @@ class ToolMotionTruth {
   /// Earth ← world rotation of the truth set-up (the model's earth segment at x_true).
   const Eigen::Matrix3d& R_EW() const { return R_EW_; }
   const JointTrajectory& trajectory() const { return trajectory_; }
+  /// JointTrajectory::Retarget on the truth's programme: the arm goes to q [rad | m] at stop k
+  /// instead (a cell that picks its next stop while it works). A SensorSim reading this truth
+  /// follows it from its next tick.
+  void Retarget(int k, const Eigen::VectorXd& q) { trajectory_.Retarget(k, q); }
   const kinematics::KinematicModel& model() const { return model_; }
   const Eigen::VectorXd& x_true() const { return x_true_; }
 
@@ -118,8 +122,8 @@ class SensorSim {
   SensorSim(const ToolMotionTruth& truth, const SensorSimSettings& settings, std::uint64_t seed);
   /// The next tick, or nullopt after the end of the trajectory.
   std::optional<SensorFrame> Next();
-  /// Number of ticks in the whole trajectory.
-  std::int64_t num_ticks() const { return num_ticks_; }
+  /// Number of ticks in the whole trajectory (as it stands now: a retargeted truth changes it).
+  std::int64_t num_ticks() const;
   /// Still stops given a magnetic disturbance (indices of waypoints).
   const std::vector<int>& disturbed_stops() const { return disturbed_; }
   const ImuModel& imu() const { return imu_; }
@@ -130,7 +134,7 @@ class SensorSim {
   SensorSimSettings settings_;
   ImuModel imu_;
   PositionSensorModel position_;
-  std::int64_t k_ = 0, num_ticks_ = 0;
+  std::int64_t k_ = 0;
   std::vector<int> disturbed_;
   std::vector<Eigen::Vector3d> disturbance_E_;  // per waypoint [µT]
 };

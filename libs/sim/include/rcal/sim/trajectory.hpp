@@ -40,11 +40,21 @@ class JointTrajectory {
   /// Index of the waypoint the arm stands at at time t, or −1 while moving.
   int StillAt(double t) const;
 
+  /// Replaces waypoint k (1 ≤ k < num_waypoints()) by q [rad | m], as a robot program that picks
+  /// its next stop while it works (issue 16: a cell following NEXT_POSES): the moves into and out
+  /// of k are re-timed by the same limits, every later segment shifts by the change in duration,
+  /// every earlier one is unchanged. Call it before the move into k begins (t < start of that
+  /// move) for a motion without jumps. Throws std::invalid_argument naming the bad argument (k
+  /// out of range, q of the wrong size or not finite).
+  void Retarget(int k, const Eigen::VectorXd& q);
+
  private:
   struct Segment {
     double t_start, t_end;
     int from, to;  // to == from: standing still
   };
+  // Segments from the still at waypoint `from` on, starting at t [s].
+  void TimeFrom(int from, double t);
   std::vector<Eigen::VectorXd> waypoints_;
   std::vector<Segment> segments_;
   TrajectorySettings settings_;

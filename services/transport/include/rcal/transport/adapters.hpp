@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "rcal/calibration_status_t.hpp"
+#include "rcal/cell/next_poses.hpp"
 #include "rcal/clock_offset_t.hpp"
 #include "rcal/estimation/clock_offset.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
@@ -23,6 +24,7 @@
 #include "rcal/kinematic_params_t.hpp"
 #include "rcal/kinematics/measurement.hpp"
 #include "rcal/kinematics/model.hpp"
+#include "rcal/next_poses_t.hpp"
 #include "rcal/pose_measurement_t.hpp"
 
 namespace rcal::transport {
@@ -132,5 +134,30 @@ struct SourceClock {
 /// offsets, σ ≥ 0 (+inf: unknown), state 0 to 3 (clock_offset.lcm); the reason names the field.
 std::optional<std::vector<SourceClock>> ClockOffsetsFromMessage(const clock_offset_t& msg,
                                                                 std::string* error);
+
+// ---- next poses (issue 16) -------------------------------------------------------------------
+
+/// The identifier's advice → NEXT_POSES. `utime` [µs]: the pose after which it was computed;
+/// `poses_used`: poses accepted so far.
+next_poses_t ToNextPoses(const cell::NextPoseAdvice& advice, int64_t utime, int32_t poses_used,
+                         int num_joints);
+
+/// NEXT_POSES as a cell that follows it reads it: suggestions best first.
+struct NextPoses {
+  int64_t utime = 0;  ///< [µs] sensor time of the pose after which they were computed
+  int32_t poses_used = 0;
+  std::vector<Eigen::VectorXd> q;  ///< joints [rad | m], the model's order (as read)
+  std::vector<double> gain_m2;     ///< predicted decrease of the mean squared error [m²]
+  std::vector<double> distance;    ///< joint-space distance from the joints then [rad | m]
+  double predicted_rms_m = 0;      ///< predicted RMS task-region position error [m]
+};
+
+/// NEXT_POSES → suggestions for `model`. Checks: num_joints == the model's, 0 ≤ count ≤ 1000,
+/// num_values == count × num_joints and every array that long, finite values, each joint within
+/// the model's limits, gain, distance and predicted_rms_position ≥ 0; the reason names the field
+/// (a suggestion outside the limits would drive an arm into its stops).
+std::optional<NextPoses> NextPosesFromMessage(const next_poses_t& msg,
+                                              const kinematics::KinematicModel& model,
+                                              std::string* error);
 
 }  // namespace rcal::transport
