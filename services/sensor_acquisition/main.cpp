@@ -159,6 +159,13 @@ class NextPosesInbox {
         });
   }
   const std::optional<rcal::transport::NextPoses>& newest() const { return newest_; }
+  /// A stop went where the advice asked (true) or to the programme's stop (false).
+  void Count(bool followed) { ++(followed ? followed_ : programme_); }
+  /// The end's summary line.
+  void LogSummary() const {
+    spdlog::info("following NEXT_POSES: {} stops followed, {} the programme's", followed_,
+                 programme_);
+  }
   /// Handles messages until the newest advice was computed at or after sensor time `utime` [µs],
   /// for at most `timeout_s` of wall time. Returns whether it came.
   bool WaitFor(int64_t utime, double timeout_s) {
@@ -191,11 +198,7 @@ class NextPosesInbox {
   const rcal::kinematics::KinematicModel& model_;
   rcal::transport::Health& health_;
   std::optional<rcal::transport::NextPoses> newest_;
-};
-
-// The figures a following cell reports at its end.
-struct FollowCount {
-  int followed = 0, programme = 0;
+  int followed_ = 0, programme_ = 0;
 };
 
 // --checkpoint: where a restarted simulated source resumes (sensors::SimCheckpoint, a lease
@@ -289,7 +292,6 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
              : "");
   std::optional<NextPosesInbox> advice;
   if (follow) advice.emplace(t, channels.next_poses, model, health);
-  FollowCount followed;
   const sensors::SimProgramme programme{"sensors", seed,        num_cal,
                                         num_test,  start_utime, ss.rate_hz};
   auto tick_utime = [&](int64_t k) {
@@ -310,14 +312,13 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
   int64_t published = 0, k = first;
   // Following: the calibration stop the arm leaves next (waypoint 0 is home; 1..num_cal the
   // calibration stops; the last waypoint, the first test stop, is never replaced).
+  auto departs = [&](int stop) { return truth.trajectory().StillInterval(stop).second; };  // [s]
   int leaving = 1;
-  while (leaving < num_cal &&
-         truth.trajectory().StillInterval(leaving).second < static_cast<double>(first) / ss.rate_hz)
-    ++leaving;
+  while (leaving < num_cal && departs(leaving) < static_cast<double>(first) / ss.rate_hz) ++leaving;
   auto choose_next = [&](int stop) {
     const auto& a = advice->newest();
     if (!a) {
-      ++followed.programme;
+      advice->Count(false);
       return;  // the identifier does not advise yet: the programme's stop
     }
     // The stops stood at after the pose the advice was computed for (it cannot know them).
@@ -328,7 +329,7 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
         since.push_back(truth.trajectory().waypoint(j));
     const auto q = cell::NextStopToFollow(a->q, since);
     if (!q) {
-      ++followed.programme;
+      advice->Count(false);
       spdlog::info(
           "stop {}: the programme's (NEXT_POSES after utime {} has no stop not yet "
           "measured)",
@@ -336,7 +337,7 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
       return;
     }
     truth.Retarget(stop + 1, *q);
-    ++followed.followed;
+    advice->Count(true);
     spdlog::info(
         "stop {}: NEXT_POSES after utime {} ({} poses used, {} stop(s) behind), predicted task "
         "RMS {:.4f} mm",
@@ -350,10 +351,8 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
   };
   while (!services::StopRequested()) {
     // Leaving a calibration stop: where to next (before the first tick of the move).
-    while (advice && leaving<num_cal&& static_cast<double>(k) / ss.rate_hz> truth.trajectory()
-                         .StillInterval(leaving)
-                         .second)
-      choose_next(leaving++);
+    const double t_next = static_cast<double>(k) / ss.rate_hz;  // [s] of the next tick
+    while (advice && leaving < num_cal && departs(leaving) < t_next) choose_next(leaving++);
     const auto f = sensors.Next();
     if (!f) break;
     const int64_t utime = start_utime + std::llround(f->t * 1e6);
@@ -381,9 +380,7 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
   lease.Stopped(k, k >= sensors.num_ticks());
   health.Final(t);
   spdlog::info("done: {} samples published", published);
-  if (follow)
-    spdlog::info("following NEXT_POSES: {} stops followed, {} the programme's", followed.followed,
-                 followed.programme);
+  if (advice) advice->LogSummary();
   if (linger) {
     // Under a supervisor: stay up (an exit would be restarted, and without --checkpoint replay
     // the programme).
@@ -583,7 +580,6 @@ int main(int argc, char** argv) {
     transport::Health health("sensor_acquisition");
     std::optional<NextPosesInbox> advice;
     if (follow) advice.emplace(t, built.spec.channels.next_poses, model, health);
-    FollowCount followed;
     spdlog::info("sensor_acquisition sim on {}: {} poses at {} Hz, speed {}", t.url(),
                  poses > 0 ? std::to_string(poses) : "unlimited", rate, speed);
 
@@ -632,9 +628,9 @@ int main(int argc, char** argv) {
         std::vector<Eigen::VectorXd> since;
         if (!came) since.push_back(sim::JointsAsRead(q_last, static_cast<double>(k), steps));
         const auto choice = cell::NextStopToFollow(advice->newest()->q, since);
+        advice->Count(choice.has_value());
         if (choice) {
           q = sim::TrueJoints(*choice, static_cast<double>(k + 1), steps);
-          ++followed.followed;
           spdlog::info(
               "pose {}: NEXT_POSES after utime {} ({} poses used){}, predicted task "
               "RMS {:.4f} mm",
@@ -642,11 +638,10 @@ int main(int argc, char** argv) {
               came ? "" : " (the advice of the last stop did not come in time)",
               advice->newest()->predicted_rms_m * 1e3);
         } else {
-          ++followed.programme;
           spdlog::info("pose {}: the programme's stop (no usable NEXT_POSES)", k + 1);
         }
       } else if (advice) {
-        ++followed.programme;
+        advice->Count(false);
       }
       q_last = q;
       lease.Before(k);
@@ -669,9 +664,7 @@ int main(int argc, char** argv) {
       t.HandleTimeout(0);  // keeps LCM's receive queue empty
     }
     lease.Stopped(k, poses > 0 && k >= poses);
-    if (follow)
-      spdlog::info("following NEXT_POSES: {} stops followed, {} the programme's", followed.followed,
-                   followed.programme);
+    if (advice) advice->LogSummary();
     spdlog::info("done");
     return 0;
   } catch (const std::exception& e) {
