@@ -45,6 +45,7 @@ rcal::kinematic_params_t Params(int n) {
     m.identified.push_back(i % 5 != 4);
   }
   m.poses_used = 50;
+  m.num_effect_params = 0;
   return m;
 }
 

@@ -46,6 +46,15 @@ inline void Adapt(const pose_measurement_t& m) {
   // marker_id mapped to the model's marker slot, as ekf_identifier and calibrate-log do.
   if (auto z = transport::FromMessage(m, &error, &Grb3016()))
     (void)kinematics::Validate(Grb3016(), *z);
+  // The pose's context, as ekf_identifier and calibrate-log read it.
+  (void)transport::ContextFromMessage(m, &error);
+}
+// An extended model (ekf_identifier --effects, ik_corrector --effects) to check effects against.
+inline const kinematics::ExtendedModel& Grb3016Bending() {
+  static const kinematics::ExtendedModel model(Grb3016(),
+                                               {{kinematics::EffectCause::kJointCompliance, 1},
+                                                {kinematics::EffectCause::kJointPeriodic, 2, 2}});
+  return model;
 }
 inline void Adapt(const ik_request_t& m) {
   std::string error;
@@ -55,6 +64,7 @@ inline void Adapt(const ik_request_t& m) {
 inline void Adapt(const kinematic_params_t& m) {
   std::string error;
   (void)transport::ParamsFromMessage(m, Grb3016(), &error);
+  (void)transport::EffectsFromMessage(m, Grb3016Bending(), &error);
 }
 // sensor_acquisition --follow-next-poses: the advice checked against the model, then followed.
 inline void Adapt(const next_poses_t& m) {
@@ -80,9 +90,14 @@ void Decode(const std::uint8_t* data, std::size_t size) {
   }
   if (why.empty()) Adapt(msg);
   if constexpr (std::is_same_v<Msg, pose_measurement_t>) {
-    // The log readers' decoder, which also reads the layout before marker_id.
+    // The log readers' decoder, which also reads the layouts before the context and marker_id.
     Msg upgraded;
     if (transport::DecodePoseMeasurement(data, size, &upgraded).empty()) Adapt(upgraded);
+  }
+  if constexpr (std::is_same_v<Msg, kinematic_params_t>) {
+    // rcal export's decoder, which also reads the layout before the effects.
+    Msg upgraded;
+    if (transport::DecodeKinematicParams(data, size, &upgraded).empty()) Adapt(upgraded);
   }
 }
 

@@ -4,8 +4,10 @@
 #include "rcal/dds/convert_detail.hpp"
 
 #include <cmath>
+#include <initializer_list>
 #include <limits>
 #include <type_traits>
+#include <utility>
 
 namespace rcal::dds {
 using namespace detail;
@@ -44,6 +46,18 @@ bool FillHeader(std_msgs_msg_dds__Header_& h, int64_t utime, const char* frame,
 // ---- kinematic parameters ---------------------------------------------------------------------
 
 namespace {
+// True when every array has n entries, else false with the refusal naming the first that has
+// not ("kinematic_params.sigmas: 27 entries, num_params is 28").
+template <typename Size>
+bool SizesAre(Size n, const char* counted_by,
+              std::initializer_list<std::pair<const char*, Size>> arrays, std::string* error) {
+  for (auto [name, size] : arrays)
+    if (size != n)
+      return Fail(error, std::string("kinematic_params.") + name + ": " + std::to_string(size) +
+                             " entries, " + counted_by + " " + std::to_string(n));
+  return true;
+}
+
 std::string ParamField(const char* array, size_t i, const std::string& name) {
   std::string s = Indexed((std::string("kinematic_params.") + array).c_str(), i);
   s += " (";
@@ -57,19 +71,36 @@ std::optional<Sample<KinematicParams>> ToDds(const kinematic_params_t& msg, std:
   if (msg.robot_id.empty()) return Fail(error, "kinematic_params.robot_id: empty"), std::nullopt;
   if (msg.num_params < 0) return Fail(error, "kinematic_params.num_params: negative"), std::nullopt;
   const auto n = static_cast<size_t>(msg.num_params);
-  for (auto [name, size] : {std::pair{"names", msg.names.size()},
-                            {"values", msg.values.size()},
-                            {"sigmas", msg.sigmas.size()},
-                            {"identified", msg.identified.size()}})
-    if (size != n)
-      return Fail(error, std::string("kinematic_params.") + name + ": " + std::to_string(size) +
-                             " entries, num_params is " + std::to_string(n)),
-             std::nullopt;
+  if (!SizesAre<size_t>(n, "num_params is",
+                        {{"names", msg.names.size()},
+                         {"values", msg.values.size()},
+                         {"sigmas", msg.sigmas.size()},
+                         {"identified", msg.identified.size()}},
+                        error))
+    return std::nullopt;
   for (size_t i = 0; i < n; ++i)
     if (!CheckValue(
             msg.values[i], [&] { return ParamField("values", i, msg.names[i]); }, error) ||
         !CheckValue(
             msg.sigmas[i], [&] { return ParamField("sigmas", i, msg.names[i]); }, error))
+      return std::nullopt;
+  if (msg.num_effect_params < 0)
+    return Fail(error, "kinematic_params.num_effect_params: negative"), std::nullopt;
+  const auto k = static_cast<size_t>(msg.num_effect_params);
+  if (!SizesAre<size_t>(k, "num_effect_params is",
+                        {{"effect_names", msg.effect_names.size()},
+                         {"effect_units", msg.effect_units.size()},
+                         {"effect_values", msg.effect_values.size()},
+                         {"effect_sigmas", msg.effect_sigmas.size()}},
+                        error))
+    return std::nullopt;
+  for (size_t i = 0; i < k; ++i)
+    if (!CheckValue(
+            msg.effect_values[i],
+            [&] { return ParamField("effect_values", i, msg.effect_names[i]); }, error) ||
+        !CheckValue(
+            msg.effect_sigmas[i],
+            [&] { return ParamField("effect_sigmas", i, msg.effect_names[i]); }, error))
       return std::nullopt;
 
   Sample<KinematicParams> s;
@@ -89,6 +120,16 @@ std::optional<Sample<KinematicParams>> ToDds(const kinematic_params_t& msg, std:
     d.identified._buffer[i] = msg.identified[i] != 0;
   }
   d.poses_used = msg.poses_used;
+  AllocSeq<dds_sequence_string, char*>(d.effect_names, k);
+  AllocSeq<dds_sequence_string, char*>(d.effect_units, k);
+  AllocSeq<dds_sequence_double, double>(d.effect_values, k);
+  AllocSeq<dds_sequence_double, double>(d.effect_sigmas, k);
+  for (size_t i = 0; i < k; ++i) {
+    d.effect_names._buffer[i] = Dup(msg.effect_names[i]);
+    d.effect_units._buffer[i] = Dup(msg.effect_units[i]);
+    d.effect_values._buffer[i] = msg.effect_values[i];
+    d.effect_sigmas._buffer[i] = msg.effect_sigmas[i];
+  }
   return s;
 }
 
@@ -96,13 +137,12 @@ std::optional<kinematic_params_t> FromDds(const KinematicParams& d, std::string*
   const std::string robot_id = Str(d.robot_id);
   if (robot_id.empty()) return Fail(error, "kinematic_params.robot_id: empty"), std::nullopt;
   const uint32_t n = d.names._length;
-  for (auto [name, size] : {std::pair{"values", d.values._length},
-                            {"sigmas", d.sigmas._length},
-                            {"identified", d.identified._length}})
-    if (size != n)
-      return Fail(error, std::string("kinematic_params.") + name + ": " + std::to_string(size) +
-                             " entries, names has " + std::to_string(n)),
-             std::nullopt;
+  if (!SizesAre<uint32_t>(n, "names has",
+                          {{"values", d.values._length},
+                           {"sigmas", d.sigmas._length},
+                           {"identified", d.identified._length}},
+                          error))
+    return std::nullopt;
   if (n > static_cast<uint32_t>(std::numeric_limits<int32_t>::max()))
     return Fail(error, "kinematic_params.names: too many entries"), std::nullopt;
   const auto utime = UtimeFromStamp(d.header.stamp, "kinematic_params.header.stamp", error);
@@ -125,6 +165,29 @@ std::optional<kinematic_params_t> FromDds(const KinematicParams& d, std::string*
     m.identified.push_back(d.identified._buffer[i] ? 1 : 0);
   }
   m.poses_used = d.poses_used;
+  const uint32_t k = d.effect_names._length;
+  if (!SizesAre<uint32_t>(k, "effect_names has",
+                          {{"effect_units", d.effect_units._length},
+                           {"effect_values", d.effect_values._length},
+                           {"effect_sigmas", d.effect_sigmas._length}},
+                          error))
+    return std::nullopt;
+  if (k > static_cast<uint32_t>(std::numeric_limits<int32_t>::max()))
+    return Fail(error, "kinematic_params.effect_names: too many entries"), std::nullopt;
+  m.num_effect_params = static_cast<int32_t>(k);
+  for (uint32_t i = 0; i < k; ++i) {
+    m.effect_names.push_back(Str(d.effect_names._buffer[i]));
+    m.effect_units.push_back(Str(d.effect_units._buffer[i]));
+    if (!CheckValue(
+            d.effect_values._buffer[i],
+            [&] { return ParamField("effect_values", i, m.effect_names.back()); }, error) ||
+        !CheckValue(
+            d.effect_sigmas._buffer[i],
+            [&] { return ParamField("effect_sigmas", i, m.effect_names.back()); }, error))
+      return std::nullopt;
+    m.effect_values.push_back(d.effect_values._buffer[i]);
+    m.effect_sigmas.push_back(d.effect_sigmas._buffer[i]);
+  }
   return m;
 }
 

@@ -28,11 +28,20 @@
 // simulator is involved: a simulated cell is a source of data like any driver. The held poses
 // are checkpointed too (schema rcal.ekf_checkpoint/3, `held`), so a restart during the guess
 // phase keeps them.
+//
+// --effects analysis.json (an `rcal analyze` result, or the JSON of `rcal calibrate --effects`):
+// the non-geometric effects it lists are identified live with the geometry (issue 15 item 4):
+// the state is [base set; effect parameters], starting at 0 with the default weak prior, each
+// pose's update under its context (POSE_MEASUREMENT's temperature_c, payload_kg, time_s,
+// dq_sign); KINEMATIC_PARAMS carries the effect parameters with their σ, the checkpoint the
+// contexts. A context that cannot be true (temperature beyond [−60, 200] °C, a negative payload,
+// a dq_sign not −1, 0, +1) refuses its pose, naming the field, with or without effects.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
 #include <Eigen/Core>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <memory>
@@ -80,6 +89,7 @@ struct Options {
   int next_poses = 5;  // NEXT_POSES suggestions per pose (0: none)
   // NEXT_POSES: a stop's cost as joint-space distance [rad | m]
   double stop_cost = identification::kDefaultStopCost;
+  std::string effects;  // analysis.json: the effects identified with the geometry (empty: none)
 };
 
 class Identifier {
@@ -87,13 +97,17 @@ class Identifier {
   Identifier(const Options& o, transport::Transport& t)
       : o_(o),
         t_(t),
-        id_(io::LoadCell(services::RepoPath(o.cell))),
+        id_(cell::MakeOnlineIdentification(
+            io::LoadCell(services::RepoPath(o.cell)),
+            o.effects.empty() ? std::string() : services::RepoPath(o.effects))),
         channels_(id_.cell().spec.channels),
         model_id_(transport::ModelId(id_.model())),
         health_(o.name),
         gate_(o.time) {
     const io::BuiltCell& cell = id_.cell();
     if (o.next_poses > 0) advisor_.emplace(cell);
+    for (const auto& p : id_.ekf().extended_model().EffectParameters())
+      spdlog::info("effect parameter {} [{}] identified live", p.name, p.unit);
     spdlog::info("cell {} ({}): chain {} → {}, {} of {} parameters identifiable{}", cell.spec.name,
                  cell.spec.source, cell.robot_spec.base_link, cell.robot_spec.tip_link,
                  id_.base().size(), id_.model().num_params(),
@@ -181,8 +195,10 @@ class Identifier {
     health_.Received();
     std::string error;
     auto z = transport::FromMessage(msg, &error, &id_.model());
-    if (z) error = Implausible(*z);
-    if (!z || !error.empty()) {
+    std::optional<kinematics::EffectContext> context;
+    if (z) context = transport::ContextFromMessage(msg, &error);
+    if (z && context) error = Implausible(*z);
+    if (!z || !context || !error.empty()) {
       Reject(error);
       Beat();
       return;
@@ -206,7 +222,7 @@ class Identifier {
     last_pose_index_ = msg.pose_index;
     last_q_ = z->q;
     if (advisor_) advisor_->Measured(*z);
-    const auto out = id_.Add({std::move(*z), msg.utime, msg.pose_index},
+    const auto out = id_.Add({std::move(*z), msg.utime, msg.pose_index, std::move(*context)},
                              [this](const cell::OnlineIdentification::Update& u) { Applied(u); });
     if (!out.rejected.empty()) {
       Reject(out.rejected);
@@ -246,10 +262,17 @@ class Identifier {
         spdlog::warn("pose {}: change detected: {} by {:.6g} [m | rad], released", u.pose_index + 1,
                      names[i], u.result.change->step(i));
     }
-    // Poses are numbered from 1 as `rcal watch` numbers them (pose_index counts from 0).
-    spdlog::info("pose {} (pose_index {}): {} (accepted {}, rejected {}, NIS {:.2f})",
+    // Poses are numbered from 1 as `rcal watch` numbers them (pose_index counts from 0); the
+    // effect parameters (--effects) with their σ.
+    std::string effects;
+    const auto params = ekf.extended_model().EffectParameters();
+    for (size_t k = 0; k < params.size(); ++k)
+      effects += fmt::format("; {} {:.4g} ± {:.2g} {}", params[k].name,
+                             ekf.e()(static_cast<Eigen::Index>(k)),
+                             ekf.sigma_e()(static_cast<Eigen::Index>(k)), params[k].unit);
+    spdlog::info("pose {} (pose_index {}): {} (accepted {}, rejected {}, NIS {:.2f}){}",
                  u.pose_index + 1, u.pose_index, u.result.accepted ? "accepted" : "rejected",
-                 ekf.accepted(), ekf.rejected(), u.result.nis);
+                 ekf.accepted(), ekf.rejected(), u.result.nis, effects);
   }
 
   // The EKF state and the poses held for the set-up guess, atomically (--checkpoint).
@@ -270,9 +293,15 @@ class Identifier {
     if (t_.Publish(channels_.kinematic_params,
                    transport::ToKinematicParams(ekf, model.name(), utime)))
       health_.Published();
-    const auto history = ekf.Checkpoint().history;
+    const auto checkpoint = ekf.Checkpoint();
+    const auto& history = checkpoint.history;
     if (!history.empty()) {
-      const auto stats = identification::ErrorsAgainstMeasurements(model, ekf.x(), history);
+      // With effects: the residual of the extended model, each pose under its context.
+      const auto stats =
+          ekf.num_effect_params() > 0
+              ? identification::ErrorsAgainstMeasurements(ekf.extended_model(), ekf.x(), ekf.e(),
+                                                          history, checkpoint.contexts)
+              : identification::ErrorsAgainstMeasurements(model, ekf.x(), history);
       fig.rms_position_residual = stats.rms_position_m;
       fig.rms_orientation_residual = stats.rms_orientation_rad;
       fig.condition_number =
@@ -332,6 +361,9 @@ int main(int argc, char** argv) {
          "ranked by gain / (distance + this); large: by gain alone")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
+  app.add_option("--effects", o.effects,
+                 "non-geometric effects identified live with the geometry: the analysis.json of "
+                 "rcal analyze (its `effects`), or the JSON of rcal calibrate --effects");
   CLI11_PARSE(app, argc, argv);
 
   try {

@@ -490,6 +490,15 @@ int main(int argc, char** argv) {
                  "STOP on, joint JOINT (j1..jN or its name) reads DELTA [rad | m] less than where "
                  "it stands, as after an encoder swap and re-mastering: the joint's offset steps "
                  "by DELTA mid-run (repeatable)");
+  std::vector<std::string> sim_effects;
+  app.add_option(
+      "--sim-effect", sim_effects,
+      "sim poses: a non-geometric effect the simulated arm has, CAUSE[:JOINT]=V[,V] as "
+      "rcal simulate --effect takes it (joint_compliance:j2=2e-6, joint_periodic:j3=1e-4,"
+      "5e-5, joint_scale:j4=2e-4, backlash:j5=5e-5, thermal=1.2e-5, thermal:time=3e-9; "
+      "repeatable). Every stop's context is published with its pose either way: time since "
+      "the start, a warming temperature, a payload of 0, 5 or 10 kg, the approach "
+      "direction");
   bool follow = false;
   app.add_flag("--follow-next-poses", follow,
                "sim: go where ekf_identifier's NEXT_POSES asks (its best suggestion) instead of to "
@@ -547,6 +556,10 @@ int main(int argc, char** argv) {
     const cell::CellSimSpec sim_spec = cell::LoadCellSimSpec(services::RepoPath(sim_path));
     const io::BuiltCell built = io::LoadCell(sim_spec.cell);
     if (app.get_option("--seed")->count() == 0) seed = sim_spec.seed;
+    if (level == "sensors" && !sim_effects.empty())
+      throw std::runtime_error(
+          "--sim-effect: the sensor-level simulator moves the arm by its geometry alone; give "
+          "--level poses");
     if (level == "sensors")
       return RunSensorSim(built, sim_spec, seed, poses > 0 ? poses : sim_spec.num_cal, test_poses,
                           step_offsets, follow, linger, start_utime, speed, resume, t);
@@ -576,7 +589,31 @@ int main(int argc, char** argv) {
           "mid-run",
           model.joints()[spec.joint].name, -spec.delta, spec.stop, text);
     }
+    // Non-geometric effects of the simulated arm (none: its geometry alone), and the conditions
+    // of each stop, drawn from their own generator so that the poses' noise is the same with and
+    // without them.
+    std::vector<sim::TruthEffect> truth_effects;
+    for (const std::string& text : sim_effects) {
+      truth_effects.push_back(sim::ParseEffectSpec(text, model));
+      spdlog::info("the simulated arm has {} ({})",
+                   kinematics::ToString(truth_effects.back().effect.cause), text);
+    }
+    const sim::EffectTruth effect_truth = sim::MakeEffectTruth(model, truth_effects);
     sim::Rng rng(seed * 1000 + 3);
+    const sim::SessionSettings session;
+    sim::Rng context_rng(seed * 1000 + 7);
+    Eigen::VectorXd q_before;  // where the arm stood at the stop before (truth)
+    auto stop_context = [&](int64_t k, const Eigen::VectorXd& q) {
+      auto c = sim::StopContext(static_cast<double>(k) / rate, q, q_before, session, context_rng);
+      q_before = q;
+      return c;
+    };
+    auto measure = [&](int slot, const Eigen::VectorXd& q, const kinematics::EffectContext& c) {
+      if (truth_effects.empty())
+        return sim::MeasurePose(model.ForMarker(slot), x_true, q, noise, rng);
+      return sim::MeasureTruePose(
+          effect_truth.model.ForMarker(slot).Forward(q, c, x_true, effect_truth.e), q, noise, rng);
+    };
     transport::Health health("sensor_acquisition");
     std::optional<NextPosesInbox> advice;
     if (follow) advice.emplace(t, built.spec.channels.next_poses, model, health);
@@ -607,7 +644,8 @@ int main(int argc, char** argv) {
       const int64_t utime = pose_utime(k);
       if (k < first) {
         // Fast-forward: the same random numbers as the uninterrupted programme.
-        for (int slot : slots) sim::MeasurePose(model.ForMarker(slot), x_true, q, noise, rng);
+        const auto c = stop_context(k, q);
+        for (int slot : slots) measure(slot, q, c);
         continue;
       }
       if (speed > 0) {
@@ -651,13 +689,14 @@ int main(int argc, char** argv) {
       // Each marker the tracker measures at this stop, in the cell's order, 1 µs apart (a tracker
       // measures its reflectors one after the other); pose_index counts the measurements.
       const int n = static_cast<int>(slots.size());
+      const kinematics::EffectContext context = stop_context(k, q);
       for (int j = 0; j < n; ++j) {
-        auto z = sim::MeasurePose(model.ForMarker(slots[j]), x_true, q, noise, rng);
+        auto z = measure(slots[j], q, context);
         z.marker = slots[j];
         const auto index = static_cast<int32_t>(k * n + j);
-        if (t.Publish(
-                built.spec.channels.pose_measurement,
-                transport::ToMessage(z, utime + j, index, transport::MarkerId(model, slots[j]))))
+        if (t.Publish(built.spec.channels.pose_measurement,
+                      transport::ToMessage(z, utime + j, index,
+                                           transport::MarkerId(model, slots[j]), context)))
           health.Published();
       }
       health.Tick(utime, t);

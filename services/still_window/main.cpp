@@ -32,13 +32,19 @@
 // (estimation::MayFormStillWindow); otherwise the window is refused and counted (HEALTH rejected,
 // naming the source). Without CLOCK_OFFSET (one clock: the
 // simulator, a replay) nothing changes.
+// Context (for an identifier with non-geometric effects): each pose carries the approach
+// direction, the sign of each joint's last motion before its window began (from JOINTS), and its
+// time (the window's end, s of sensor time); temperature unknown (NaN) and payload 0, which no
+// stream of the cell carries yet.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <deque>
 #include <optional>
+#include <utility>
 
 #include "rcal/clock_offset_t.hpp"
 #include "rcal/estimation/clock_offset.hpp"
@@ -146,6 +152,7 @@ class StillWindowNode {
     for (int i = 0; i < m.num_joints; ++i) q(i) = m.q[i];
     if (!q.allFinite()) return Bad("joint_state.q: not finite");
     if (!Admit(joints_gate_, m.utime, "joint_state.utime")) return;
+    Moved(Seconds(m.utime), q);
     Done(m.utime, pipeline_.AddJoints(Seconds(m.utime), q));
   }
   void OnImu(const imu_sample_t& m) {
@@ -190,6 +197,26 @@ class StillWindowNode {
     }
     return "";
   }
+  // The direction of each joint's last motion, kept as it changes (time [s], signs) over the
+  // last few stops, so that a window emitted as the arm leaves it gets the direction it came
+  // from, not the one it leaves in.
+  void Moved(double t, const Eigen::VectorXd& q) {
+    if (q_last_.size() == q.size()) {
+      Eigen::VectorXi dir =
+          directions_.empty() ? Eigen::VectorXi::Zero(q.size()) : directions_.back().second;
+      for (int j = 0; j < q.size(); ++j)
+        if (q(j) != q_last_(j)) dir(j) = q(j) > q_last_(j) ? 1 : -1;
+      if (directions_.empty() || dir != directions_.back().second) directions_.push_back({t, dir});
+      while (directions_.size() > 64) directions_.pop_front();
+    }
+    q_last_ = q;
+  }
+  Eigen::VectorXi ApproachBefore(double t) const {
+    for (auto it = directions_.rbegin(); it != directions_.rend(); ++it)
+      if (it->first <= t) return it->second;
+    return {};
+  }
+
   void Emit(const estimation::StillPose& p) {
     if (t_first_ && p.t_begin - *t_first_ < warmup_) {
       spdlog::info("window {:.3f}–{:.3f} s dropped: warm-up", p.t_begin, p.t_end);
@@ -203,8 +230,11 @@ class StillWindowNode {
     }
     const kinematics::PoseMeasurement z = p.ToMeasurement();
     const int64_t utime = std::llround(p.t_end * 1e6);
+    kinematics::EffectContext context;
+    context.time_s = p.t_end;
+    context.dq_sign = ApproachBefore(p.t_begin);
     if (t_.Publish(channels_.pose_measurement,
-                   transport::ToMessage(z, utime, emitted_, marker_id_))) {
+                   transport::ToMessage(z, utime, emitted_, marker_id_, context))) {
       health_.Published();
       spdlog::info("pose {}: window {:.3f}–{:.3f} s, {} IMU / {} position samples", emitted_,
                    p.t_begin, p.t_end, p.imu_samples, p.position_samples);
@@ -228,6 +258,8 @@ class StillWindowNode {
   transport::Health health_;
   std::optional<double> t_first_;
   int emitted_ = 0;
+  Eigen::VectorXd q_last_;                                     // the last joints received
+  std::deque<std::pair<double, Eigen::VectorXi>> directions_;  // (time [s], signs) as they change
   std::int64_t dropped_ = 0, resets_ = 0;
   estimation::TimeGate joints_gate_, imu_gate_, position_gate_;
 };

@@ -3,7 +3,10 @@
 // (the truth only the simulator knows): it guesses the set-up from the first poses with no
 // knowledge of the simulator and reaches what the noise allows against the truth; restored
 // mid-guess or mid-run it ends where an uninterrupted run ends; bad poses are refused naming the
-// field and change nothing; a cell with nothing to guess starts at once.
+// field and change nothing; a cell with nothing to guess starts at once. With effects (an arm
+// whose joint 2 bends under gravity and payload), each pose's context enters its update: the
+// compliance is found against the simulated truth and the arm predicted where the geometry alone
+// cannot; a restart from the checkpoint (contexts kept) ends where an uninterrupted run ends.
 #include "rcal/cell/online_identification.hpp"
 
 #include <gtest/gtest.h>
@@ -15,6 +18,7 @@
 #include "rcal/identification/batch_lm.hpp"
 #include "rcal/identification/metrics.hpp"
 #include "rcal/io/cell_yaml.hpp"
+#include "rcal/sim/effects.hpp"
 #include "rcal/sim/pose_sim.hpp"
 
 namespace rcal::cell {
@@ -46,7 +50,7 @@ const SimRun& Run50() {
 }
 
 TimedPose At(const kinematics::PoseMeasurement& z, int k) {
-  return {z, 1'000'000 * (k + 1), k};
+  return {z, 1'000'000 * (k + 1), k, {}};
 }
 
 TEST(OnlineIdentification, TheCellFileAloneReachesWhatTheNoiseAllows) {
@@ -149,6 +153,83 @@ TEST(OnlineIdentification, ACellWithNothingToGuessStartsAtOnce) {
   ASSERT_EQ(out.updates.size(), 1u);
   EXPECT_TRUE(out.updates[0].result.accepted);
   EXPECT_GT(out.updates[0].max_step_sigma, 0.0);
+}
+
+// The pose-level cell (a 6-DoF tracker on the GRB3016, nothing to guess) whose joint 2 bends by
+// c·τ (joint_compliance, c = 2e-6 rad/(N·m), τ its gravity torque with a payload of 0, 5 or
+// 10 kg): stops at random joints, each with its context as a live simulator publishes it
+// (sim::StopContext: approach direction, payload, warming temperature, time).
+TEST(OnlineIdentification, WithEffectsEachPoseTakesItsContextAndTheEffectIsFound) {
+  const io::BuiltCell cell = io::LoadCell(RCAL_SOURCE_DIR "/config/cells/grb3016_poses.yaml");
+  const CellSimSpec sim = LoadCellSimSpec(RCAL_SOURCE_DIR "/config/cells/grb3016_poses.sim.yaml");
+  const Eigen::VectorXd x_true = TrueErrors(cell, sim);
+  const sim::TruthEffect compliance = sim::ParseEffectSpec("joint_compliance:j2=2e-6", cell.model);
+  const sim::EffectTruth truth = sim::MakeEffectTruth(cell.model, {compliance});
+  sim::PoseNoise noise;
+  noise.position_sigma = cell.spec.position.sigma.maxCoeff();
+  noise.orientation_sigma = cell.spec.position.orientation_sigma;
+  sim::Rng rng(71), context_rng(72);
+  const sim::SessionSettings session;
+  std::vector<TimedPose> cal, test;
+  Eigen::VectorXd q_before;
+  const auto qs = sim::SampleJoints(cell.model, 110, rng);
+  for (int k = 0; k < 110; ++k) {
+    const auto c = sim::StopContext(10.0 * k, qs[k], q_before, session, context_rng);
+    q_before = qs[k];
+    const auto z = sim::MeasurePoseWithEffects(truth, x_true, qs[k], c, noise, rng);
+    (k < 60 ? cal : test).push_back({z, 1'000'000 * (k + 1), k, c});
+  }
+  OnlineIdentification geometric(cell);
+  OnlineIdentification extended(cell, {compliance.effect});
+  ASSERT_EQ(extended.ekf().num_effect_params(), 1);
+  for (const auto& p : cal) {
+    EXPECT_TRUE(geometric.Add(p).rejected.empty());
+    const auto out = extended.Add(p);
+    ASSERT_TRUE(out.rejected.empty()) << out.rejected;
+    ASSERT_EQ(out.updates.size(), 1u);
+    EXPECT_TRUE(out.updates[0].result.accepted) << out.updates[0].result.reason;
+  }
+  // The compliance within 3σ of the truth, and σ small enough to tell it from 0.
+  const double c = extended.ekf().e()(0), sigma = extended.ekf().sigma_e()(0);
+  std::printf("joint 2 compliance %.4g ± %.2g rad/(N·m) (truth 2e-6)\n", c, sigma);
+  EXPECT_NEAR(c, 2e-6, 3 * sigma);
+  EXPECT_LT(sigma, 2e-6 / 5);
+  // Where the arm really is at the test stops (the truth, without noise): the extended estimate
+  // predicts it under each stop's context; the geometric one cannot follow the payload.
+  const auto error = [&](const OnlineIdentification& id) {
+    double sum = 0;
+    for (const auto& p : test) {
+      const Eigen::Vector3d p_true = truth.model.Forward(p.z.q, p.context, x_true, truth.e).p_WM_W;
+      const Eigen::VectorXd e = id.ekf().e();
+      const Eigen::Vector3d p_est =
+          e.size() > 0 ? id.ekf().extended_model().Forward(p.z.q, p.context, id.ekf().x(), e).p_WM_W
+                       : id.model().Forward(p.z.q, id.ekf().x()).p_WM_W;
+      sum += (p_true - p_est).norm();
+    }
+    return sum / static_cast<double>(test.size());
+  };
+  const double e_geo = error(geometric), e_ext = error(extended);
+  std::printf("test error: geometric %.4f mm, with the effect %.4f mm\n", e_geo * 1e3, e_ext * 1e3);
+  EXPECT_LT(e_ext, 0.5 * e_geo);
+  EXPECT_LT(e_ext, noise.position_sigma);
+  // Restarted after 30 poses from the checkpoint (contexts and all): the same end, bit for bit.
+  OnlineIdentification first(cell, {compliance.effect});
+  for (int k = 0; k < 30; ++k) first.Add(cal[k]);
+  const identification::EkfCheckpoint checkpoint = first.ekf().Checkpoint();
+  ASSERT_EQ(checkpoint.contexts.size(), checkpoint.history.size());
+  OnlineIdentification resumed(cell, {compliance.effect});
+  resumed.Restore(checkpoint, {}, first.last_utime(), first.last_pose_index());
+  for (int k = 30; k < 60; ++k) resumed.Add(cal[k]);
+  EXPECT_EQ(resumed.ekf().state(), extended.ekf().state());
+  // A context that cannot be (a dq_sign of 2) is refused naming the field, and changes nothing.
+  TimedPose bad = test[0];
+  bad.context.dq_sign(1) = 2;
+  const auto refused = extended.Add(bad);
+  ASSERT_EQ(refused.updates.size(), 1u);
+  EXPECT_FALSE(refused.updates[0].result.accepted);
+  EXPECT_NE(refused.updates[0].result.reason.find("dq_sign"), std::string::npos)
+      << refused.updates[0].result.reason;
+  EXPECT_EQ(extended.ekf().state(), resumed.ekf().state());
 }
 
 }  // namespace

@@ -84,6 +84,16 @@ TEST(DdsKinematicParams, EveryFieldLandsInItsDdsField) {
     EXPECT_EQ(d.identified._buffer[i], m.identified[i] != 0) << i;
   }
   EXPECT_EQ(d.poses_used, 20);
+  ASSERT_EQ(d.effect_names._length, 2u);
+  ASSERT_EQ(d.effect_units._length, 2u);
+  ASSERT_EQ(d.effect_values._length, 2u);
+  ASSERT_EQ(d.effect_sigmas._length, 2u);
+  for (size_t k = 0; k < 2; ++k) {
+    EXPECT_STREQ(d.effect_names._buffer[k], m.effect_names[k].c_str());
+    EXPECT_STREQ(d.effect_units._buffer[k], m.effect_units[k].c_str());
+    EXPECT_TRUE(Same(d.effect_values._buffer[k], m.effect_values[k])) << k;
+    EXPECT_TRUE(Same(d.effect_sigmas._buffer[k], m.effect_sigmas[k])) << k;
+  }
 }
 
 TEST(DdsKinematicParams, RoundTripsExactly) {
@@ -106,6 +116,7 @@ TEST(DdsKinematicParams, EmptyParameterListRoundTrips) {
   m.robot_id = "r";
   m.num_params = 0;
   m.poses_used = 0;
+  m.num_effect_params = 0;
   std::string e;
   const auto s = ToDds(m, &e);
   ASSERT_TRUE(s) << e;
@@ -143,6 +154,16 @@ TEST(DdsKinematicParams, RejectsNaNAndInfinityNamingTheField) {
   s->get().values._buffer[0] = kNaN;
   EXPECT_FALSE(FromDds(s->get(), &e));
   EXPECT_EQ(e, "kinematic_params.values[0] (a1): NaN");
+  // The effect parameters too, both ways.
+  m = TestParams(1);
+  m.effect_sigmas[1] = kInf;
+  EXPECT_FALSE(ToDds(m, &e));
+  EXPECT_EQ(e, "kinematic_params.effect_sigmas[1] (thermal.k): infinite");
+  s = ToDds(TestParams(1), &e);
+  ASSERT_TRUE(s) << e;
+  s->get().effect_values._buffer[0] = kNaN;
+  EXPECT_FALSE(FromDds(s->get(), &e));
+  EXPECT_EQ(e, "kinematic_params.effect_values[0] (joint_compliance.j2.c): NaN");
 }
 
 TEST(DdsKinematicParams, RejectsSizesThatDisagreeAndAnEmptyRobotId) {
@@ -169,6 +190,18 @@ TEST(DdsKinematicParams, RejectsSizesThatDisagreeAndAnEmptyRobotId) {
   EXPECT_FALSE(FromDds(s->get(), &e));
   EXPECT_NE(e.find("kinematic_params.identified"), std::string::npos) << e;
   s->get().identified._length = 28;
+  s->get().effect_sigmas._length = 1;
+  EXPECT_FALSE(FromDds(s->get(), &e));
+  EXPECT_NE(e.find("kinematic_params.effect_sigmas"), std::string::npos) << e;
+  s->get().effect_sigmas._length = 2;
+  m = TestParams(1);
+  m.effect_units.pop_back();
+  EXPECT_FALSE(ToDds(m, &e));
+  EXPECT_NE(e.find("kinematic_params.effect_units"), std::string::npos) << e;
+  m = TestParams(1);
+  m.num_effect_params = -1;
+  EXPECT_FALSE(ToDds(m, &e));
+  EXPECT_NE(e.find("kinematic_params.num_effect_params"), std::string::npos) << e;
   s->get().header.stamp.nanosec = 1'000'000'000u;
   EXPECT_FALSE(FromDds(s->get(), &e));
   EXPECT_NE(e.find("kinematic_params.header.stamp.nanosec"), std::string::npos) << e;

@@ -43,6 +43,12 @@ inline kinematic_params_t TestParams(int version, const std::string& robot_id = 
   m.values[7] = 1e300 * version;
   m.sigmas[4] = 0.0;  // not identified
   m.poses_used = 10 * version;
+  // Two effect parameters (an extended identifier's), values and σ exact in binary.
+  m.num_effect_params = 2;
+  m.effect_names = {"joint_compliance.j2.c", "thermal.k"};
+  m.effect_units = {"rad/(N*m)", "1/K"};
+  m.effect_values = {std::ldexp(3.0, -20) * version, -std::ldexp(5.0, -18)};
+  m.effect_sigmas = {std::ldexp(1.0, -23), std::ldexp(1.0, -21) / version};
   return m;
 }
 

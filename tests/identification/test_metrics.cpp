@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "identification_fixture.hpp"
+#include "rcal/sim/effects.hpp"
 
 namespace rcal::identification {
 namespace {
@@ -33,6 +34,30 @@ TEST(Metrics, ErrorsAgainstTruthAndMeasurementsAgreeWithoutNoise) {
   EXPECT_NEAR(a.mean_position_m, b.mean_position_m, 1e-15);
   EXPECT_NEAR(a.max_orientation_rad, b.max_orientation_rad, 1e-12);
   EXPECT_GT(a.mean_position_m, 0.01);  // Table 3 moves the tool by centimetres
+}
+
+// The extended model against noise-free measurements of an arm that bends (joint 2 compliance,
+// payloads 0–10 kg): 0 at the true effect, under each pose's context; the geometric part alone
+// (effect 0) misses by the deflection. A context list of the wrong size is refused.
+TEST(Metrics, ErrorsOfAnExtendedModelUnderEachContext) {
+  const auto model = kinematics::testing::Grb3016();
+  sim::Rng rng(6);
+  const Eigen::VectorXd x_true = sim::Table3Errors(model);
+  const sim::TruthEffect t = sim::ParseEffectSpec("joint_compliance:j2=5e-6", model);
+  const sim::EffectTruth truth = sim::MakeEffectTruth(model, {t});
+  const auto qs = sim::SampleJoints(model, 20, rng);
+  const auto contexts = sim::SampleSession(model.num_joints(), 20, sim::SessionSettings{}, rng);
+  sim::PoseNoise exact;
+  exact.position_sigma = exact.orientation_sigma = 0;
+  const auto ms = sim::MeasurePosesWithEffects(truth, x_true, qs, contexts, exact, rng);
+  const auto at_truth = ErrorsAgainstMeasurements(truth.model, x_true, truth.e, ms, contexts);
+  EXPECT_LT(at_truth.max_position_m, 1e-12);
+  EXPECT_LT(at_truth.max_orientation_rad, 1e-12);
+  const auto without =
+      ErrorsAgainstMeasurements(truth.model, x_true, truth.model.NoEffects(), ms, contexts);
+  EXPECT_GT(without.mean_position_m, 1e-4);  // 5e-6 rad/(N·m) · ~100 N·m · ~1 m
+  EXPECT_THROW(ErrorsAgainstMeasurements(truth.model, x_true, truth.e, ms, {contexts[0]}),
+               std::invalid_argument);
 }
 
 // A joint that reads 1 mrad less than where it stands: the model with that joint's offset 1 mrad

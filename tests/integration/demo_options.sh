@@ -64,5 +64,12 @@ for args in "rcal-up --follow-next-poses" "rcal-up --demo --ros2 --follow-next-p
   [ "$rc" -eq 2 ] || { echo "$args: exit $rc, expected 2 ($(cat "$bin/err"))"; fail=1; }
   grep -q "follow-next-poses\|unknown option" "$bin/err" || { echo "$args: stderr does not name --follow-next-poses: $(cat "$bin/err")"; fail=1; }
 done
+# --effects: described, takes no value.
+printf '%s\n' "$(PATH=$bin "$repo/deploy/demo" --help 2>&1)" | grep -q 'deploy/demo --effects' ||
+  { echo "deploy/demo --help: --effects not described"; fail=1; }
+out=$(PATH=$bin "$repo/deploy/demo" --effects x 2>"$bin/err")
+rc=$?
+[ "$rc" -eq 2 ] || { echo "demo --effects x: exit $rc, expected 2 ($(cat "$bin/err"))"; fail=1; }
+grep -q "effects takes no value" "$bin/err" || { echo "demo --effects x: $(cat "$bin/err")"; fail=1; }
 [ "$fail" = 0 ] && echo "ok: deploy/demo --help and a bad option, rcal-up --sim refusals, nothing installed or built"
 exit $fail

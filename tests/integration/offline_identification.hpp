@@ -71,15 +71,19 @@ inline const io::BuiltCell& DemoCell() {
 
 /// OnlineIdentification(`cell`) run on `used` in order, each message decoded against the cell's
 /// model; a pose it refuses is a test failure. (A unique_ptr: the identification holds its cell.)
+/// With `effects`, the extended identification (each pose under its logged context).
 inline std::unique_ptr<cell::OnlineIdentification> Replayed(
-    const io::BuiltCell& cell, const std::vector<pose_measurement_t>& used) {
-  auto id = std::make_unique<cell::OnlineIdentification>(cell);
+    const io::BuiltCell& cell, const std::vector<pose_measurement_t>& used,
+    const std::vector<kinematics::Effect>& effects = {}) {
+  auto id = std::make_unique<cell::OnlineIdentification>(cell, effects);
   for (const auto& m : used) {
     std::string error;
     const auto z = transport::FromMessage(m, &error, &cell.model);
     EXPECT_TRUE(z) << error;
-    if (!z) continue;
-    const auto out = id->Add({*z, m.utime, m.pose_index});
+    const auto context = transport::ContextFromMessage(m, &error);
+    EXPECT_TRUE(context) << error;
+    if (!z || !context) continue;
+    const auto out = id->Add({*z, m.utime, m.pose_index, *context});
     EXPECT_TRUE(out.rejected.empty()) << out.rejected;
   }
   return id;
@@ -119,7 +123,8 @@ inline void ExpectCalibrateLogEqualsIdentifier(const std::string& rcal,
                                                const std::filesystem::path& dir,
                                                const std::string& cell_file,
                                                const std::vector<pose_measurement_t>& poses,
-                                               const kinematic_params_t& params) {
+                                               const kinematic_params_t& params,
+                                               const std::string& effects_file = "") {
   const std::filesystem::path log = dir / "poses.lcmlog";
   {
     lcm::LogFile f(log.string(), "w");
@@ -138,7 +143,8 @@ inline void ExpectCalibrateLogEqualsIdentifier(const std::string& rcal,
   }
   const std::filesystem::path json = dir / "calibrate_log.json";
   const std::string cmd = rcal + " calibrate-log " + log.string() + " --cell " + cell_file +
-                          " --json " + json.string() + " > " + (dir / "calibrate_log.out").string();
+                          (effects_file.empty() ? "" : " --effects " + effects_file) + " --json " +
+                          json.string() + " > " + (dir / "calibrate_log.out").string();
   ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
   const auto j = nlohmann::json::parse(std::ifstream(json));
   EXPECT_EQ(j["poses_accepted"].get<int>(), params.poses_used);
@@ -150,6 +156,16 @@ inline void ExpectCalibrateLogEqualsIdentifier(const std::string& rcal,
     const auto& value = p.contains("value_m") ? p["value_m"] : p["value_rad"];
     EXPECT_NEAR(value.get<double>(), params.values[i], kSameAsOffline) << params.names[i];
     worst = std::max(worst, std::abs(value.get<double>() - params.values[i]));
+  }
+  // The effect parameters too (--effects): the JSON's `effects` entries, values in model order.
+  std::vector<double> effects;
+  if (j.contains("effects"))
+    for (const auto& e : j["effects"])
+      for (const auto& v : e["values"]) effects.push_back(v["value"].get<double>());
+  ASSERT_EQ(static_cast<int>(effects.size()), params.num_effect_params);
+  for (int k = 0; k < params.num_effect_params; ++k) {
+    EXPECT_NEAR(effects[k], params.effect_values[k], 1e-6 * params.effect_sigmas[k])
+        << params.effect_names[k];
   }
   std::printf("rcal calibrate-log on the %zu poses vs the identifier: max difference %.3g\n",
               poses.size(), worst);

@@ -19,6 +19,7 @@
 #include <fstream>
 #include <functional>
 #include <optional>
+#include <set>
 
 #include "netns.hpp"
 #include "offline_identification.hpp"
@@ -27,9 +28,11 @@
 #include "rcal/identification/ekf_identifier.hpp"
 #include "rcal/identification/metrics.hpp"
 #include "rcal/identification/pose_planning.hpp"
+#include "rcal/io/effects_json.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/kinematics/identifiability.hpp"
 #include "rcal/next_poses_t.hpp"
+#include "rcal/sim/effects.hpp"
 #include "rcal/sim/pose_sim.hpp"
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
@@ -254,6 +257,91 @@ TEST_F(Pipeline, ACellFollowingNextPosesGoesWhereTheIdentifierAsks) {
     EXPECT_LE(std::abs(x_online(i) - ekf.x()(i)), 1e-6 * ekf.sigma()(i))
         << off.model.parameters()[i].name;
   EXPECT_LT(off.TestError(x_online), 0.02 * off.TestError(off.model.Nominal()));
+}
+
+// An arm whose joint 2 bends under gravity and payload (sensor_acquisition --sim-effect
+// joint_compliance:j2=2e-6, pose level) and an identifier told of the effect (ekf_identifier
+// --effects analysis.json, as `rcal analyze` writes it): every POSE_MEASUREMENT carries its stop's
+// context (payload, approach direction, temperature, time), KINEMATIC_PARAMS the compliance with
+// its σ, found against the simulator's truth; the live estimate is the library's on the published
+// poses (cell::OnlineIdentification with the effect); the calibrated arm is predicted under a
+// 10 kg payload where the geometry alone cannot.
+TEST_F(Pipeline, AnArmThatBendsIsCalibratedWithItsEffectLive) {
+  RCAL_IN_NAMESPACE("Pipeline.AnArmThatBendsIsCalibratedWithItsEffectLive");
+  const Offline off;
+  constexpr int kPoses = 60;
+  const io::BuiltCell cell = io::LoadCell(RCAL_SOURCE_DIR "/config/cells/grb3016_poses.yaml");
+  const sim::TruthEffect compliance = sim::ParseEffectSpec("joint_compliance:j2=2e-6", cell.model);
+  {
+    const kinematics::ExtendedModel ext(cell.model, {compliance.effect});
+    const Eigen::VectorXd zero = ext.NoEffects();
+    std::ofstream(dir_ / "analysis.json")
+        << nlohmann::json{{"effects", io::EffectsJson(ext, zero, zero)}}.dump(2);
+  }
+  Listener l;
+  auto id_args = Identifier(dir_ / "ekf.json");
+  id_args.insert(id_args.end(), {"--effects", (dir_ / "analysis.json").string()});
+  Start(id_args, "ekf_identifier.log");
+  ASSERT_TRUE(l.WaitFor([&] { return l.statuses > 0; })) << "identifier did not come up";
+  auto args = Sensor(kPoses, 50);
+  args.insert(args.end(), {"--sim-effect", "joint_compliance:j2=2e-6"});
+  const pid_t sensor = Start(args, "sensor_acquisition.log");
+  ASSERT_TRUE(l.WaitFor([&] { return l.params && l.params->poses_used == kPoses; }))
+      << "identifier log: " << (dir_ / "ekf_identifier.log");
+  EXPECT_EQ(Wait(sensor), 0);
+  Reaped(sensor);
+  ASSERT_EQ(l.poses.size(), static_cast<size_t>(kPoses));
+  EXPECT_EQ(l.status->poses_rejected, 0);
+  // The contexts as published: payloads of the list, the approach direction after the first stop.
+  std::set<double> payloads;
+  for (size_t k = 0; k < l.poses.size(); ++k) {
+    payloads.insert(l.poses[k].payload_kg);
+    EXPECT_TRUE(std::isfinite(l.poses[k].temperature_c));
+    const int moved = static_cast<int>(std::count_if(
+        l.poses[k].dq_sign.begin(), l.poses[k].dq_sign.end(), [](int8_t d) { return d != 0; }));
+    EXPECT_EQ(moved, k == 0 ? 0 : off.model.num_joints()) << "pose " << k;
+  }
+  EXPECT_EQ(payloads, (std::set<double>{0.0, 5.0, 10.0}));
+  // The compliance live, with its σ, against the truth.
+  const kinematic_params_t& p = *l.params;
+  ASSERT_EQ(p.num_effect_params, 1);
+  EXPECT_EQ(p.effect_names[0], "joint_compliance." + cell.model.joints()[1].name + ".c");
+  EXPECT_EQ(p.effect_units[0], "rad/(N*m)");
+  std::printf("live: joint 2 compliance %.4g ± %.2g rad/(N·m) (truth 2e-6)\n", p.effect_values[0],
+              p.effect_sigmas[0]);
+  EXPECT_NEAR(p.effect_values[0], 2e-6, 3 * p.effect_sigmas[0]);
+  EXPECT_LT(p.effect_sigmas[0], 2e-6 / 5);
+  // Live = library on the poses it was sent, contexts and all.
+  const auto offline = integration::Replayed(cell, l.poses, {compliance.effect});
+  const auto& ekf = offline->ekf();
+  EXPECT_LE(std::abs(p.effect_values[0] - ekf.e()(0)), 1e-6 * ekf.sigma_e()(0));
+  const Eigen::VectorXd x_online = Values(p);
+  for (int i : offline->base())
+    EXPECT_LE(std::abs(x_online(i) - ekf.x()(i)), 1e-6 * ekf.sigma()(i))
+        << cell.model.parameters()[i].name;
+#ifdef RCAL_TOOL
+  // And `rcal calibrate-log --effects` on a log of those poses.
+  integration::ExpectCalibrateLogEqualsIdentifier(
+      RCAL_TOOL, dir_, RCAL_SOURCE_DIR "/config/cells/grb3016_poses.yaml", l.poses, p,
+      (dir_ / "analysis.json").string());
+#endif
+  // Under a 10 kg payload at the test stops: the calibrated arm with its effect against the
+  // truth, and the geometric identification of the same poses.
+  const auto geometric = integration::Replayed(cell, l.poses);
+  const sim::EffectTruth truth = sim::MakeEffectTruth(cell.model, {compliance});
+  kinematics::EffectContext loaded;
+  loaded.payload_kg = 10.0;
+  double e_live = 0, e_geo = 0;
+  for (const auto& q : off.test_q) {
+    const Eigen::Vector3d p_true = truth.model.Forward(q, loaded, off.x_true, truth.e).p_WM_W;
+    e_live += (ekf.extended_model().Forward(q, loaded, x_online, ekf.e()).p_WM_W - p_true).norm();
+    e_geo += (cell.model.Forward(q, geometric->ekf().x()).p_WM_W - p_true).norm();
+  }
+  e_live /= static_cast<double>(off.test_q.size());
+  e_geo /= static_cast<double>(off.test_q.size());
+  std::printf("10 kg payload: live with the effect %.4f mm, geometry alone %.4f mm\n", e_live * 1e3,
+              e_geo * 1e3);
+  EXPECT_LT(e_live, 0.5 * e_geo);
 }
 
 // The shipped UR10 cell (config/cells/ur10.yaml): an optical tracker measuring positions only, two

@@ -127,7 +127,7 @@ cell::OnlineIdentification OfflineOn(const LiveRun& run, const io::BuiltCell& bu
       ADD_FAILURE() << error;
       continue;
     }
-    offline.Add({*z, m.utime, m.pose_index});
+    offline.Add({*z, m.utime, m.pose_index, {}});
   }
   return offline;
 }
@@ -482,7 +482,7 @@ TEST_F(SensorPipeline, CalibratesThroughTwentyPercentPacketLoss) {
     std::string error;
     const auto z = transport::FromMessage(p, &error);
     ASSERT_TRUE(z) << error;
-    id.Add({*z, p.utime, p.pose_index});
+    id.Add({*z, p.utime, p.pose_index, {}});
   }
   const double lossy_mm =
       identification::ErrorsAgainstTruth(cell.model, id.ekf().x(), cell.x_true, test_q)

@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include "../kinematics/test_robots.hpp"
 
 namespace rcal::sim {
@@ -133,6 +135,45 @@ TEST(SimEffects, SessionContexts) {
   EXPECT_GT(neg, 100);
   EXPECT_LT(neg, 200);
   EXPECT_GT(c.back().temperature_c - c.front().temperature_c, 8.0);
+}
+
+// A live stop's context: the approach direction is the sign of the motion from the stop before
+// (0 for a joint that did not move, none known at the first stop), time as given, the
+// temperature on the warm-up curve within its noise, a payload of the list; every call draws the
+// same numbers, so a resumed run that replays its stops continues the same sequence.
+TEST(SimEffects, StopContextOfALiveCell) {
+  SessionSettings s;
+  Rng a(3), b(3);
+  Eigen::VectorXd q0(3), q1(3);
+  q0 << 0.1, 0.2, 0.3;
+  q1 << 0.3, 0.2, -0.1;
+  const auto first = StopContext(0.0, q0, {}, s, a);
+  EXPECT_EQ(first.dq_sign, Eigen::VectorXi::Zero(3));
+  const auto second = StopContext(1200.0, q1, q0, s, a);
+  EXPECT_EQ(second.dq_sign, Eigen::Vector3i(1, 0, -1));
+  EXPECT_EQ(second.time_s, 1200.0);
+  const double warm = s.temperature_start_c +
+                      s.temperature_rise_c * (1.0 - std::exp(-1200.0 / s.warmup_time_constant_s));
+  EXPECT_NEAR(second.temperature_c, warm, 5 * s.temperature_noise_c);
+  EXPECT_TRUE(second.payload_kg == 0.0 || second.payload_kg == 5.0 || second.payload_kg == 10.0);
+  // The same draws whatever the joints: a fast-forward through the same stops stays in step.
+  StopContext(0.0, q1, q0, s, b);
+  const auto replayed = StopContext(1200.0, q1, q0, s, b);
+  EXPECT_EQ(replayed.temperature_c, second.temperature_c);
+  EXPECT_EQ(replayed.payload_kg, second.payload_kg);
+  // Over many stops the payloads cover the list and the temperature follows the curve.
+  int heavy = 0;
+  double dev = 0;
+  for (int k = 0; k < 300; ++k) {
+    const auto c = StopContext(10.0 * k, q0, q1, s, a);
+    heavy += c.payload_kg == 10.0;
+    dev += c.temperature_c -
+           (s.temperature_start_c +
+            s.temperature_rise_c * (1.0 - std::exp(-10.0 * k / s.warmup_time_constant_s)));
+  }
+  EXPECT_GT(heavy, 60);
+  EXPECT_LT(heavy, 140);
+  EXPECT_NEAR(dev / 300, 0.0, 5 * s.temperature_noise_c / std::sqrt(300.0));
 }
 
 TEST(SimEffects, EffectOfSize) {

@@ -133,7 +133,7 @@ cell::OnlineIdentification Identified(int n) {
   Eigen::VectorXd x_true = Eigen::VectorXd::Zero(model.num_params());
   for (int i = 0; i < x_true.size(); ++i) x_true(i) = 1e-4 * std::sin(1.0 + i);
   const auto ms = sim::MeasurePoses(model, x_true, sim::SampleJoints(model, n, rng), {}, rng);
-  for (int k = 0; k < n; ++k) id.Add({ms[k], 1'000'000 + 100'000 * k, k});
+  for (int k = 0; k < n; ++k) id.Add({ms[k], 1'000'000 + 100'000 * k, k, {}});
   return id;
 }
 

@@ -410,7 +410,7 @@ TEST(PoseLog, RcalCalibrateLogWithTheCellReachesTheOnlineIdentification) {
     const auto z =
         transport::FromMessage(transport::ToMessage(w.cal[k], 1'000'000 * (k + 1), k), &error);
     ASSERT_TRUE(z) << error;
-    online.Add({*z, 1'000'000 * (k + 1), k});
+    online.Add({*z, 1'000'000 * (k + 1), k, {}});
   }
   const Eigen::VectorXd x = online.ekf().x(), sigma = online.ekf().sigma();
   EXPECT_EQ(j.at("poses_accepted").get<int>(), online.ekf().accepted());

@@ -123,7 +123,7 @@ TEST(Track, AnLcmLogRunsWithEachPosesOwnCovarianceAsTheIdentifierDoes) {
     std::string error;
     const auto z = transport::FromMessage(m, &error, &built.model);
     ASSERT_TRUE(z) << error;
-    for (const auto& u : id.Add({*z, m.utime, m.pose_index}).updates)
+    for (const auto& u : id.Add({*z, m.utime, m.pose_index, {}}).updates)
       nis[u.pose_index] = u.result.nis;
   }
   std::ifstream trace(dir / "trace.csv");

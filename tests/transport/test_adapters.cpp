@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
 #include <limits>
 
 #include "fixture.hpp"
@@ -143,40 +144,107 @@ TEST(PoseMeasurementAdapter, MarkerIdIsTheCellsAndBecomesTheModelsSlot) {
   EXPECT_FALSE(FromMessage(ToMessage(g.poses[0], 10, 0, 3), &error, &g.model));
 }
 
-// A POSE_MEASUREMENT as recorded before marker_id (its fingerprint 0x257fdb5ac9ac24a6, the same
-// fields without marker_id) decodes as marker 0, field for field; anything else keeps its refusal:
-// a damaged old message is refused naming the field, an unknown fingerprint as before.
-TEST(PoseMeasurementAdapter, TheLayoutBeforeMarkerIdStillDecodes) {
+// A POSE_MEASUREMENT as recorded by earlier rcal decodes, field for field, with the fields it
+// lacked at their defaults: before the context (fingerprint 0xa1f22502bbcd6577: temperature and
+// time NaN, payload 0, dq_sign 0) and before marker_id too (0x257fdb5ac9ac24a6: marker 0).
+// Anything else keeps its refusal: a damaged old message is refused naming the field, an unknown
+// fingerprint as before.
+TEST(PoseMeasurementAdapter, TheLayoutsBeforeTheContextAndMarkerIdStillDecode) {
   const Grb3016 g(2);
-  const pose_measurement_t now = ToMessage(g.poses[1], 123456, 9);
+  kinematics::EffectContext ctx;
+  ctx.temperature_c = 31.0;
+  ctx.payload_kg = 2.5;
+  ctx.time_s = 600.0;
+  ctx.dq_sign = Eigen::VectorXi::Constant(g.model.num_joints(), -1);
+  const pose_measurement_t now = ToMessage(g.poses[1], 123456, 9, 0, ctx);
   std::vector<uint8_t> bytes(static_cast<size_t>(now.getEncodedSize()));
   now.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
-  // The old layout: the old fingerprint, marker_id's 4 bytes (after pose_index) left out.
-  std::vector<uint8_t> old(bytes.begin(), bytes.begin() + 20);
-  old.insert(old.end(), bytes.begin() + 24, bytes.end());
-  const uint8_t before[8] = {0x25, 0x7f, 0xdb, 0x5a, 0xc9, 0xac, 0x24, 0xa6};
-  std::copy(before, before + 8, old.begin());
+  // Before the context: the fingerprint of then, the context (3 doubles, num_joints bytes) left
+  // out at the end.
+  std::vector<uint8_t> v2(bytes.begin(), bytes.end() - 24 - now.num_joints);
+  const uint8_t before_context[8] = {0xa1, 0xf2, 0x25, 0x02, 0xbb, 0xcd, 0x65, 0x77};
+  std::copy(before_context, before_context + 8, v2.begin());
+  // Before marker_id: that, without marker_id's 4 bytes after pose_index.
+  std::vector<uint8_t> v1(v2.begin(), v2.begin() + 20);
+  v1.insert(v1.end(), v2.begin() + 24, v2.end());
+  const uint8_t before_marker[8] = {0x25, 0x7f, 0xdb, 0x5a, 0xc9, 0xac, 0x24, 0xa6};
+  std::copy(before_marker, before_marker + 8, v1.begin());
+  for (const auto* old : {&v2, &v1}) {
+    pose_measurement_t msg;
+    EXPECT_NE(DecodeLcm(old->data(), old->size(), &msg), "");  // the plain decoder refuses it
+    ASSERT_EQ(DecodePoseMeasurement(old->data(), old->size(), &msg), "");
+    EXPECT_EQ(msg.utime, 123456);
+    EXPECT_EQ(msg.pose_index, 9);
+    EXPECT_EQ(msg.marker_id, 0);
+    EXPECT_EQ(msg.q, now.q);
+    EXPECT_EQ(msg.covariance, now.covariance);
+    for (int i = 0; i < 4; ++i) EXPECT_EQ(msg.q_EI[i], now.q_EI[i]);
+    EXPECT_TRUE(std::isnan(msg.temperature_c));
+    EXPECT_EQ(msg.payload_kg, 0.0);
+    EXPECT_TRUE(std::isnan(msg.time_s));
+    EXPECT_EQ(msg.dq_sign, std::vector<int8_t>(static_cast<size_t>(now.num_joints), 0));
+    std::string error;
+    const auto c = ContextFromMessage(msg, &error);
+    ASSERT_TRUE(c) << error;
+    EXPECT_EQ(c->dq_sign.size(), 0);  // all 0: no direction
+  }
+  // Today's layout decodes as it is, context and all.
   pose_measurement_t msg;
-  EXPECT_NE(DecodeLcm(old.data(), old.size(), &msg), "");  // the plain decoder refuses it
-  ASSERT_EQ(DecodePoseMeasurement(old.data(), old.size(), &msg), "");
-  EXPECT_EQ(msg.utime, 123456);
-  EXPECT_EQ(msg.pose_index, 9);
-  EXPECT_EQ(msg.marker_id, 0);
-  EXPECT_EQ(msg.q, now.q);
-  EXPECT_EQ(msg.covariance, now.covariance);
-  for (int i = 0; i < 4; ++i) EXPECT_EQ(msg.q_EI[i], now.q_EI[i]);
-  // Today's layout decodes as it is.
   ASSERT_EQ(DecodePoseMeasurement(bytes.data(), bytes.size(), &msg), "");
   EXPECT_EQ(msg.pose_index, 9);
-  // An old message with num_joints = -1: refused naming the field.
-  old[20] = old[21] = old[22] = old[23] = 0xff;
-  EXPECT_NE(DecodePoseMeasurement(old.data(), old.size(), &msg).find("num_joints = -1"),
+  std::string error;
+  const auto c = ContextFromMessage(msg, &error);
+  ASSERT_TRUE(c) << error;
+  EXPECT_EQ(c->temperature_c, 31.0);
+  EXPECT_EQ(c->payload_kg, 2.5);
+  EXPECT_EQ(c->time_s, 600.0);
+  EXPECT_EQ(c->dq_sign, ctx.dq_sign);
+  // Old messages with num_joints = -1: refused naming the field.
+  v1[20] = v1[21] = v1[22] = v1[23] = 0xff;
+  EXPECT_NE(DecodePoseMeasurement(v1.data(), v1.size(), &msg).find("num_joints = -1"),
+            std::string::npos);
+  v2[24] = v2[25] = v2[26] = v2[27] = 0xff;
+  EXPECT_NE(DecodePoseMeasurement(v2.data(), v2.size(), &msg).find("num_joints = -1"),
             std::string::npos);
   // Another fingerprint: refused as DecodeLcm refuses it.
-  old[0] ^= 0x01;
-  EXPECT_EQ(DecodePoseMeasurement(old.data(), old.size(), &msg),
-            DecodeLcm(old.data(), old.size(), &msg));
-  EXPECT_NE(DecodePoseMeasurement(old.data(), old.size(), &msg), "");
+  v1[0] ^= 0x01;
+  EXPECT_EQ(DecodePoseMeasurement(v1.data(), v1.size(), &msg),
+            DecodeLcm(v1.data(), v1.size(), &msg));
+  EXPECT_NE(DecodePoseMeasurement(v1.data(), v1.size(), &msg), "");
+}
+
+// The context's refusals each name their field; a good context survives the wire.
+TEST(PoseMeasurementAdapter, ContextRefusalsNameTheField) {
+  const Grb3016 g(1);
+  const pose_measurement_t good = ToMessage(g.poses[0], 10, 0);
+  std::string error;
+  const auto c = ContextFromMessage(ThroughLcm(good), &error);
+  ASSERT_TRUE(c) << error;
+  EXPECT_TRUE(std::isnan(c->temperature_c));
+  EXPECT_EQ(c->payload_kg, 0.0);
+  struct Case {
+    const char* field;
+    std::function<void(pose_measurement_t&)> spoil;
+  };
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  const std::vector<Case> cases = {
+      {"temperature_c", [&](pose_measurement_t& m) { m.temperature_c = inf; }},
+      {"temperature_c", [&](pose_measurement_t& m) { m.temperature_c = 2000.0; }},
+      {"payload_kg", [&](pose_measurement_t& m) { m.payload_kg = nan; }},
+      {"payload_kg", [&](pose_measurement_t& m) { m.payload_kg = -1.0; }},
+      {"time_s", [&](pose_measurement_t& m) { m.time_s = -inf; }},
+      {"dq_sign", [&](pose_measurement_t& m) { m.dq_sign.pop_back(); }},
+      {"dq_sign[2]", [&](pose_measurement_t& m) { m.dq_sign[2] = 7; }},
+  };
+  for (const auto& k : cases) {
+    pose_measurement_t m = good;
+    k.spoil(m);
+    error.clear();
+    EXPECT_FALSE(ContextFromMessage(m, &error)) << k.field;
+    EXPECT_NE(error.find(std::string("pose_measurement.") + k.field), std::string::npos)
+        << k.field << ": " << error;
+  }
 }
 
 TEST(KinematicParamsAdapter, RoundTripAndModelChecks) {
@@ -213,6 +281,73 @@ TEST(KinematicParamsAdapter, RoundTripAndModelChecks) {
   nan.values[3] = std::nan("");
   EXPECT_FALSE(ParamsFromMessage(nan, g.model, &error));
   EXPECT_NE(error.find("kinematic_params.values"), std::string::npos) << error;
+}
+
+// An extended identifier's effect parameters travel with the estimate: names and units of the
+// model, values and σ of the filter, read back exactly; a message that does not fit the model is
+// refused naming the field; the layout before the effects (fingerprint 0xf474f493449420b3)
+// decodes with none.
+TEST(KinematicParamsAdapter, EffectParametersTravelWithTheEstimate) {
+  const Grb3016 g(10);
+  kinematics::Effect compliance;
+  compliance.cause = kinematics::EffectCause::kJointCompliance;
+  compliance.joint = 1;
+  kinematics::Effect periodic;
+  periodic.cause = kinematics::EffectCause::kJointPeriodic;
+  periodic.joint = 2;
+  const kinematics::ExtendedModel ext(g.model, {compliance, periodic});
+  identification::EkfIdentifier ekf(ext, g.base);
+  kinematics::EffectContext ctx;
+  ctx.payload_kg = 5.0;
+  for (const auto& z : g.poses) ekf.Update(z, ctx);
+  const auto msg = ThroughLcm(ToKinematicParams(ekf, "grb3016", 99));
+  ASSERT_EQ(msg.num_effect_params, 3);
+  const auto params = ext.EffectParameters();
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_EQ(msg.effect_names[k], params[k].name);
+    EXPECT_EQ(msg.effect_units[k], params[k].unit);
+    EXPECT_EQ(msg.effect_values[k], ekf.e()(k));
+    EXPECT_EQ(msg.effect_sigmas[k], ekf.sigma_e()(k));
+    EXPECT_GT(msg.effect_sigmas[k], 0.0);
+  }
+  std::string error;
+  const auto e = EffectsFromMessage(msg, ext, &error);
+  ASSERT_TRUE(e) << error;
+  EXPECT_EQ(*e, ekf.e());
+  // A geometric estimate carries none, and does not fit the extended model.
+  const auto plain =
+      ThroughLcm(ToKinematicParams(g.model, g.x_true, g.x_true * 0, g.base, "r", 1, 1));
+  EXPECT_EQ(plain.num_effect_params, 0);
+  EXPECT_FALSE(EffectsFromMessage(plain, ext, &error));
+  EXPECT_NE(error.find("kinematic_params.num_effect_params"), std::string::npos) << error;
+  auto renamed = msg;
+  std::swap(renamed.effect_names[0], renamed.effect_names[1]);
+  EXPECT_FALSE(EffectsFromMessage(renamed, ext, &error));
+  EXPECT_NE(error.find("kinematic_params.effect_names[0]"), std::string::npos) << error;
+  auto nan = msg;
+  nan.effect_values[2] = std::nan("");
+  EXPECT_FALSE(EffectsFromMessage(nan, ext, &error));
+  EXPECT_NE(error.find("kinematic_params.effect_values[2]"), std::string::npos) << error;
+  auto negative = msg;
+  negative.effect_sigmas[1] = -1.0;
+  EXPECT_FALSE(EffectsFromMessage(negative, ext, &error));
+  EXPECT_NE(error.find("kinematic_params.effect_sigmas[1]"), std::string::npos) << error;
+
+  // The layout before the effects: the same bytes up to poses_used, the fingerprint of then.
+  std::vector<uint8_t> bytes(static_cast<size_t>(plain.getEncodedSize()));
+  plain.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+  std::vector<uint8_t> old(bytes.begin(), bytes.end() - 4);  // num_effect_params = 0 left out
+  const uint8_t before[8] = {0xf4, 0x74, 0xf4, 0x93, 0x44, 0x94, 0x20, 0xb3};
+  std::copy(before, before + 8, old.begin());
+  kinematic_params_t back;
+  EXPECT_NE(DecodeLcm(old.data(), old.size(), &back), "");
+  ASSERT_EQ(DecodeKinematicParams(old.data(), old.size(), &back), "");
+  EXPECT_EQ(back.values, plain.values);
+  EXPECT_EQ(back.poses_used, plain.poses_used);
+  EXPECT_EQ(back.num_effect_params, 0);
+  ASSERT_EQ(DecodeKinematicParams(bytes.data(), bytes.size(), &back), "");
+  old[0] ^= 0x01;
+  EXPECT_NE(DecodeKinematicParams(old.data(), old.size(), &back), "");
 }
 
 TEST(KinematicParamsAdapter, FromTheIdentifier) {

@@ -1,6 +1,7 @@
 // A checkpoint written as text and restored continues exactly as the uninterrupted identifier.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 
 #include "fixture.hpp"
@@ -100,7 +101,7 @@ TEST(Checkpoint, HeldPosesRoundTrip) {
   const Grb3016 g(4);
   identification::EkfIdentifier ekf(g.model, g.base);
   CheckpointFile f{ModelId(g.model), 5678, -1, ekf.Checkpoint(), {}};
-  for (int k = 0; k < 3; ++k) f.held.push_back({g.poses[k], 1000 + k, k});
+  for (int k = 0; k < 3; ++k) f.held.push_back({g.poses[k], 1000 + k, k, {}});
   const CheckpointFile back = ParseCheckpoint(CheckpointText(f));
   ASSERT_EQ(back.held.size(), 3u);
   for (int k = 0; k < 3; ++k) {
@@ -113,6 +114,71 @@ TEST(Checkpoint, HeldPosesRoundTrip) {
     EXPECT_EQ(back.held[k].z.has_orientation, g.poses[k].has_orientation);
   }
   EXPECT_EQ(back.checkpoint.accepted, 0);
+}
+
+// An extended identifier's checkpoint keeps each pose's context (unknown temperature and time as
+// null, dq_sign as given) and the held poses' contexts: restored, the identifier continues bit for
+// bit as the one it was taken from; a malformed context is an error naming its key.
+TEST(Checkpoint, ContextsRoundTrip) {
+  const Grb3016 g(12);
+  kinematics::Effect compliance;
+  compliance.cause = kinematics::EffectCause::kJointCompliance;
+  compliance.joint = 1;
+  const kinematics::ExtendedModel ext(g.model, {compliance});
+  const auto context = [&](int k) {
+    kinematics::EffectContext c;
+    c.payload_kg = 2.5 * k;
+    if (k % 2) c.temperature_c = 20.0 + 0.1 * k;  // else unknown (NaN)
+    if (k % 3) c.time_s = 60.0 * k;
+    c.dq_sign = Eigen::VectorXi::Constant(g.model.num_joints(), k % 2 ? 1 : -1);
+    return c;
+  };
+  identification::EkfIdentifier a(ext, g.base), b(ext, g.base);
+  for (int k = 0; k < 8; ++k) a.Update(g.poses[k], context(k));
+  CheckpointFile f{ModelId(g.model), 5678, 7, a.Checkpoint(), {}};
+  f.held.push_back({g.poses[8], 9000, 8, context(8)});
+  const CheckpointFile back = ParseCheckpoint(CheckpointText(f));
+  ASSERT_EQ(back.checkpoint.contexts.size(), 8u);
+  for (int k = 0; k < 8; ++k) {
+    const auto& c = back.checkpoint.contexts[k];
+    const auto want = context(k);
+    EXPECT_EQ(std::isnan(c.temperature_c), std::isnan(want.temperature_c)) << k;
+    if (!std::isnan(want.temperature_c)) {
+      EXPECT_EQ(c.temperature_c, want.temperature_c) << k;
+    }
+    EXPECT_EQ(std::isnan(c.time_s), std::isnan(want.time_s)) << k;
+    if (!std::isnan(want.time_s)) {
+      EXPECT_EQ(c.time_s, want.time_s) << k;
+    }
+    EXPECT_EQ(c.payload_kg, want.payload_kg) << k;
+    EXPECT_EQ(c.dq_sign, want.dq_sign) << k;
+  }
+  ASSERT_EQ(back.held.size(), 1u);
+  EXPECT_EQ(back.held[0].context.payload_kg, 20.0);
+  EXPECT_EQ(back.held[0].context.dq_sign, context(8).dq_sign);
+  b.Restore(back.checkpoint);
+  for (int k = 8; k < 12; ++k) {
+    a.Update(g.poses[k], context(k));
+    b.Update(g.poses[k], context(k));
+  }
+  EXPECT_EQ(b.state(), a.state());
+  EXPECT_EQ(b.P(), a.P());
+  // A geometric identifier writes no contexts.
+  identification::EkfIdentifier plain(g.model, g.base);
+  plain.Update(g.poses[0]);
+  EXPECT_EQ(CheckpointText({ModelId(g.model), 1, 0, plain.Checkpoint(), {}}).find("contexts"),
+            std::string::npos);
+  // Malformed: named.
+  std::string text = CheckpointText(f);
+  const auto at = text.find("\"dq_sign\":[");
+  ASSERT_NE(at, std::string::npos);
+  text.replace(at, text.find(']', at) + 1 - at, "\"dq_sign\":7");
+  try {
+    ParseCheckpoint(text);
+    ADD_FAILURE() << "a dq_sign that is not an array loaded";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("dq_sign"), std::string::npos) << e.what();
+  }
 }
 
 // A schema-1 file (written before `held` existed) still loads, with nothing held; a schema-3

@@ -208,6 +208,58 @@ TEST(IkCorrectorNode, WithEffectsCommandsTheExtendedArm) {
   EXPECT_EQ(extended.health().rejected(), 0);
 }
 
+// An identifier run with --effects sends the effect values it identified: they replace the
+// options' (the file's) when they are this model's effects; an estimate without effects keeps
+// them; effects of another model refuse the message, naming the field, and change nothing.
+TEST(IkCorrectorNode, EffectValuesIdentifiedLiveReplaceTheFilesValues) {
+  const kinematics::KinematicModel model =
+      io::LoadRobot(RCAL_SOURCE_DIR "/config/robots/grb3016.yaml").model;
+  const Eigen::VectorXd x_true = sim::Table3Errors(model);
+  IkCorrectorNode::Options with;
+  with.effects = {{kinematics::EffectCause::kJointCompliance, 1}};
+  with.effect_values = Eigen::VectorXd::Constant(1, 1e-6);  // the file's [rad/(N·m)]
+  const kinematics::ExtendedModel ext(model, with.effects, with.gravity);
+  std::vector<int> all(model.num_params());
+  for (int i = 0; i < model.num_params(); ++i) all[i] = i;
+  const auto params = [&](int64_t utime, int poses) {
+    return ToKinematicParams(model, x_true, Eigen::VectorXd::Constant(model.num_params(), 1e-6),
+                             all, model.name(), utime, poses);
+  };
+  LcmTransport t("memq://");
+  IkCorrectorNode node(t, model, with);
+  const auto drain = [&] {
+    while (t.HandleTimeout(0) > 0) {
+    }
+  };
+  // Without effects in the message: the file's values stay.
+  t.Publish(channels::kKinematicParams, params(1, 10));
+  drain();
+  EXPECT_EQ(node.e(), with.effect_values);
+  // With this model's effects: the live values.
+  kinematic_params_t live = params(2, 11);
+  live.num_effect_params = 1;
+  live.effect_names = {ext.EffectParameters()[0].name};
+  live.effect_units = {ext.EffectParameters()[0].unit};
+  live.effect_values = {2.5e-6};
+  live.effect_sigmas = {1e-7};
+  t.Publish(channels::kKinematicParams, live);
+  drain();
+  EXPECT_EQ(node.e(), Eigen::VectorXd::Constant(1, 2.5e-6));
+  EXPECT_EQ(node.health().rejected(), 0);
+  // Another model's effect: refused, naming the field; the values in use stay.
+  kinematic_params_t other = live;
+  other.utime = 3;
+  other.poses_used = 12;
+  other.effect_names = {"joint_compliance.j5.c"};
+  other.effect_values = {9e-6};
+  t.Publish(channels::kKinematicParams, other);
+  drain();
+  EXPECT_EQ(node.e(), Eigen::VectorXd::Constant(1, 2.5e-6));
+  EXPECT_EQ(node.health().rejected(), 1);
+  EXPECT_NE(node.health().last_error().find("kinematic_params.effect_names[0]"), std::string::npos)
+      << node.health().last_error();
+}
+
 // Issue 11: a duplicate or older KINEMATIC_PARAMS replaced the estimate in use (a stale 1-pose
 // estimate replaced the 30-pose one, IK off by 0.036 rad, rejected = 0). The newest by
 // (poses_used, utime) is kept, refusals counted; an identifier that started over is followed

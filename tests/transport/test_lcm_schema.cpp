@@ -13,13 +13,13 @@
 #include <vector>
 
 #include "rcal/calibration_status_t.hpp"
+#include "rcal/clock_offset_t.hpp"
 #include "rcal/health_t.hpp"
 #include "rcal/ik_command_t.hpp"
 #include "rcal/ik_request_t.hpp"
 #include "rcal/imu_sample_t.hpp"
 #include "rcal/joint_state_t.hpp"
 #include "rcal/kinematic_params_t.hpp"
-#include "rcal/clock_offset_t.hpp"
 #include "rcal/next_poses_t.hpp"
 #include "rcal/orientation_estimate_t.hpp"
 #include "rcal/pose_measurement_t.hpp"
@@ -57,6 +57,10 @@ pose_measurement_t Pose6() {
   m.dimension = 6;
   m.num_covariance = 36;
   m.covariance.assign(36, 1e-6);
+  m.temperature_c = 25.0;
+  m.payload_kg = 0.0;
+  m.time_s = 1e-3;
+  m.dq_sign = {1, -1, 0, 1, 1, -1};
   return m;
 }
 constexpr size_t kNumJointsAt = 8 + 8 + 4 + 4;  // fingerprint, utime, pose_index, marker_id
@@ -112,7 +116,8 @@ TEST(LcmSchema, PoseMeasurementMembersInOrder) {
   for (const auto& m : t->members) names.push_back(m.name);
   EXPECT_EQ(names, (std::vector<std::string>{"utime", "pose_index", "marker_id", "num_joints", "q",
                                              "p", "has_orientation", "q_EI", "dimension",
-                                             "num_covariance", "covariance"}));
+                                             "num_covariance", "covariance", "temperature_c",
+                                             "payload_kg", "time_s", "dq_sign"}));
   ASSERT_EQ(t->members[4].dimensions.size(), 1u);
   EXPECT_TRUE(t->members[4].dimensions[0].variable);
   EXPECT_EQ(t->members[4].dimensions[0].size, "num_joints");
@@ -133,6 +138,11 @@ TEST(LcmSchema, ValidMessagesOfEveryTypePass) {
   k.values = {1e-3, 2e-3};
   k.sigmas = {1e-4, 1e-4};
   k.identified = {1, 0};
+  k.num_effect_params = 1;
+  k.effect_names = {"joint_compliance.j2.c"};
+  k.effect_units = {"rad/(N*m)"};
+  k.effect_values = {2e-6};
+  k.effect_sigmas = {1e-7};
   EXPECT_EQ(CheckAs<kinematic_params_t>(Encode(k)), "");
   supervisor_state_t sv{};
   sv.num_processes = 1;
@@ -166,24 +176,26 @@ TEST(LcmSchema, ValidMessagesOfEveryTypePass) {
 
 TEST(LcmSchema, TheFuzzedLengthsAreRefusedNamingTheField) {
   std::vector<uint8_t> b = Encode(Pose6());
-  ASSERT_EQ(b.size(), 426u);
+  // 426 bytes up to the covariance, then the context: 3 doubles and a byte per joint.
+  constexpr size_t kContextBytes = 3 * 8 + 6;
+  ASSERT_EQ(b.size(), 426u + kContextBytes);
   PutBe32(b, kNumJointsAt, (int64_t{1} << 28) + 6);
   EXPECT_EQ(CheckAs<pose_measurement_t>(b),
-            "pose_measurement_t.num_joints = 268435462 exceeds the 398 bytes left "
+            "pose_measurement_t.num_joints = 268435462 exceeds the 428 bytes left "
             "(q[num_joints])");
   PutBe32(b, kNumJointsAt, -1);
   EXPECT_EQ(CheckAs<pose_measurement_t>(b),
             "pose_measurement_t.num_joints = -1 is negative (q[num_joints])");
   // Below the bytes left as a count, but not as 8-byte doubles.
-  PutBe32(b, kNumJointsAt, 50);
-  EXPECT_NE(CheckAs<pose_measurement_t>(b).find("pose_measurement_t.num_joints = 50: q needs 400 "
-                                                "bytes, 398 left"),
+  PutBe32(b, kNumJointsAt, 60);
+  EXPECT_NE(CheckAs<pose_measurement_t>(b).find("pose_measurement_t.num_joints = 60: q needs 480 "
+                                                "bytes, 428 left"),
             std::string::npos)
       << CheckAs<pose_measurement_t>(b);
   PutBe32(b, kNumJointsAt, 6);
   PutBe32(b, 426 - 4 - 8 * 36, 600000000);  // num_covariance = 6e8
   EXPECT_EQ(CheckAs<pose_measurement_t>(b),
-            "pose_measurement_t.num_covariance = 600000000 exceeds the 288 bytes left "
+            "pose_measurement_t.num_covariance = 600000000 exceeds the 318 bytes left "
             "(covariance[num_covariance])");
   // Present in full but beyond any rcal message: the per-type limit.
   pose_measurement_t big = Pose6();
@@ -308,7 +320,7 @@ TEST(LcmSchema, SubscribeRefusesBeforeDecodingWithTheReason) {
   EXPECT_EQ(delivered, 0);
   ASSERT_EQ(errors.size(), 2u);
   EXPECT_EQ(errors[0],
-            "channel POSE_MEASUREMENT: pose_measurement_t.num_joints = 268435462 exceeds the 398 "
+            "channel POSE_MEASUREMENT: pose_measurement_t.num_joints = 268435462 exceeds the 428 "
             "bytes left (q[num_joints])");
   EXPECT_EQ(errors[1],
             "channel POSE_MEASUREMENT: pose_measurement_t.num_joints = -1 is negative "

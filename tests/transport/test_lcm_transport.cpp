@@ -31,6 +31,10 @@ pose_measurement_t Sample() {
   m.dimension = 3;
   m.num_covariance = 9;
   m.covariance = {1e-8, 0, 0, 0, 1e-8, 0, 0, 0, 1e-8};
+  m.temperature_c = 21.5;
+  m.payload_kg = 0;
+  m.time_s = 12.0;
+  m.dq_sign = {1, -1};
   return m;
 }
 

@@ -13,6 +13,9 @@ struct CalibrateLogOptions {
   std::string channel;                             ///< empty: the cell's channels.pose_measurement
   std::string json_path;
   bool allow_gaps = false;  ///< go on when the log lost data (CheckLogGaps); else exit non-zero
+  /// analysis.json: the effects identified with the geometry, as ekf_identifier --effects
+  /// (empty: none).
+  std::string effects_path;
 };
 
 /// The options calibrate-log has besides LOG, --cell and --json (which `calibrate` shares):

@@ -253,9 +253,8 @@ std::vector<identification::MarkerReference> MarkerReferences(
 int Run(const Options& o) {
   if (!o.log.log.empty()) {
     if (!o.data.empty()) throw std::runtime_error("rcal calibrate: give DATA or --log, not both");
-    if (!o.effects_path.empty())
-      throw std::runtime_error("rcal calibrate: --effects needs DATA, not --log");
     CalibrateLogOptions lo = o.log;
+    lo.effects_path = o.effects_path;  // identified with the geometry, as ekf_identifier --effects
     if (!o.robot.empty())
       throw std::runtime_error(
           "rcal calibrate --log: the robot comes from --cell (a cell file "
@@ -627,7 +626,8 @@ const RegisterCommand kCalibrate(
       sub.add_flag("--fixed-noise", o->fixed_noise, "use the given noise, do not estimate it");
       sub.add_option("--effects", o->effects_path,
                      "analysis.json of `rcal analyze`: fit its effects with the geometry, write "
-                     "the calibrated effects (values, sigma) to the JSON");
+                     "the calibrated effects (values, sigma) to the JSON (with --log: identified "
+                     "as ekf_identifier --effects does, each pose under its logged context)");
       sub.add_option("--marker-offset", o->marker_offsets,
                      "ID=x,y,z: marker ID's known offset p_FM [m, tip-link frame], not fitted "
                      "(repeatable)");

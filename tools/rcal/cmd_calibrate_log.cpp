@@ -14,6 +14,9 @@
 // (identification::CalibrationImplausible on the noise left in the accepted poses' residuals and
 // the poses the EKF rejected): no pose accepted or a fit no arm gives is REJECTED, exit 3, the
 // reasons on stderr and in the JSON (rejected, rejected_because).
+// --effects analysis.json: the effects identified with the geometry, each pose under its logged
+// context (cell::MakeOnlineIdentification, as ekf_identifier --effects); the JSON's `effects` are
+// the calibrated ones (values, σ), in analysis.json's form.
 #include <cmath>
 #include <cstdio>
 #include <map>
@@ -24,10 +27,12 @@
 #include "command.hpp"
 #include "pose_log.hpp"
 #include "rcal/cell/online_identification.hpp"
+#include "rcal/identification/metrics.hpp"
 #include "rcal/identification/sanity.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/calibration_export.hpp"
 #include "rcal/io/cell_yaml.hpp"
+#include "rcal/io/effects_json.hpp"
 #include "rcal/io/lcm_log.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/pose_measurement_t.hpp"
@@ -50,7 +55,9 @@ void AddCalibrateLogOptions(CLI::App& sub, CalibrateLogOptions& o, const std::st
 int RunCalibrateLog(const CalibrateLogOptions& o_in) {
   CalibrateLogOptions o = o_in;
   // The identification exactly as ekf_identifier runs it (same base set, set-up guess, checks).
-  cell::OnlineIdentification id(io::LoadCell(ResolvePath(o.cell)));
+  cell::OnlineIdentification id = cell::MakeOnlineIdentification(
+      io::LoadCell(ResolvePath(o.cell)),
+      o.effects_path.empty() ? std::string() : ResolvePath(o.effects_path));
   if (o.channel.empty()) o.channel = id.cell().spec.channels.pose_measurement;
   const auto& model = id.model();
   const auto& base = id.base();
@@ -64,6 +71,7 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
   int64_t events = 0, skipped = 0;
   PoseLog valid;  // the poses that decode and fit the model, for the plausibility check
   std::map<int64_t, kinematics::PoseMeasurement> by_utime;  // ... and the residuals of the fit
+  std::map<int64_t, kinematics::EffectContext> context_by_utime;  // (under their contexts)
   std::vector<int64_t> accepted_utimes;
   std::string first_skip;  // why the first pose skipped was
   while (const auto e = log->Next()) {
@@ -80,20 +88,23 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
     }
     std::string error;
     auto z = transport::FromMessage(msg, &error, &id.model());
-    if (!z) {
+    std::optional<kinematics::EffectContext> context;
+    if (z) context = transport::ContextFromMessage(msg, &error);
+    if (!z || !context) {
       if (first_skip.empty()) first_skip = error;
       ++skipped;
       continue;
     }
     const kinematics::PoseMeasurement m = *z;
-    const auto outcome = id.Add({std::move(*z), msg.utime, msg.pose_index});
+    const auto outcome = id.Add({std::move(*z), msg.utime, msg.pose_index, *context});
     if (!outcome.rejected.empty()) {
       if (first_skip.empty()) first_skip = outcome.rejected;
       ++skipped;
       continue;
     }
-    valid.poses.push_back({m, msg.utime, msg.pose_index});
+    valid.poses.push_back({m, msg.utime, msg.pose_index, *context});
     by_utime.emplace(msg.utime, m);
+    context_by_utime.emplace(msg.utime, *context);
     for (const auto& u : outcome.updates)
       if (u.result.accepted) accepted_utimes.push_back(u.utime);
   }
@@ -128,6 +139,11 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
     std::printf("  %-16s %+.6e ± %.2e  [%s]\n", model.parameters()[i].name.c_str(), x(i), sigma(i),
                 ParameterFrame(cell_robot, i).c_str());
   }
+  const auto effect_params = ekf.extended_model().EffectParameters();
+  for (size_t k = 0; k < effect_params.size(); ++k)
+    std::printf("  %-16s %+.6e ± %.2e  [%s]\n", effect_params[k].name.c_str(),
+                ekf.e()(static_cast<Eigen::Index>(k)), ekf.sigma_e()(static_cast<Eigen::Index>(k)),
+                effect_params[k].unit.c_str());
   for (int i = 0; i < x.size(); ++i) {
     const auto& P = model.parameters()[i];
     const std::string unit = P.is_angle ? "rad" : "m";
@@ -144,12 +160,18 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
   figures.poses_rejected = ekf.rejected();
   double p2 = 0, o2 = 0;
   int np = 0, no = 0;
+  // With effects: the extended model's residual, each pose under its context.
+  const bool extended = ekf.num_effect_params() > 0;
   for (const int64_t t : accepted_utimes) {
-    const Eigen::VectorXd r = kinematics::Residual(model, by_utime.at(t), x);
-    p2 += r.head<3>().squaredNorm();
+    const auto& m = by_utime.at(t);
+    const auto stats = extended
+                           ? identification::ErrorsAgainstMeasurements(
+                                 ekf.extended_model(), x, ekf.e(), {m}, {context_by_utime.at(t)})
+                           : identification::ErrorsAgainstMeasurements(model, x, {m});
+    p2 += stats.rms_position_m * stats.rms_position_m;
     ++np;
-    if (r.size() == 6) {
-      o2 += r.tail<3>().squaredNorm();
+    if (m.has_orientation) {
+      o2 += stats.rms_orientation_rad * stats.rms_orientation_rad;
       ++no;
     }
   }
@@ -181,6 +203,12 @@ int RunCalibrateLog(const CalibrateLogOptions& o_in) {
         {"residual_orientation_sigma_rad", figures.orientation_sigma_rad},
         {"rejected", !rejected.empty()},
         {"rejected_because", rejected}};
+    // The effects identified with the geometry (--effects), as analysis.json entries with the
+    // calibrated values and σ: what ik_corrector --effects and rcal calibrate --effects read.
+    if (extended) {
+      j["effects"] = io::EffectsJson(ekf.extended_model(), ekf.e(), ekf.sigma_e());
+      j["link_density_kg_per_m"] = ekf.extended_model().gravity().link_density_kg_per_m;
+    }
     // What `rcal export` reads (io/calibration_export.hpp): the cell's robot with its set-up
     // frames and every parameter with its σ (null: not identified).
     if (rejected.empty() && ekf.accepted() > 0) {
@@ -229,6 +257,9 @@ const RegisterCommand kCalibrateLog(
       sub.add_option("--cell", o->cell, "cell file (schema rcal.cell/1), as ekf_identifier's")
           ->capture_default_str();
       AddCalibrateLogOptions(sub, *o, "");
+      sub.add_option("--effects", o->effects_path,
+                     "analysis.json of `rcal analyze`: identify its effects with the geometry, "
+                     "each pose under its logged context, as ekf_identifier --effects");
       sub.add_option("--json", o->json_path, "write the parameters here (SI units)");
       return [o]() { return RunCalibrateLog(*o); };
     });

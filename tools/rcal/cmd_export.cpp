@@ -149,7 +149,8 @@ io::ExportInput FromLog(const Options& o) {
     if (e->channel != channel) continue;
     ++events;
     kinematic_params_t msg;
-    if (const std::string why = transport::DecodeLcm(e->data.data(), e->data.size(), &msg);
+    if (const std::string why =
+            transport::DecodeKinematicParams(e->data.data(), e->data.size(), &msg);
         !why.empty()) {
       reader.Skip(*e, why);
       if (first_bad.empty()) first_bad = why;

@@ -80,7 +80,8 @@ std::vector<TrackRow> TrackCell(cell::OnlineIdentification& id,
         row.prediction_error_m = identification::PositionError(id.model(), ms[k], id.ekf().x());
     } else {
       // Sensor time: the row order (rows are sorted by time already), 1 ms apart.
-      const auto out = id.Add({ms[k], static_cast<int64_t>(k + 1) * 1000, static_cast<int64_t>(k)});
+      const auto out =
+          id.Add({ms[k], static_cast<int64_t>(k + 1) * 1000, static_cast<int64_t>(k), {}});
       row.rejected = out.rejected;
       for (const auto& u : out.updates) {
         if (u.pose_index != static_cast<int64_t>(k)) continue;

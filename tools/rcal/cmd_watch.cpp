@@ -173,12 +173,20 @@ int Run(const Options& o) {
             status += b;
           }
         }
+        // The effect parameters identified live (ekf_identifier --effects), SI with their units.
+        std::string effects;
+        for (int k = 0; k < p.num_effect_params; ++k) {
+          char b[200];
+          std::snprintf(b, sizeof b, "  %s %.3g ± %.2g %s", p.effect_names[k].c_str(),
+                        p.effect_values[k], p.effect_sigmas[k], p.effect_units[k].c_str());
+          effects += b;
+        }
         std::printf(
             "pose %3d  t %8.2f s  change max %7.2f σ (|Δ| %7.3f mm, %7.3f mrad)  RMS residual "
-            "%6.3f mm %s  rejected %d%s  %s\n",
+            "%6.3f mm %s  rejected %d%s  %s%s\n",
             p.poses_used, s.utime * 1e-6, max_step, std::sqrt(d_len) * 1e3, std::sqrt(d_ang) * 1e3,
             s.rms_position_residual * 1e3, rms_orientation, s.poses_rejected, test.c_str(),
-            status.c_str());
+            status.c_str(), effects.c_str());
         std::fflush(stdout);
         last_poses = p.poses_used;
         previous = p;

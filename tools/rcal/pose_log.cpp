@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 #include <array>
+#include <cmath>
 #include <fstream>
 #include <limits>
 
@@ -58,6 +59,11 @@ PoseLog ReadPoseLog(const std::filesystem::path& path, const kinematics::Kinemat
     // ekf_identifier refuses them: counted here, not a loss of the log's.
     auto z = transport::FromMessage(msg, &error, &model);
     if (z) error = kinematics::Validate(model, *z);
+    std::optional<kinematics::EffectContext> context;
+    if (z && error.empty()) {
+      context = transport::ContextFromMessage(msg, &error);
+      if (!context) z.reset();
+    }
     if (!error.empty()) {
       skip(error);
       continue;
@@ -67,7 +73,7 @@ PoseLog ReadPoseLog(const std::filesystem::path& path, const kinematics::Kinemat
       continue;
     }
     last_utime = msg.utime;
-    out.poses.push_back({std::move(*z), msg.utime, msg.pose_index});
+    out.poses.push_back({std::move(*z), msg.utime, msg.pose_index, std::move(*context)});
   }
   out.log = reader.stats();
   return out;
@@ -86,7 +92,14 @@ io::PoseDataset ToPoseDataset(const PoseLog& log, int num_joints) {
       const Eigen::Quaterniond q(p.measurement.R_EI);
       s.q_EI_wxyz = Eigen::Vector4d(q.w(), q.x(), q.y(), q.z());
     }
-    s.time = static_cast<double>(p.utime) * 1e-6;
+    // The pose's context as logged: the cell's time when it carries one (what ekf_identifier's
+    // thermal-by-time effect reads), else the sensor time; temperature, payload, approach
+    // direction (absent when not known).
+    s.time =
+        std::isfinite(p.context.time_s) ? p.context.time_s : static_cast<double>(p.utime) * 1e-6;
+    s.temperature = p.context.temperature_c;
+    s.payload = p.context.payload_kg;
+    s.dq_sign = p.context.dq_sign;
     s.row = static_cast<int>(d.samples.size()) + 1;  // the k-th pose read from the log
     d.has_orientation = d.has_orientation && s.has_orientation;
     d.samples.push_back(std::move(s));

@@ -14,6 +14,7 @@
 
 #include "rcal/io/lcm_log.hpp"
 #include "rcal/io/pose_dataset.hpp"
+#include "rcal/kinematics/joint_effects.hpp"
 #include "rcal/kinematics/measurement.hpp"
 #include "rcal/kinematics/model.hpp"
 
@@ -26,6 +27,7 @@ struct LoggedPose {
   kinematics::PoseMeasurement measurement;  ///< with the logged covariance
   int64_t utime = 0;                        ///< sensor time [µs]
   int32_t pose_index = 0;
+  kinematics::EffectContext context;  ///< the conditions logged with it (defaults before they were)
 };
 
 struct PoseLog {

@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "rcal/identification/setup_guess.hpp"
+#include "rcal/io/effects_json.hpp"
 #include "rcal/kinematics/identifiability.hpp"
 
 namespace rcal::cell {
@@ -35,10 +36,14 @@ std::vector<int> CellBaseSet(const io::BuiltCell& cell) {
   return kinematics::AnalyzeIdentifiability(model, ms, x).identifiable;
 }
 
-OnlineIdentification::OnlineIdentification(io::BuiltCell cell)
+OnlineIdentification::OnlineIdentification(io::BuiltCell cell,
+                                           std::vector<kinematics::Effect> effects,
+                                           kinematics::GravityModel gravity)
     : cell_(std::move(cell)),
       guessed_(cell_.Guessed()),
       base_(CellBaseSet(cell_)),
+      effects_(std::move(effects)),
+      gravity_(gravity),
       start_(cell_.model.Nominal()),
       ekf_(MakeEkf(start_)),
       started_(guessed_.empty()) {
@@ -58,13 +63,25 @@ std::unique_ptr<identification::EkfIdentifier> OnlineIdentification::MakeEkf(
     const Eigen::VectorXd& x0) const {
   // Parameters outside the base set stay at x0: the guess for a set-up frame, the drawing for the
   // arm.
-  auto ekf = std::make_unique<identification::EkfIdentifier>(cell_.model, base_, cell_.ekf, x0);
+  std::unique_ptr<identification::EkfIdentifier> ekf;
+  Eigen::VectorXd sigma_e;
+  if (effects_.empty()) {
+    ekf = std::make_unique<identification::EkfIdentifier>(cell_.model, base_, cell_.ekf, x0);
+  } else {
+    const kinematics::ExtendedModel ext(cell_.model, effects_, gravity_);
+    ekf = std::make_unique<identification::EkfIdentifier>(ext, base_, cell_.ekf, x0);
+    sigma_e = cell_.ekf.prior_sigma_effects.size() == ext.num_effect_params()
+                  ? cell_.ekf.prior_sigma_effects
+                  : identification::DefaultEffectPriorSigma(ext);
+  }
   const Eigen::VectorXd sigma = cell_.PriorSigma();
-  Eigen::VectorXd start(base_.size()), var(base_.size());
-  for (size_t i = 0; i < base_.size(); ++i) {
+  const auto n = static_cast<Eigen::Index>(base_.size());
+  Eigen::VectorXd start = Eigen::VectorXd::Zero(n + sigma_e.size()), var(n + sigma_e.size());
+  for (Eigen::Index i = 0; i < n; ++i) {
     start(i) = x0(base_[i]);
     var(i) = sigma(base_[i]) * sigma(base_[i]);
   }
+  var.tail(sigma_e.size()) = sigma_e.array().square();  // the effects start at 0
   ekf->SetState(start, var.asDiagonal());
   return ekf;
 }
@@ -116,7 +133,7 @@ OnlineIdentification::Update OnlineIdentification::Apply(const TimedPose& pose) 
   u.pose_index = pose.pose_index;
   u.dimension = pose.z.dimension();
   const Eigen::VectorXd x_before = ekf_->x();
-  u.result = ekf_->Update(pose.z);
+  u.result = ekf_->Update(pose.z, pose.context);
   if (!u.result.accepted) return u;
   last_utime_ = pose.utime;
   last_pose_index_ = pose.pose_index;
@@ -140,6 +157,17 @@ void OnlineIdentification::Restore(const identification::EkfCheckpoint& checkpoi
   last_utime_ = last_utime;
   last_pose_index_ = last_pose_index;
   if (ekf_->accepted() > 0 || guessed_.empty()) started_ = true;
+}
+
+OnlineIdentification MakeOnlineIdentification(io::BuiltCell cell, const std::string& effects_path) {
+  if (effects_path.empty()) return OnlineIdentification(std::move(cell));
+  const io::AnalysisEffects ae = io::ReadAnalysisEffects(effects_path, cell.model);
+  kinematics::GravityModel gravity;
+  if (std::isfinite(ae.link_density_kg_per_m))
+    gravity.link_density_kg_per_m = ae.link_density_kg_per_m;
+  if (ae.effects.empty())
+    spdlog::warn("{}: lists no effect; identifying the geometry alone", effects_path);
+  return OnlineIdentification(std::move(cell), ae.effects, gravity);
 }
 
 }  // namespace rcal::cell

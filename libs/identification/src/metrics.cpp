@@ -44,6 +44,26 @@ PoseErrorStats ErrorsAgainstMeasurements(const kinematics::KinematicModel& model
   return Summarize(std::move(p), std::move(o));
 }
 
+PoseErrorStats ErrorsAgainstMeasurements(const kinematics::ExtendedModel& model,
+                                         const Eigen::VectorXd& x, const Eigen::VectorXd& e,
+                                         const std::vector<kinematics::PoseMeasurement>& ms,
+                                         const std::vector<kinematics::EffectContext>& contexts) {
+  if (!contexts.empty() && contexts.size() != ms.size())
+    throw std::invalid_argument("ErrorsAgainstMeasurements: " + std::to_string(ms.size()) +
+                                " measurements but " + std::to_string(contexts.size()) +
+                                " contexts");
+  const kinematics::EffectContext none;
+  std::vector<double> p, o;
+  for (size_t i = 0; i < ms.size(); ++i) {
+    const auto& m = ms[i];
+    const kinematics::ToolPose pose =
+        model.ForMarker(m.marker).Forward(m.q, contexts.empty() ? none : contexts[i], x, e);
+    p.push_back((m.p_WM_W - pose.p_WM_W).norm());
+    if (m.has_orientation) o.push_back(geometry::AngleBetween(m.R_EI, pose.R_EI));
+  }
+  return Summarize(std::move(p), std::move(o));
+}
+
 PoseErrorStats ErrorsAgainstTruth(const kinematics::KinematicModel& model, const Eigen::VectorXd& x,
                                   const Eigen::VectorXd& x_true,
                                   const std::vector<Eigen::VectorXd>& qs) {

@@ -158,6 +158,27 @@ std::vector<kinematics::EffectContext> SampleSession(int num_joints, int count,
   return out;
 }
 
+kinematics::EffectContext StopContext(double t_s, const Eigen::VectorXd& q,
+                                      const Eigen::VectorXd& q_before, const SessionSettings& s,
+                                      Rng& rng) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  std::uniform_int_distribution<size_t> pick(0,
+                                             s.payloads_kg.empty() ? 0 : s.payloads_kg.size() - 1);
+  kinematics::EffectContext c;
+  c.time_s = t_s;
+  const double noise = n(rng);
+  const size_t payload = pick(rng);
+  c.temperature_c = s.temperature_start_c +
+                    s.temperature_rise_c * (1.0 - std::exp(-t_s / s.warmup_time_constant_s)) +
+                    s.temperature_noise_c * noise;
+  c.payload_kg = s.payloads_kg.empty() ? 0.0 : s.payloads_kg[payload];
+  c.dq_sign = Eigen::VectorXi::Zero(q.size());
+  if (q_before.size() == q.size())
+    for (int j = 0; j < q.size(); ++j)
+      c.dq_sign(j) = q(j) > q_before(j) ? 1 : (q(j) < q_before(j) ? -1 : 0);
+  return c;
+}
+
 kinematics::PoseMeasurement MeasurePoseWithEffects(const EffectTruth& truth,
                                                    const Eigen::VectorXd& x_true,
                                                    const Eigen::VectorXd& q,

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstring>
+#include <limits>
 #include <vector>
 
 #include "rcal/identification/tracking.hpp"
@@ -38,7 +40,8 @@ std::string ModelId(const kinematics::KinematicModel& model) {
 }
 
 pose_measurement_t ToMessage(const kinematics::PoseMeasurement& m, int64_t utime,
-                             int32_t pose_index, int32_t marker_id) {
+                             int32_t pose_index, int32_t marker_id,
+                             const kinematics::EffectContext& context) {
   pose_measurement_t msg;
   msg.utime = utime;
   msg.pose_index = pose_index;
@@ -58,26 +61,99 @@ pose_measurement_t ToMessage(const kinematics::PoseMeasurement& m, int64_t utime
   for (int r = 0; r < m.covariance.rows(); ++r)
     for (int c = 0; c < m.covariance.cols(); ++c)
       msg.covariance[r * m.covariance.cols() + c] = m.covariance(r, c);
+  msg.temperature_c = context.temperature_c;
+  msg.payload_kg = context.payload_kg;
+  msg.time_s = context.time_s;
+  msg.dq_sign.assign(m.q.size(), 0);
+  if (context.dq_sign.size() == m.q.size())
+    for (int j = 0; j < m.q.size(); ++j)
+      msg.dq_sign[j] = static_cast<int8_t>(std::clamp(context.dq_sign(j), -1, 1));
   return msg;
 }
 
+namespace {
+
+uint64_t ReadU64(const uint8_t* b) {
+  uint64_t v = 0;
+  for (int i = 0; i < 8; ++i) v = (v << 8) | b[i];
+  return v;
+}
+void WriteU64(uint64_t v, uint8_t* b) {
+  for (int i = 0; i < 8; ++i) b[i] = static_cast<uint8_t>(v >> (56 - 8 * i));
+}
+void AppendDouble(double d, std::vector<uint8_t>& out) {
+  uint64_t v;
+  std::memcpy(&v, &d, sizeof v);
+  out.resize(out.size() + 8);
+  WriteU64(v, out.data() + out.size() - 8);
+}
+
+}  // namespace
+
 std::string DecodePoseMeasurement(const void* data, size_t size, pose_measurement_t* msg) {
   const std::string why = DecodeLcm(data, size, msg);
-  // The layout before marker_id: fingerprint, utime, pose_index, then today's fields from
-  // num_joints on. Upgraded by inserting marker_id = 0 after pose_index.
+  // Earlier layouts, upgraded to today's by the fields they lacked:
+  //  - before marker_id: fingerprint, utime, pose_index, then the fields from num_joints on,
+  //    up to the covariance; marker_id = 0 inserted after pose_index;
+  //  - before the context: today's fields up to the covariance; the context appended (temperature
+  //    and time NaN, payload 0, dq_sign num_joints zeros).
   constexpr uint64_t kBeforeMarkerId = 0x257fdb5ac9ac24a6ULL;
+  constexpr uint64_t kBeforeContext = 0xa1f22502bbcd6577ULL;
   constexpr size_t kMarkerIdAt = 8 + 8 + 4;
+  constexpr size_t kNumJointsAt = kMarkerIdAt + 4;
   if (why.empty() || size < kMarkerIdAt) return why;
   const auto* b = static_cast<const uint8_t*>(data);
-  uint64_t hash = 0;
-  for (int i = 0; i < 8; ++i) hash = (hash << 8) | b[i];
-  if (hash != kBeforeMarkerId) return why;
-  std::vector<uint8_t> upgraded(size + 4, 0);
-  const auto now = static_cast<uint64_t>(pose_measurement_t::getHash());
-  for (int i = 0; i < 8; ++i) upgraded[i] = static_cast<uint8_t>(now >> (56 - 8 * i));
-  std::copy(b + 8, b + kMarkerIdAt, upgraded.begin() + 8);
-  std::copy(b + kMarkerIdAt, b + size, upgraded.begin() + kMarkerIdAt + 4);
-  return DecodeLcm(upgraded.data(), upgraded.size(), msg);
+  const uint64_t hash = ReadU64(b);
+  if (hash != kBeforeMarkerId && hash != kBeforeContext) return why;
+  std::vector<uint8_t> up(b, b + size);
+  if (hash == kBeforeMarkerId) up.insert(up.begin() + kMarkerIdAt, 4, 0);
+  if (up.size() < kNumJointsAt + 4) return why;
+  int32_t num_joints = 0;
+  for (size_t i = 0; i < 4; ++i)
+    num_joints =
+        static_cast<int32_t>((static_cast<uint32_t>(num_joints) << 8) | up[kNumJointsAt + i]);
+  WriteU64(static_cast<uint64_t>(pose_measurement_t::getHash()), up.data());
+  // Each joint took 8 bytes of q: a count the bytes cannot hold is refused by the decoder, naming
+  // num_joints, before any context is appended for it.
+  if (num_joints < 0 || static_cast<size_t>(num_joints) > up.size() / 8)
+    return DecodeLcm(up.data(), up.size(), msg);
+  AppendDouble(std::numeric_limits<double>::quiet_NaN(), up);  // temperature_c
+  AppendDouble(0.0, up);                                       // payload_kg
+  AppendDouble(std::numeric_limits<double>::quiet_NaN(), up);  // time_s
+  up.insert(up.end(), static_cast<size_t>(num_joints), 0);     // dq_sign
+  return DecodeLcm(up.data(), up.size(), msg);
+}
+
+std::optional<kinematics::EffectContext> ContextFromMessage(const pose_measurement_t& msg,
+                                                            std::string* error) {
+  using R = kinematics::EffectContext;
+  R c;
+  if (!std::isnan(msg.temperature_c) && !(msg.temperature_c >= -60.0 && msg.temperature_c <= 200.0))
+    return Fail<R>(error, "pose_measurement.temperature_c: " + std::to_string(msg.temperature_c) +
+                              " °C is outside [-60, 200] (NaN: not measured)");
+  if (!(msg.payload_kg >= 0.0 && msg.payload_kg <= 1000.0))
+    return Fail<R>(error, "pose_measurement.payload_kg: " + std::to_string(msg.payload_kg) +
+                              " kg is outside [0, 1000]");
+  if (std::isinf(msg.time_s)) return Fail<R>(error, "pose_measurement.time_s: infinite");
+  if (msg.num_joints < 0 || msg.dq_sign.size() != static_cast<size_t>(msg.num_joints))
+    return Fail<R>(error, "pose_measurement.dq_sign: " + std::to_string(msg.dq_sign.size()) +
+                              " values, expected num_joints (" + std::to_string(msg.num_joints) +
+                              ")");
+  bool any = false;
+  for (size_t j = 0; j < msg.dq_sign.size(); ++j) {
+    if (msg.dq_sign[j] < -1 || msg.dq_sign[j] > 1)
+      return Fail<R>(error, "pose_measurement.dq_sign[" + std::to_string(j) +
+                                "]: " + std::to_string(msg.dq_sign[j]) + " is not -1, 0 or +1");
+    any = any || msg.dq_sign[j] != 0;
+  }
+  c.temperature_c = msg.temperature_c;
+  c.payload_kg = msg.payload_kg;
+  c.time_s = msg.time_s;
+  if (any) {
+    c.dq_sign.resize(msg.num_joints);
+    for (int j = 0; j < msg.num_joints; ++j) c.dq_sign(j) = msg.dq_sign[j];
+  }
+  return c;
 }
 
 int32_t MarkerId(const kinematics::KinematicModel& model, int slot) {
@@ -175,13 +251,64 @@ kinematic_params_t ToKinematicParams(const kinematics::KinematicModel& model,
     msg.sigmas.push_back(i < sigma.size() ? sigma(i) : 0.0);
   }
   msg.poses_used = poses_used;
+  msg.num_effect_params = 0;  // a geometric estimate
   return msg;
 }
 
 kinematic_params_t ToKinematicParams(const identification::EkfIdentifier& ekf,
                                      const std::string& robot_id, int64_t utime) {
-  return ToKinematicParams(ekf.model(), ekf.x(), ekf.sigma(), ekf.identified(), robot_id, utime,
-                           ekf.accepted());
+  kinematic_params_t msg = ToKinematicParams(ekf.model(), ekf.x(), ekf.sigma(), ekf.identified(),
+                                             robot_id, utime, ekf.accepted());
+  const auto names = ekf.extended_model().EffectParameters();
+  const Eigen::VectorXd e = ekf.e(), sigma = ekf.sigma_e();
+  msg.num_effect_params = static_cast<int32_t>(names.size());
+  for (size_t k = 0; k < names.size(); ++k) {
+    msg.effect_names.push_back(names[k].name);
+    msg.effect_units.push_back(names[k].unit);
+    msg.effect_values.push_back(e(static_cast<Eigen::Index>(k)));
+    msg.effect_sigmas.push_back(sigma(static_cast<Eigen::Index>(k)));
+  }
+  return msg;
+}
+
+std::string DecodeKinematicParams(const void* data, size_t size, kinematic_params_t* msg) {
+  const std::string why = DecodeLcm(data, size, msg);
+  // Before the effect parameters: today's fields up to poses_used; num_effect_params = 0
+  // appended.
+  constexpr uint64_t kBeforeEffects = 0xf474f493449420b3ULL;
+  if (why.empty() || size < 8 || ReadU64(static_cast<const uint8_t*>(data)) != kBeforeEffects)
+    return why;
+  const auto* b = static_cast<const uint8_t*>(data);
+  std::vector<uint8_t> up(b, b + size);
+  WriteU64(static_cast<uint64_t>(kinematic_params_t::getHash()), up.data());
+  up.insert(up.end(), 4, 0);
+  return DecodeLcm(up.data(), up.size(), msg);
+}
+
+std::optional<Eigen::VectorXd> EffectsFromMessage(const kinematic_params_t& msg,
+                                                  const kinematics::ExtendedModel& model,
+                                                  std::string* error) {
+  using R = Eigen::VectorXd;
+  const auto params = model.EffectParameters();
+  const size_t n = params.size();
+  if (msg.num_effect_params != static_cast<int32_t>(n) || msg.effect_names.size() != n ||
+      msg.effect_values.size() != n || msg.effect_sigmas.size() != n)
+    return Fail<R>(error,
+                   "kinematic_params.num_effect_params: " + std::to_string(msg.num_effect_params) +
+                       ", the model has " + std::to_string(n));
+  R e(static_cast<Eigen::Index>(n));
+  for (size_t k = 0; k < n; ++k) {
+    const std::string at = "[" + std::to_string(k) + "]";
+    if (msg.effect_names[k] != params[k].name)
+      return Fail<R>(error, "kinematic_params.effect_names" + at + ": " + msg.effect_names[k] +
+                                ", expected " + params[k].name);
+    if (!std::isfinite(msg.effect_values[k]))
+      return Fail<R>(error, "kinematic_params.effect_values" + at + ": not finite");
+    if (!(std::isfinite(msg.effect_sigmas[k]) && msg.effect_sigmas[k] >= 0))
+      return Fail<R>(error, "kinematic_params.effect_sigmas" + at + ": not a finite σ ≥ 0");
+    e(static_cast<Eigen::Index>(k)) = msg.effect_values[k];
+  }
+  return e;
 }
 
 std::optional<Eigen::VectorXd> ParamsFromMessage(const kinematic_params_t& msg,

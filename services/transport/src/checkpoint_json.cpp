@@ -1,5 +1,7 @@
 #include "rcal/transport/checkpoint_json.hpp"
 
+#include <cmath>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 
@@ -77,6 +79,33 @@ kinematics::PoseMeasurement MeasurementFromJson(const json& h, const std::string
   return m;
 }
 
+// A pose's context (kinematics::EffectContext): NaN (unknown) written as null.
+json ContextJson(const kinematics::EffectContext& c) {
+  const auto maybe = [](double v) { return std::isnan(v) ? json(nullptr) : json(v); };
+  return {{"temperature_c", maybe(c.temperature_c)},
+          {"payload_kg", maybe(c.payload_kg)},
+          {"time_s", maybe(c.time_s)},
+          {"dq_sign", std::vector<int>(c.dq_sign.data(), c.dq_sign.data() + c.dq_sign.size())}};
+}
+
+kinematics::EffectContext ContextFromJson(const json& j, const std::string& path) {
+  const auto maybe = [&](const char* key) {
+    const json& v = At(j, key, path);
+    if (v.is_null()) return std::numeric_limits<double>::quiet_NaN();
+    if (!v.is_number()) throw std::runtime_error("checkpoint: " + path + key + ": not a number");
+    return v.get<double>();
+  };
+  kinematics::EffectContext c;
+  c.temperature_c = maybe("temperature_c");
+  c.payload_kg = maybe("payload_kg");
+  c.time_s = maybe("time_s");
+  const json& dq = At(j, "dq_sign", path);
+  if (!dq.is_array()) throw std::runtime_error("checkpoint: " + path + "dq_sign: not an array");
+  c.dq_sign.resize(static_cast<Eigen::Index>(dq.size()));
+  for (size_t i = 0; i < dq.size(); ++i) c.dq_sign(static_cast<Eigen::Index>(i)) = dq[i].get<int>();
+  return c;
+}
+
 }  // namespace
 
 std::string CheckpointText(const CheckpointFile& f) {
@@ -85,8 +114,10 @@ std::string CheckpointText(const CheckpointFile& f) {
   for (const auto& m : c.history) history.push_back(MeasurementJson(m));
   json held = json::array();
   for (const auto& h : f.held)
-    held.push_back(
-        {{"utime", h.utime}, {"pose_index", h.pose_index}, {"measurement", MeasurementJson(h.z)}});
+    held.push_back({{"utime", h.utime},
+                    {"pose_index", h.pose_index},
+                    {"measurement", MeasurementJson(h.z)},
+                    {"context", ContextJson(h.context)}});
   json j = {{"schema", kSchema},
             {"model_id", f.model_id},
             {"utime", f.utime},
@@ -109,6 +140,12 @@ std::string CheckpointText(const CheckpointFile& f) {
     json inflations = json::array();
     for (const Eigen::MatrixXd& m : c.inflations) inflations.push_back(Mat(m));
     j["inflations"] = inflations;
+  }
+  // The contexts of an extended identifier's poses (additive key; none: a geometric one).
+  if (!c.contexts.empty()) {
+    json contexts = json::array();
+    for (const auto& ctx : c.contexts) contexts.push_back(ContextJson(ctx));
+    j["contexts"] = contexts;
   }
   return j.dump() + "\n";
 }
@@ -162,6 +199,12 @@ CheckpointFile ParseCheckpoint(const std::string& text) {
       for (size_t i = 0; i < inflations.size(); ++i)
         c.inflations.push_back(ToMat(inflations[i], "inflations[" + std::to_string(i) + "]"));
     }
+    if (j.contains("contexts")) {
+      const json& contexts = At(j, "contexts", "");
+      if (!contexts.is_array()) throw std::runtime_error("checkpoint: contexts: not an array");
+      for (size_t i = 0; i < contexts.size(); ++i)
+        c.contexts.push_back(ContextFromJson(contexts[i], "contexts[" + std::to_string(i) + "]."));
+    }
     if (schema != kSchemaV1) {
       const json& held = At(j, "held", "");
       if (!held.is_array()) throw std::runtime_error("checkpoint: held: not an array");
@@ -171,6 +214,8 @@ CheckpointFile ParseCheckpoint(const std::string& text) {
         h.utime = At(held[i], "utime", path).get<int64_t>();
         h.pose_index = At(held[i], "pose_index", path).get<int64_t>();
         h.z = MeasurementFromJson(At(held[i], "measurement", path), path + "measurement.");
+        if (held[i].contains("context"))  // additive: absent before contexts were carried
+          h.context = ContextFromJson(held[i]["context"], path + "context.");
         f.held.push_back(std::move(h));
       }
     }

@@ -46,6 +46,13 @@ void IkCorrectorNode::OnParams(const kinematic_params_t& msg) {
   std::string error;
   const auto values = ParamsFromMessage(msg, model_, &error);
   if (!values) return Reject(error);
+  // Effect values identified live (ekf_identifier --effects) replace the options' when they are
+  // this model's effects; an estimate without any keeps them; others are refused.
+  std::optional<Eigen::VectorXd> effects;
+  if (extended_ && msg.num_effect_params > 0) {
+    effects = EffectsFromMessage(msg, extended_->model(), &error);
+    if (!effects) return Reject(error);
+  }
   if (const int64_t ceiling = estimation::HostCeilingUs(); msg.utime > ceiling) {
     health_.OutOfHorizon("kinematic_params.utime: " + std::to_string(msg.utime) +
                          " is beyond the time ceiling (" + std::to_string(ceiling) + ")");
@@ -76,14 +83,15 @@ void IkCorrectorNode::OnParams(const kinematic_params_t& msg) {
                    " newer estimates in a row from poses_used " + std::to_string(msg.poses_used) +
                    ")");
   }
-  Use(msg, *values);
+  Use(msg, *values, effects);
 }
 
-void IkCorrectorNode::Use(const kinematic_params_t& msg, const Eigen::VectorXd& values) {
+void IkCorrectorNode::Use(const kinematic_params_t& msg, const Eigen::VectorXd& values,
+                          const std::optional<Eigen::VectorXd>& effects) {
   stale_run_ = 0;
   x_ = values;
   calibrated_.SetParameters(x_);
-  if (extended_) extended_->SetParameters(x_, extended_->e());
+  if (extended_) extended_->SetParameters(x_, effects ? *effects : extended_->e());
   params_utime_ = msg.utime;
   params_poses_used_ = msg.poses_used;
   latest_ = std::max(latest_, msg.utime);

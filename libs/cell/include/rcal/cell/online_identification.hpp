@@ -17,6 +17,12 @@
 //   each pose           checked (kinematics::Validate), strictly after the last accepted (or
 //                       held) pose in sensor time, then the EKF update (which may reject it by its
 //                       gate)
+//   effects (optional)  non-geometric effects (kinematics::ExtendedModel, e.g. the effects an
+//                       `rcal analyze` selected): the EKF's state is then [base set; e], e starting
+//                       at 0 with identification::DefaultEffectPriorSigma (or the settings'
+//                       prior_sigma_effects), and each pose's context (TimedPose::context:
+//                       temperature, payload, time, approach direction) enters its update. The
+//                       set-up guess stays geometric.
 //
 // Pure: no transport, no files. State worth keeping (the EKF checkpoint and the held poses) is
 // exposed for the caller to save and restore.
@@ -40,6 +46,9 @@ struct TimedPose {
   kinematics::PoseMeasurement z;
   int64_t utime = 0;
   int64_t pose_index = -1;
+  /// The conditions it was taken under (an extended model's effects depend on them; ignored
+  /// without effects).
+  kinematics::EffectContext context;
 };
 
 /// The identifiable (base) parameter set of `cell`'s measurements at a seeded joint sample, the
@@ -66,7 +75,11 @@ class OnlineIdentification {
 
   /// Throws std::invalid_argument when the cell's identifier settings cannot be used
   /// (guess_poses < 3 with guessed frames).
-  explicit OnlineIdentification(io::BuiltCell cell);
+  /// `effects`: non-geometric effects identified with the base set (none: the geometric
+  /// identifier); `gravity`: the point-mass model of joint_compliance. Throws
+  /// std::invalid_argument for an effect the model cannot have (ExtendedModel).
+  explicit OnlineIdentification(io::BuiltCell cell, std::vector<kinematics::Effect> effects = {},
+                                kinematics::GravityModel gravity = {});
 
   /// One pose in arrival order. `on_update`, when given, is called after each EKF update with the
   /// identification in its state right after that update (to publish the estimate pose by pose,
@@ -98,6 +111,8 @@ class OnlineIdentification {
   io::BuiltCell cell_;
   std::vector<int> guessed_;
   std::vector<int> base_;
+  std::vector<kinematics::Effect> effects_;
+  kinematics::GravityModel gravity_;
   Eigen::VectorXd start_;
   std::unique_ptr<identification::EkfIdentifier> ekf_;
   std::vector<TimedPose> held_;
@@ -105,5 +120,12 @@ class OnlineIdentification {
   int64_t last_utime_ = std::numeric_limits<int64_t>::min();
   int64_t last_pose_index_ = -1;
 };
+
+/// The cell's online identification with the effects listed in `effects_path`, an `rcal
+/// analyze` analysis.json or the JSON of `rcal calibrate --effects` (empty: none, the geometric
+/// identification); joint_compliance's gravity model as the analysis fitted it (its
+/// link_density_kg_per_m), else 10 kg/m, rcal analyze's default. What ekf_identifier --effects and
+/// `rcal calibrate --log --effects` both build. Throws std::runtime_error naming the file and key.
+OnlineIdentification MakeOnlineIdentification(io::BuiltCell cell, const std::string& effects_path);
 
 }  // namespace rcal::cell

@@ -9,6 +9,7 @@
 #include <random>
 #include <vector>
 
+#include "rcal/kinematics/joint_effects.hpp"
 #include "rcal/kinematics/measurement.hpp"
 #include "rcal/kinematics/model.hpp"
 
@@ -28,6 +29,14 @@ PoseErrorStats Summarize(std::vector<double> position_m, std::vector<double> ori
 PoseErrorStats ErrorsAgainstMeasurements(const kinematics::KinematicModel& model,
                                          const Eigen::VectorXd& x,
                                          const std::vector<kinematics::PoseMeasurement>& ms);
+
+/// An extended model at geometric errors x and effects e [SI] against the measured poses, each
+/// taken under its context (`contexts` one per measurement, or empty: all default). Throws
+/// std::invalid_argument when contexts has another size.
+PoseErrorStats ErrorsAgainstMeasurements(const kinematics::ExtendedModel& model,
+                                         const Eigen::VectorXd& x, const Eigen::VectorXd& e,
+                                         const std::vector<kinematics::PoseMeasurement>& ms,
+                                         const std::vector<kinematics::EffectContext>& contexts);
 
 /// The model at errors x against the truth (the same model at x_true) at joints qs.
 PoseErrorStats ErrorsAgainstTruth(const kinematics::KinematicModel& model, const Eigen::VectorXd& x,

@@ -72,6 +72,15 @@ struct SessionSettings {
 std::vector<kinematics::EffectContext> SampleSession(int num_joints, int count,
                                                      const SessionSettings& settings, Rng& rng);
 
+/// The conditions at one stop of a running cell (a live simulator's context, stop by stop): t_s
+/// [s] since the run started (time_s), the temperature warming up as `settings` says at t_s (plus
+/// its noise), a payload drawn from settings.payloads_kg, and the approach direction
+/// sign(q − q_before) per joint (0 where the joint did not move; all 0 when q_before is empty).
+/// Draws the same two numbers from rng at every call (a resumed run fast-forwards by calling it).
+kinematics::EffectContext StopContext(double t_s, const Eigen::VectorXd& q,
+                                      const Eigen::VectorXd& q_before,
+                                      const SessionSettings& settings, Rng& rng);
+
 /// What the truth robot (geometric errors x_true, effects `truth`) reaches at joints q as read
 /// under `ctx`, measured with `noise` (measurement carries the noise covariance).
 kinematics::PoseMeasurement MeasurePoseWithEffects(const EffectTruth& truth,

@@ -37,13 +37,24 @@ std::string ModelId(const kinematics::KinematicModel& model);
 
 /// Pose measurement → message. `utime` [µs]: sensor time of the still window's end. `marker_id`:
 /// the measured marker's id (the cell's, the dataset's `marker`), not its slot m.marker.
+/// `context`: the conditions the pose was taken under (default: temperature and time unknown,
+/// no payload, no motion direction).
 pose_measurement_t ToMessage(const kinematics::PoseMeasurement& m, int64_t utime,
-                             int32_t pose_index, int32_t marker_id = 0);
+                             int32_t pose_index, int32_t marker_id = 0,
+                             const kinematics::EffectContext& context = {});
 
-/// Decodes a POSE_MEASUREMENT as transport::DecodeLcm does, and also as it was recorded before it
-/// carried marker_id (fingerprint 0x257fdb5ac9ac24a6: the same fields without marker_id), read as
-/// marker 0, so that logs recorded by earlier rcal still calibrate. Returns "" or the refusal.
+/// Decodes a POSE_MEASUREMENT as transport::DecodeLcm does, and also as it was recorded by earlier
+/// rcal, so that their logs still calibrate: before it carried the context (fingerprint
+/// 0xa1f22502bbcd6577: read with temperature and time unknown, no payload, dq_sign 0) and before
+/// it carried marker_id (0x257fdb5ac9ac24a6: also read as marker 0). Returns "" or the refusal.
 std::string DecodePoseMeasurement(const void* data, size_t size, pose_measurement_t* msg);
+
+/// The context of a message (kinematics::EffectContext). Checks, naming the field:
+/// temperature_c NaN or within [−60, 200] °C, payload_kg within [0, 1000] kg, time_s NaN or
+/// finite, dq_sign one value per joint, each −1, 0 or +1. A dq_sign of all 0 reads as no
+/// direction (an empty dq_sign).
+std::optional<kinematics::EffectContext> ContextFromMessage(const pose_measurement_t& msg,
+                                                            std::string* error);
 
 /// The message's marker id for marker slot `slot` of `model` (0 for a model without markers).
 int32_t MarkerId(const kinematics::KinematicModel& model, int slot);
@@ -72,9 +83,20 @@ kinematic_params_t ToKinematicParams(const kinematics::KinematicModel& model,
                                      const std::string& robot_id, int64_t utime,
                                      int32_t poses_used);
 
-/// The identifier's current estimate → message.
+/// The identifier's current estimate → message, with its effect parameters (values and σ, names
+/// and units of kinematics::ExtendedModel::EffectParameters) for an extended identifier.
 kinematic_params_t ToKinematicParams(const identification::EkfIdentifier& ekf,
                                      const std::string& robot_id, int64_t utime);
+
+/// Decodes a KINEMATIC_PARAMS as transport::DecodeLcm does, and also as earlier rcal recorded it
+/// before it carried effect parameters (fingerprint 0xf474f493449420b3: read with none).
+std::string DecodeKinematicParams(const void* data, size_t size, kinematic_params_t* msg);
+
+/// The effect parameters of a message, checked against `model` (its EffectParameters: the same
+/// count, names in order; finite values, σ ≥ 0 finite). Names the field on a refusal.
+std::optional<Eigen::VectorXd> EffectsFromMessage(const kinematic_params_t& msg,
+                                                  const kinematics::ExtendedModel& model,
+                                                  std::string* error);
 
 /// Message → full-length error vector for `model`. Checks sizes, finiteness, the model id and
 /// that every name is the model's parameter at that index.

@@ -5,7 +5,10 @@
 // restart during the guess phase keeps them. Schema 3 adds `x_fixed` (the values of the
 // parameters outside the identified set: the set-up guess the EKF started from) and each
 // measurement's `marker` slot. Files of schema 2 (no x_fixed: the identifier's own) and 1 (no
-// `held` either) still load.
+// `held` either) still load. Additive keys (no schema change): the tracking `status`,
+// `small_steps` and `inflations`, and for an extended identifier (ekf_identifier --effects) the
+// `contexts` of its poses and each held pose's `context` (temperature_c, payload_kg, time_s: null
+// when unknown; dq_sign).
 #pragma once
 
 #include <cstdint>

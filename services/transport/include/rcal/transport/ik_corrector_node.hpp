@@ -5,7 +5,9 @@
 // would put the tool on the calibrated model (nominal_tool_error). With non-geometric effects in
 // the options (an `rcal analyze` / `rcal calibrate --effects` result), the calibrated answer is
 // solved by rcal::ik::ExtendedIk on the extended model (geometric errors from KINEMATIC_PARAMS,
-// effect values from the options) under the options' context; backlash takes the direction of
+// effect values from the options, or from KINEMATIC_PARAMS when it carries this model's effects:
+// an identifier run with --effects; effects of another model refuse the message, naming the
+// field) under the options' context; backlash takes the direction of
 // the commanded motion (sign of the geometric answer − q_seed per joint). Parameters for another
 // model (model id, names, sizes), non-finite values, malformed requests and undecodable bytes are
 // rejected, counted in HEALTH, and change nothing.
@@ -83,7 +85,8 @@ class IkCorrectorNode {
 
  private:
   void Reject(const std::string& reason);
-  void Use(const kinematic_params_t& msg, const Eigen::VectorXd& values);
+  void Use(const kinematic_params_t& msg, const Eigen::VectorXd& values,
+           const std::optional<Eigen::VectorXd>& effects);
   Transport& t_;
   const kinematics::KinematicModel& model_;
   Options o_;
