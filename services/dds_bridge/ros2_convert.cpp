@@ -372,6 +372,7 @@ std::optional<Sample<DiagnosticArray>> ToRos(const std::vector<DiagnosticEntry>&
         {"filter_resets", std::to_string(h.filter_resets)},
         {"stale", std::to_string(h.stale)},
         {"dropped", std::to_string(h.dropped)}};
+    if (!h.activity.empty()) kv.emplace_back("activity", h.activity);
     kv.insert(kv.end(), entries[i].extra.begin(), entries[i].extra.end());
     AllocSeq<dds_sequence_diagnostic_msgs_msg_dds__KeyValue_, diagnostic_msgs_msg_dds__KeyValue_>(
         st.values, kv.size());

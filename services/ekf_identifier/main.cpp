@@ -3,10 +3,10 @@
 // Subscribes POSE_MEASUREMENT (still-window pose measurements; detecting the windows from the raw
 // IMU/POSITION/JOINTS streams comes with the estimation library), updates
 // rcal::identification::EkfIdentifier, and publishes KINEMATIC_PARAMS and CALIBRATION_STATUS
-// after every pose, HEALTH at 1 Hz of sensor time. The state is checkpointed atomically after
-// every accepted pose, so a restarted process resumes where it stopped. Bad messages (fail to
-// decode, wrong sizes, NaN, time not after the last pose) are rejected, counted in HEALTH, and
-// leave the state untouched.
+// after every pose, HEALTH at 1 Hz of sensor time (its `activity` the tracking status). The state
+// is checkpointed atomically after every accepted pose, so a restarted process resumes where it
+// stopped. Bad messages (fail to decode, wrong sizes, NaN, time not after the last pose) are
+// rejected, counted in HEALTH, and leave the state untouched.
 //
 // Time and sequence (issue 11): POSE_MEASUREMENT passes an estimation::TimeGate (--horizon,
 // default an hour of sensor time between poses; --resync-samples): an exact duplicate, a pose
@@ -129,6 +129,7 @@ class Identifier {
   /// process is up and how many poses it resumed with.
   void PublishCurrent() {
     const auto& ekf = id_.ekf();
+    health_.Activity(identification::TrackingStatusName(ekf.status()));
     const int64_t utime = ekf.accepted() > 0 ? id_.last_utime() : 0;
     if (ekf.accepted() > 0 &&
         t_.Publish(channels_.kinematic_params,
@@ -247,6 +248,7 @@ class Identifier {
       Reject("pose " + std::to_string(u.pose_index) + ": " + u.result.reason);
     else
       SaveState();
+    health_.Activity(identification::TrackingStatusName(ekf.status()));  // HEALTH says it too
     transport::StatusFigures fig;
     fig.last_nis = u.result.nis;
     // Converged: enough equations for the unknowns, and the last pose moved no parameter by more

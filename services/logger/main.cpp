@@ -1,9 +1,9 @@
 // logger: records every channel to LCM event logs (readable by lcm-logplayer and lcm-logger's
 // tools), starting a new file when one reaches --max-bytes, and writes every KINEMATIC_PARAMS to a
 // readable CSV history beside the log that holds its event (utime, poses_used, then value and σ
-// of each parameter): `<prefix>.NNNN.lcmlog` and `<prefix>.NNNN.kinematic_params.csv`
-// (log_files.hpp). Event timestamps are the receive time (as lcm-logger's); the messages keep
-// their sensor utime.
+// of each parameter, then of each effect parameter of an identifier run with --effects):
+// `<prefix>.NNNN.lcmlog` and `<prefix>.NNNN.kinematic_params.csv` (log_files.hpp). Event timestamps
+// are the receive time (as lcm-logger's); the messages keep their sensor utime.
 //
 // Runs and restarts: each start of the logger (a new run, or the supervisor running the same
 // command line after a crash or SIGKILL) takes the next number, one past the highest-numbered
@@ -121,10 +121,14 @@ int main(int argc, char** argv) {
         [&](const kinematic_params_t& m) {
           std::string header = "utime,poses_used";
           for (const auto& n : m.names) header += "," + n + ",sigma_" + n;
+          // An identifier run with --effects: its effect parameters after the geometric ones.
+          for (const auto& n : m.effect_names) header += "," + n + ",sigma_" + n;
           std::ostringstream row;
           row.precision(17);
           row << m.utime << "," << m.poses_used;
           for (int i = 0; i < m.num_params; ++i) row << "," << m.values[i] << "," << m.sigmas[i];
+          for (int i = 0; i < m.num_effect_params; ++i)
+            row << "," << m.effect_values[i] << "," << m.effect_sigmas[i];
           row << "\n";
           if (!files.AppendParams(header + "\n", row.str())) health.Error("CSV write failed");
           beat(m.utime);

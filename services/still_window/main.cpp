@@ -33,18 +33,16 @@
 // naming the source). Without CLOCK_OFFSET (one clock: the
 // simulator, a replay) nothing changes.
 // Context (for an identifier with non-geometric effects): each pose carries the approach
-// direction, the sign of each joint's last motion before its window began (from JOINTS), and its
-// time (the window's end, s of sensor time); temperature unknown (NaN) and payload 0, which no
-// stream of the cell carries yet.
+// direction, the sign of each joint's move from the last still window to this one (none at the
+// first), and its time (the window's end, s of sensor time); temperature unknown (NaN) and payload
+// 0, which no stream of the cell carries yet.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
-#include <deque>
 #include <optional>
-#include <utility>
 
 #include "rcal/clock_offset_t.hpp"
 #include "rcal/estimation/clock_offset.hpp"
@@ -152,7 +150,6 @@ class StillWindowNode {
     for (int i = 0; i < m.num_joints; ++i) q(i) = m.q[i];
     if (!q.allFinite()) return Bad("joint_state.q: not finite");
     if (!Admit(joints_gate_, m.utime, "joint_state.utime")) return;
-    Moved(Seconds(m.utime), q);
     Done(m.utime, pipeline_.AddJoints(Seconds(m.utime), q));
   }
   void OnImu(const imu_sample_t& m) {
@@ -197,27 +194,24 @@ class StillWindowNode {
     }
     return "";
   }
-  // The direction of each joint's last motion, kept as it changes (time [s], signs) over the
-  // last few stops, so that a window emitted as the arm leaves it gets the direction it came
-  // from, not the one it leaves in.
-  void Moved(double t, const Eigen::VectorXd& q) {
-    if (q_last_.size() == q.size()) {
-      Eigen::VectorXi dir =
-          directions_.empty() ? Eigen::VectorXi::Zero(q.size()) : directions_.back().second;
+  // The direction each joint moved in from the last stop to this one (the sign of the net move,
+  // which on a stop-to-stop move of the arm is the direction of its last motion; an encoder
+  // dithering by a count at rest does not flip it), and this stop becomes the last. Empty (not
+  // known) at the first stop seen.
+  Eigen::VectorXi Approach(const Eigen::VectorXd& q) {
+    Eigen::VectorXi dir;
+    if (q_last_stop_.size() == q.size()) {
+      dir = Eigen::VectorXi::Zero(q.size());
       for (int j = 0; j < q.size(); ++j)
-        if (q(j) != q_last_(j)) dir(j) = q(j) > q_last_(j) ? 1 : -1;
-      if (directions_.empty() || dir != directions_.back().second) directions_.push_back({t, dir});
-      while (directions_.size() > 64) directions_.pop_front();
+        if (q(j) != q_last_stop_(j)) dir(j) = q(j) > q_last_stop_(j) ? 1 : -1;
     }
-    q_last_ = q;
-  }
-  Eigen::VectorXi ApproachBefore(double t) const {
-    for (auto it = directions_.rbegin(); it != directions_.rend(); ++it)
-      if (it->first <= t) return it->second;
-    return {};
+    q_last_stop_ = q;
+    return dir;
   }
 
   void Emit(const estimation::StillPose& p) {
+    const kinematics::PoseMeasurement z = p.ToMeasurement();
+    const Eigen::VectorXi approach = Approach(z.q);  // also for a window not published
     if (t_first_ && p.t_begin - *t_first_ < warmup_) {
       spdlog::info("window {:.3f}–{:.3f} s dropped: warm-up", p.t_begin, p.t_end);
       return;
@@ -228,11 +222,10 @@ class StillWindowNode {
       spdlog::warn("window {:.3f}–{:.3f} s refused: {}", p.t_begin, p.t_end, veto);
       return;
     }
-    const kinematics::PoseMeasurement z = p.ToMeasurement();
     const int64_t utime = std::llround(p.t_end * 1e6);
     kinematics::EffectContext context;
     context.time_s = p.t_end;
-    context.dq_sign = ApproachBefore(p.t_begin);
+    context.dq_sign = approach;
     if (t_.Publish(channels_.pose_measurement,
                    transport::ToMessage(z, utime, emitted_, marker_id_, context))) {
       health_.Published();
@@ -258,8 +251,7 @@ class StillWindowNode {
   transport::Health health_;
   std::optional<double> t_first_;
   int emitted_ = 0;
-  Eigen::VectorXd q_last_;                                     // the last joints received
-  std::deque<std::pair<double, Eigen::VectorXi>> directions_;  // (time [s], signs) as they change
+  Eigen::VectorXd q_last_stop_;  // joints of the last still window (its pose or not)
   std::int64_t dropped_ = 0, resets_ = 0;
   estimation::TimeGate joints_gate_, imu_gate_, position_gate_;
 };

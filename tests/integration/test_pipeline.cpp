@@ -25,6 +25,7 @@
 #include "offline_identification.hpp"
 #include "rcal/cell/cell_sim_yaml.hpp"
 #include "rcal/cell/online_identification.hpp"
+#include "rcal/health_t.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
 #include "rcal/identification/metrics.hpp"
 #include "rcal/identification/pose_planning.hpp"
@@ -91,7 +92,11 @@ struct Listener {
   int statuses = 0;
   std::optional<next_poses_t> next;  // NEXT_POSES (issue 16)
   std::vector<next_poses_t> all_next;
+  std::optional<health_t> identifier_health;  // ekf_identifier's latest HEALTH
   Listener() {
+    t.Subscribe<health_t>(transport::channels::kHealth, [this](const health_t& m) {
+      if (m.process == "ekf_identifier") identifier_health = m;
+    });
     t.Subscribe<next_poses_t>(transport::channels::kNextPoses, [this](const next_poses_t& m) {
       next = m;
       all_next.push_back(m);
@@ -162,7 +167,7 @@ TEST_F(Pipeline, CalibratesToTheOfflineFigures) {
   const auto ekf = off.Ekf(poses, kPoses);
 
   Listener l;
-  Start(Identifier(dir_ / "ekf.json"), "ekf_identifier.log");
+  const pid_t id = Start(Identifier(dir_ / "ekf.json"), "ekf_identifier.log");
   ASSERT_TRUE(l.WaitFor([&] { return l.statuses > 0; })) << "identifier did not come up";
   EXPECT_EQ(l.status->poses_accepted, 0);
   const pid_t sensor = Start(Sensor(kPoses, 50), "sensor_acquisition.log");
@@ -170,6 +175,13 @@ TEST_F(Pipeline, CalibratesToTheOfflineFigures) {
       << "identifier log: " << (dir_ / "ekf_identifier.log");
   EXPECT_EQ(Wait(sensor), 0);
   Reaped(sensor);
+  // HEALTH says what the identifier is doing: the tracking status CALIBRATION_STATUS carries (its
+  // final beat, on a clean stop, is at the last pose's time).
+  EXPECT_EQ(Stop(id), 0);
+  ASSERT_TRUE(l.WaitFor(
+      [&] { return l.identifier_health && l.identifier_health->utime == l.status->utime; }, 30));
+  EXPECT_EQ(l.identifier_health->activity, l.status->tracking_status);
+  EXPECT_EQ(l.identifier_health->activity, "converged");
 
   const Eigen::VectorXd x_online = Values(*l.params);
   const Eigen::VectorXd sigma = ekf.sigma();
@@ -283,6 +295,10 @@ TEST_F(Pipeline, AnArmThatBendsIsCalibratedWithItsEffectLive) {
   id_args.insert(id_args.end(), {"--effects", (dir_ / "analysis.json").string()});
   Start(id_args, "ekf_identifier.log");
   ASSERT_TRUE(l.WaitFor([&] { return l.statuses > 0; })) << "identifier did not come up";
+#ifdef RCAL_LOGGER
+  const pid_t logger =
+      Start({RCAL_LOGGER, "--lcm-url", kUrl, "--dir", (dir_ / "lcm").string()}, "logger.log");
+#endif
   auto args = Sensor(kPoses, 50);
   args.insert(args.end(), {"--sim-effect", "joint_compliance:j2=2e-6"});
   const pid_t sensor = Start(args, "sensor_acquisition.log");
@@ -292,6 +308,20 @@ TEST_F(Pipeline, AnArmThatBendsIsCalibratedWithItsEffectLive) {
   Reaped(sensor);
   ASSERT_EQ(l.poses.size(), static_cast<size_t>(kPoses));
   EXPECT_EQ(l.status->poses_rejected, 0);
+#ifdef RCAL_LOGGER
+  // The logger's readable history has the effect parameter after the geometric ones.
+  EXPECT_EQ(Stop(logger), 0);
+  std::string header, last;
+  {
+    std::ifstream csv(dir_ / "lcm" / "rcal.0000.kinematic_params.csv");
+    std::getline(csv, header);
+    for (std::string line; std::getline(csv, line);) last = line;
+  }
+  const std::string effect = "joint_compliance." + cell.model.joints()[1].name + ".c";
+  EXPECT_NE(header.find("," + effect + ",sigma_" + effect), std::string::npos) << header;
+  EXPECT_EQ(std::count(header.begin(), header.end(), ','),
+            std::count(last.begin(), last.end(), ','));
+#endif
   // The contexts as published: payloads of the list, the approach direction after the first stop.
   std::set<double> payloads;
   for (size_t k = 0; k < l.poses.size(); ++k) {

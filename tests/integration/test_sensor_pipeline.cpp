@@ -195,6 +195,14 @@ TEST_F(SensorPipeline, CalibratesToTheOfflineFigure) {
     const double sigma_th = std::sqrt(w.cal[k].covariance.bottomRightCorner<3, 3>().trace() / 3);
     EXPECT_LT(Eigen::AngleAxisd(z->R_EI * w.cal[k].R_EI.transpose()).angle(), 0.5 * sigma_th)
         << "window " << k;
+    // Its context: the window's time, and the direction each joint came from the stop before (the
+    // programme's stops; none known at the first published window).
+    EXPECT_NEAR(poses[k].time_s, static_cast<double>(poses[k].utime) * 1e-6, 1e-6);
+    for (int j = 0; j < z->q.size(); ++j) {
+      const double move = k == 0 ? 0.0 : w.cal[k].q(j) - w.cal[k - 1].q(j);
+      const int want = move > 0 ? 1 : (move < 0 ? -1 : 0);
+      EXPECT_EQ(poses[k].dq_sign[j], want) << "window " << k << " joint " << j;
+    }
   }
   std::printf("test error: online %.4f mm, offline %.4f mm (%d poses, seed %u)\n", online_mm,
               offline_mm, kCal, kSeed);

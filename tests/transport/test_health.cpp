@@ -47,6 +47,8 @@ TEST(Health, CountsAndLastErrorArePublished) {
   h.Received();
   h.Rejected("pose_measurement.q: not finite");
   h.Published();
+  h.Activity("converging");
+  h.Activity("change_detected");  // the latest is what is said
   EXPECT_TRUE(h.Tick(42, t));
   EXPECT_FALSE(h.Tick(43, t));
   while (t.HandleTimeout(0) > 0) {
@@ -58,6 +60,7 @@ TEST(Health, CountsAndLastErrorArePublished) {
   EXPECT_EQ(got[0].rejected, 1);
   EXPECT_EQ(got[0].published, 2);  // one message plus this heartbeat
   EXPECT_EQ(got[0].last_error, "pose_measurement.q: not finite");
+  EXPECT_EQ(got[0].activity, "change_detected");
   EXPECT_GT(got[0].pid, 0);
 }
 

@@ -51,8 +51,9 @@ int Run(const Options& o) {
 
   std::printf("rcal status on %s (%.1f s): supervisor %s\n", t.url().c_str(), o.wait_s,
               state ? "heard" : "not heard");
-  std::printf("%-20s %-9s %8s %8s %10s %10s %10s %14s  %s\n", "process", "state", "pid", "restarts",
-              "received", "rejected", "published", "sensor time[s]", "last error");
+  std::printf("%-20s %-9s %8s %8s %10s %10s %10s %14s  %-15s %s\n", "process", "state", "pid",
+              "restarts", "received", "rejected", "published", "sensor time[s]", "activity",
+              "last error");
   nlohmann::json rows = nlohmann::json::array();
   for (const auto& n : names) {
     std::string st = "-", err;
@@ -71,19 +72,20 @@ int Run(const Options& o) {
       const health_t& h = it->second;
       if (!pid) pid = h.pid;
       err = h.last_error;
-      std::printf("%-20s %-9s %8lld %8lld %10lld %10lld %10lld %14.3f  %s\n", n.c_str(), st.c_str(),
-                  pid, restarts, static_cast<long long>(h.received),
+      std::printf("%-20s %-9s %8lld %8lld %10lld %10lld %10lld %14.3f  %-15s %s\n", n.c_str(),
+                  st.c_str(), pid, restarts, static_cast<long long>(h.received),
                   static_cast<long long>(h.rejected), static_cast<long long>(h.published),
-                  h.utime * 1e-6, err.c_str());
+                  h.utime * 1e-6, h.activity.empty() ? "-" : h.activity.c_str(), err.c_str());
       row.update({{"pid", pid},
                   {"received", h.received},
                   {"rejected", h.rejected},
                   {"published", h.published},
                   {"sensor_time_s", h.utime * 1e-6},
+                  {"activity", h.activity},
                   {"last_error", h.last_error}});
     } else {
-      std::printf("%-20s %-9s %8lld %8lld %10s %10s %10s %14s  %s\n", n.c_str(), st.c_str(), pid,
-                  restarts, "-", "-", "-", "-", err.c_str());
+      std::printf("%-20s %-9s %8lld %8lld %10s %10s %10s %14s  %-15s %s\n", n.c_str(), st.c_str(),
+                  pid, restarts, "-", "-", "-", "-", "-", err.c_str());
       row["reason"] = err;
     }
     rows.push_back(row);

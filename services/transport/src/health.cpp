@@ -112,6 +112,7 @@ health_t Health::Message(int64_t utime) const {
   m.filter_resets = filter_resets_;
   m.stale = stale_;
   m.dropped = dropped_;
+  m.activity = activity_;
   return m;
 }
 

@@ -45,6 +45,10 @@ class Health {
   void SetDropped(int64_t total) { dropped_ = total; }
   /// A filter's state went non-finite and it was reset; `reason` says which and when.
   void FilterReset(const std::string& reason);
+  /// What the process is doing, in its own terms (health_t.activity; e.g. ekf_identifier's
+  /// tracking status).
+  void Activity(std::string activity) { activity_ = std::move(activity); }
+  const std::string& activity() const { return activity_; }
 
   /// Offers the message's `utime` [µs] to the source's time gate and counts the outcome: a
   /// refused one in rejected (and duplicates / out_of_horizon / out_of_order) with the gate's
@@ -91,6 +95,7 @@ class Health {
   int64_t duplicates_ = 0, out_of_horizon_ = 0, out_of_order_ = 0, gaps_ = 0, resyncs_ = 0,
           filter_resets_ = 0, stale_ = 0, dropped_ = 0;
   std::string last_error_;
+  std::string activity_;
 };
 
 }  // namespace rcal::transport
