@@ -101,6 +101,7 @@ TEST(LcmTransport, DatagramsTheKernelDropsAreCounted) {
   pose_measurement_t m = Sample();
   m.num_joints = 100;  // ~1 kB: a datagram per message, a few per minimum buffer
   m.q.assign(100, 0.1);
+  m.dq_sign.assign(100, 0);  // one per joint: the encoder reads num_joints of each
   for (int k = 0; k < kBurst; ++k) ASSERT_TRUE(tx.Publish("POSE_MEASUREMENT", m));
   usleep(300'000);
   while (rx.HandleTimeout(50) > 0) {
