@@ -136,6 +136,14 @@ EffectTruth MakeEffectTruth(const kinematics::KinematicModel& model,
   return out;
 }
 
+namespace {
+// The session's warm-up curve without its noise: T₀ + ΔT (1 − exp(−t/τ)) [°C].
+double WarmedTo(const SessionSettings& s, double t_s) {
+  return s.temperature_start_c +
+         s.temperature_rise_c * (1.0 - std::exp(-t_s / s.warmup_time_constant_s));
+}
+}  // namespace
+
 std::vector<kinematics::EffectContext> SampleSession(int num_joints, int count,
                                                      const SessionSettings& s, Rng& rng) {
   std::normal_distribution<double> n(0.0, 1.0);
@@ -146,10 +154,7 @@ std::vector<kinematics::EffectContext> SampleSession(int num_joints, int count,
   for (int i = 0; i < count; ++i) {
     auto& c = out[i];
     c.time_s = count > 1 ? s.session_s * i / (count - 1) : 0.0;
-    c.temperature_c =
-        s.temperature_start_c +
-        s.temperature_rise_c * (1.0 - std::exp(-c.time_s / s.warmup_time_constant_s)) +
-        s.temperature_noise_c * n(rng);
+    c.temperature_c = WarmedTo(s, c.time_s) + s.temperature_noise_c * n(rng);
     c.payload_kg = s.payloads_kg.empty() ? 0.0 : s.payloads_kg[pick(rng)];
     c.dq_sign = Eigen::VectorXi::Ones(num_joints);
     if (s.random_approach)
@@ -168,9 +173,7 @@ kinematics::EffectContext StopContext(double t_s, const Eigen::VectorXd& q,
   c.time_s = t_s;
   const double noise = n(rng);
   const size_t payload = pick(rng);
-  c.temperature_c = s.temperature_start_c +
-                    s.temperature_rise_c * (1.0 - std::exp(-t_s / s.warmup_time_constant_s)) +
-                    s.temperature_noise_c * noise;
+  c.temperature_c = WarmedTo(s, t_s) + s.temperature_noise_c * noise;
   c.payload_kg = s.payloads_kg.empty() ? 0.0 : s.payloads_kg[payload];
   c.dq_sign = Eigen::VectorXi::Zero(q.size());
   if (q_before.size() == q.size())
