@@ -21,6 +21,7 @@
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/joint_state_t.hpp"
 #include "rcal/kinematic_params_t.hpp"
+#include "rcal/model_discrepancy_t.hpp"
 #include "rcal/next_poses_t.hpp"
 #include "rcal/orientation_estimate_t.hpp"
 #include "rcal/pose_measurement_t.hpp"
@@ -72,6 +73,10 @@ inline void Adapt(const next_poses_t& m) {
   if (auto n = transport::NextPosesFromMessage(m, Grb3016(), &error))
     (void)cell::NextStopToFollow(n->q, {Eigen::VectorXd::Zero(Grb3016().num_joints())});
 }
+inline void Adapt(const model_discrepancy_t& m) {
+  std::string error;
+  (void)transport::ModelDiscrepancyFromMessage(m, &error);
+}
 template <typename Msg>
 void Adapt(const Msg&) {}
 
@@ -101,9 +106,9 @@ void Decode(const std::uint8_t* data, std::size_t size) {
   }
 }
 
-/// Decodes as the type with this index (mod 14).
+/// Decodes as the type with this index (mod 15).
 inline void DecodeAs(unsigned index, const std::uint8_t* data, std::size_t size) {
-  switch (index % 14) {
+  switch (index % 15) {
     case 0:
       return Decode<calibration_status_t>(data, size);
     case 1:
@@ -130,6 +135,8 @@ inline void DecodeAs(unsigned index, const std::uint8_t* data, std::size_t size)
       return Decode<clock_offset_t>(data, size);
     case 13:
       return Decode<next_poses_t>(data, size);
+    case 14:
+      return Decode<model_discrepancy_t>(data, size);
     default:
       return Decode<tool_position_estimate_t>(data, size);
   }
@@ -138,7 +145,7 @@ inline void DecodeAs(unsigned index, const std::uint8_t* data, std::size_t size)
 /// Decodes as the type the pipeline publishes on `channel` (pose_measurement_t if none).
 inline void DecodeChannel(std::string_view channel, const std::uint8_t* data, std::size_t size) {
   namespace ch = transport::channels;
-  const std::string_view names[14] = {ch::kCalibrationStatus,
+  const std::string_view names[15] = {ch::kCalibrationStatus,
                                       ch::kHealth,
                                       ch::kIkCommand,
                                       ch::kIkRequest,
@@ -151,8 +158,9 @@ inline void DecodeChannel(std::string_view channel, const std::uint8_t* data, st
                                       ch::kSupervisorState,
                                       ch::kToolPosition,
                                       ch::kClockOffset,
-                                      ch::kNextPoses};
-  for (unsigned i = 0; i < 14; ++i)
+                                      ch::kNextPoses,
+                                      ch::kModelDiscrepancy};
+  for (unsigned i = 0; i < 15; ++i)
     if (!names[i].empty() && names[i] == channel) return DecodeAs(i, data, size);
   DecodeAs(8, data, size);
 }

@@ -36,24 +36,38 @@
 // dq_sign); KINEMATIC_PARAMS carries the effect parameters with their σ, the checkpoint the
 // contexts. A context that cannot be true (temperature beyond [−60, 200] °C, a negative payload,
 // a dq_sign not −1, 0, +1) refuses its pose, naming the field, with or without effects.
+//
+// The discrepancy watch (issue 15 item 5, --discrepancy-every N, default 50): every N accepted
+// poses rcal analyze's tests run on the identifier's window (cell::WatchForDiscrepancy: χ² of the
+// geometric fit against the poses' noise, correlation with each candidate effect, selection by
+// nested cross-validation) on a worker thread, so poses keep flowing during its second or so;
+// MODEL_DISCREPANCY names the suspected causes with their z and the expected held-out gain.
+// --discrepancy-switch: suspects the identifier lacks are switched in
+// (cell::OnlineIdentification::SwitchIn: identified from the window's poses on) and written next
+// to the checkpoint (CHECKPOINT.effects.json, an analysis.json), so a restart identifies them too.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
 #include <Eigen/Core>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <future>
 #include <memory>
 #include <optional>
 
+#include "rcal/cell/discrepancy_watch.hpp"
 #include "rcal/cell/next_poses.hpp"
 #include "rcal/cell/online_identification.hpp"
 #include "rcal/estimation/time_gate.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
 #include "rcal/identification/metrics.hpp"
 #include "rcal/identification/tracking.hpp"
+#include "rcal/io/atomic_file.hpp"
 #include "rcal/io/cell_yaml.hpp"
+#include "rcal/io/effects_json.hpp"
 #include "rcal/kinematics/identifiability.hpp"
 #include "rcal/next_poses_t.hpp"
 #include "rcal/services/common.hpp"
@@ -90,7 +104,14 @@ struct Options {
   // NEXT_POSES: a stop's cost as joint-space distance [rad | m]
   double stop_cost = identification::kDefaultStopCost;
   std::string effects;  // analysis.json: the effects identified with the geometry (empty: none)
+  int discrepancy_every = 50;       // MODEL_DISCREPANCY every this many accepted poses (0: never)
+  bool discrepancy_switch = false;  // switch the suspected effects in
 };
+
+// Where a switched-in model's effects are kept beside the checkpoint.
+std::string EffectsBeside(const std::string& checkpoint) {
+  return checkpoint + ".effects.json";
+}
 
 class Identifier {
  public:
@@ -106,6 +127,7 @@ class Identifier {
         gate_(o.time) {
     const io::BuiltCell& cell = id_.cell();
     if (o.next_poses > 0) advisor_.emplace(cell);
+    watch_settings_.every_poses = o.discrepancy_every;
     for (const auto& p : id_.ekf().extended_model().EffectParameters())
       spdlog::info("effect parameter {} [{}] identified live", p.name, p.unit);
     spdlog::info("cell {} ({}): chain {} → {}, {} of {} parameters identifiable{}", cell.spec.name,
@@ -123,8 +145,59 @@ class Identifier {
         });
   }
 
-  /// The final HEALTH (on a clean stop): the counts up to the end.
-  void Finish() { health_.Final(t_); }
+  /// The final HEALTH (on a clean stop): the counts up to the end (a watch still running is
+  /// waited for and published first).
+  void Finish() {
+    if (watch_.valid()) {
+      watch_.wait();
+      PollWatch();
+    }
+    health_.Final(t_);
+  }
+
+  /// A finished discrepancy watch: MODEL_DISCREPANCY, and the switch (--discrepancy-switch).
+  void PollWatch() {
+    if (!watch_.valid() || watch_.wait_for(std::chrono::seconds(0)) != std::future_status::ready)
+      return;
+    cell::DiscrepancyReport r;
+    try {
+      r = watch_.get();
+    } catch (const std::exception& e) {
+      health_.Error(std::string("discrepancy watch: ") + e.what());
+      spdlog::warn("discrepancy watch: {}", e.what());
+      return;
+    }
+    bool switched = false;
+    std::string names;
+    for (const auto& s : r.suspects)
+      names += fmt::format("{}{} (z {:.1f}{})", names.empty() ? "suspected: " : ", ", s.description,
+                           s.z, s.in_model ? ", in the model" : "");
+    spdlog::info(
+        "discrepancy watch over {} poses: chi2/dof {:.2f}; {}; held-out position RMS {:.4f} -> "
+        "{:.4f} mm",
+        r.window_poses, r.chi2_dof > 0 ? r.chi2 / r.chi2_dof : 0.0,
+        names.empty() ? std::string("nothing suspected") : names, r.heldout_rms_before_m * 1e3,
+        r.heldout_rms_after_m * 1e3);
+    if (o_.discrepancy_switch && !r.NewEffects().empty()) {
+      try {
+        const auto added = id_.SwitchIn(r.NewEffects());
+        switched = !added.empty();
+        if (switched) {
+          SaveEffects();
+          SaveState();
+          for (const auto& p : id_.ekf().extended_model().EffectParameters())
+            spdlog::info("effect parameter {} [{}] identified live (switched in)", p.name, p.unit);
+        }
+      } catch (const std::exception& e) {
+        health_.Error(std::string("discrepancy switch: ") + e.what());
+        spdlog::warn("discrepancy switch: {}", e.what());
+      }
+    }
+    if (t_.Publish(channels_.model_discrepancy,
+                   transport::ToModelDiscrepancy(r, watch_utime_, id_.ekf().accepted(), switched)))
+      health_.Published();
+    if (switched) Publish(watch_utime_, {});
+  }
   /// At start: the restored estimate (if any) and a CALIBRATION_STATUS that tells listeners the
   /// process is up and how many poses it resumed with.
   void PublishCurrent() {
@@ -257,6 +330,7 @@ class Identifier {
                     u.max_step_sigma < 0.1;
     Publish(u.utime, fig);
     PublishNextPoses(u.utime);
+    StartWatch(u);
     health_.Tick(u.utime, t_);
     if (u.result.change) {  // issue 15: named, released, re-converging (CALIBRATION_STATUS too)
       const auto names = identification::ChangeNames(id_.model(), *u.result.change);
@@ -275,6 +349,33 @@ class Identifier {
     spdlog::info("pose {} (pose_index {}): {} (accepted {}, rejected {}, NIS {:.2f}){}",
                  u.pose_index + 1, u.pose_index, u.result.accepted ? "accepted" : "rejected",
                  ekf.accepted(), ekf.rejected(), u.result.nis, effects);
+  }
+
+  // The discrepancy watch on a copy of the window, on a worker thread (one at a time).
+  void StartWatch(const cell::OnlineIdentification::Update& u) {
+    PollWatch();
+    if (!u.result.accepted || watch_.valid() || !cell::WatchDue(id_, watch_settings_)) return;
+    watch_utime_ = u.utime;
+    watch_ = std::async(std::launch::async,
+                        [model = id_.model(), window = cell::WatchWindow(id_),
+                         effects = id_.effects(), gravity = id_.gravity(), s = watch_settings_]() {
+                          return cell::WatchForDiscrepancy(model, window, effects, gravity, s);
+                        });
+  }
+
+  // The effects identified, beside the checkpoint (an analysis.json), atomically.
+  void SaveEffects() {
+    if (o_.checkpoint.empty()) return;
+    try {
+      const auto& ekf = id_.ekf();
+      nlohmann::json j;
+      j["effects"] = io::EffectsJson(ekf.extended_model(), ekf.e(), ekf.sigma_e());
+      j["link_density_kg_per_m"] = ekf.extended_model().gravity().link_density_kg_per_m;
+      io::AtomicWriteFile(EffectsBeside(o_.checkpoint), j.dump(2) + "\n");
+    } catch (const std::exception& e) {
+      health_.Error(e.what());
+      spdlog::error("{}", e.what());
+    }
   }
 
   // The EKF state and the poses held for the set-up guess, atomically (--checkpoint).
@@ -323,6 +424,9 @@ class Identifier {
   }
   std::optional<cell::NextPoseAdvisor> advisor_;
   Eigen::VectorXd last_q_;
+  cell::DiscrepancyWatchSettings watch_settings_;
+  std::future<cell::DiscrepancyReport> watch_;
+  int64_t watch_utime_ = 0;
 
   Options o_;
   transport::Transport& t_;
@@ -340,8 +444,8 @@ int main(int argc, char** argv) {
   Options o;
   CLI::App app{
       "ekf_identifier: online EKF identification of the kinematic parameter errors.\n"
-      "Subscribes POSE_MEASUREMENT; publishes KINEMATIC_PARAMS, CALIBRATION_STATUS, NEXT_POSES and "
-      "HEALTH.\n"
+      "Subscribes POSE_MEASUREMENT; publishes KINEMATIC_PARAMS, CALIBRATION_STATUS, NEXT_POSES, "
+      "MODEL_DISCREPANCY and HEALTH.\n"
       "LCM URL: --lcm-url, else $RCAL_LCM_URL, else udpm://239.255.76.67:7667?ttl=0."};
   app.add_option("--cell", o.cell,
                  "cell file (schema rcal.cell/1): the robot, set-up frames, sensors, priors and "
@@ -366,7 +470,19 @@ int main(int argc, char** argv) {
   app.add_option("--effects", o.effects,
                  "non-geometric effects identified live with the geometry: the analysis.json of "
                  "rcal analyze (its `effects`), or the JSON of rcal calibrate --effects");
+  app.add_option("--discrepancy-every", o.discrepancy_every,
+                 "MODEL_DISCREPANCY: rcal analyze's tests on the window every this many accepted "
+                 "poses (0: never)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 1000000));
+  app.add_flag("--discrepancy-switch", o.discrepancy_switch,
+               "switch the effects MODEL_DISCREPANCY suspects in: identified live from then on, "
+               "kept beside the checkpoint (CHECKPOINT.effects.json)");
   CLI11_PARSE(app, argc, argv);
+  // A model whose effects were switched in resumes with them (unless --effects says otherwise).
+  if (o.effects.empty() && !o.checkpoint.empty() &&
+      std::filesystem::exists(EffectsBeside(o.checkpoint)) && std::filesystem::exists(o.checkpoint))
+    o.effects = EffectsBeside(o.checkpoint);
 
   try {
     rcal::services::InstallStopHandlers();
@@ -374,8 +490,11 @@ int main(int argc, char** argv) {
     spdlog::info("ekf_identifier on {}", t.url());
     Identifier id(o, t);
     id.PublishCurrent();
-    if (const int rc =
-            rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
+    if (const int rc = rcal::services::ServeUntilStopped([&](int ms) {
+          const int r = t.HandleTimeout(ms);
+          id.PollWatch();
+          return r;
+        });
         rc != 0)
       return rc;
     id.Finish();

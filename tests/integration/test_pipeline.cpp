@@ -32,6 +32,7 @@
 #include "rcal/io/effects_json.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/kinematics/identifiability.hpp"
+#include "rcal/model_discrepancy_t.hpp"
 #include "rcal/next_poses_t.hpp"
 #include "rcal/sim/effects.hpp"
 #include "rcal/sim/pose_sim.hpp"
@@ -92,8 +93,12 @@ struct Listener {
   int statuses = 0;
   std::optional<next_poses_t> next;  // NEXT_POSES (issue 16)
   std::vector<next_poses_t> all_next;
-  std::optional<health_t> identifier_health;  // ekf_identifier's latest HEALTH
+  std::optional<health_t> identifier_health;       // ekf_identifier's latest HEALTH
+  std::vector<model_discrepancy_t> discrepancies;  // MODEL_DISCREPANCY (issue 15 item 5)
   Listener() {
+    t.Subscribe<model_discrepancy_t>(
+        transport::channels::kModelDiscrepancy,
+        [this](const model_discrepancy_t& m) { discrepancies.push_back(m); });
     t.Subscribe<health_t>(transport::channels::kHealth, [this](const health_t& m) {
       if (m.process == "ekf_identifier") identifier_health = m;
     });
@@ -372,6 +377,65 @@ TEST_F(Pipeline, AnArmThatBendsIsCalibratedWithItsEffectLive) {
   std::printf("10 kg payload: live with the effect %.4f mm, geometry alone %.4f mm\n", e_live * 1e3,
               e_geo * 1e3);
   EXPECT_LT(e_live, 0.5 * e_geo);
+}
+
+// The discrepancy watch live (issue 15 item 5): the geometric identifier (no --effects) on the arm
+// whose joint 2 bends, with --discrepancy-switch. After 50 poses MODEL_DISCREPANCY names
+// joint_compliance on that joint (χ² beyond the noise, a held-out gain), the effect is switched
+// in, and from then on KINEMATIC_PARAMS carries it, found against the simulator's truth. The
+// switched-in model is kept beside the checkpoint: a restarted identifier resumes with it.
+TEST_F(Pipeline, TheDiscrepancyWatchNamesTheBendingJointAndSwitchesItIn) {
+  RCAL_IN_NAMESPACE("Pipeline.TheDiscrepancyWatchNamesTheBendingJointAndSwitchesItIn");
+  constexpr int kPoses = 100;
+  const io::BuiltCell cell = io::LoadCell(RCAL_SOURCE_DIR "/config/cells/grb3016_poses.yaml");
+  Listener l;
+  const fs::path checkpoint = dir_ / "ekf.json";
+  auto id_args = Identifier(checkpoint);
+  id_args.insert(id_args.end(), {"--discrepancy-every", "50", "--discrepancy-switch"});
+  const pid_t id = Start(id_args, "ekf_identifier.log");
+  ASSERT_TRUE(l.WaitFor([&] { return l.statuses > 0; })) << "identifier did not come up";
+  auto args = Sensor(kPoses, 50);
+  args.insert(args.end(), {"--sim-effect", "joint_compliance:j2=2e-6"});
+  const pid_t sensor = Start(args, "sensor_acquisition.log");
+  ASSERT_TRUE(l.WaitFor([&] {
+    return l.params && l.params->poses_used >= kPoses && !l.discrepancies.empty();
+  })) << "identifier log: "
+      << (dir_ / "ekf_identifier.log");
+  EXPECT_EQ(Wait(sensor), 0);
+  Reaped(sensor);
+  const model_discrepancy_t& first = l.discrepancies.front();
+  std::string error;
+  const auto d = transport::ModelDiscrepancyFromMessage(first, &error);
+  ASSERT_TRUE(d) << error;
+  EXPECT_GE(d->window_poses, 50);
+  EXPECT_GT(d->chi2 / d->chi2_dof, 1.2);
+  ASSERT_FALSE(d->suspects.empty());
+  std::printf("MODEL_DISCREPANCY after %d poses: %s z %.1f, held-out %.4f -> %.4f mm\n",
+              d->poses_used, d->suspects[0].description.c_str(), d->suspects[0].z,
+              d->heldout_rms_before_m * 1e3, d->heldout_rms_after_m * 1e3);
+  EXPECT_EQ(d->suspects[0].cause, "joint_compliance");
+  EXPECT_EQ(d->suspects[0].joints, cell.model.joints()[1].name);
+  EXPECT_FALSE(d->suspects[0].in_model);
+  EXPECT_GT(d->expected_gain, 0.0);
+  EXPECT_TRUE(d->switched_in);
+  // From then on the compliance is identified live, against the truth.
+  const kinematic_params_t& p = *l.params;
+  ASSERT_EQ(p.num_effect_params, 1);
+  EXPECT_EQ(p.effect_names[0], "joint_compliance." + cell.model.joints()[1].name + ".c");
+  std::printf("switched in live: %.4g ± %.2g rad/(N·m) (truth 2e-6)\n", p.effect_values[0],
+              p.effect_sigmas[0]);
+  EXPECT_NEAR(p.effect_values[0], 2e-6, 3 * p.effect_sigmas[0]);
+  EXPECT_LT(p.effect_sigmas[0], 2e-6 / 5);
+  EXPECT_EQ(Stop(id), 0);
+  // Restarted on its checkpoint: it resumes with the switched-in model.
+  ASSERT_TRUE(fs::exists(checkpoint.string() + ".effects.json"));
+  l.params.reset();
+  const pid_t again = Start(Identifier(checkpoint), "ekf_identifier_again.log");
+  ASSERT_TRUE(l.WaitFor([&] { return l.params.has_value(); }))
+      << "identifier log: " << (dir_ / "ekf_identifier_again.log");
+  EXPECT_EQ(l.params->num_effect_params, 1);
+  EXPECT_EQ(l.params->effect_values[0], p.effect_values[0]);
+  EXPECT_EQ(Stop(again), 0);
 }
 
 // The shipped UR10 cell (config/cells/ur10.yaml): an optical tracker measuring positions only, two

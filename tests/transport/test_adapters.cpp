@@ -586,5 +586,83 @@ TEST(NextPosesAdapter, RoundTripAndRefusals) {
   EXPECT_TRUE(empty->q.empty());
 }
 
+// MODEL_DISCREPANCY (issue 15 item 5): the watch's report round-trips; every malformed field is
+// refused naming it.
+TEST(ModelDiscrepancyAdapter, RoundTripAndRefusals) {
+  cell::DiscrepancyReport r;
+  r.window_poses = 100;
+  r.noise_against = "stated noise";
+  r.chi2 = 1100;
+  r.chi2_dof = 575;
+  r.chi2_log_p = -200;
+  cell::SuspectedEffect s;
+  s.effect.cause = kinematics::EffectCause::kJointCompliance;
+  s.effect.joint = 1;
+  s.cause = "joint_compliance";
+  s.joints = {"j2"};
+  s.description = "joint_compliance j2";
+  s.z = 5.5;
+  r.suspects.push_back(s);
+  s.effect.cause = kinematics::EffectCause::kThermal;
+  s.cause = "thermal";
+  s.joints.clear();
+  s.description = "thermal (time)";
+  s.z = 3.1;
+  s.in_model = true;
+  r.suspects.push_back(s);
+  r.heldout_rms_before_m = 1.6e-4;
+  r.heldout_rms_after_m = 0.8e-4;
+  r.expected_gain = 0.5;
+  r.scheme = "nested 5-fold";
+  const model_discrepancy_t m = ThroughLcm(ToModelDiscrepancy(r, 123, 100, true));
+  std::string error;
+  const auto d = ModelDiscrepancyFromMessage(m, &error);
+  ASSERT_TRUE(d) << error;
+  EXPECT_EQ(d->utime, 123);
+  EXPECT_EQ(d->poses_used, 100);
+  EXPECT_EQ(d->window_poses, 100);
+  EXPECT_EQ(d->chi2, 1100);
+  EXPECT_EQ(d->chi2_log_p, -200);
+  ASSERT_EQ(d->suspects.size(), 2u);
+  EXPECT_EQ(d->suspects[0].cause, "joint_compliance");
+  EXPECT_EQ(d->suspects[0].joints, "j2");
+  EXPECT_EQ(d->suspects[0].description, "joint_compliance j2");
+  EXPECT_EQ(d->suspects[0].z, 5.5);
+  EXPECT_FALSE(d->suspects[0].in_model);
+  EXPECT_EQ(d->suspects[1].joints, "");
+  EXPECT_TRUE(d->suspects[1].in_model);
+  EXPECT_EQ(d->expected_gain, 0.5);
+  EXPECT_EQ(d->scheme, "nested 5-fold");
+  EXPECT_TRUE(d->switched_in);
+  // An infinite z (zero spread of the paired differences) and a log p that underflowed are valid.
+  model_discrepancy_t extreme = m;
+  extreme.z[0] = std::numeric_limits<double>::infinity();
+  extreme.chi2_log_p = -std::numeric_limits<double>::infinity();
+  EXPECT_TRUE(ModelDiscrepancyFromMessage(extreme, &error)) << error;
+  const auto refused = [&](const std::function<void(model_discrepancy_t&)>& spoil,
+                           const std::string& field) {
+    model_discrepancy_t bad = m;
+    spoil(bad);
+    std::string e;
+    EXPECT_FALSE(ModelDiscrepancyFromMessage(bad, &e)) << field;
+    EXPECT_NE(e.find("model_discrepancy." + field), std::string::npos) << e;
+  };
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  refused([](auto& b) { b.num_suspects = 3; }, "num_suspects");
+  refused([](auto& b) { b.num_suspects = -1; }, "num_suspects");
+  refused([](auto& b) { b.num_suspects = 1 << 30; }, "num_suspects");
+  refused([](auto& b) { b.window_poses = -1; }, "window_poses");
+  refused([&](auto& b) { b.chi2 = nan; }, "chi2");
+  refused([](auto& b) { b.chi2_dof = -1; }, "chi2_dof");
+  refused([](auto& b) { b.chi2_log_p = 0.5; }, "chi2_log_p");
+  refused([](auto& b) { b.cause[1] = "gremlins"; }, "cause[1]");
+  refused([&](auto& b) { b.z[0] = nan; }, "z[0]");
+  refused([](auto& b) { b.in_model[0] = 2; }, "in_model[0]");
+  refused([](auto& b) { b.description[0] = std::string(300, 'x'); }, "description[0]");
+  refused([](auto& b) { b.heldout_rms_after = -1e-3; }, "heldout_rms_after");
+  refused([](auto& b) { b.expected_gain = 2; }, "expected_gain");
+  refused([](auto& b) { b.switched_in = 7; }, "switched_in");
+}
+
 }  // namespace
 }  // namespace rcal::transport

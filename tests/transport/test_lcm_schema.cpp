@@ -20,6 +20,7 @@
 #include "rcal/imu_sample_t.hpp"
 #include "rcal/joint_state_t.hpp"
 #include "rcal/kinematic_params_t.hpp"
+#include "rcal/model_discrepancy_t.hpp"
 #include "rcal/next_poses_t.hpp"
 #include "rcal/orientation_estimate_t.hpp"
 #include "rcal/pose_measurement_t.hpp"
@@ -99,6 +100,7 @@ TEST(LcmSchema, EveryLcmFileIsParsedAndEachFingerprintIsTheGeneratedCodes) {
   expect("joint_state_t", joint_state_t::getHash());
   expect("kinematic_params_t", kinematic_params_t::getHash());
   expect("next_poses_t", next_poses_t::getHash());
+  expect("model_discrepancy_t", model_discrepancy_t::getHash());
   expect("clock_offset_t", clock_offset_t::getHash());
   expect("orientation_estimate_t", orientation_estimate_t::getHash());
   expect("pose_measurement_t", pose_measurement_t::getHash());

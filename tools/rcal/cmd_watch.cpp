@@ -14,7 +14,8 @@
 // With --step-offset (the same as sensor_acquisition's): after the step's sensor time (the sim's
 // default --start-utime 0), the truth the test error is judged against is where the arm stands
 // when its joints read the test stops (sim::TrueJoints). Each line ends with the identifier's
-// tracking status and, on a detection, what it named and by how much.
+// tracking status and, on a detection, what it named and by how much. A MODEL_DISCREPANCY (the
+// identifier's discrepancy watch) gets its own line: what it suspects, z, the expected gain.
 #include <atomic>
 #include <chrono>
 #include <csignal>
@@ -32,6 +33,7 @@
 #include "rcal/identification/metrics.hpp"
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/kinematic_params_t.hpp"
+#include "rcal/model_discrepancy_t.hpp"
 #include "rcal/sim/effects.hpp"
 #include "rcal/sim/pose_sim.hpp"
 #include "rcal/sim/sensor_sim.hpp"
@@ -100,6 +102,24 @@ int Run(const Options& o) {
     params = m;
     last_heard = std::chrono::steady_clock::now();
     heard = true;
+  });
+  t.Subscribe<model_discrepancy_t>(channels.model_discrepancy, [&](const model_discrepancy_t& m) {
+    std::string error;
+    const auto d = transport::ModelDiscrepancyFromMessage(m, &error);
+    if (!d) {
+      std::printf("discrepancy refused: %s\n", error.c_str());
+      return;
+    }
+    std::string suspects;
+    for (const auto& x : d->suspects)
+      suspects += (suspects.empty() ? "" : ", ") + x.description + " (z " +
+                  std::to_string(x.z).substr(0, 4) + (x.in_model ? ", in the model)" : ")");
+    std::printf("discrepancy over %d poses: chi2/dof %.2f; %s; held-out %.4f -> %.4f mm%s\n",
+                d->window_poses, d->chi2_dof > 0 ? d->chi2 / d->chi2_dof : 0.0,
+                suspects.empty() ? "nothing suspected" : ("suspected: " + suspects).c_str(),
+                d->heldout_rms_before_m * 1e3, d->heldout_rms_after_m * 1e3,
+                d->switched_in ? "; switched in" : "");
+    std::fflush(stdout);
   });
   t.Subscribe<calibration_status_t>(
       channels.calibration_status, [&](const calibration_status_t& s) {

@@ -7,6 +7,8 @@
 #include <random>
 #include <stdexcept>
 
+#include "rcal/identification/chi_square.hpp"
+#include "rcal/identification/extended_measurement.hpp"
 #include "rcal/identification/setup_guess.hpp"
 #include "rcal/io/effects_json.hpp"
 #include "rcal/kinematics/identifiability.hpp"
@@ -127,6 +129,13 @@ OnlineIdentification::Outcome OnlineIdentification::Add(
   return out;
 }
 
+namespace {
+bool SameMeasurement(const kinematics::PoseMeasurement& a, const kinematics::PoseMeasurement& b) {
+  return a.marker == b.marker && a.q.size() == b.q.size() && a.q == b.q && a.p_WM_W == b.p_WM_W &&
+         a.has_orientation == b.has_orientation && (!a.has_orientation || a.R_EI == b.R_EI);
+}
+}  // namespace
+
 OnlineIdentification::Update OnlineIdentification::Apply(const TimedPose& pose) {
   Update u;
   u.utime = pose.utime;
@@ -134,6 +143,15 @@ OnlineIdentification::Update OnlineIdentification::Apply(const TimedPose& pose) 
   u.dimension = pose.z.dimension();
   const Eigen::VectorXd x_before = ekf_->x();
   u.result = ekf_->Update(pose.z, pose.context);
+  const bool gated = !u.result.accepted && u.result.gate > 0 && u.result.nis > u.result.gate;
+  if (u.result.accepted || gated) {
+    seen_.push_back(pose);
+    // Older than the window's first pose: folded into the prior, no longer the window's.
+    const auto& history = ekf_->history();
+    while (!seen_.empty() && seen_.size() > history.size() &&
+           (history.empty() || !SameMeasurement(seen_.front().z, history.front())))
+      seen_.pop_front();
+  }
   if (!u.result.accepted) return u;
   last_utime_ = pose.utime;
   last_pose_index_ = pose.pose_index;
@@ -151,12 +169,146 @@ void OnlineIdentification::Restore(const identification::EkfCheckpoint& checkpoi
         "held: " + std::to_string(held.size()) + " poses held for a set-up guess, but " +
         (guessed_.empty() ? "the cell guesses no frame" : "the EKF has started"));
   ekf_->Restore(checkpoint);
+  seen_.clear();
   // The start it ran from (its parameters outside the base set are fixed there).
   if (checkpoint.x_fixed.size() == start_.size()) start_ = checkpoint.x_fixed;
   held_ = std::move(held);
   last_utime_ = last_utime;
   last_pose_index_ = last_pose_index;
   if (ekf_->accepted() > 0 || guessed_.empty()) started_ = true;
+}
+
+std::vector<TimedPose> OnlineIdentification::Window() const {
+  const auto& history = ekf_->history();
+  if (history.empty()) return {};
+  for (size_t i = 0; i < seen_.size(); ++i)
+    if (SameMeasurement(seen_[i].z, history.front()))
+      return std::vector<TimedPose>(seen_.begin() + static_cast<std::ptrdiff_t>(i), seen_.end());
+  const identification::EkfCheckpoint c = ekf_->Checkpoint();  // restored: the accepted poses
+  std::vector<TimedPose> out;
+  for (size_t k = 0; k < c.history.size(); ++k)
+    out.push_back(
+        {c.history[k], 0, -1, k < c.contexts.size() ? c.contexts[k] : kinematics::EffectContext{}});
+  return out;
+}
+
+std::vector<kinematics::Effect> OnlineIdentification::SwitchIn(
+    const std::vector<kinematics::Effect>& effects) {
+  if (!started_) throw std::logic_error("effects cannot be switched in before the EKF has started");
+  std::vector<kinematics::Effect> added, all = effects_;
+  for (const auto& e : effects) {
+    const auto same = [&](const kinematics::Effect& o) { return o.SameAs(e); };
+    if (std::none_of(all.begin(), all.end(), same)) {
+      all.push_back(e);
+      added.push_back(e);
+    }
+  }
+  if (added.empty()) return added;
+  const identification::EkfCheckpoint old = ekf_->Checkpoint();
+  const kinematics::ExtendedModel& old_ext = ekf_->extended_model();
+  // Old state index of each new state entry (−1: a new effect parameter): the base set first,
+  // then each effect's parameters at its offset.
+  const auto n = static_cast<int>(base_.size());
+  const kinematics::ExtendedModel new_ext(cell_.model, all, gravity_);  // throws, nothing changed
+  std::vector<int> from(n + new_ext.num_effect_params(), -1);
+  for (int i = 0; i < n; ++i) from[i] = i;
+  for (size_t k = 0; k < old_ext.effects().size(); ++k)
+    for (int j = 0; j < old_ext.effects()[k].num_params(); ++j)
+      from[n + new_ext.effect_offset(static_cast<int>(k)) + j] =
+          n + old_ext.effect_offset(static_cast<int>(k)) + j;  // old effects keep their order
+  std::vector<kinematics::Effect> kept = effects_;
+  effects_ = all;
+  std::unique_ptr<identification::EkfIdentifier> ekf = MakeEkf(start_);
+  identification::EkfCheckpoint c = ekf->Checkpoint();  // the new parameters' prior
+  const auto m = static_cast<Eigen::Index>(from.size());
+  for (Eigen::Index i = 0; i < m; ++i) {
+    if (from[i] < 0) continue;
+    c.x0(i) = old.x0(from[i]);
+    c.x(i) = old.x(from[i]);
+    c.x_lin(i) = old.x_lin(from[i]);
+    for (Eigen::Index j = 0; j < m; ++j) {
+      c.P0(i, j) = from[j] < 0 ? 0.0 : old.P0(from[i], from[j]);
+      c.P(i, j) = from[j] < 0 ? 0.0 : old.P(from[i], from[j]);
+    }
+  }
+  // The window as the poses arrived: the old history's entries (with their inflations) and,
+  // between them, the poses the old gate refused.
+  const std::vector<TimedPose> window = Window();
+  std::vector<bool> was_refused;
+  c.history.clear();
+  c.contexts.clear();
+  c.inflations.clear();
+  size_t h = 0;
+  for (const TimedPose& p : window) {
+    const bool in_history = h < old.history.size() && SameMeasurement(p.z, old.history[h]);
+    Eigen::MatrixXd w;
+    if (in_history && h < old.inflations.size() && old.inflations[h].size() != 0) {
+      w = Eigen::MatrixXd::Zero(m, m);
+      for (Eigen::Index i = 0; i < m; ++i)
+        for (Eigen::Index j = 0; j < m; ++j)
+          if (from[i] >= 0 && from[j] >= 0) w(i, j) = old.inflations[h](from[i], from[j]);
+    }
+    if (in_history) ++h;
+    c.history.push_back(p.z);
+    c.contexts.push_back(p.context);
+    c.inflations.push_back(w);
+    was_refused.push_back(!in_history);
+  }
+  c.accepted = old.accepted;
+  c.rejected = old.rejected;
+  c.relinearizations = old.relinearizations;
+  c.x_fixed = old.x_fixed;
+  // New parameters: converging again until they settle.
+  c.status = identification::TrackingStatus::kConverging;
+  c.small_steps = 0;
+  const int passes = std::max(cell_.ekf.max_relinearize_passes, 1);
+  try {
+    ekf->Restore(c);
+    ekf->Refine(passes);
+    // A refused pose the new model still cannot explain (beyond its gate at the new estimate) is
+    // an outlier, not evidence: dropped, and the window relinearised without it.
+    const double p_gate = cell_.ekf.gate_probability;
+    identification::EkfCheckpoint d = ekf->Checkpoint();
+    d.history.clear();
+    d.contexts.clear();
+    d.inflations.clear();
+    int taken = 0;
+    for (size_t k = 0; k < c.history.size(); ++k) {
+      if (was_refused[k] && p_gate < 1.0) {
+        Eigen::VectorXd r;
+        Eigen::MatrixXd H;
+        identification::ExtendedResidualAndJacobian(
+            ekf->extended_model(), c.history[k], c.contexts[k], ekf->x(), ekf->e(), base_, r, &H);
+        const Eigen::MatrixXd S = H * ekf->P() * H.transpose() + c.history[k].covariance;
+        const double nis = r.dot(S.llt().solve(r));
+        if (!(nis <= identification::ChiSquareQuantile(p_gate, static_cast<double>(r.size()))))
+          continue;
+      }
+      taken += was_refused[k] ? 1 : 0;
+      d.history.push_back(c.history[k]);
+      d.contexts.push_back(c.contexts[k]);
+      d.inflations.push_back(c.inflations[k]);
+    }
+    if (d.history.size() != c.history.size()) {
+      d.x = c.x;
+      d.P = c.P;
+      d.x_lin = c.x_lin;
+      ekf->Restore(d);
+      ekf->Refine(passes);
+    }
+    // The refused poses taken count as accepted now.
+    identification::EkfCheckpoint e = ekf->Checkpoint();
+    e.accepted += taken;
+    e.rejected = std::max(0, e.rejected - taken);
+    ekf->Restore(e);
+  } catch (...) {
+    effects_ = kept;
+    throw;
+  }
+  ekf_ = std::move(ekf);
+  // The window now holds every pose it kept.
+  seen_.assign(window.begin(), window.end());
+  return added;
 }
 
 OnlineIdentification MakeOnlineIdentification(io::BuiltCell cell, const std::string& effects_path) {

@@ -56,6 +56,9 @@ Eigen::VectorXd InitialSetupGuess(const kinematics::KinematicModel& model,
 std::vector<int> IdentifiableSubset(const kinematics::KinematicModel& model,
                                     const std::vector<kinematics::PoseMeasurement>& ms,
                                     const Eigen::VectorXd& x, const std::vector<int>& candidates) {
+  // No candidate (a model whose set-up frames are all fixed) or no pose: nothing identifiable
+  // (Eigen's QR of a matrix with no column reads out of bounds).
+  if (candidates.empty() || ms.empty()) return {};
   int rows = 0;
   for (const auto& m : ms) rows += m.dimension();
   Eigen::MatrixXd J(rows, candidates.size());

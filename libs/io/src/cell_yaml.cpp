@@ -323,7 +323,8 @@ void ReadChannels(const Reader& r, const YAML::Node& n, const std::string& p, Ce
       {"health", &c->health},
       {"supervisor_state", &c->supervisor_state},
       {"clock_offset", &c->clock_offset},
-      {"next_poses", &c->next_poses}};
+      {"next_poses", &c->next_poses},
+      {"model_discrepancy", &c->model_discrepancy}};
   std::set<std::string> keys;
   for (const auto& f : fields) keys.insert(f.first);
   r.CheckMap(n, p, keys);

@@ -520,4 +520,85 @@ std::optional<NextPoses> NextPosesFromMessage(const next_poses_t& m,
   return out;
 }
 
+model_discrepancy_t ToModelDiscrepancy(const cell::DiscrepancyReport& r, int64_t utime,
+                                       int32_t poses_used, bool switched_in) {
+  model_discrepancy_t m;
+  m.utime = utime;
+  m.poses_used = poses_used;
+  m.window_poses = r.window_poses;
+  m.chi2 = r.chi2;
+  m.chi2_dof = r.chi2_dof;
+  m.chi2_log_p = std::min(r.chi2_log_p, 0.0);
+  m.num_suspects = static_cast<int32_t>(r.suspects.size());
+  for (const auto& s : r.suspects) {
+    m.cause.push_back(s.cause);
+    std::string joints;
+    for (const auto& j : s.joints) joints += (joints.empty() ? "" : ",") + j;
+    m.joints.push_back(joints);
+    m.description.push_back(s.description);
+    m.z.push_back(s.z);
+    m.in_model.push_back(s.in_model ? 1 : 0);
+  }
+  m.heldout_rms_before = r.heldout_rms_before_m;
+  m.heldout_rms_after = r.heldout_rms_after_m;
+  m.expected_gain = r.expected_gain;
+  m.scheme = r.scheme;
+  m.switched_in = switched_in ? 1 : 0;
+  return m;
+}
+
+std::optional<ModelDiscrepancy> ModelDiscrepancyFromMessage(const model_discrepancy_t& m,
+                                                            std::string* error) {
+  auto fail = [&](const std::string& why) {
+    if (error) *error = "model_discrepancy." + why;
+    return std::nullopt;
+  };
+  const auto finite_nonneg = [](double v) { return std::isfinite(v) && v >= 0; };
+  if (m.window_poses < 0) return fail("window_poses: negative");
+  if (m.poses_used < 0) return fail("poses_used: negative");
+  if (m.num_suspects < 0 || m.num_suspects > 64)
+    return fail("num_suspects: " + std::to_string(m.num_suspects) + " is not 0 to 64");
+  const auto n = static_cast<size_t>(m.num_suspects);
+  if (m.cause.size() != n || m.joints.size() != n || m.description.size() != n || m.z.size() != n ||
+      m.in_model.size() != n)
+    return fail("num_suspects: " + std::to_string(n) +
+                ", cause, joints, description, z or in_model disagrees");
+  if (!finite_nonneg(m.chi2)) return fail("chi2: not a finite value ≥ 0");
+  if (!finite_nonneg(m.chi2_dof)) return fail("chi2_dof: not a finite value ≥ 0");
+  if (std::isnan(m.chi2_log_p) || m.chi2_log_p > 0) return fail("chi2_log_p: not ≤ 0");
+  if (!finite_nonneg(m.heldout_rms_before))
+    return fail("heldout_rms_before: not a finite value ≥ 0");
+  if (!finite_nonneg(m.heldout_rms_after)) return fail("heldout_rms_after: not a finite value ≥ 0");
+  if (!(std::isfinite(m.expected_gain) && m.expected_gain <= 1))
+    return fail("expected_gain: not a finite value ≤ 1");
+  if (m.switched_in != 0 && m.switched_in != 1) return fail("switched_in: not 0 or 1");
+  constexpr size_t kMaxText = 256;
+  if (m.scheme.size() > kMaxText) return fail("scheme: longer than 256 bytes");
+  ModelDiscrepancy out;
+  out.utime = m.utime;
+  out.poses_used = m.poses_used;
+  out.window_poses = m.window_poses;
+  out.chi2 = m.chi2;
+  out.chi2_dof = m.chi2_dof;
+  out.chi2_log_p = m.chi2_log_p;
+  for (size_t i = 0; i < n; ++i) {
+    const std::string at = "[" + std::to_string(i) + "]";
+    if (!kinematics::ParseEffectCause(m.cause[i]))
+      return fail("cause" + at + ": '" + m.cause[i].substr(0, kMaxText) +
+                  "' is not joint_compliance, joint_periodic, joint_scale, backlash or thermal");
+    if (m.joints[i].size() > kMaxText) return fail("joints" + at + ": longer than 256 bytes");
+    if (m.description[i].size() > kMaxText)
+      return fail("description" + at + ": longer than 256 bytes");
+    if (std::isnan(m.z[i])) return fail("z" + at + ": NaN");
+    if (m.in_model[i] != 0 && m.in_model[i] != 1) return fail("in_model" + at + ": not 0 or 1");
+    out.suspects.push_back({m.cause[i], m.joints[i], m.description[i], m.z[i], m.in_model[i] == 1});
+  }
+  out.heldout_rms_before_m = m.heldout_rms_before;
+  out.heldout_rms_after_m = m.heldout_rms_after;
+  out.expected_gain = m.expected_gain;
+  out.scheme = m.scheme;
+  out.switched_in = m.switched_in == 1;
+  return out;
+}
+
 }  // namespace rcal::transport

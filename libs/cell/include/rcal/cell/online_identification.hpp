@@ -30,6 +30,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <limits>
 #include <memory>
@@ -92,7 +93,27 @@ class OnlineIdentification {
   void Restore(const identification::EkfCheckpoint& checkpoint, std::vector<TimedPose> held,
                int64_t last_utime, int64_t last_pose_index);
 
+  /// The poses of the EKF's window as they arrived: its accepted poses and, between them, those
+  /// its gate refused (the poses a model that lacks an effect cannot explain are the evidence of
+  /// it), oldest first. After a Restore, the window's accepted poses alone (utime 0) until new
+  /// poses arrive.
+  std::vector<TimedPose> Window() const;
+
+  /// Adds `effects` to those identified (issue 15 item 5, the discrepancy watch's switch): the
+  /// identification is rebuilt on the extended model, the state of the geometric parameters and
+  /// of the effects it already had kept with their covariance, each new effect parameter from 0
+  /// with its weak prior (uncorrelated), and relinearised over Window() (the poses the old gate
+  /// refused included, then those still beyond the gate of the new model dropped), so the new
+  /// effects are identified from the poses already seen (the information folded out of the window
+  /// carries none about them). Effects already identified are skipped. Returns the effects added.
+  /// Throws std::invalid_argument for an effect the model cannot have (nothing changed) and
+  /// std::logic_error before the EKF has started.
+  std::vector<kinematics::Effect> SwitchIn(const std::vector<kinematics::Effect>& effects);
+
   const io::BuiltCell& cell() const { return cell_; }
+  /// The non-geometric effects identified (none: the geometric identification).
+  const std::vector<kinematics::Effect>& effects() const { return effects_; }
+  const kinematics::GravityModel& gravity() const { return gravity_; }
   const kinematics::KinematicModel& model() const { return cell_.model; }
   const std::vector<int>& base() const { return base_; }
   const identification::EkfIdentifier& ekf() const { return *ekf_; }
@@ -116,6 +137,8 @@ class OnlineIdentification {
   Eigen::VectorXd start_;
   std::unique_ptr<identification::EkfIdentifier> ekf_;
   std::vector<TimedPose> held_;
+  /// Poses applied to the EKF (accepted or refused by its gate) since its window began.
+  std::deque<TimedPose> seen_;
   bool started_ = true;
   int64_t last_utime_ = std::numeric_limits<int64_t>::min();
   int64_t last_pose_index_ = -1;

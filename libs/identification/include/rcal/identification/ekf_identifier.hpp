@@ -223,6 +223,9 @@ class EkfIdentifier {
   int relinearizations() const { return relinearizations_; }
   /// Accepted poses in the window (the others are folded into the prior).
   int window_size() const { return static_cast<int>(history_.size()); }
+  /// The window's accepted poses, oldest first (their contexts: Checkpoint().contexts).
+  const std::vector<kinematics::PoseMeasurement>& history() const { return history_; }
+  const EkfSettings& settings() const { return settings_; }
   TrackingStatus status() const { return status_; }
   /// Changes detected so far, oldest first.
   const std::vector<DetectedChange>& changes() const { return changes_; }

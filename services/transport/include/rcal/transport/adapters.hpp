@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "rcal/calibration_status_t.hpp"
+#include "rcal/cell/discrepancy_watch.hpp"
 #include "rcal/cell/next_poses.hpp"
 #include "rcal/clock_offset_t.hpp"
 #include "rcal/estimation/clock_offset.hpp"
@@ -24,6 +25,7 @@
 #include "rcal/kinematic_params_t.hpp"
 #include "rcal/kinematics/measurement.hpp"
 #include "rcal/kinematics/model.hpp"
+#include "rcal/model_discrepancy_t.hpp"
 #include "rcal/next_poses_t.hpp"
 #include "rcal/pose_measurement_t.hpp"
 
@@ -181,5 +183,35 @@ struct NextPoses {
 std::optional<NextPoses> NextPosesFromMessage(const next_poses_t& msg,
                                               const kinematics::KinematicModel& model,
                                               std::string* error);
+
+// ---- model discrepancy (issue 15 item 5) ---------------------------------------------------
+
+/// The discrepancy watch's report → MODEL_DISCREPANCY. `utime` [µs]: the window's last pose;
+/// `poses_used`: poses accepted so far; `switched_in`: the new suspects are now identified.
+model_discrepancy_t ToModelDiscrepancy(const cell::DiscrepancyReport& report, int64_t utime,
+                                       int32_t poses_used, bool switched_in);
+
+/// MODEL_DISCREPANCY as a listener reads it.
+struct ModelDiscrepancy {
+  int64_t utime = 0;  ///< [µs]
+  int32_t poses_used = 0, window_poses = 0;
+  double chi2 = 0, chi2_dof = 0, chi2_log_p = 0;
+  struct Suspect {
+    std::string cause, joints, description;
+    double z = 0;
+    bool in_model = false;
+  };
+  std::vector<Suspect> suspects;  ///< strongest first
+  double heldout_rms_before_m = 0, heldout_rms_after_m = 0, expected_gain = 0;
+  std::string scheme;
+  bool switched_in = false;
+};
+
+/// MODEL_DISCREPANCY → its content. Checks: 0 ≤ window_poses, 0 ≤ num_suspects ≤ 64 and every
+/// array that long, each cause in the vocabulary, strings ≤ 256 bytes, chi2 and dof finite ≥ 0,
+/// chi2_log_p ≤ 0 (−inf allowed), z not NaN, in_model and switched_in 0 or 1, held-out RMS
+/// finite ≥ 0, expected_gain finite ≤ 1; the reason names the field.
+std::optional<ModelDiscrepancy> ModelDiscrepancyFromMessage(const model_discrepancy_t& msg,
+                                                            std::string* error);
 
 }  // namespace rcal::transport

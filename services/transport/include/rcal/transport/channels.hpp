@@ -17,5 +17,6 @@ inline constexpr const char* kHealth = "HEALTH";                         ///< he
 inline constexpr const char* kSupervisorState = "SUPERVISOR_STATE";      ///< supervisor_state_t
 inline constexpr const char* kClockOffset = "CLOCK_OFFSET";              ///< clock_offset_t
 inline constexpr const char* kNextPoses = "NEXT_POSES";                  ///< next_poses_t
+inline constexpr const char* kModelDiscrepancy = "MODEL_DISCREPANCY";    ///< model_discrepancy_t
 
 }  // namespace rcal::transport::channels
