@@ -174,10 +174,13 @@ class Identifier {
                            s.z, s.in_model ? ", in the model" : "");
     spdlog::info(
         "discrepancy watch over {} poses: chi2/dof {:.2f}; {}; held-out position RMS {:.4f} -> "
-        "{:.4f} mm",
+        "{:.4f} mm{}",
         r.window_poses, r.chi2_dof > 0 ? r.chi2 / r.chi2_dof : 0.0,
         names.empty() ? std::string("nothing suspected") : names, r.heldout_rms_before_m * 1e3,
-        r.heldout_rms_after_m * 1e3);
+        r.heldout_rms_after_m * 1e3,
+        r.correlations.empty() ? std::string()
+                               : fmt::format("; residual vs {}: r = {:.2f}",
+                                             r.correlations[0].regressor, r.correlations[0].r));
     if (o_.discrepancy_switch && !r.NewEffects().empty()) {
       try {
         const auto added = id_.SwitchIn(r.NewEffects());
@@ -185,8 +188,14 @@ class Identifier {
         if (switched) {
           SaveEffects();
           SaveState();
-          for (const auto& p : id_.ekf().extended_model().EffectParameters())
-            spdlog::info("effect parameter {} [{}] identified live (switched in)", p.name, p.unit);
+          const auto& ekf = id_.ekf();
+          const auto params = ekf.extended_model().EffectParameters();
+          for (size_t k = 0; k < params.size(); ++k)
+            spdlog::info(
+                "effect parameter {} [{}] identified live (switched in): {:.4g} ± {:.2g} "
+                "from the window's {} poses",
+                params[k].name, params[k].unit, ekf.e()(static_cast<Eigen::Index>(k)),
+                ekf.sigma_e()(static_cast<Eigen::Index>(k)), ekf.window_size());
         }
       } catch (const std::exception& e) {
         health_.Error(std::string("discrepancy switch: ") + e.what());

@@ -614,6 +614,8 @@ TEST(ModelDiscrepancyAdapter, RoundTripAndRefusals) {
   r.heldout_rms_after_m = 0.8e-4;
   r.expected_gain = 0.5;
   r.scheme = "nested 5-fold";
+  r.correlations.push_back({"gravity torque j2 [N*m]", 0.41, -12.5});
+  r.correlations.push_back({"temperature [degC]", -0.05, -0.3});
   const model_discrepancy_t m = ThroughLcm(ToModelDiscrepancy(r, 123, 100, true));
   std::string error;
   const auto d = ModelDiscrepancyFromMessage(m, &error);
@@ -634,6 +636,10 @@ TEST(ModelDiscrepancyAdapter, RoundTripAndRefusals) {
   EXPECT_EQ(d->expected_gain, 0.5);
   EXPECT_EQ(d->scheme, "nested 5-fold");
   EXPECT_TRUE(d->switched_in);
+  ASSERT_EQ(d->correlations.size(), 2u);
+  EXPECT_EQ(d->correlations[0].regressor, "gravity torque j2 [N*m]");
+  EXPECT_EQ(d->correlations[0].r, 0.41);
+  EXPECT_EQ(d->correlations[1].log_p, -0.3);
   // An infinite z (zero spread of the paired differences) and a log p that underflowed are valid.
   model_discrepancy_t extreme = m;
   extreme.z[0] = std::numeric_limits<double>::infinity();
@@ -662,6 +668,11 @@ TEST(ModelDiscrepancyAdapter, RoundTripAndRefusals) {
   refused([](auto& b) { b.heldout_rms_after = -1e-3; }, "heldout_rms_after");
   refused([](auto& b) { b.expected_gain = 2; }, "expected_gain");
   refused([](auto& b) { b.switched_in = 7; }, "switched_in");
+  refused([](auto& b) { b.num_correlations = 5; }, "num_correlations");
+  refused([](auto& b) { b.num_correlations = 65; }, "num_correlations");
+  refused([](auto& b) { b.correlation[1] = 1.5; }, "correlation[1]");
+  refused([](auto& b) { b.correlation_log_p[0] = 0.1; }, "correlation_log_p[0]");
+  refused([](auto& b) { b.regressor[0] = std::string(257, 'r'); }, "regressor[0]");
 }
 
 }  // namespace

@@ -114,10 +114,14 @@ int Run(const Options& o) {
     for (const auto& x : d->suspects)
       suspects += (suspects.empty() ? "" : ", ") + x.description + " (z " +
                   std::to_string(x.z).substr(0, 4) + (x.in_model ? ", in the model)" : ")");
-    std::printf("discrepancy over %d poses: chi2/dof %.2f; %s; held-out %.4f -> %.4f mm%s\n",
+    std::string strongest;
+    if (!d->correlations.empty())
+      strongest = "; residual vs " + d->correlations[0].regressor +
+                  ": r = " + std::to_string(d->correlations[0].r).substr(0, 5);
+    std::printf("discrepancy over %d poses: chi2/dof %.2f; %s; held-out %.4f -> %.4f mm%s%s\n",
                 d->window_poses, d->chi2_dof > 0 ? d->chi2 / d->chi2_dof : 0.0,
                 suspects.empty() ? "nothing suspected" : ("suspected: " + suspects).c_str(),
-                d->heldout_rms_before_m * 1e3, d->heldout_rms_after_m * 1e3,
+                d->heldout_rms_before_m * 1e3, d->heldout_rms_after_m * 1e3, strongest.c_str(),
                 d->switched_in ? "; switched in" : "");
     std::fflush(stdout);
   });

@@ -85,6 +85,10 @@ DiscrepancyReport WatchForDiscrepancy(const kinematics::KinematicModel& model,
       a.effects.empty() ? a.gain.heldout_rms_before_m : a.gain.heldout_rms_after_m;
   r.expected_gain = a.effects.empty() ? 0.0 : a.gain.relative_gain;
   r.scheme = a.gain.scheme;
+  for (const auto& c : a.correlations) {  // strongest first (Analysis::correlations)
+    if (r.correlations.size() == 8) break;
+    r.correlations.push_back({c.regressor + " [" + c.unit + "]", c.correlation, c.log_p});
+  }
   return r;
 }
 

@@ -544,6 +544,12 @@ model_discrepancy_t ToModelDiscrepancy(const cell::DiscrepancyReport& r, int64_t
   m.expected_gain = r.expected_gain;
   m.scheme = r.scheme;
   m.switched_in = switched_in ? 1 : 0;
+  m.num_correlations = static_cast<int32_t>(r.correlations.size());
+  for (const auto& c : r.correlations) {
+    m.regressor.push_back(c.regressor);
+    m.correlation.push_back(c.r);
+    m.correlation_log_p.push_back(std::min(c.log_p, 0.0));
+  }
   return m;
 }
 
@@ -592,6 +598,21 @@ std::optional<ModelDiscrepancy> ModelDiscrepancyFromMessage(const model_discrepa
     if (std::isnan(m.z[i])) return fail("z" + at + ": NaN");
     if (m.in_model[i] != 0 && m.in_model[i] != 1) return fail("in_model" + at + ": not 0 or 1");
     out.suspects.push_back({m.cause[i], m.joints[i], m.description[i], m.z[i], m.in_model[i] == 1});
+  }
+  if (m.num_correlations < 0 || m.num_correlations > 64)
+    return fail("num_correlations: " + std::to_string(m.num_correlations) + " is not 0 to 64");
+  const auto nc = static_cast<size_t>(m.num_correlations);
+  if (m.regressor.size() != nc || m.correlation.size() != nc || m.correlation_log_p.size() != nc)
+    return fail("num_correlations: " + std::to_string(nc) +
+                ", regressor, correlation or correlation_log_p disagrees");
+  for (size_t i = 0; i < nc; ++i) {
+    const std::string at = "[" + std::to_string(i) + "]";
+    if (m.regressor[i].size() > kMaxText) return fail("regressor" + at + ": longer than 256 bytes");
+    if (!(std::isfinite(m.correlation[i]) && std::abs(m.correlation[i]) <= 1))
+      return fail("correlation" + at + ": not a finite value in [-1, 1]");
+    if (std::isnan(m.correlation_log_p[i]) || m.correlation_log_p[i] > 0)
+      return fail("correlation_log_p" + at + ": not ≤ 0");
+    out.correlations.push_back({m.regressor[i], m.correlation[i], m.correlation_log_p[i]});
   }
   out.heldout_rms_before_m = m.heldout_rms_before;
   out.heldout_rms_after_m = m.heldout_rms_after;

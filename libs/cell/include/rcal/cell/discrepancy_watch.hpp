@@ -56,6 +56,13 @@ struct SuspectedEffect {
   bool in_model = false;          ///< the identifier already identifies it
 };
 
+/// The residual's correlation with one candidate's regressor.
+struct WatchedCorrelation {
+  std::string regressor;  ///< with its unit: "gravity torque j2 [N*m]", "temperature [degC]"
+  double r = 0;           ///< Pearson r
+  double log_p = 0;       ///< ln p, two-sided
+};
+
 /// One run of the watch.
 struct DiscrepancyReport {
   int window_poses = 0;
@@ -68,6 +75,7 @@ struct DiscrepancyReport {
   double expected_gain = 0;               ///< (before − after) / before
   std::string scheme;                     ///< how held-out was judged
   kinematics::GravityModel gravity;       ///< joint_compliance's model in the analysis
+  std::vector<WatchedCorrelation> correlations;  ///< strongest first, at most 8
   /// Suspects the identifier does not identify yet.
   std::vector<kinematics::Effect> NewEffects() const;
 };

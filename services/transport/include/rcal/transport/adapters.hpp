@@ -201,7 +201,8 @@ struct ModelDiscrepancy {
     double z = 0;
     bool in_model = false;
   };
-  std::vector<Suspect> suspects;  ///< strongest first
+  std::vector<Suspect> suspects;                       ///< strongest first
+  std::vector<cell::WatchedCorrelation> correlations;  ///< strongest first
   double heldout_rms_before_m = 0, heldout_rms_after_m = 0, expected_gain = 0;
   std::string scheme;
   bool switched_in = false;
@@ -210,7 +211,8 @@ struct ModelDiscrepancy {
 /// MODEL_DISCREPANCY → its content. Checks: 0 ≤ window_poses, 0 ≤ num_suspects ≤ 64 and every
 /// array that long, each cause in the vocabulary, strings ≤ 256 bytes, chi2 and dof finite ≥ 0,
 /// chi2_log_p ≤ 0 (−inf allowed), z not NaN, in_model and switched_in 0 or 1, held-out RMS
-/// finite ≥ 0, expected_gain finite ≤ 1; the reason names the field.
+/// finite ≥ 0, expected_gain finite ≤ 1, 0 ≤ num_correlations ≤ 64 and its arrays that long,
+/// |correlation| ≤ 1, correlation_log_p ≤ 0; the reason names the field.
 std::optional<ModelDiscrepancy> ModelDiscrepancyFromMessage(const model_discrepancy_t& msg,
                                                             std::string* error);
 
