@@ -6,7 +6,8 @@
 //   the geometry misses the noise (χ²) and what the effect would gain; switched in, the
 //   identification finds the compliance against the simulated truth (the poses the geometric
 //   gate refused taken back), agrees with an identifier built with the effect from the start on
-//   the same poses, and predicts the arm under a payload where the geometry cannot;
+//   the same poses, and predicts the arm under a payload where the geometry cannot; the same on a
+//   UR10 tracker cell (positions only, two markers, its frames guessed);
 // - arms without the effect (three seeds): nothing is suspected and χ² agrees with the noise.
 #include "rcal/cell/discrepancy_watch.hpp"
 
@@ -95,6 +96,11 @@ TEST(DiscrepancyWatch, NamesTheHiddenEffectAndSwitchedInItIsIdentified) {
   EXPECT_EQ(r.noise_against, "stated noise");
   EXPECT_GT(r.chi2 / r.chi2_dof, 1.5);
   EXPECT_LT(r.chi2_log_p, std::log(1e-6));
+  // The residual correlates most with joint 2's gravity torque.
+  ASSERT_FALSE(r.correlations.empty());
+  EXPECT_EQ(r.correlations[0].regressor.rfind("gravity torque j2", 0), 0u)
+      << r.correlations[0].regressor;
+  EXPECT_LT(r.correlations[0].log_p, std::log(1e-3));
   ASSERT_FALSE(r.suspects.empty());
   const SuspectedEffect& top = r.suspects[0];
   std::printf("suspect %s z %.1f value %.4g ± %.2g; held-out %.4f -> %.4f mm (gain %.0f %%)\n",
@@ -214,6 +220,53 @@ TEST(DiscrepancyWatch, AnUnchangedArmKeepsTheConstantFilter) {
     EXPECT_TRUE(RunWatched(watched, stops).empty()) << seed;
     for (const auto& p : stops) plain.Add(p);
     EXPECT_EQ(watched.ekf().state(), plain.ekf().state()) << seed;
+  }
+}
+
+// Another arm and cell: the UR10 with an optical tracker measuring two markers, positions only,
+// its tracker frame guessed from the first poses (config/cells/ur10.yaml). Its shoulder bends
+// (joint_compliance on joint 2): the watch names it; the same arm without it: nothing.
+TEST(DiscrepancyWatch, APositionsOnlyTrackerCellWithGuessedFramesToo) {
+  const io::BuiltCell cell = io::LoadCell(RCAL_SOURCE_DIR "/config/cells/ur10.yaml");
+  const CellSimSpec sim = LoadCellSimSpec(RCAL_SOURCE_DIR "/config/cells/ur10.sim.yaml");
+  const Eigen::VectorXd x_true = TrueErrors(cell, sim);
+  sim::PoseNoise noise;
+  noise.position_sigma = 1e-4;
+  noise.orientation_sigma = 0;
+  for (const bool bends : {true, false}) {
+    std::vector<sim::TruthEffect> effects;
+    if (bends) effects.push_back(sim::ParseEffectSpec("joint_compliance:j2=2e-6", cell.model));
+    const sim::EffectTruth truth = sim::MakeEffectTruth(cell.model, effects);
+    sim::Rng rng(7), context_rng(8);
+    OnlineIdentification id(cell);
+    Eigen::VectorXd q_before;
+    const auto qs = sim::SampleJoints(cell.model, 60, rng);
+    int64_t utime = 0;
+    for (int k = 0; k < 60; ++k) {
+      const auto c = sim::StopContext(10.0 * k, qs[k], q_before, {}, context_rng);
+      q_before = qs[k];
+      for (auto z : sim::MeasurePosesWithEffects(truth, x_true, {qs[k]}, {c}, noise, rng)) {
+        // What the tracker measures: the marker's position alone.
+        z.has_orientation = false;
+        z.covariance = Eigen::Matrix3d::Identity() * noise.position_sigma * noise.position_sigma;
+        ++utime;
+        const auto out = id.Add({z, utime * 1000, utime, c});
+        ASSERT_TRUE(out.rejected.empty()) << out.rejected;
+      }
+    }
+    ASSERT_TRUE(id.started());
+    const DiscrepancyReport r = WatchForDiscrepancy(id);
+    std::printf("UR10 %s: %d poses, chi2/dof %.2f, %s\n", bends ? "bending" : "unchanged",
+                r.window_poses, r.chi2 / r.chi2_dof,
+                r.suspects.empty() ? "nothing suspected" : r.suspects[0].description.c_str());
+    if (bends) {
+      ASSERT_FALSE(r.suspects.empty());
+      EXPECT_EQ(r.suspects[0].cause, "joint_compliance");
+      EXPECT_EQ(r.suspects[0].joints, (std::vector<std::string>{cell.model.joints()[1].name}));
+      EXPECT_GT(r.expected_gain, 0.1);
+    } else {
+      EXPECT_TRUE(r.suspects.empty()) << r.suspects[0].description;
+    }
   }
 }
 

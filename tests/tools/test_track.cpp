@@ -10,12 +10,16 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "rcal/cell/cell_sim_yaml.hpp"
+#include "rcal/cell/discrepancy_watch.hpp"
 #include "rcal/cell/online_identification.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/cell_yaml.hpp"
+#include "rcal/io/effects_json.hpp"
 #include "rcal/io/pose_dataset.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/pose_measurement_t.hpp"
+#include "rcal/sim/effects.hpp"
 #include "rcal/sim/pose_sim.hpp"
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
@@ -138,6 +142,79 @@ TEST(Track, AnLcmLogRunsWithEachPosesOwnCovarianceAsTheIdentifierDoes) {
     ++compared;
   }
   EXPECT_GE(compared, 30);
+  fs::remove_all(dir);
+}
+
+// `rcal track LOG --cell CELL --discrepancy-every 50 --discrepancy-switch` on a log of the arm
+// whose joint 2 bends (each pose logged with its context): the watch names joint_compliance on
+// joint 2 after 50 accepted poses and switches it in; the JSON's watch and final effect are what
+// the library gives for the same poses run the same way.
+TEST(Track, TheDiscrepancyWatchRunsOverALogAsTheIdentifierRunsIt) {
+  const fs::path dir = fs::temp_directory_path() / "rcal_track_watch_test";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string cell_file = std::string(RCAL_SOURCE_DIR) + "/config/cells/grb3016_poses.yaml";
+  const io::BuiltCell built = io::LoadCell(cell_file);
+  const cell::CellSimSpec sim_spec =
+      cell::LoadCellSimSpec(std::string(RCAL_SOURCE_DIR) + "/config/cells/grb3016_poses.sim.yaml");
+  const Eigen::VectorXd x_true = cell::TrueErrors(built, sim_spec);
+  const sim::EffectTruth truth = sim::MakeEffectTruth(
+      built.model, {sim::ParseEffectSpec("joint_compliance:j2=2e-6", built.model)});
+  sim::PoseNoise noise;
+  noise.position_sigma = built.spec.position.sigma.maxCoeff();
+  noise.orientation_sigma = built.spec.position.orientation_sigma;
+  sim::Rng rng(97), context_rng(98);
+  std::vector<cell::TimedPose> poses;
+  {
+    lcm::LogFile log((dir / "run.lcmlog").string(), "w");
+    ASSERT_TRUE(log.good());
+    Eigen::VectorXd q_before;
+    const auto qs = sim::SampleJoints(built.model, 80, rng);
+    for (int k = 0; k < 80; ++k) {
+      const auto c = sim::StopContext(10.0 * k, qs[k], q_before, {}, context_rng);
+      q_before = qs[k];
+      const auto z = sim::MeasurePoseWithEffects(truth, x_true, qs[k], c, noise, rng);
+      const pose_measurement_t m = transport::ToMessage(z, (k + 1) * 1'000'000, k, 0, c);
+      std::vector<unsigned char> buf(m.getEncodedSize());
+      m.encode(buf.data(), 0, static_cast<int>(buf.size()));
+      lcm::LogEvent e{k, (k + 1) * 1'000'000, transport::channels::kPoseMeasurement,
+                      static_cast<int32_t>(buf.size()), buf.data()};
+      ASSERT_EQ(log.writeEvent(&e), 0);
+      std::string error;  // what a reader of the log gets back
+      const auto back = transport::FromMessage(m, &error, &built.model);
+      ASSERT_TRUE(back) << error;
+      poses.push_back({*back, m.utime, k, *transport::ContextFromMessage(m, &error)});
+    }
+  }
+  const testing::Result r = testing::RunRcal(
+      "track " + (dir / "run.lcmlog").string() + " --cell " + cell_file +
+      " --discrepancy-every 50 --discrepancy-switch --json " + (dir / "track.json").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  nlohmann::json j;
+  std::ifstream(dir / "track.json") >> j;
+  ASSERT_EQ(j["discrepancy_watch"].size(), 1u) << j.dump(1);
+  const auto& w = j["discrepancy_watch"][0];
+  EXPECT_EQ(w["accepted"], 50);
+  ASSERT_GE(w["suspects"].size(), 1u);
+  EXPECT_EQ(w["suspects"][0]["effect"], "joint_compliance j2");
+  EXPECT_EQ(w["switched_in"], nlohmann::json::array({"joint_compliance j2"}));
+  ASSERT_EQ(j["effects"].size(), 1u);
+  // The library, the same poses, the same way.
+  cell::OnlineIdentification id(built);
+  cell::DiscrepancyWatchSettings s;
+  for (const auto& p : poses) {
+    const auto out = id.Add(p);
+    if (!out.updates.empty() && out.updates.back().result.accepted && cell::WatchDue(id, s))
+      id.SwitchIn(cell::WatchForDiscrepancy(id, s).NewEffects());
+  }
+  ASSERT_EQ(id.ekf().num_effect_params(), 1);
+  const double c = id.ekf().e()(0), sigma = id.ekf().sigma_e()(0);
+  const io::AnalysisEffects tracked = io::ParseAnalysisEffects(j, built.model);
+  ASSERT_EQ(tracked.values.size(), 1);
+  std::printf("rcal track: joint 2 compliance %.6g; library %.6g ± %.2g (truth 2e-6)\n",
+              tracked.values(0), c, sigma);
+  EXPECT_NEAR(c, 2e-6, 3 * sigma);
+  EXPECT_NEAR(tracked.values(0), c, 1e-9 * sigma);
   fs::remove_all(dir);
 }
 

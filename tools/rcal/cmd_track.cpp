@@ -10,6 +10,13 @@
 // The trace has one row per data row: time, set, prediction_error_m (test rows), status,
 // changed (the parameters or joint named on the row that detected a change), nis.
 //
+// With --cell, --discrepancy-every N runs the process's discrepancy watch (cell::
+// WatchForDiscrepancy) when it is due, and --discrepancy-switch switches what it suspects in, as
+// ekf_identifier does (offline the watch's result is applied at the pose it was due; live it
+// arrives about a second later, from a worker thread). Each pose goes in with its context (an LCM
+// log's logged one, a CSV's temperature, payload, time and approach columns). The JSON lists every
+// watch (`discrepancy_watch`) and the effects identified at the end (`effects`).
+//
 // rcal track --sweep [--seeds N] [--quiet-poses N] [--out DIR]: the seeded tracking experiment
 // (track_sweep.hpp) on the shipped arms, full poses and positions only; prints the table and
 // writes DIR/track_sweep.json.
@@ -26,11 +33,13 @@
 
 #include "command.hpp"
 #include "pose_log.hpp"
+#include "rcal/cell/discrepancy_watch.hpp"
 #include "rcal/cell/online_identification.hpp"
 #include "rcal/identification/calibration.hpp"
 #include "rcal/identification/tracking.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/cell_yaml.hpp"
+#include "rcal/io/effects_json.hpp"
 #include "rcal/io/pose_dataset.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/kinematics/identifiability.hpp"
@@ -56,6 +65,16 @@ struct Options {
   int quiet_poses = 10000;
   std::vector<std::string> arms;
   std::string out = "out/track";
+  int discrepancy_every = 0;  // --cell: the watch every this many accepted poses (0: none)
+  bool discrepancy_switch = false;
+};
+
+// One run of the discrepancy watch over the rows.
+struct WatchRun {
+  size_t row = 0;  // index of the row after which it ran
+  int accepted = 0;
+  cell::DiscrepancyReport report;
+  std::vector<std::string> switched_in;
 };
 
 std::string Join(const std::vector<std::string>& v, const char* sep) {
@@ -67,7 +86,11 @@ std::string Join(const std::vector<std::string>& v, const char* sep) {
 // The cell's online identification over the rows (the process's logic).
 std::vector<TrackRow> TrackCell(cell::OnlineIdentification& id,
                                 const std::vector<kinematics::PoseMeasurement>& ms,
-                                const std::vector<bool>& is_test) {
+                                const std::vector<kinematics::EffectContext>& contexts,
+                                const std::vector<bool>& is_test, const Options& o,
+                                std::vector<WatchRun>* watches) {
+  cell::DiscrepancyWatchSettings watch;
+  watch.every_poses = o.discrepancy_every;
   const double nan = std::numeric_limits<double>::quiet_NaN();
   std::vector<TrackRow> rows;
   for (size_t k = 0; k < ms.size(); ++k) {
@@ -81,7 +104,7 @@ std::vector<TrackRow> TrackCell(cell::OnlineIdentification& id,
     } else {
       // Sensor time: the row order (rows are sorted by time already), 1 ms apart.
       const auto out =
-          id.Add({ms[k], static_cast<int64_t>(k + 1) * 1000, static_cast<int64_t>(k), {}});
+          id.Add({ms[k], static_cast<int64_t>(k + 1) * 1000, static_cast<int64_t>(k), contexts[k]});
       row.rejected = out.rejected;
       for (const auto& u : out.updates) {
         if (u.pose_index != static_cast<int64_t>(k)) continue;
@@ -95,6 +118,13 @@ std::vector<TrackRow> TrackCell(cell::OnlineIdentification& id,
         }
       }
       if (out.held) row.rejected = "held for the set-up guess";
+      if (row.accepted && cell::WatchDue(id, watch)) {
+        WatchRun w{k, id.ekf().accepted(), cell::WatchForDiscrepancy(id, watch), {}};
+        if (o.discrepancy_switch)
+          for (const auto& e : id.SwitchIn(w.report.NewEffects()))
+            w.switched_in.push_back(discrepancy::Describe(id.model(), e));
+        watches->push_back(std::move(w));
+      }
     }
     row.status = id.ekf().status();
     rows.push_back(std::move(row));
@@ -105,6 +135,9 @@ std::vector<TrackRow> TrackCell(cell::OnlineIdentification& id,
 int RunData(const Options& o) {
   if (o.robot.empty() && o.cell.empty())
     throw std::runtime_error("rcal track: --robot or --cell is required with DATA");
+  if (o.cell.empty() && (o.discrepancy_every > 0 || o.discrepancy_switch))
+    throw std::runtime_error(
+        "rcal track: --discrepancy-every and --discrepancy-switch need --cell");
   io::LoadedRobot robot;
   std::unique_ptr<cell::OnlineIdentification> id;
   if (!o.cell.empty()) {
@@ -144,8 +177,14 @@ int RunData(const Options& o) {
   for (const auto& s : data.samples) is_test.push_back(s.set == io::PoseSample::kTest);
 
   std::vector<TrackRow> rows;
+  std::vector<WatchRun> watches;
   if (id) {
-    rows = TrackCell(*id, ms, is_test);
+    std::vector<kinematics::EffectContext> contexts;
+    if (log)
+      for (const auto& p : log->poses) contexts.push_back(p.context);
+    else
+      contexts = io::ToContexts(data);
+    rows = TrackCell(*id, ms, contexts, is_test, o, &watches);
   } else {
     std::vector<kinematics::PoseMeasurement> fit;
     for (size_t k = 0; k < ms.size(); ++k)
@@ -240,6 +279,29 @@ int RunData(const Options& o) {
             {"segments", segments},
             {"final_status",
              rows.empty() ? "converging" : identification::TrackingStatusName(rows.back().status)}};
+  if (id) {
+    json jw = json::array();
+    for (const WatchRun& w : watches) {
+      json suspects = json::array();
+      for (const auto& x : w.report.suspects)
+        suspects.push_back({{"effect", x.description}, {"z", x.z}, {"in_model", x.in_model}});
+      jw.push_back(
+          {{"row", data.samples[w.row].row},
+           {"accepted", w.accepted},
+           {"window_poses", w.report.window_poses},
+           {"chi2_per_dof", w.report.chi2_dof > 0 ? w.report.chi2 / w.report.chi2_dof : 0.0},
+           {"suspects", suspects},
+           {"heldout_rms_before_m", w.report.heldout_rms_before_m},
+           {"heldout_rms_after_m", w.report.heldout_rms_after_m},
+           {"switched_in", w.switched_in}});
+      std::printf("  discrepancy watch after row %d (%d accepted): %s%s\n", data.samples[w.row].row,
+                  w.accepted, suspects.empty() ? "nothing suspected" : suspects.dump().c_str(),
+                  w.switched_in.empty() ? "" : "; switched in");
+    }
+    j["discrepancy_watch"] = jw;
+    const auto& ekf = id->ekf();
+    j["effects"] = io::EffectsJson(ekf.extended_model(), ekf.e(), ekf.sigma_e());
+  }
   if (!o.json_path.empty()) io::AtomicWriteFile(o.json_path, j.dump(2) + "\n");
   std::printf("%zu rows (%d fitted, %d accepted), %zu change(s) detected, final status %s\n",
               rows.size(), fitted, accepted, changes.size(),
@@ -325,6 +387,14 @@ const RegisterCommand kTrack(
       sub.add_option("--orientation-sigma-deg", o->orientation_sigma_deg,
                      "orientation noise per axis")
           ->capture_default_str();
+      sub.add_option("--discrepancy-every", o->discrepancy_every,
+                     "--cell: the process's discrepancy watch every this many accepted poses (0: "
+                     "none; ekf_identifier's default is 50)")
+          ->capture_default_str()
+          ->check(CLI::Range(0, 1000000));
+      sub.add_flag("--discrepancy-switch", o->discrepancy_switch,
+                   "--cell: switch what the watch suspects in (ekf_identifier "
+                   "--discrepancy-switch)");
       sub.add_flag("--sweep", o->sweep, "run the seeded tracking sweep instead (no DATA)");
       sub.add_option("--seeds", o->seeds, "sweep: seeds per arm and step")->capture_default_str();
       sub.add_option("--quiet-poses", o->quiet_poses,
