@@ -296,7 +296,8 @@ void EkfAged(benchmark::State& state, long age, bool former) {
     ekf.Restore(a.checkpoint);
     state.ResumeTiming();
     const auto r = ekf.Update(a.next);
-    const std::string text = rcal::transport::CheckpointText({"bench", 0, 0, ekf.Checkpoint(), {}});
+    const std::string text =
+        rcal::transport::CheckpointText({"bench", 0, 0, ekf.Checkpoint(), {}, {}});
     benchmark::DoNotOptimize(r.nis);
     bytes = text.size();
   }

@@ -43,8 +43,8 @@
 // nested cross-validation) on a worker thread, so poses keep flowing during its second or so;
 // MODEL_DISCREPANCY names the suspected causes with their z and the expected held-out gain.
 // --discrepancy-switch: suspects the identifier lacks are switched in
-// (cell::OnlineIdentification::SwitchIn: identified from the window's poses on) and written next
-// to the checkpoint (CHECKPOINT.effects.json, an analysis.json), so a restart identifies them too.
+// (cell::OnlineIdentification::SwitchIn: identified from the window's poses on); the checkpoint
+// names the effects of its state (key `effects`), so a restart resumes with the extended model.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -61,11 +61,11 @@
 #include "rcal/cell/discrepancy_watch.hpp"
 #include "rcal/cell/next_poses.hpp"
 #include "rcal/cell/online_identification.hpp"
+#include "rcal/discrepancy/analysis.hpp"
 #include "rcal/estimation/time_gate.hpp"
 #include "rcal/identification/ekf_identifier.hpp"
 #include "rcal/identification/metrics.hpp"
 #include "rcal/identification/tracking.hpp"
-#include "rcal/io/atomic_file.hpp"
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/io/effects_json.hpp"
 #include "rcal/kinematics/identifiability.hpp"
@@ -107,11 +107,6 @@ struct Options {
   int discrepancy_every = 50;       // MODEL_DISCREPANCY every this many accepted poses (0: never)
   bool discrepancy_switch = false;  // switch the suspected effects in
 };
-
-// Where a switched-in model's effects are kept beside the checkpoint.
-std::string EffectsBeside(const std::string& checkpoint) {
-  return checkpoint + ".effects.json";
-}
 
 class Identifier {
  public:
@@ -186,7 +181,6 @@ class Identifier {
         const auto added = id_.SwitchIn(r.NewEffects());
         switched = !added.empty();
         if (switched) {
-          SaveEffects();
           SaveState();
           const auto& ekf = id_.ekf();
           const auto params = ekf.extended_model().EffectParameters();
@@ -231,6 +225,16 @@ class Identifier {
               transport::UntrustedCheckpointTime(f, estimation::HostCeilingUs());
           !why.empty())
         throw std::runtime_error(why);
+      if (!f.effects_json.empty()) {
+        // The state belongs to a model with these effects (--effects, and those the discrepancy
+        // watch switched in): the identification takes them before the state is restored.
+        const auto effects = io::ParseAnalysisEffects(
+                                 {{"effects", nlohmann::json::parse(f.effects_json)}}, id_.model())
+                                 .effects;
+        for (const auto& e : id_.SwitchIn(effects))
+          spdlog::info("checkpoint: its model identifies {} (switched in before the restart)",
+                       discrepancy::Describe(id_.model(), e));
+      }
       id_.Restore(f.checkpoint, f.held, f.utime, f.last_pose_index);
       if (id_.ekf().accepted() > 0 || !id_.held().empty()) {
         gate_.Restore(f.utime);
@@ -372,27 +376,17 @@ class Identifier {
                         });
   }
 
-  // The effects identified, beside the checkpoint (an analysis.json), atomically.
-  void SaveEffects() {
-    if (o_.checkpoint.empty()) return;
-    try {
-      const auto& ekf = id_.ekf();
-      nlohmann::json j;
-      j["effects"] = io::EffectsJson(ekf.extended_model(), ekf.e(), ekf.sigma_e());
-      j["link_density_kg_per_m"] = ekf.extended_model().gravity().link_density_kg_per_m;
-      io::AtomicWriteFile(EffectsBeside(o_.checkpoint), j.dump(2) + "\n");
-    } catch (const std::exception& e) {
-      health_.Error(e.what());
-      spdlog::error("{}", e.what());
-    }
-  }
-
   // The EKF state and the poses held for the set-up guess, atomically (--checkpoint).
   void SaveState() {
     if (o_.checkpoint.empty()) return;
     try {
-      transport::SaveCheckpoint(o_.checkpoint, {model_id_, id_.last_utime(), id_.last_pose_index(),
-                                                id_.ekf().Checkpoint(), id_.held()});
+      const auto& ekf = id_.ekf();
+      transport::SaveCheckpoint(
+          o_.checkpoint,
+          {model_id_, id_.last_utime(), id_.last_pose_index(), ekf.Checkpoint(), id_.held(),
+           ekf.num_effect_params() > 0
+               ? io::EffectsJson(ekf.extended_model(), ekf.e(), ekf.sigma_e()).dump()
+               : std::string()});
     } catch (const std::exception& e) {
       health_.Error(e.what());
       spdlog::error("{}", e.what());
@@ -485,14 +479,9 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(0, 1000000));
   app.add_flag("--discrepancy-switch", o.discrepancy_switch,
-               "switch the effects MODEL_DISCREPANCY suspects in: identified live from then on, "
-               "kept beside the checkpoint (CHECKPOINT.effects.json)");
+               "switch the effects MODEL_DISCREPANCY suspects in: identified live from then on "
+               "(the checkpoint keeps them)");
   CLI11_PARSE(app, argc, argv);
-  // A model whose effects were switched in resumes with them (unless --effects says otherwise).
-  if (o.effects.empty() && !o.checkpoint.empty() &&
-      std::filesystem::exists(EffectsBeside(o.checkpoint)) && std::filesystem::exists(o.checkpoint))
-    o.effects = EffectsBeside(o.checkpoint);
-
   try {
     rcal::services::InstallStopHandlers();
     rcal::transport::LcmTransport t(o.lcm_url);

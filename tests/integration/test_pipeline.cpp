@@ -383,7 +383,7 @@ TEST_F(Pipeline, AnArmThatBendsIsCalibratedWithItsEffectLive) {
 // whose joint 2 bends, with --discrepancy-switch. After 50 poses MODEL_DISCREPANCY names
 // joint_compliance on that joint (χ² beyond the noise, a held-out gain), the effect is switched
 // in, and from then on KINEMATIC_PARAMS carries it, found against the simulator's truth. The
-// switched-in model is kept beside the checkpoint: a restarted identifier resumes with it.
+// checkpoint names the effects of its state: a restarted identifier resumes with them.
 TEST_F(Pipeline, TheDiscrepancyWatchNamesTheBendingJointAndSwitchesItIn) {
   RCAL_IN_NAMESPACE("Pipeline.TheDiscrepancyWatchNamesTheBendingJointAndSwitchesItIn");
   constexpr int kPoses = 100;
@@ -427,8 +427,10 @@ TEST_F(Pipeline, TheDiscrepancyWatchNamesTheBendingJointAndSwitchesItIn) {
   EXPECT_NEAR(p.effect_values[0], 2e-6, 3 * p.effect_sigmas[0]);
   EXPECT_LT(p.effect_sigmas[0], 2e-6 / 5);
   EXPECT_EQ(Stop(id), 0);
-  // Restarted on its checkpoint: it resumes with the switched-in model.
-  ASSERT_TRUE(fs::exists(checkpoint.string() + ".effects.json"));
+  // Restarted on its checkpoint (which names the effects of its state): it resumes with the
+  // switched-in model.
+  ASSERT_NE(transport::LoadCheckpoint(checkpoint).effects_json.find("joint_compliance"),
+            std::string::npos);
   l.params.reset();
   const pid_t again = Start(Identifier(checkpoint), "ekf_identifier_again.log");
   ASSERT_TRUE(l.WaitFor([&] { return l.params.has_value(); }))

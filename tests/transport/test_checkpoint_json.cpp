@@ -5,6 +5,7 @@
 #include <filesystem>
 
 #include "fixture.hpp"
+#include "rcal/io/effects_json.hpp"
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/checkpoint_json.hpp"
 
@@ -20,7 +21,7 @@ TEST(Checkpoint, RestoredIdentifierContinuesBitForBit) {
     whole.Update(g.poses[k]);
     first.Update(g.poses[k]);
   }
-  CheckpointFile f{ModelId(g.model), 1234, 14, first.Checkpoint(), {}};
+  CheckpointFile f{ModelId(g.model), 1234, 14, first.Checkpoint(), {}, {}};
   const auto dir = std::filesystem::temp_directory_path() / "rcal_checkpoint_test";
   std::filesystem::remove_all(dir);
   SaveCheckpoint(dir / "ekf.json", f);
@@ -50,7 +51,7 @@ TEST(Checkpoint, TrackingStateRoundTrips) {
   const Grb3016 g(12);
   identification::EkfIdentifier ekf(g.model, g.base);
   for (int k = 0; k < 12; ++k) ekf.Update(g.poses[k]);
-  CheckpointFile f{ModelId(g.model), 1, 11, ekf.Checkpoint(), {}};
+  CheckpointFile f{ModelId(g.model), 1, 11, ekf.Checkpoint(), {}, {}};
   const int n = static_cast<int>(g.base.size());
   f.checkpoint.inflations.resize(f.checkpoint.history.size());
   f.checkpoint.inflations[4] = Eigen::MatrixXd::Identity(n, n) * 1e-6;
@@ -100,7 +101,7 @@ TEST(Checkpoint, MalformedTextIsAnErrorNamingTheKey) {
 TEST(Checkpoint, HeldPosesRoundTrip) {
   const Grb3016 g(4);
   identification::EkfIdentifier ekf(g.model, g.base);
-  CheckpointFile f{ModelId(g.model), 5678, -1, ekf.Checkpoint(), {}};
+  CheckpointFile f{ModelId(g.model), 5678, -1, ekf.Checkpoint(), {}, {}};
   for (int k = 0; k < 3; ++k) f.held.push_back({g.poses[k], 1000 + k, k, {}});
   const CheckpointFile back = ParseCheckpoint(CheckpointText(f));
   ASSERT_EQ(back.held.size(), 3u);
@@ -135,7 +136,7 @@ TEST(Checkpoint, ContextsRoundTrip) {
   };
   identification::EkfIdentifier a(ext, g.base), b(ext, g.base);
   for (int k = 0; k < 8; ++k) a.Update(g.poses[k], context(k));
-  CheckpointFile f{ModelId(g.model), 5678, 7, a.Checkpoint(), {}};
+  CheckpointFile f{ModelId(g.model), 5678, 7, a.Checkpoint(), {}, {}};
   f.held.push_back({g.poses[8], 9000, 8, context(8)});
   const CheckpointFile back = ParseCheckpoint(CheckpointText(f));
   ASSERT_EQ(back.checkpoint.contexts.size(), 8u);
@@ -166,7 +167,7 @@ TEST(Checkpoint, ContextsRoundTrip) {
   // A geometric identifier writes no contexts.
   identification::EkfIdentifier plain(g.model, g.base);
   plain.Update(g.poses[0]);
-  EXPECT_EQ(CheckpointText({ModelId(g.model), 1, 0, plain.Checkpoint(), {}}).find("contexts"),
+  EXPECT_EQ(CheckpointText({ModelId(g.model), 1, 0, plain.Checkpoint(), {}, {}}).find("contexts"),
             std::string::npos);
   // Malformed: named.
   std::string text = CheckpointText(f);
@@ -184,11 +185,42 @@ TEST(Checkpoint, ContextsRoundTrip) {
 // A schema-1 file (written before `held` existed) still loads, with nothing held; a schema-3
 // file without `held` is an error naming the key. A schema-2 file (before `x_fixed` and the
 // measurements' marker) loads with the identifier's own fixed values and marker 0.
+// The effects of the state's model (an identifier whose discrepancy watch switched them in) are
+// kept as analysis.json entries and read back as written; a malformed entry is named.
+TEST(Checkpoint, TheEffectsOfTheStatesModelRoundTrip) {
+  const Grb3016 g(13);
+  kinematics::Effect compliance;
+  compliance.cause = kinematics::EffectCause::kJointCompliance;
+  compliance.joint = 1;
+  const kinematics::ExtendedModel ext(g.model, {compliance});
+  identification::EkfIdentifier a(ext, g.base);
+  for (int k = 0; k < 4; ++k) a.Update(g.poses[k]);
+  const std::string effects = io::EffectsJson(ext, a.e(), a.sigma_e()).dump();
+  const CheckpointFile f{ModelId(g.model), 1, 3, a.Checkpoint(), {}, effects};
+  const CheckpointFile back = ParseCheckpoint(CheckpointText(f));
+  EXPECT_EQ(back.effects_json, effects);
+  const auto parsed =
+      io::ParseAnalysisEffects({{"effects", nlohmann::json::parse(back.effects_json)}}, g.model);
+  ASSERT_EQ(parsed.effects.size(), 1u);
+  EXPECT_TRUE(parsed.effects[0].SameAs(compliance));
+  // A geometric state writes no key.
+  EXPECT_EQ(CheckpointText({ModelId(g.model), 1, 3, a.Checkpoint(), {}, {}}).find("\"effects\""),
+            std::string::npos);
+  std::string text = CheckpointText(f);
+  text.replace(text.find("\"effects\""), 10, "\"effects\": 5, \"_x\":");
+  try {
+    ParseCheckpoint(text);
+    FAIL() << "no exception";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("effects"), std::string::npos) << e.what();
+  }
+}
+
 TEST(Checkpoint, SchemaOneStillLoads) {
   const Grb3016 g(10);
   identification::EkfIdentifier ekf(g.model, g.base);
   for (int k = 0; k < 10; ++k) ekf.Update(g.poses[k]);
-  std::string text = CheckpointText({ModelId(g.model), 42, 9, ekf.Checkpoint(), {}});
+  std::string text = CheckpointText({ModelId(g.model), 42, 9, ekf.Checkpoint(), {}, {}});
   const auto v3 = text.find("rcal.ekf_checkpoint/3");
   ASSERT_NE(v3, std::string::npos);
   {

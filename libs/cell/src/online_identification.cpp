@@ -194,7 +194,6 @@ std::vector<TimedPose> OnlineIdentification::Window() const {
 
 std::vector<kinematics::Effect> OnlineIdentification::SwitchIn(
     const std::vector<kinematics::Effect>& effects) {
-  if (!started_) throw std::logic_error("effects cannot be switched in before the EKF has started");
   std::vector<kinematics::Effect> added, all = effects_;
   for (const auto& e : effects) {
     const auto same = [&](const kinematics::Effect& o) { return o.SameAs(e); };
@@ -204,6 +203,14 @@ std::vector<kinematics::Effect> OnlineIdentification::SwitchIn(
     }
   }
   if (added.empty()) return added;
+  if (!started_ || (ekf_->accepted() == 0 && ekf_->history().empty())) {
+    // Nothing identified yet (a restart about to restore a checkpoint of the extended model, or
+    // the set-up guess still holding poses): the EKF simply starts with the effects.
+    const kinematics::ExtendedModel check(cell_.model, all, gravity_);  // throws, nothing changed
+    effects_ = all;
+    ekf_ = MakeEkf(start_);
+    return added;
+  }
   const identification::EkfCheckpoint old = ekf_->Checkpoint();
   const kinematics::ExtendedModel& old_ext = ekf_->extended_model();
   // Old state index of each new state entry (−1: a new effect parameter): the base set first,

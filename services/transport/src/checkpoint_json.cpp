@@ -135,6 +135,8 @@ std::string CheckpointText(const CheckpointFile& f) {
             {"x_fixed", Vec(c.x_fixed)},
             {"status", identification::TrackingStatusName(c.status)},
             {"small_steps", c.small_steps}};
+  // The effects of the state's model (additive key; none: geometric).
+  if (!f.effects_json.empty()) j["effects"] = json::parse(f.effects_json);
   // A released change's covariance before its pose (additive key; none: no change released).
   if (!c.inflations.empty()) {
     json inflations = json::array();
@@ -198,6 +200,11 @@ CheckpointFile ParseCheckpoint(const std::string& text) {
       if (!inflations.is_array()) throw std::runtime_error("checkpoint: inflations: not an array");
       for (size_t i = 0; i < inflations.size(); ++i)
         c.inflations.push_back(ToMat(inflations[i], "inflations[" + std::to_string(i) + "]"));
+    }
+    if (j.contains("effects")) {
+      const json& effects = At(j, "effects", "");
+      if (!effects.is_array()) throw std::runtime_error("checkpoint: effects: not an array");
+      f.effects_json = effects.dump();
     }
     if (j.contains("contexts")) {
       const json& contexts = At(j, "contexts", "");

@@ -106,8 +106,9 @@ class OnlineIdentification {
   /// refused included, then those still beyond the gate of the new model dropped), so the new
   /// effects are identified from the poses already seen (the information folded out of the window
   /// carries none about them). Effects already identified are skipped. Returns the effects added.
-  /// Throws std::invalid_argument for an effect the model cannot have (nothing changed) and
-  /// std::logic_error before the EKF has started.
+  /// Before anything is identified (the set-up guess still holding poses, or a restart about to
+  /// Restore a checkpoint of the extended model) the EKF simply starts with them. Throws
+  /// std::invalid_argument for an effect the model cannot have (nothing changed).
   std::vector<kinematics::Effect> SwitchIn(const std::vector<kinematics::Effect>& effects);
 
   const io::BuiltCell& cell() const { return cell_; }

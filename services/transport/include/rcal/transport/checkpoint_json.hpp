@@ -8,7 +8,9 @@
 // `held` either) still load. Additive keys (no schema change): the tracking `status`,
 // `small_steps` and `inflations`, and for an extended identifier (ekf_identifier --effects) the
 // `contexts` of its poses and each held pose's `context` (temperature_c, payload_kg, time_s: null
-// when unknown; dq_sign).
+// when unknown; dq_sign), and `effects`: the effects of the model the state belongs to, as
+// analysis.json entries (an identifier whose discrepancy watch switched effects in resumes with
+// them; absent: the geometric model).
 #pragma once
 
 #include <cstdint>
@@ -31,6 +33,9 @@ struct CheckpointFile {
   int64_t last_pose_index = -1;  ///< pose_index of that measurement (−1: none)
   identification::EkfCheckpoint checkpoint;
   std::vector<HeldPose> held;  ///< held back for the set-up guess, oldest first (schema 2)
+  /// The effects of the state's model as a JSON array of analysis.json entries
+  /// (io::EffectsJson; parse with io::ParseAnalysisEffects against the model); empty: none.
+  std::string effects_json = {};
 };
 
 /// JSON text of a checkpoint.
