@@ -199,7 +199,9 @@ class Identifier {
     if (t_.Publish(channels_.model_discrepancy,
                    transport::ToModelDiscrepancy(r, watch_utime_, id_.ekf().accepted(), switched)))
       health_.Published();
-    if (switched) Publish(watch_utime_, {});
+    // The state now holds every pose up to the last one: published at its time (a listener that
+    // orders KINEMATIC_PARAMS by utime must not see it go back).
+    if (switched) Publish(id_.last_utime(), {});
   }
   /// At start: the restored estimate (if any) and a CALIBRATION_STATUS that tells listeners the
   /// process is up and how many poses it resumed with.

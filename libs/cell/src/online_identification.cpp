@@ -151,6 +151,9 @@ OnlineIdentification::Update OnlineIdentification::Apply(const TimedPose& pose) 
     while (!seen_.empty() && seen_.size() > history.size() &&
            (history.empty() || !SameMeasurement(seen_.front().z, history.front())))
       seen_.pop_front();
+    // Bounded: an arm the gate refuses pose after pose (a change not detected) must not grow it
+    // without end; at most as many refused poses as the window holds (and 100).
+    while (seen_.size() > history.size() + std::max<size_t>(history.size(), 100)) seen_.pop_front();
   }
   if (!u.result.accepted) return u;
   last_utime_ = pose.utime;
@@ -169,7 +172,12 @@ void OnlineIdentification::Restore(const identification::EkfCheckpoint& checkpoi
         "held: " + std::to_string(held.size()) + " poses held for a set-up guess, but " +
         (guessed_.empty() ? "the cell guesses no frame" : "the EKF has started"));
   ekf_->Restore(checkpoint);
+  // The window as restored: its accepted poses (the refused ones between them are not kept).
   seen_.clear();
+  for (size_t k = 0; k < checkpoint.history.size(); ++k)
+    seen_.push_back(
+        {checkpoint.history[k], 0, -1,
+         k < checkpoint.contexts.size() ? checkpoint.contexts[k] : kinematics::EffectContext{}});
   // The start it ran from (its parameters outside the base set are fixed there).
   if (checkpoint.x_fixed.size() == start_.size()) start_ = checkpoint.x_fixed;
   held_ = std::move(held);
@@ -184,12 +192,8 @@ std::vector<TimedPose> OnlineIdentification::Window() const {
   for (size_t i = 0; i < seen_.size(); ++i)
     if (SameMeasurement(seen_[i].z, history.front()))
       return std::vector<TimedPose>(seen_.begin() + static_cast<std::ptrdiff_t>(i), seen_.end());
-  const identification::EkfCheckpoint c = ekf_->Checkpoint();  // restored: the accepted poses
-  std::vector<TimedPose> out;
-  for (size_t k = 0; k < c.history.size(); ++k)
-    out.push_back(
-        {c.history[k], 0, -1, k < c.contexts.size() ? c.contexts[k] : kinematics::EffectContext{}});
-  return out;
+  // The window's first poses were dropped from seen_ (its bound): the poses as they arrived since.
+  return std::vector<TimedPose>(seen_.begin(), seen_.end());
 }
 
 std::vector<kinematics::Effect> OnlineIdentification::SwitchIn(

@@ -95,8 +95,9 @@ class OnlineIdentification {
 
   /// The poses of the EKF's window as they arrived: its accepted poses and, between them, those
   /// its gate refused (the poses a model that lacks an effect cannot explain are the evidence of
-  /// it), oldest first. After a Restore, the window's accepted poses alone (utime 0) until new
-  /// poses arrive.
+  /// it), oldest first (at most as many refused poses as the window holds, and 100). After a
+  /// Restore the refused poses of the restored window are not known: its accepted poses (utime 0)
+  /// and what arrives after them.
   std::vector<TimedPose> Window() const;
 
   /// Adds `effects` to those identified (issue 15 item 5, the discrepancy watch's switch): the
