@@ -4,6 +4,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "rcal/cell/claimed_noise.hpp"
+
 namespace rcal::cell {
 
 std::vector<kinematics::Effect> DiscrepancyReport::NewEffects() const {
@@ -41,15 +43,13 @@ DiscrepancyReport WatchForDiscrepancy(const kinematics::KinematicModel& model,
   if (as.stated_position_sigma_m <= 0) {
     // The noise the poses claim: RMS per-axis σ of their covariances (position, orientation).
     double vp = 0, vo = 0;
-    int no = 0;
+    int np = 0, no = 0;
     for (const auto& m : window.measurements) {
-      vp += m.covariance.topLeftCorner<3, 3>().trace() / 3.0;
-      if (m.has_orientation) {
-        vo += m.covariance.bottomRightCorner<3, 3>().trace() / 3.0;
-        ++no;
-      }
+      const ClaimedVariance v = PerAxisVariance(m);
+      if (v.position > 0) vp += v.position, ++np;
+      if (v.orientation > 0) vo += v.orientation, ++no;
     }
-    as.stated_position_sigma_m = std::sqrt(vp / static_cast<double>(window.measurements.size()));
+    as.stated_position_sigma_m = np > 0 ? std::sqrt(vp / np) : 0.0;
     as.stated_orientation_sigma_rad = no > 0 ? std::sqrt(vo / no) : 0.0;
   }
   const discrepancy::Analysis a = discrepancy::Analyze(model, window, as);

@@ -5,6 +5,8 @@
 #include <random>
 #include <stdexcept>
 
+#include "rcal/cell/claimed_noise.hpp"
+
 namespace rcal::cell {
 
 NextPoseAdvisor::NextPoseAdvisor(const io::BuiltCell& cell, int candidates, unsigned seed)
@@ -29,16 +31,12 @@ NextPoseAdvisor::NextPoseAdvisor(const io::BuiltCell& cell, int candidates, unsi
 }
 
 void NextPoseAdvisor::Measured(const kinematics::PoseMeasurement& z) {
-  const Eigen::MatrixXd& C = z.covariance;
-  if (C.rows() < 3 || C.rows() != C.cols() || !C.allFinite()) return;
-  const double position_var = C.topLeftCorner(3, 3).trace() / 3;
-  if (!(position_var > 0)) return;
-  position_var_sum_ += position_var;
+  const ClaimedVariance v = PerAxisVariance(z);
+  if (!(v.position > 0)) return;
+  position_var_sum_ += v.position;
   settings_.position_sigma_m = std::sqrt(position_var_sum_ / ++positions_);
-  if (!z.has_orientation || C.rows() != 6) return;
-  const double orientation_var = C.bottomRightCorner(3, 3).trace() / 3;
-  if (!(orientation_var > 0)) return;
-  orientation_var_sum_ += orientation_var;
+  if (!(v.orientation > 0)) return;
+  orientation_var_sum_ += v.orientation;
   settings_.orientation_sigma_rad = std::sqrt(orientation_var_sum_ / ++orientations_);
 }
 

@@ -300,25 +300,22 @@ std::vector<kinematics::Effect> OnlineIdentification::SwitchIn(
       d.contexts.push_back(c.contexts[k]);
       d.inflations.push_back(c.inflations[k]);
     }
-    if (d.history.size() != c.history.size()) {
+    // The refused poses taken count as accepted now.
+    d.accepted = c.accepted + taken;
+    d.rejected = std::max(0, c.rejected - taken);
+    const bool dropped = d.history.size() != c.history.size();
+    if (dropped) {  // relinearised again without them, from the state before the first pass
       d.x = c.x;
       d.P = c.P;
       d.x_lin = c.x_lin;
-      ekf->Restore(d);
-      ekf->Refine(passes);
     }
-    // The refused poses taken count as accepted now.
-    identification::EkfCheckpoint e = ekf->Checkpoint();
-    e.accepted += taken;
-    e.rejected = std::max(0, e.rejected - taken);
-    ekf->Restore(e);
+    ekf->Restore(d);
+    if (dropped) ekf->Refine(passes);
   } catch (...) {
     effects_ = kept;
     throw;
   }
   ekf_ = std::move(ekf);
-  // The window now holds every pose it kept.
-  seen_.assign(window.begin(), window.end());
   return added;
 }
 
