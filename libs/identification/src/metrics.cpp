@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numeric>
+#include <random>
 #include <stdexcept>
 #include <string>
 
@@ -112,6 +113,44 @@ std::pair<double, double> PredictedMeanErrors(const kinematics::KinematicModel& 
   }
   const double count = static_cast<double>(qs.size()) * samples;
   return {sum_p / count, sum_o / count};
+}
+
+double MeanPositionErrorQuantile(const kinematics::KinematicModel& model,
+                                 const std::vector<int>& identified, const Eigen::MatrixXd& C,
+                                 const Eigen::VectorXd& x, const std::vector<Eigen::VectorXd>& qs,
+                                 double p, unsigned seed, int samples) {
+  if (!(p > 0.0 && p < 1.0))
+    throw std::invalid_argument("MeanPositionErrorQuantile: p not in (0, 1)");
+  if (samples < 1) throw std::invalid_argument("MeanPositionErrorQuantile: samples < 1");
+  const auto k = static_cast<Eigen::Index>(identified.size());
+  if (C.rows() != k || C.cols() != k)
+    throw std::invalid_argument("MeanPositionErrorQuantile: C is not of the identified size");
+  if (qs.empty()) return 0.0;
+  const Eigen::MatrixXd L = C.llt().matrixL();
+  // The position rows of every pose, stacked: one draw z gives every pose's δp = Jₚ L z at once.
+  Eigen::MatrixXd JL(3 * static_cast<Eigen::Index>(qs.size()), k);
+  Eigen::MatrixXd J(6, model.num_params());
+  Eigen::MatrixXd Jid(3, k);
+  for (size_t i = 0; i < qs.size(); ++i) {
+    model.IdentificationJacobian(qs[i], x, J);
+    for (Eigen::Index c = 0; c < k; ++c) Jid.col(c) = J.col(identified[c]).head<3>();
+    JL.middleRows(3 * static_cast<Eigen::Index>(i), 3) = Jid * L;
+  }
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> n(0.0, 1.0);
+  Eigen::VectorXd z(k);
+  std::vector<double> means(samples);
+  for (int s = 0; s < samples; ++s) {
+    for (Eigen::Index i = 0; i < k; ++i) z(i) = n(rng);
+    const Eigen::VectorXd d = JL * z;
+    double sum = 0;
+    for (size_t i = 0; i < qs.size(); ++i)
+      sum += d.segment<3>(3 * static_cast<Eigen::Index>(i)).norm();
+    means[s] = sum / static_cast<double>(qs.size());
+  }
+  const auto at = static_cast<size_t>(std::min<double>(samples - 1, std::floor(p * samples)));
+  std::nth_element(means.begin(), means.begin() + static_cast<std::ptrdiff_t>(at), means.end());
+  return means[at];
 }
 
 }  // namespace rcal::identification

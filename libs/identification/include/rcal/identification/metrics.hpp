@@ -59,4 +59,16 @@ std::pair<double, double> PredictedMeanErrors(const kinematics::KinematicModel& 
                                               const std::vector<Eigen::VectorXd>& qs,
                                               unsigned seed = 1, int samples = 200);
 
+/// The spread of one calibration's realized mean position error at joints qs, where
+/// PredictedMeanErrors gives its expectation: the estimate's error is ONE draw δx ~ N(0, C) on the
+/// `identified` parameters, shared by every pose of qs (as one calibration's error is), and the
+/// mean over qs of |Jₚ δx| is taken per draw. Returns its p-quantile [m] (0 < p < 1) over `samples`
+/// seeded draws. Use it to judge a realized test error with a known false-alarm rate (1 − p) where
+/// a fixed multiple of the expectation would be exceeded at a rate nobody knows. Throws
+/// std::invalid_argument for p outside (0, 1), samples < 1 or C not of the identified size.
+double MeanPositionErrorQuantile(const kinematics::KinematicModel& model,
+                                 const std::vector<int>& identified, const Eigen::MatrixXd& C,
+                                 const Eigen::VectorXd& x, const std::vector<Eigen::VectorXd>& qs,
+                                 double p, unsigned seed = 1, int samples = 20000);
+
 }  // namespace rcal::identification
