@@ -3,6 +3,8 @@
 // 1 Hz of sensor time. Each accelerometer sample is paired with the orientation estimate of the
 // same utime; updates are applied in sensor-time order (rcal::transport::PositionKfNode), so a
 // replay at any speed gives the same estimates. Bad samples are rejected and counted in HEALTH.
+// The IMU → marker lever arm (cell sensors.imu.to_marker, --lever-arm, --estimate-lever-arm) gets
+// ω_B = gyro − the paired orientation's gyro bias; an estimated lever arm is logged at exit.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -46,6 +48,20 @@ int main(int argc, char** argv) {
                  "positions go in without it (after --orientation-wait of IMU time) [s]")
       ->check(CLI::Range(0.0, 3600.0))
       ->capture_default_str();
+  std::vector<double> lever_arm;
+  app.add_option("--lever-arm", lever_arm,
+                 "IMU → marker lever arm r_B in the IMU's sample axes [m] (x y z); default the "
+                 "cell's sensors.imu.to_marker, else zero (the IMU taken at the marker)")
+      ->expected(3)
+      ->check(CLI::Range(-1.0, 1.0));
+  bool estimate_lever_arm = false;
+  app.add_flag("--estimate-lever-arm", estimate_lever_arm,
+               "estimate the lever arm (three constant states, observed while the tool turns; "
+               "starting from --lever-arm or the cell's value)");
+  app.add_option("--lever-arm-sigma", settings.lever_arm_sigma,
+                 "initial σ per axis of an estimated lever arm [m]")
+      ->check(CLI::Range(1e-6, 1.0))
+      ->capture_default_str();
   app.add_option("--sensor-id", options.sensor_id, "IMU to follow")->capture_default_str();
   app.add_option("--marker-id", options.marker_id, "marker to follow")->capture_default_str();
   services::AddTimeGateOptions(app, &options.time, "sample");
@@ -69,17 +85,31 @@ int main(int argc, char** argv) {
       if (app.count("--position-sigma") == 0)
         settings.position_sigma = cell.position.sigma.maxCoeff();
       if (app.count("--marker-id") == 0) options.marker_id = cell.position.markers.front();
+      // The cell gives the lever arm to its first marker, in the IMU's mounting frame; the filter
+      // works in the axes the samples come in (r_B = R_ISᵀ r_I).
+      if (cell.imu && options.marker_id == cell.position.markers.front()) {
+        settings.lever_arm_B = cell.imu->R_IS.transpose() * cell.imu->to_marker_I;
+        settings.estimate_lever_arm = cell.imu->estimate_to_marker;
+      } else if (cell.imu && (!cell.imu->to_marker_I.isZero() || cell.imu->estimate_to_marker)) {
+        spdlog::warn("sensors.imu.to_marker is the lever arm to marker {}, not {}: taken as zero",
+                     cell.position.markers.front(), options.marker_id);
+      }
       options.imu_channel = cell.channels.imu;
       options.orientation_channel = cell.channels.orientation;
       options.position_channel = cell.channels.position;
       options.tool_position_channel = cell.channels.tool_position;
       options.health_channel = cell.channels.health;
     }
+    if (!lever_arm.empty())
+      settings.lever_arm_B = Eigen::Vector3d(lever_arm[0], lever_arm[1], lever_arm[2]);
+    if (estimate_lever_arm) settings.estimate_lever_arm = true;
     services::InstallStopHandlers();
     transport::LcmTransport t(lcm_url);
     transport::PositionKfNode node(t, settings, options);
     node.Announce();
-    spdlog::info("position_kf on {} (earth {})", t.url(), earth);
+    spdlog::info("position_kf on {} (earth {}, lever arm r_B [{}, {}, {}] m{})", t.url(), earth,
+                 settings.lever_arm_B.x(), settings.lever_arm_B.y(), settings.lever_arm_B.z(),
+                 settings.estimate_lever_arm ? ", estimated" : "");
     if (const int rc =
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
         rc != 0)
@@ -88,6 +118,14 @@ int main(int argc, char** argv) {
     const auto& h = node.health();
     spdlog::info("stopped: received {}, rejected {}, published {}", h.received(), h.rejected(),
                  h.published());
+    const Eigen::Vector3d r_B = node.filter().lever_arm_B();
+    if (settings.estimate_lever_arm)
+      spdlog::info(
+          "lever arm r_B (IMU → marker, IMU axes) estimated: [{:.4f}, {:.4f}, {:.4f}] m ± "
+          "[{:.4f}, {:.4f}, {:.4f}] m",
+          r_B.x(), r_B.y(), r_B.z(), std::sqrt(node.filter().lever_arm_covariance()(0, 0)),
+          std::sqrt(node.filter().lever_arm_covariance()(1, 1)),
+          std::sqrt(node.filter().lever_arm_covariance()(2, 2)));
     return 0;
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());

@@ -307,8 +307,18 @@ TEST(CellYaml, SetValuesReachTheSettings) {
       "  drift_sigma_angle: 2e-6, gate_probability: 0.999, gate_after: 5, guess_poses: 8,\n"
       "  base_set_seed: 7, joint_margin: 0.05}\n"
       "channels: {imu: CELL2_IMU, pose_measurement: cell2/POSE}\n";
-  Replace(text, "earth: ned", "earth: enu\n    gravity: 9.80");
+  Replace(text, "earth: ned", "earth: enu\n    gravity: 9.80\n    to_marker: [0.01, -0.02, 0.03]");
   CellSpec spec = ParseCellYaml(text, "set.yaml");
+  ASSERT_TRUE(spec.imu.has_value());
+  EXPECT_EQ(spec.imu->to_marker_I, Eigen::Vector3d(0.01, -0.02, 0.03));
+  EXPECT_FALSE(spec.imu->estimate_to_marker);
+  {
+    std::string estimated = text;
+    Replace(estimated, "to_marker: [0.01, -0.02, 0.03]", "to_marker: estimate");
+    const CellSpec e = ParseCellYaml(estimated, "estimated.yaml");
+    EXPECT_TRUE(e.imu->estimate_to_marker);
+    EXPECT_TRUE(e.imu->to_marker_I.isZero());
+  }
   spec.robot.file = SourceDir() / "config/robots/grb3016.yaml";
   const BuiltCell c = BuildCell(spec);
   const auto& p = c.pipeline;
@@ -577,6 +587,12 @@ INSTANTIATE_TEST_SUITE_P(
                 "sensors.imu.range.mag: 4900 T is beyond 0.1 T: µT or gauss?"},
         BadCase{kG, "    gravity: 9.81", "    gravity: 981",
                 "sensors.imu.gravity: 981 m/s² is beyond 9.9 m/s²"},
+        BadCase{kG, "    gravity: 9.81", "    gravity: 9.81\n    to_marker: [0.01, 0, 1.2]",
+                "sensors.imu.to_marker: beyond 1 m from the IMU: millimetres?"},
+        BadCase{kG, "    gravity: 9.81", "    gravity: 9.81\n    to_marker: [0.01, .nan, 0]",
+                "sensors.imu.to_marker[1]: value is not finite"},
+        BadCase{kG, "    gravity: 9.81", "    gravity: 9.81\n    to_marker: guess",
+                "sensors.imu.to_marker: expected a list of 3 numbers"},
         BadCase{kG, "    gravity: 9.81", "    gravity: 1",
                 "sensors.imu.gravity: 1 m/s² is below 9.7"},
         BadCase{kP, "rpy: [0, 0, -pi/4]", "rpy: [0, 0, -45]",
@@ -638,8 +654,7 @@ TEST(CellYaml, Ros2SectionNamesTheDriversTopics) {
   EXPECT_TRUE(r.estimate_clock_offsets);
   EXPECT_EQ(r.max_clock_offset, 0.5);
   // No joint_names: the robot file's.
-  EXPECT_EQ(g.ros2_joint_names,
-            (std::vector<std::string>{"j1", "j2", "j3", "j4", "j5", "j6"}));
+  EXPECT_EQ(g.ros2_joint_names, (std::vector<std::string>{"j1", "j2", "j3", "j4", "j5", "j6"}));
 
   const BuiltCell p = LoadCell(CellPath("panda.yaml"));
   ASSERT_TRUE(p.spec.ros2);

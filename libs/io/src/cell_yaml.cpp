@@ -163,7 +163,8 @@ Eigen::Matrix3d ReadAxes(const Reader& r, const YAML::Node& n, const std::string
 }
 
 ImuSensorSpec ReadImu(const Reader& r, const YAML::Node& n, const std::string& path) {
-  r.CheckMap(n, path, {"id", "rate", "axes", "noise_density", "range", "earth", "gravity"});
+  r.CheckMap(n, path,
+             {"id", "rate", "axes", "noise_density", "range", "earth", "gravity", "to_marker"});
   ImuSensorSpec s;
   if (n["id"]) s.id = Label(r, n["id"], path + ".id");
   s.rate = Bounded(r, r.Require(n, path, "rate"), path + ".rate", "Hz", 1.0, 10000.0,
@@ -197,6 +198,16 @@ ImuSensorSpec ReadImu(const Reader& r, const YAML::Node& n, const std::string& p
     s.gravity =
         Bounded(r, n["gravity"], path + ".gravity", "m/s²", 9.7, 9.9,
                 "not the earth's gravity (write m/s²)", "not the earth's gravity (write m/s²)");
+  if (const YAML::Node t = n["to_marker"]) {
+    if (t.IsScalar() && t.Scalar() == "estimate") {
+      s.estimate_to_marker = true;
+    } else {
+      s.to_marker_I = r.Vec3(t, path + ".to_marker", false);
+      if (s.to_marker_I.norm() > 1.0)
+        r.Fail(path + ".to_marker",
+               "beyond 1 m from the IMU: millimetres? (write metres, or `estimate`)", &t);
+    }
+  }
   if (n["range"]) {
     const std::string p = path + ".range";
     const YAML::Node rg = n["range"];

@@ -305,10 +305,10 @@ void PositionKfNode::OnImu(const imu_sample_t& msg) {
   while (early != early_orientation_.end() && early->first < msg.utime)
     early = early_orientation_.erase(early);  // their IMU sample never came: nothing to pair
   if (early != early_orientation_.end() && early->first == msg.utime) {
-    ready_accel_.emplace(msg.utime, std::make_pair(s->f_B, early->second));
+    ready_accel_.emplace(msg.utime, std::make_pair(AccelSample{s->f_B, s->gyro_B}, early->second));
     early_orientation_.erase(early);
   } else {
-    pending_accel_[msg.utime] = s->f_B;
+    pending_accel_[msg.utime] = AccelSample{s->f_B, s->gyro_B};
   }
   while (pending_accel_.size() > o_.max_pending) {
     health_.Gap(1);  // a sample the filter never used: counted as missing
@@ -324,6 +324,8 @@ void PositionKfNode::OnOrientation(const orientation_estimate_t& msg) {
   std::string error;
   const auto R = RotationFromMessage(msg, &error);
   if (!R) return Reject(error);
+  const Eigen::Vector3d bias_B(msg.gyro_bias[0], msg.gyro_bias[1], msg.gyro_bias[2]);
+  if (!bias_B.allFinite()) return Reject("orientation_estimate.gyro_bias: not finite");
   if (!Admit(orientation_gate_, msg.utime, "orientation_estimate.utime")) return;
   last_orientation_ = msg.utime;
   last_orientation_arrival_us_ = o_.steady_now_us();
@@ -338,11 +340,11 @@ void PositionKfNode::OnOrientation(const orientation_estimate_t& msg) {
     ++unpaired_accel_;
   }
   if (it != pending_accel_.end() && it->first == msg.utime) {
-    ready_accel_.emplace(msg.utime, std::make_pair(it->second, *R));
+    ready_accel_.emplace(msg.utime, std::make_pair(it->second, Attitude{*R, bias_B}));
     pending_accel_.erase(it);
   } else if (!last_imu_ || msg.utime > *last_imu_) {
     // Ahead of its IMU sample: kept until the sample comes (OnImu pairs it).
-    early_orientation_[msg.utime] = *R;
+    early_orientation_[msg.utime] = Attitude{*R, bias_B};
     while (early_orientation_.size() > o_.max_pending)
       early_orientation_.erase(early_orientation_.begin());
   }
@@ -382,7 +384,7 @@ void PositionKfNode::Flush(int64_t watermark) {
     const bool has_p = !pending_position_.empty() && pending_position_.begin()->first <= watermark;
     if (!has_a && !has_p) break;
     if (has_a && (!has_p || ready_accel_.begin()->first <= pending_position_.begin()->first)) {
-      const auto [utime, fr] = *ready_accel_.begin();
+      const auto [utime, sample] = *ready_accel_.begin();
       ready_accel_.erase(ready_accel_.begin());
       if (last_applied_ && utime < *last_applied_) {
         Reject("imu_sample.utime: " + std::to_string(utime) + " came after the filter reached " +
@@ -390,7 +392,11 @@ void PositionKfNode::Flush(int64_t watermark) {
         continue;
       }
       const int64_t resets = kf_.counters().resets;
-      const auto status = kf_.UpdateAccel(SensorSeconds(utime), fr.first, fr.second);
+      const auto& [imu, attitude] = sample;
+      // ω_B from the gyro less the orientation filter's bias: the lever arm's rotational terms
+      // (nothing when the lever arm is zero and not estimated).
+      const auto status = kf_.UpdateAccel(SensorSeconds(utime), imu.f_B, attitude.R_EB,
+                                          imu.gyro_B - attitude.bias_B);
       if (!status) {
         FilterFailed("imu_sample: " + status.error(), resets);
         continue;

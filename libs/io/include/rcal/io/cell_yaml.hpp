@@ -54,6 +54,10 @@
 //       range: {gyro: 7.85, accel: 200, mag: 8e-5}    # optional [rad/s, m/s², T] (full scale)
 //       earth: ned                         # required: ned | enu (the earth frame of R_EW)
 //       gravity: 9.81                      # optional [m/s²], local gravity, 9.7 to 9.9
+//       to_marker: [0.01, 0, 0.02]         # optional [m]: the lever arm r_IM_I from the IMU to
+//                                          #   the first marker, in the mounting frame (|r| ≤ 1 m),
+//                                          #   or `estimate` (position_kf estimates it); absent:
+//                                          #   zero, the IMU taken at the marker (the paper's)
 //     position:                            # required: the position sensor (tracker, camera)
 //       id: "AT960 123"                    # optional (text)
 //       markers: [0]                       # required: the marker ids it measures, exactly the
@@ -203,6 +207,9 @@ struct ImuSensorSpec {
   double mag_range = 5e-3;                                      ///< [T]
   estimation::EarthFrame earth = estimation::EarthFrame::kNed;  ///< the earth frame of R_EW
   double gravity = 9.81;                                        ///< local gravity magnitude [m/s²]
+  /// IMU → first marker r_IM_I in the mounting frame [m] (zero: the IMU taken at the marker).
+  Eigen::Vector3d to_marker_I = Eigen::Vector3d::Zero();
+  bool estimate_to_marker = false;  ///< `to_marker: estimate`: the position filter estimates it
 };
 
 struct PositionSensorSpec {

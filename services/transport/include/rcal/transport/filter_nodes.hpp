@@ -152,7 +152,9 @@ int64_t SteadyNowUs();
 /// stall: 1.5 s of a 4x replay sent at once moved the IMU stream 6 s ahead of the orientations,
 /// and 118 accelerometer updates were lost when the fallback took sensor time alone). A position
 /// sample that comes after a later update was applied is rejected as out of order. The position
-/// sensor frame is taken as the orientation's earth frame (the filter's convention). One
+/// sensor frame is taken as the orientation's earth frame (the filter's convention). Each
+/// accelerometer update gets ω_B = its gyro sample less the paired orientation's gyro bias (the
+/// lever arm's rotational terms; an orientation with a non-finite bias is refused). One
 /// TOOL_POSITION per applied update, once initialised.
 class PositionKfNode {
  public:
@@ -212,11 +214,21 @@ class PositionKfNode {
   Health health_;
   std::optional<int64_t> last_imu_, last_orientation_, last_position_, last_applied_;
   int64_t latest_ = 0;
-  std::optional<int64_t> last_orientation_arrival_us_;    // host steady clock [µs]
-  std::map<int64_t, Eigen::Vector3d> pending_accel_;      // utime → f_B
-  std::map<int64_t, Eigen::Matrix3d> early_orientation_;  // utime → R_EI, ahead of its IMU sample
+  std::optional<int64_t> last_orientation_arrival_us_;  // host steady clock [µs]
+  // An IMU sample as the position filter uses it: specific force [m/s²] and rate [rad/s], body.
+  struct AccelSample {
+    Eigen::Vector3d f_B, gyro_B;
+  };
+  // An orientation estimate as it uses it: R_EB and the gyro bias [rad/s] (ω_B = gyro − bias,
+  // for the lever arm's rotational terms).
+  struct Attitude {
+    Eigen::Matrix3d R_EB;
+    Eigen::Vector3d bias_B;
+  };
+  std::map<int64_t, AccelSample> pending_accel_;   // utime → sample waiting for its orientation
+  std::map<int64_t, Attitude> early_orientation_;  // utime → orientation ahead of its IMU sample
   // Ready accelerometer updates (with their orientation) and waiting position samples.
-  std::multimap<int64_t, std::pair<Eigen::Vector3d, Eigen::Matrix3d>> ready_accel_;
+  std::multimap<int64_t, std::pair<AccelSample, Attitude>> ready_accel_;
   std::multimap<int64_t, Eigen::Vector3d> pending_position_;
   int64_t unpaired_accel_ = 0;
   estimation::TimeGate imu_gate_, orientation_gate_, position_gate_;
