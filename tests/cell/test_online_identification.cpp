@@ -155,6 +155,47 @@ TEST(OnlineIdentification, ACellWithNothingToGuessStartsAtOnce) {
   EXPECT_GT(out.updates[0].max_step_sigma, 0.0);
 }
 
+// The poses the gate refuses are kept for Window() (the discrepancy watch's evidence) between the
+// accepted ones, but bounded: an arm the gate refuses pose after pose must not grow it without
+// end. After 40 accepted poses, 300 the gate refuses (the marker 0.3 m off: a tracker that locked
+// on another reflector): the window holds the 40 accepted poses and at most max(40, 100) refused
+// ones, the newest; the next good pose is accepted and the window still ends with it.
+TEST(OnlineIdentification, TheRefusedPosesKeptForTheWindowAreBounded) {
+  OnlineIdentification id(io::LoadCell(RCAL_SOURCE_DIR "/config/cells/grb3016_poses.yaml"));
+  sim::Rng rng(11);
+  const auto& m = id.model();
+  const auto ms =
+      sim::MeasurePoses(m, sim::Table3Errors(m), sim::SampleJoints(m, 341, rng), {}, rng);
+  int k = 0;
+  for (; k < 40; ++k) ASSERT_TRUE(id.Add(At(ms[k], k)).updates.at(0).result.accepted) << k;
+  int refused = 0;
+  for (; k < 340; ++k) {
+    TimedPose bad = At(ms[k], k);
+    bad.z.p_WM_W.x() += 0.3;
+    const auto out = id.Add(bad);
+    ASSERT_EQ(out.updates.size(), 1u);
+    refused += !out.updates[0].result.accepted;
+    const auto window = id.Window();
+    const size_t accepted = id.ekf().history().size();
+    EXPECT_LE(window.size(), accepted + std::max<size_t>(accepted, 100)) << "pose " << k;
+    EXPECT_EQ(window.back().pose_index, k);
+  }
+  EXPECT_EQ(refused, 300);
+  EXPECT_EQ(id.ekf().history().size(), 40u);
+  const auto window = id.Window();
+  ASSERT_EQ(window.size(), 40u + 100u);
+  // The window's own 40 first, then the newest 100 refused (before, the bound dropped the oldest
+  // entries whatever they were: the accepted poses went first and the window lost its start).
+  for (size_t i = 0; i < window.size(); ++i)
+    EXPECT_EQ(window[i].pose_index,
+              i < 40 ? static_cast<int64_t>(i) : static_cast<int64_t>(200 + i))
+        << "entry " << i;
+  const auto out = id.Add(At(ms[340], 340));
+  EXPECT_TRUE(out.updates.at(0).result.accepted);
+  EXPECT_EQ(id.Window().back().pose_index, 340);
+  EXPECT_LE(id.Window().size(), 41u + 100u);
+}
+
 // The pose-level cell (a 6-DoF tracker on the GRB3016, nothing to guess) whose joint 2 bends by
 // c·τ (joint_compliance, c = 2e-6 rad/(N·m), τ its gravity torque with a payload of 0, 5 or
 // 10 kg): stops at random joints, each with its context as a live simulator publishes it

@@ -152,8 +152,18 @@ OnlineIdentification::Update OnlineIdentification::Apply(const TimedPose& pose) 
            (history.empty() || !SameMeasurement(seen_.front().z, history.front())))
       seen_.pop_front();
     // Bounded: an arm the gate refuses pose after pose (a change not detected) must not grow it
-    // without end; at most as many refused poses as the window holds (and 100).
-    while (seen_.size() > history.size() + std::max<size_t>(history.size(), 100)) seen_.pop_front();
+    // without end; at most as many refused poses as the window holds (and 100), the oldest
+    // refused one dropped first (never a pose of the window: the entries of seen_ that are the
+    // history's, in order, are its poses; the others are refused ones).
+    while (seen_.size() > history.size() + std::max<size_t>(history.size(), 100)) {
+      size_t h = 0, i = 0;
+      while (i < seen_.size() && h < history.size() && SameMeasurement(seen_[i].z, history[h])) {
+        ++h;
+        ++i;
+      }
+      if (i >= seen_.size()) break;  // nothing refused left to drop
+      seen_.erase(seen_.begin() + static_cast<std::ptrdiff_t>(i));
+    }
   }
   if (!u.result.accepted) return u;
   last_utime_ = pose.utime;

@@ -95,7 +95,8 @@ class OnlineIdentification {
 
   /// The poses of the EKF's window as they arrived: its accepted poses and, between them, those
   /// its gate refused (the poses a model that lacks an effect cannot explain are the evidence of
-  /// it), oldest first (at most as many refused poses as the window holds, and 100). After a
+  /// it), oldest first (at most as many refused poses as the window holds, and 100: the oldest
+  /// refused ones are dropped first, never one of the window's own). After a
   /// Restore the refused poses of the restored window are not known: its accepted poses (utime 0)
   /// and what arrives after them.
   std::vector<TimedPose> Window() const;
