@@ -131,6 +131,22 @@ TEST(CellSimYaml, SwitchesReachTheSensors) {
   EXPECT_EQ(rs.dropout, 0.1);
 }
 
+// The IMU's lever arm to the marker reaches the live sources' truth (MakeSimProgramme); absent,
+// the IMU sits at the marker.
+TEST(CellSimYaml, TheImuToMarkerLeverArmReachesTheProgrammesTruth) {
+  Loaded d = Load("grb3016");
+  EXPECT_TRUE(MakeSimProgramme(d.cell, d.sim, 1, 2, 0).truth.imu_to_marker_I().isZero());
+  std::string text = io::ReadFile(RCAL_SOURCE_DIR "/config/cells/grb3016.sim.yaml");
+  const std::string marker = "    - {id: 0, xyz: [0.034, -0.003, 0.122]}";
+  const auto at = text.find(marker);
+  ASSERT_NE(at, std::string::npos);
+  text.insert(at + marker.size(), "\n  imu_to_marker: [0.1, -0.05, 0.08]");
+  const CellSimSpec sim = ParseCellSimYaml(text, "lever.sim.yaml");
+  EXPECT_EQ(sim.imu_to_marker_I, Eigen::Vector3d(0.1, -0.05, 0.08));
+  EXPECT_EQ(MakeSimProgramme(d.cell, sim, 1, 2, 0).truth.imu_to_marker_I(),
+            Eigen::Vector3d(0.1, -0.05, 0.08));
+}
+
 // The panda's IMU has turned axes, the UR10 none: the simulator's mounting and the run's
 // orientation follow.
 TEST(CellSimYaml, ImuAxesAndPositionOnlyCells) {
@@ -344,6 +360,9 @@ INSTANTIATE_TEST_SUITE_P(
                 "truth.markers[0].xyz: beyond 2 m from the flange: millimetres?"},
         BadCase{"flange_to_imu: {rpy:", "flange_to_imu: {xyz: [0, 0, 0], rpy:",
                 "truth.flange_to_imu.xyz: unknown key"},
+        BadCase{"    - {id: 0, xyz: [0.034, -0.003, 0.122]}",
+                "    - {id: 0, xyz: [0.034, -0.003, 0.122]}\n  imu_to_marker: [0, 0, 1.2]",
+                "truth.imu_to_marker: beyond 1 m from the IMU: millimetres?"},
         BadCase{"  still_time: 1.5 ", "  still_time: 1500 ", "run.still_time: 1500 s is beyond"},
         BadCase{"  test_poses: 50", "  test_poses: 50.5",
                 "run.test_poses: expected an integer from 0 to 100000"},

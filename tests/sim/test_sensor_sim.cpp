@@ -85,6 +85,50 @@ TEST(ToolMotionTruth, DerivativesMatchTheJointJacobian) {
   EXPECT_GT(checked, 5);
 }
 
+// The IMU 13 cm from the marker (r_IM_I): its acceleration is the rigid body's at its own point,
+// a_I = a_M − α × r_W − ω × (ω × r_W), r_W = R_WI r_IM_I, with ω, α and a_M from the closed-form
+// joint Jacobian (another route than the truth's second differences of positions); without a
+// lever arm the IMU's acceleration is the marker's, bit for bit.
+TEST(ToolMotionTruth, AnImuOffTheMarkerFeelsTheRigidBodyAccelerationAtItsPoint) {
+  const auto m = Cell();
+  const Eigen::VectorXd x = Truth(m);
+  ToolMotionTruth truth(m, x, Program(m, 4, 3));
+  const ToolMotionTruth at_marker(m, x, Program(m, 4, 3));
+  const Eigen::Vector3d r_IM_I(0.1, -0.05, 0.08);
+  truth.set_imu_to_marker_I(r_IM_I);
+  const Eigen::Matrix3d& R_EW = truth.R_EW();
+  int checked = 0;
+  double largest_lever_m_s2 = 0;
+  for (double t = 0.05; t < truth.trajectory().duration(); t += 0.173) {
+    const ToolState s = truth.At(t), s0 = at_marker.At(t);
+    EXPECT_EQ(s0.a_WI_W, s0.a_WM_W);
+    EXPECT_EQ(s0.p_WI_W, s0.p_WM_W);
+    Eigen::VectorXd q, qd;
+    truth.trajectory().Sample(t, q, &qd);
+    if (qd.norm() < 1e-3) continue;
+    const Eigen::Matrix3d R_WI = R_EW.transpose() * s.R_EI;
+    const Eigen::Vector3d r_W = R_WI * r_IM_I;
+    EXPECT_LT((s.p_WI_W - (s.p_WM_W - r_W)).norm(), 1e-12);
+    const double h = 1e-4;
+    Eigen::VectorXd qa, qda, qb, qdb;
+    truth.trajectory().Sample(t + h, qa, &qda);
+    truth.trajectory().Sample(t - h, qb, &qdb);
+    const Eigen::MatrixXd Ja = m.JointJacobian(qa, x), Jb = m.JointJacobian(qb, x);
+    const Eigen::Vector3d a_M = (Ja.topRows(3) * qda - Jb.topRows(3) * qdb) / (2 * h);
+    const Eigen::Vector3d alpha_W = (Ja.bottomRows(3) * qda - Jb.bottomRows(3) * qdb) / (2 * h);
+    const Eigen::Vector3d w_W = m.JointJacobian(q, x).bottomRows(3) * qd;
+    const Eigen::Vector3d lever = alpha_W.cross(r_W) + w_W.cross(w_W.cross(r_W));
+    const Eigen::Vector3d a_I = a_M - lever;
+    largest_lever_m_s2 = std::max(largest_lever_m_s2, lever.norm());
+    EXPECT_LT((s.a_WI_W - a_I).norm(), 1e-3 * (1 + a_I.norm())) << t;
+    EXPECT_LT((truth.Imu(s).a_W - R_EW * s.a_WI_W).norm(), 1e-12);
+    EXPECT_LT((truth.Imu(s).p_W - R_EW * s.p_WI_W).norm(), 1e-12);
+    ++checked;
+  }
+  EXPECT_GT(checked, 5);
+  EXPECT_GT(largest_lever_m_s2, 0.05);  // the lever arm's terms are there to be found
+}
+
 TEST(SensorSim, ImuAtRestReadsGravityAndTheFieldAndStreamsAreDeterministic) {
   const auto m = Cell();
   const Eigen::VectorXd x = Truth(m);

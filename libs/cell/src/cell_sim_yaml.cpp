@@ -84,7 +84,15 @@ CellSimSpec ParseCellSimYaml(const std::string& text, const std::string& source)
   }
   {
     const YAML::Node t = r.Require(root, "", "truth");
-    r.CheckMap(t, "truth", {"world_from_base", "earth_from_world", "flange_to_imu", "markers"});
+    r.CheckMap(
+        t, "truth",
+        {"world_from_base", "earth_from_world", "flange_to_imu", "markers", "imu_to_marker"});
+    if (const YAML::Node lever = t["imu_to_marker"]) {
+      s.imu_to_marker_I = r.Vec3(lever, "truth.imu_to_marker", false);
+      if (s.imu_to_marker_I.norm() > 1.0)
+        r.Fail("truth.imu_to_marker", "beyond 1 m from the IMU: millimetres? (write metres)",
+               &lever);
+    }
     if (t["world_from_base"])
       s.world_from_base =
           ReadTrueFrame(r, t["world_from_base"], "truth.world_from_base", true, true);
@@ -317,6 +325,7 @@ SimProgramme MakeSimProgramme(const io::BuiltCell& cell, const CellSimSpec& sim,
   sim::TrajectorySettings ts;
   ts.still_time = SimRunSettings(cell, sim).still_time;
   sim::ToolMotionTruth truth(c.model, c.x_true, sim::JointTrajectory(waypoints, ts));
+  truth.set_imu_to_marker_I(sim.imu_to_marker_I);
   return SimProgramme{std::move(c), std::move(stops), std::move(truth)};
 }
 

@@ -37,6 +37,13 @@ ToolState ToolMotionTruth::At(double t) const {
   s.v_WM_W = (pp.p_WM_W - pm.p_WM_W) / (2 * h_);
   s.a_WM_W = (pp.p_WM_W - 2 * pose.p_WM_W + pm.p_WM_W) / (h_ * h_);
   s.omega_I = geometry::Log(pm.R_EI.transpose() * pp.R_EI) / (2 * h_);
+  // The IMU point: p_WI = p_WM − R_WI r_IM_I (exactly p_WM for r = 0).
+  const auto imu_point = [&](const kinematics::ToolPose& p) -> Eigen::Vector3d {
+    return p.p_WM_W - R_EW_.transpose() * (p.R_EI * r_IM_I_);
+  };
+  const Eigen::Vector3d pi = imu_point(pose), pi_m = imu_point(pm), pi_p = imu_point(pp);
+  s.p_WI_W = pi;
+  s.a_WI_W = (pi_p - 2 * pi + pi_m) / (h_ * h_);
   return s;
 }
 
@@ -45,8 +52,8 @@ ImuTruth ToolMotionTruth::Imu(const ToolState& s) const {
   u.t = s.t;
   u.R_WI = s.R_EI;
   u.omega_I = s.omega_I;
-  u.a_W = R_EW_ * s.a_WM_W;
-  u.p_W = R_EW_ * s.p_WM_W;
+  u.a_W = R_EW_ * s.a_WI_W;
+  u.p_W = R_EW_ * s.p_WI_W;
   return u;
 }
 

@@ -21,6 +21,11 @@
 //     earth_from_world: {rpy: [-0.01, 0.017, 0.87]}                            # R_EW [rad]
 //     flange_to_imu: {rpy: [-0.02, 0.035, 0.35]}                               # R_FI [rad]
 //     markers: [{id: 0, xyz: [0.034, -0.003, 0.122]}]                          # p_FM [m]
+//     imu_to_marker: [0.1, -0.05, 0.08]    # optional: r_IM_I, the IMU → first marker lever arm
+//                                          #   in the IMU frame [m], |r| ≤ 1 m (default zero: the
+//                                          #   IMU at the marker point); the live sources'
+//                                          #   (MakeSimProgramme) IMU feels the rigid body's
+//                                          #   acceleration at its own point
 //   run:                                   # optional, every key optional (defaults: RunSettings)
 //     calibration_poses: 50                # still stops used for calibration, 1 to 100000
 //     test_poses: 50                       # then test stops, 0 to 100000
@@ -71,7 +76,8 @@ struct CellSimSpec {
   double sigma_length = 0.0;  ///< [m] (kRandom)
   double sigma_angle = 0.0;   ///< [rad] (kRandom)
   std::optional<TrueFrame> world_from_base, earth_from_world, flange_to_imu;
-  std::vector<std::pair<int, Eigen::Vector3d>> markers;  ///< marker id, true p_FM [m]
+  std::vector<std::pair<int, Eigen::Vector3d>> markers;       ///< marker id, true p_FM [m]
+  Eigen::Vector3d imu_to_marker_I = Eigen::Vector3d::Zero();  ///< true r_IM_I [m]
   // The run; defaults: RunSettings{}.
   int num_cal = 50, num_test = 50, num_extra = 0;
   double still_time = 1.5;   ///< [s]

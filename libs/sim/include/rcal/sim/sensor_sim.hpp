@@ -8,8 +8,11 @@
 //     v ≈ (p(t+h) − p(t−h)) / 2h,   a ≈ (p(t+h) − 2p(t) + p(t−h)) / h²       [m/s, m/s²]
 //   ω_I ≈ Log(R_EI(t−h)ᵀ R_EI(t+h)) / 2h    angular rate in the IMU frame [rad/s]
 // Both are O(h²) accurate; q(t) is a quintic, so h = 1 ms gives errors far below sensor noise.
-// The IMU sits at the marker point, so its acceleration in the earth frame is a_E = R_EW a_WM_W
-// (gravity not included; ImuModel adds it). ImuModel's W is this earth frame E (NED).
+// The IMU sits at p_WI_W = p_WM_W − R_WI r_IM_I, r_IM_I the IMU → marker lever arm in the IMU
+// frame (set_imu_to_marker_I; default zero: the IMU at the marker point), R_WI = R_EWᵀ R_EI; its
+// acceleration a_WI_W is the central second difference of p_WI_W like the marker's (for r = 0
+// exactly a_WM_W), and in the earth frame a_E = R_EW a_WI_W (gravity not included; ImuModel adds
+// it). ImuModel's W is this earth frame E (NED).
 //
 // Streams, all at the clock rate (default 100 Hz), sample k at t_k = k / rate:
 //   joints  q(t_k) as read (optionally quantised to the encoder resolution)
@@ -43,6 +46,8 @@ struct ToolState {
   Eigen::Vector3d a_WM_W = Eigen::Vector3d::Zero();    ///< marker acceleration, world [m/s²]
   Eigen::Matrix3d R_EI = Eigen::Matrix3d::Identity();  ///< IMU → earth
   Eigen::Vector3d omega_I = Eigen::Vector3d::Zero();   ///< IMU angular rate, IMU frame [rad/s]
+  Eigen::Vector3d p_WI_W = Eigen::Vector3d::Zero();    ///< IMU position, world [m]
+  Eigen::Vector3d a_WI_W = Eigen::Vector3d::Zero();    ///< IMU acceleration, world [m/s²]
 };
 
 /// Truth motion of the marker/IMU for a truth model (model, x_true) along a trajectory.
@@ -53,8 +58,12 @@ class ToolMotionTruth {
                   JointTrajectory trajectory, double fd_step = 1e-3);
   /// The truth state at t [s] (clamped to the trajectory's span, where the arm stands still).
   ToolState At(double t) const;
-  /// The IMU truth (ImuModel's W = earth E): R_WI = R_EI, a_W = R_EW a_WM_W, p_W = R_EW p_WM_W.
+  /// The IMU truth (ImuModel's W = earth E): R_WI = R_EI, a_W = R_EW a_WI_W, p_W = R_EW p_WI_W.
   ImuTruth Imu(const ToolState& s) const;
+  /// The IMU → marker lever arm r_IM_I in the IMU frame [m] (the first marker; zero: the IMU at
+  /// the marker point).
+  void set_imu_to_marker_I(const Eigen::Vector3d& r_IM_I) { r_IM_I_ = r_IM_I; }
+  const Eigen::Vector3d& imu_to_marker_I() const { return r_IM_I_; }
   /// Earth ← world rotation of the truth set-up (the model's earth segment at x_true).
   const Eigen::Matrix3d& R_EW() const { return R_EW_; }
   const JointTrajectory& trajectory() const { return trajectory_; }
@@ -71,6 +80,7 @@ class ToolMotionTruth {
   JointTrajectory trajectory_;
   double h_;
   Eigen::Matrix3d R_EW_;
+  Eigen::Vector3d r_IM_I_ = Eigen::Vector3d::Zero();
 };
 
 /// An encoder swapped and re-mastered (or slipped in a collision) while the arm works: from sensor
