@@ -118,14 +118,14 @@ int main(int argc, char** argv) {
     const auto& h = node.health();
     spdlog::info("stopped: received {}, rejected {}, published {}", h.received(), h.rejected(),
                  h.published());
-    const Eigen::Vector3d r_B = node.filter().lever_arm_B();
-    if (settings.estimate_lever_arm)
+    if (settings.estimate_lever_arm) {
+      const Eigen::Vector3d r_B = node.filter().lever_arm_B();
+      const Eigen::Vector3d sigma = node.filter().lever_arm_covariance().diagonal().cwiseSqrt();
       spdlog::info(
           "lever arm r_B (IMU → marker, IMU axes) estimated: [{:.4f}, {:.4f}, {:.4f}] m ± "
           "[{:.4f}, {:.4f}, {:.4f}] m",
-          r_B.x(), r_B.y(), r_B.z(), std::sqrt(node.filter().lever_arm_covariance()(0, 0)),
-          std::sqrt(node.filter().lever_arm_covariance()(1, 1)),
-          std::sqrt(node.filter().lever_arm_covariance()(2, 2)));
+          r_B.x(), r_B.y(), r_B.z(), sigma.x(), sigma.y(), sigma.z());
+    }
     return 0;
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());

@@ -138,11 +138,11 @@ double MeanPositionErrorQuantile(const kinematics::KinematicModel& model,
   }
   std::mt19937_64 rng(seed);
   std::normal_distribution<double> n(0.0, 1.0);
-  Eigen::VectorXd z(k);
+  Eigen::VectorXd z(k), d(JL.rows());
   std::vector<double> means(samples);
   for (int s = 0; s < samples; ++s) {
     for (Eigen::Index i = 0; i < k; ++i) z(i) = n(rng);
-    const Eigen::VectorXd d = JL * z;
+    d.noalias() = JL * z;
     double sum = 0;
     for (size_t i = 0; i < qs.size(); ++i)
       sum += d.segment<3>(3 * static_cast<Eigen::Index>(i)).norm();
