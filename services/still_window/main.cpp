@@ -111,6 +111,7 @@ class StillWindowNode {
       pipeline_.Reset();
       dropped_ = 0;
       resets_ = 0;
+      disagreements_ = 0;
     }
     if (estimation::Usable(v)) return true;
     spdlog::warn("rejected: {}", health_.last_error());
@@ -138,6 +139,13 @@ class StillWindowNode {
     if (const auto& c = pipeline_.counters(); c.windows_dropped > dropped_) {
       dropped_ = c.windows_dropped;
       spdlog::warn("window dropped ({} so far): {}", dropped_, c.last_error);
+    }
+    if (const auto& c = pipeline_.counters(); c.heading_disagreements > disagreements_) {
+      disagreements_ = c.heading_disagreements;
+      spdlog::warn(
+          "window heading disagrees with the previous window carried by the gyro (a disturbed "
+          "field?): its heading variance widened ({} so far)",
+          disagreements_);
     }
     for (const auto& p : pipeline_.TakePoses()) Emit(p);
     health_.Tick(utime, t_);
@@ -252,7 +260,7 @@ class StillWindowNode {
   std::optional<double> t_first_;
   int emitted_ = 0;
   Eigen::VectorXd q_last_stop_;  // joints of the last still window (its pose or not)
-  std::int64_t dropped_ = 0, resets_ = 0;
+  std::int64_t dropped_ = 0, resets_ = 0, disagreements_ = 0;
   estimation::TimeGate joints_gate_, imu_gate_, position_gate_;
 };
 

@@ -15,6 +15,7 @@
 #include <random>
 
 #include "rcal/cell/sim_cell.hpp"
+#include "rcal/estimation/fqa.hpp"
 #include "rcal/geometry/so3.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/sim/draw.hpp"
@@ -34,6 +35,7 @@ struct Outcome {
   std::vector<StillPose> poses;
   std::vector<Stop> stops;
   std::int64_t dropped = 0;  // windows dropped by the pipeline
+  std::int64_t heading_disagreements = 0;
 };
 
 // χ²(k) quantile by Wilson–Hilferty, k (1 − 2/(9k) + z √(2/(9k)))³, z the standard normal
@@ -45,10 +47,14 @@ double ChiSquareQuantileWh(double z, double k) {
 
 // `inject`, when given, is called after every regular sample (at its time t) to add bad input.
 // `position_loss`: the fraction of position samples lost (independently, seeded).
+// `accel_bias_walk` [m/s²/√s]: the accelerometer's bias walks from 0 at the first sample;
+// `settings` the pipeline's.
 Outcome Simulate(int num_stops, unsigned seed, double still_s = 1.5, double move_s = 1.0,
                  const std::function<void(PosePipeline&, double)>& inject = {},
-                 double position_loss = 0.0) {
-  std::mt19937_64 rng(seed), rng_loss(seed + 1000);
+                 double position_loss = 0.0, double accel_bias_walk = 0.0,
+                 const PosePipelineSettings& settings = {},
+                 const std::function<Eigen::Vector3d(int)>& mag_disturbance_E = {}) {
+  std::mt19937_64 rng(seed), rng_loss(seed + 1000), rng_bias(seed + 2000);
   std::bernoulli_distribution lost(position_loss);
   std::normal_distribution<double> n(0, 1);
   auto n3 = [&] { return sim::Draw3(n, rng); };
@@ -58,13 +64,16 @@ Outcome Simulate(int num_stops, unsigned seed, double still_s = 1.5, double move
   Outcome o;
   for (int k = 0; k < num_stops; ++k)
     o.stops.push_back({geometry::Exp(0.8 * n3()), Eigen::Vector3d(1, 0.2, 0.5) + 0.3 * n3()});
-  PosePipeline pipe;
+  PosePipeline pipe(settings);
   double t = 0;
+  Eigen::Vector3d b_a = Eigen::Vector3d::Zero();  // accelerometer bias [m/s²]
+  Eigen::Vector3d d_E = Eigen::Vector3d::Zero();  // field disturbance of the current stop [µT]
   auto sample = [&](const Eigen::Matrix3d& R, const Eigen::Vector3d& p, const Eigen::Vector3d& w_I,
                     const Eigen::VectorXd& q) {
+    if (t > 0) b_a += accel_bias_walk * std::sqrt(dt) * sim::Draw3(n, rng_bias);
     ASSERT_TRUE(pipe.AddJoints(t, q));
-    ASSERT_TRUE(pipe.AddImu(t, w_I + sg * n3(), -R.transpose() * g_E + sa * n3(),
-                            R.transpose() * m_E + sm * n3()));
+    ASSERT_TRUE(pipe.AddImu(t, w_I + sg * n3(), -R.transpose() * g_E + sa * n3() + b_a,
+                            R.transpose() * (m_E + d_E) + sm * n3()));
     const Eigen::Vector3d p_meas = p + sp * n3();
     if (!lost(rng_loss)) {
       ASSERT_TRUE(pipe.AddPosition(t, p_meas));
@@ -74,8 +83,10 @@ Outcome Simulate(int num_stops, unsigned seed, double still_s = 1.5, double move
   };
   for (int k = 0; k < num_stops; ++k) {
     const Eigen::VectorXd q = Eigen::VectorXd::Constant(6, 0.1 * k);
+    if (mag_disturbance_E) d_E = mag_disturbance_E(k);
     for (int i = 0; i < static_cast<int>(still_s / dt); ++i)
       sample(o.stops[k].R_EI, o.stops[k].p_W, Eigen::Vector3d::Zero(), q);
+    d_E.setZero();
     if (k + 1 == num_stops) break;
     // Move: constant body rate to the next orientation, straight line in position. Sample i
     // of the move is the end of its i+1-th interval: the gyro reads the rate over the interval
@@ -96,6 +107,7 @@ Outcome Simulate(int num_stops, unsigned seed, double still_s = 1.5, double move
   pipe.Flush();
   o.poses = pipe.TakePoses();
   o.dropped = pipe.counters().windows_dropped;
+  o.heading_disagreements = pipe.counters().heading_disagreements;
   return o;
 }
 
@@ -139,11 +151,112 @@ TEST(PosePipeline, ConsistentCovarianceWithHalfThePositionSamplesLost) {
   EXPECT_LT(b.nees, b.hi);
 }
 
+// The accelerometer bias's covariance is the FQA's own response to a bias: finite differences
+// of the FQA (central, 1e-4 m/s²) at orientations drawn at random, in NED and ENU, against the
+// closed form σ² A Aᵀ.
+TEST(PosePipeline, TheAccelerometerBiasCovarianceIsTheFqasResponseToABias) {
+  std::mt19937_64 rng(11);
+  std::normal_distribution<double> n(0, 1);
+  const double g = 9.81, dip = std::atan2(44.0, 20.0), sigma = 2e-3;
+  for (EarthFrame earth : {EarthFrame::kNed, EarthFrame::kEnu}) {
+    FqaSettings fs;
+    fs.earth = earth;
+    fs.m_ref_E = MagneticNorth(earth);
+    const Eigen::Vector3d u = UpVector(earth), north = MagneticNorth(earth);
+    const Eigen::Vector3d m_E = 20.0 * north - 44.0 * u;  // 20 µT north, 44 µT down
+    for (int trial = 0; trial < 5; ++trial) {
+      const Eigen::Matrix3d R_EB = geometry::Exp(1.5 * sim::Draw3(n, rng));
+      const Eigen::Vector3d f_B = R_EB.transpose() * (g * u), m_B = R_EB.transpose() * m_E;
+      const Eigen::Matrix3d R0 = geometry::QuatToMatrix(*Fqa(f_B, m_B, fs));
+      ASSERT_LT(geometry::Log(R0 * R_EB.transpose()).norm(), 1e-9);
+      Eigen::Matrix3d J;  // ∂δθ_E / ∂b_E
+      const double h = 1e-4;
+      for (int j = 0; j < 3; ++j) {
+        const Eigen::Vector3d db_B = R_EB.transpose() * (h * Eigen::Vector3d::Unit(j));
+        const Eigen::Matrix3d Rp = geometry::QuatToMatrix(*Fqa(f_B + db_B, m_B, fs));
+        const Eigen::Matrix3d Rm = geometry::QuatToMatrix(*Fqa(f_B - db_B, m_B, fs));
+        J.col(j) =
+            (geometry::Log(Rp * R0.transpose()) - geometry::Log(Rm * R0.transpose())) / (2 * h);
+      }
+      const Eigen::Matrix3d C = AccelBiasOrientationCovariance(earth, g, dip, sigma);
+      const Eigen::Matrix3d C_fd = sigma * sigma * J * J.transpose();
+      EXPECT_LT((C - C_fd).norm(), 1e-6 * C_fd.norm()) << C << "\n\n" << C_fd;
+      // The heading row is not zero: the dip couples tilt into heading (tan 65.6° = 2.2).
+      EXPECT_GT(std::abs(C_fd(2, 2)) + std::abs(C_fd(0, 0)), 0.0);
+    }
+  }
+  // No magnetometer dip, no heading coupling: the heading row and column are zero.
+  const Eigen::Matrix3d C0 = AccelBiasOrientationCovariance(EarthFrame::kNed, g, 0.0, sigma);
+  EXPECT_EQ(C0.row(2).norm(), 0.0);
+  EXPECT_NEAR(C0(0, 0), sigma * sigma / (g * g), 1e-15);
+}
+
+// An accelerometer bias walking at 2e-4 m/s²/√s (over the ~250 s of 101 stops, ~3e-3 m/s²: a
+// tilt of 3e-4 rad against a window scatter of 6e-5 rad): the windows are consistent when the
+// pipeline is told the walk, and beyond the band when it is not (the control).
+// The band. Every window of a run shares one bias path, so a run's mean NEES is not χ²(6n)/n:
+// its tilt part is, per horizontal axis, X = (1/n) Σ W(t_k)²/t_k for a Brownian W, E[X] = 1 and
+// Var[X] = 2 ∫∫ min(s, t)²/(s t) = 1 (windows spread evenly in time). Over K independent runs the
+// mean NEES has mean 6·(Hotelling factor) and variance (2 + 12/n)/K at most (bias dominating the
+// tilt); the band is that ± 3.29 σ (false-alarm rate 1e-3).
+TEST(PosePipeline, ConsistentCovarianceUnderAnAccelerometerBiasWalk) {
+  const double walk = 2e-4;
+  const int runs = 8;
+  PosePipelineSettings told;
+  told.accel_bias_random_walk = walk;
+  double nees = 0, control = 0, expected = 0, n = 0;
+  for (int k = 0; k < runs; ++k) {
+    const Outcome o = Simulate(101, 40 + k, 1.5, 1.0, {}, 0.0, walk, told);
+    const NeesBand b = WindowNees(o);
+    nees += b.nees / runs;
+    // The band's upper edge over its χ² quantile is the run's Hotelling factor.
+    const double m = static_cast<double>(o.poses.size());
+    expected += 6.0 * b.hi / (ChiSquareQuantileWh(3.2905, 6 * m) / m) / runs;
+    n = m;
+    control += WindowNees(Simulate(101, 40 + k, 1.5, 1.0, {}, 0.0, walk)).nees / runs;
+  }
+  const double half = 3.2905 * std::sqrt((2.0 + 12.0 / n) / runs);
+  std::printf(
+      "accelerometer bias walk: window NEES %.3f over %d runs (not told: %.3f), band "
+      "[%.3f, %.3f]\n",
+      nees, runs, control, expected - half, expected + half);
+  EXPECT_GT(nees, expected - half);
+  EXPECT_LT(nees, expected + half);
+  EXPECT_GT(control, expected + half);
+}
+
+// A disturbance that turns the horizontal field by 0.7 rad at every fifth stop, its norm and dip
+// unchanged (what the magnetometer's own tests cannot see): the windows stay consistent, their
+// heading variance grown by the disagreement with the stop's start; without the check (the
+// control) they are 0.7 rad off at a 1e-3 rad σ.
+TEST(PosePipeline, ConsistentCovarianceUnderADisturbanceTheFieldTestsCannotSee) {
+  const Eigen::Vector3d m_h(20, 0, 0);  // the simulation's horizontal field (north, µT)
+  const Eigen::Vector3d d_E = geometry::Exp(Eigen::Vector3d(0, 0, 0.7)) * m_h - m_h;
+  const auto disturbance = [&](int stop) { return stop % 5 == 2 ? d_E : Eigen::Vector3d::Zero(); };
+  PosePipelineSettings off;
+  off.heading_consistency_chi2 = 0.0;
+  const Outcome o = Simulate(101, 7, 1.5, 1.0, {}, 0.0, 0.0, {}, disturbance);
+  const Outcome control = Simulate(101, 7, 1.5, 1.0, {}, 0.0, 0.0, off, disturbance);
+  const NeesBand b = WindowNees(o), c = WindowNees(control);
+  std::printf(
+      "heading disturbance at 20 stops: window NEES %.3f (check off: %.1f), band "
+      "[%.3f, %.3f], %lld windows inflated\n",
+      b.nees, c.nees, b.lo, b.hi, static_cast<long long>(o.heading_disagreements));
+  EXPECT_GT(b.nees, b.lo);
+  EXPECT_LT(b.nees, b.hi);
+  EXPECT_GT(c.nees, c.hi);
+  // Every disturbed window, and at a 1e-3 false-alarm rate hardly another (P(> 2 of 80) < 1e-4).
+  EXPECT_GE(o.heading_disagreements, 20);
+  EXPECT_LE(o.heading_disagreements, 22);
+}
+
 TEST(PosePipeline, OnePosePerStopWithAConsistentCovariance) {
   const Outcome o = Simulate(101, 7);
   // The first stop's window is the filters' warm-up (rest_from_joints): dropped, counted.
   ASSERT_EQ(o.poses.size() + 1, o.stops.size());
   EXPECT_EQ(o.dropped, 1);
+  // No disturbance: the heading check (false-alarm rate 1e-3) widens hardly any window.
+  EXPECT_LE(o.heading_disagreements, 2);
   double nees = 0, hotelling = 0;
   for (size_t k = 0; k < o.poses.size(); ++k) {
     const StillPose& p = o.poses[k];

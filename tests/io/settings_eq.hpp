@@ -89,6 +89,8 @@ inline void ExpectSameSettings(const estimation::PosePipelineSettings& a,
   RCAL_EXPECT_FIELD(a, b, position_floor_sigma);
   RCAL_EXPECT_FIELD(a, b, orientation_floor_sigma);
   RCAL_EXPECT_FIELD(a, b, rest_from_joints);
+  RCAL_EXPECT_FIELD(a, b, accel_bias_sigma);
+  RCAL_EXPECT_FIELD(a, b, accel_bias_random_walk);
 }
 
 inline void ExpectSameSettings(const identification::EkfSettings& a,

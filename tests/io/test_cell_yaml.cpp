@@ -307,7 +307,9 @@ TEST(CellYaml, SetValuesReachTheSettings) {
       "  drift_sigma_angle: 2e-6, gate_probability: 0.999, gate_after: 5, guess_poses: 8,\n"
       "  base_set_seed: 7, joint_margin: 0.05}\n"
       "channels: {imu: CELL2_IMU, pose_measurement: cell2/POSE}\n";
-  Replace(text, "earth: ned", "earth: enu\n    gravity: 9.80\n    to_marker: [0.01, -0.02, 0.03]");
+  Replace(text, "earth: ned",
+          "earth: enu\n    gravity: 9.80\n    to_marker: [0.01, -0.02, 0.03]\n"
+          "    accel_bias: {sigma: 1.5e-4, random_walk: 2e-5}");
   CellSpec spec = ParseCellYaml(text, "set.yaml");
   ASSERT_TRUE(spec.imu.has_value());
   EXPECT_EQ(spec.imu->to_marker_I, Eigen::Vector3d(0.01, -0.02, 0.03));
@@ -333,6 +335,8 @@ TEST(CellYaml, SetValuesReachTheSettings) {
   EXPECT_EQ(p.max_gap, 0.25);
   EXPECT_FALSE(p.rest_from_joints);
   EXPECT_EQ(p.orientation.earth, estimation::EarthFrame::kEnu);
+  EXPECT_EQ(p.accel_bias_sigma, 1.5e-4);
+  EXPECT_EQ(p.accel_bias_random_walk, 2e-5);
   EXPECT_EQ(p.position.earth, estimation::EarthFrame::kEnu);
   EXPECT_EQ(p.orientation.gravity, 9.80);
   EXPECT_EQ(p.position.gravity, 9.80);
@@ -593,6 +597,12 @@ INSTANTIATE_TEST_SUITE_P(
                 "sensors.imu.to_marker[1]: value is not finite"},
         BadCase{kG, "    gravity: 9.81", "    gravity: 9.81\n    to_marker: guess",
                 "sensors.imu.to_marker: expected a list of 3 numbers"},
+        BadCase{kG, "    gravity: 9.81", "    gravity: 9.81\n    accel_bias: {sigma: 15}",
+                "sensors.imu.accel_bias.sigma: 15"},
+        BadCase{kG, "    gravity: 9.81", "    gravity: 9.81\n    accel_bias: {random_walk: .nan}",
+                "sensors.imu.accel_bias.random_walk"},
+        BadCase{kG, "    gravity: 9.81", "    gravity: 9.81\n    accel_bias: {stability: 1e-4}",
+                "sensors.imu.accel_bias"},
         BadCase{kG, "    gravity: 9.81", "    gravity: 1",
                 "sensors.imu.gravity: 1 m/s² is below 9.7"},
         BadCase{kP, "rpy: [0, 0, -pi/4]", "rpy: [0, 0, -45]",

@@ -190,7 +190,8 @@ std::vector<SweepConfig> SensorSweepConfigs(int num_cal, int num_test) {
   {
     cell::RunSettings r = b;
     r.gyro_bias = true;
-    add("gyro-bias", "gyro bias", "0.3 °/s + random walk", r);
+    add("gyro-bias", "gyro bias",
+        "0.3 °/s + random walks (gyro 1e-5 rad/s/√s, accelerometer 1e-4 m/s²/√s)", r);
   }
   {
     cell::RunSettings r = b;

@@ -116,6 +116,8 @@ Windows SimulateWindows(const Cell& cell, const RunSettings& s) {
   ps.position.position_sigma = ss.position.sigma;
   ps.orientation.gyro_noise_density = ss.imu.gyro_noise_density;
   ps.use_orientation = s.orientation;
+  // The pipeline is told the accelerometer's bias walk, as a user copies it from the datasheet.
+  if (ss.imu.bias_random_walk) ps.accel_bias_random_walk = ss.imu.accel_bias_random_walk;
   estimation::PosePipeline pipeline(ps);
 
   std::vector<estimation::StillPose> poses;

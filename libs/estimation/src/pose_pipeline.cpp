@@ -14,6 +14,21 @@ bool Finite(const Eigen::VectorXd& v) {
 }
 }  // namespace
 
+Eigen::Matrix3d AccelBiasOrientationCovariance(EarthFrame earth, double gravity, double dip,
+                                               double sigma_ba) {
+  // The FQA levels with f + b: the estimated up turns by the bias's horizontal part, δθ_t =
+  // (b_E × u)/g = −[u]× b_E / g. Levelled with that tilt, the field gains an east component
+  // −m_v (n̂·δθ_t), which the heading cancels by turning about u by −tan(dip) (n̂·δθ_t) =
+  // tan(dip) (ê·b_E)/g (n̂·(b × u) = b·(u × n̂) = −ê·b).
+  const Eigen::Vector3d u = UpVector(earth);
+  const Eigen::Vector3d n = MagneticNorth(earth);
+  const Eigen::Vector3d n_h = (n - n.dot(u) * u).normalized();
+  const Eigen::Vector3d e = n_h.cross(u);
+  Eigen::Matrix3d A = -geometry::Skew(u) + std::tan(dip) * u * e.transpose();
+  A /= gravity;
+  return sigma_ba * sigma_ba * A * A.transpose();
+}
+
 PosePipeline::PosePipeline(const PosePipelineSettings& settings)
     : settings_(settings),
       ori_(settings.orientation),
@@ -36,6 +51,9 @@ void PosePipeline::Reset() {
   q_count_ = 0;
   raw_p_.clear();
   raw_R_.clear();
+  has_t_imu0_ = false;
+  t_imu0_ = 0.0;
+  carried_.reset();
 }
 
 Status PosePipeline::Refuse(const std::string& reason) {
@@ -95,6 +113,10 @@ Status PosePipeline::AddImu(double t, const Eigen::Vector3d& gyro_B, const Eigen
   if (!gyro_B.allFinite()) return Refuse("imu.gyro: not finite");
   if (!f_B.allFinite()) return Refuse("imu.accel: not finite");
   if (!m_B.allFinite()) return Refuse("imu.mag: not finite");
+  if (!has_t_imu0_) {
+    has_t_imu0_ = true;
+    t_imu0_ = t;
+  }
   if (settings_.rest_from_joints && !filters_started_) {
     if (!still_) {
       has_t_ = true;
@@ -128,6 +150,18 @@ Status PosePipeline::AddImu(double t, const Eigen::Vector3d& gyro_B, const Eigen
       !s && pos_.counters().resets != pos_resets) {
     FilterReset(t);
     return Refuse("imu: " + s.error());
+  }
+  if (carried_) {
+    // Rate over (t_{k−1}, t_k] read at t_k (the filter's convention).
+    const double dt = t - carried_->t;
+    if (dt > settings_.max_gap) carried_.reset();  // rotation unseen: nothing to carry
+  }
+  if (carried_) {
+    const double dt = t - carried_->t;
+    carried_->R_I0I = carried_->R_I0I * geometry::Exp((gyro_B - ori_.bias_B()) * dt);
+    carried_->var_gyro += std::pow(settings_.orientation.gyro_noise_density, 2) * dt;
+    carried_->duration += dt;
+    carried_->t = t;
   }
   if (!open_ || !pos_.initialized()) return Status::Ok();
   if (t - t_last_imu_ > settings_.max_gap) gap_ = true;
@@ -177,6 +211,7 @@ void PosePipeline::FilterReset(double t) {
   ori_.Reset();
   pos_.Reset();
   filters_started_ = false;
+  carried_.reset();  // the bias it was carried with is gone
   if (open_) {
     open_ = false;
     Drop("window at " + std::to_string(t_open_) + " s: a filter reset at " + std::to_string(t) +
@@ -245,6 +280,36 @@ void PosePipeline::CloseWindow() {
   const double s = settings_.covariance_scale;
   C_p = s * C_p + std::pow(settings_.position_floor_sigma, 2) * Eigen::Matrix3d::Identity();
   C_th = s * C_th + std::pow(settings_.orientation_floor_sigma, 2) * Eigen::Matrix3d::Identity();
+  const double var_ba =
+      std::pow(settings_.accel_bias_sigma, 2) +
+      std::pow(settings_.accel_bias_random_walk, 2) * std::max(0.0, wp->t_end - t_imu0_);
+  if (var_ba > 0.0) {
+    // The heading couples to the tilt through the field's dip (0 before the reference is
+    // learned: no magnetometer reference, no coupling known).
+    const double dip = ori_.mag_ref_norm() > 0.0 ? ori_.mag_ref_dip() : 0.0;
+    C_th += AccelBiasOrientationCovariance(settings_.orientation.earth,
+                                           settings_.orientation.gravity, dip, std::sqrt(var_ba));
+  }
+  const Eigen::Vector3d u = UpVector(settings_.orientation.earth);
+  if (pose.has_orientation && carried_ && settings_.heading_consistency_chi2 > 0.0 &&
+      ori_.mag_ref_norm() > 0.0) {
+    // The previous window carried here by the gyro: a heading beyond the variances followed a
+    // disturbed field (here, or, when the previous one was, that one's inflation widens this
+    // test). The bias's error δb turns the carried heading by δb T.
+    const Eigen::Matrix3d R_pred = carried_->R_EI * carried_->R_I0I;
+    const double d_psi = u.dot(geometry::Log(pose.R_EI * R_pred.transpose()));
+    const Eigen::Matrix3d P_b = ori_.P().bottomRightCorner<3, 3>();
+    const double var =
+        carried_->var_window + u.dot(C_th * u) + carried_->var_gyro +
+        u.dot(pose.R_EI * P_b * pose.R_EI.transpose() * u) * std::pow(carried_->duration, 2);
+    if (d_psi * d_psi > settings_.heading_consistency_chi2 * var) {
+      C_th += d_psi * d_psi * u * u.transpose();
+      ++counters_.heading_disagreements;
+    }
+  }
+  if (pose.has_orientation)
+    carried_ =
+        Carried{pose.R_EI, Eigen::Matrix3d::Identity(), u.dot(C_th * u), 0.0, 0.0, t_last_imu_};
   if (pose.has_orientation) {
     pose.covariance = Eigen::MatrixXd::Zero(6, 6);
     pose.covariance.topLeftCorner<3, 3>() = C_p;

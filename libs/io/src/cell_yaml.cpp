@@ -164,7 +164,8 @@ Eigen::Matrix3d ReadAxes(const Reader& r, const YAML::Node& n, const std::string
 
 ImuSensorSpec ReadImu(const Reader& r, const YAML::Node& n, const std::string& path) {
   r.CheckMap(n, path,
-             {"id", "rate", "axes", "noise_density", "range", "earth", "gravity", "to_marker"});
+             {"id", "rate", "axes", "noise_density", "range", "earth", "gravity", "to_marker",
+              "accel_bias"});
   ImuSensorSpec s;
   if (n["id"]) s.id = Label(r, n["id"], path + ".id");
   s.rate = Bounded(r, r.Require(n, path, "rate"), path + ".rate", "Hz", 1.0, 10000.0,
@@ -207,6 +208,16 @@ ImuSensorSpec ReadImu(const Reader& r, const YAML::Node& n, const std::string& p
         r.Fail(path + ".to_marker",
                "beyond 1 m from the IMU: millimetres? (write metres, or `estimate`)", &t);
     }
+  }
+  if (const YAML::Node b = n["accel_bias"]) {
+    const std::string p = path + ".accel_bias";
+    r.CheckMap(b, p, {"sigma", "random_walk"});
+    if (b["sigma"])
+      s.accel_bias_sigma = Bounded(r, b["sigma"], p + ".sigma", "m/s²", 0.0, 1.0,
+                                   "mg or µg? (write m/s²: 15 µg = 1.47e-4)", "", true);
+    if (b["random_walk"])
+      s.accel_bias_random_walk = Bounded(r, b["random_walk"], p + ".random_walk", "m/s²/√s", 0.0,
+                                         0.01, "µg/√s or mg/√h? (write m/s²/√s)", "", true);
   }
   if (n["range"]) {
     const std::string p = path + ".range";
@@ -786,6 +797,8 @@ BuiltCell BuildCell(const CellSpec& spec) {
     ps.orientation.gravity = ps.position.gravity = ps.still.gravity = spec.imu->gravity;
     ps.orientation.gyro_range = spec.imu->gyro_range;
     ps.orientation.accel_range = spec.imu->accel_range;
+    ps.accel_bias_sigma = spec.imu->accel_bias_sigma;
+    ps.accel_bias_random_walk = spec.imu->accel_bias_random_walk;
   }
 
   identification::EkfSettings& es = c.ekf;

@@ -52,6 +52,10 @@
 //       noise_density: {gyro: 1.745e-4, accel: 5.886e-4, mag: 2e-8}
 //                                          # required [rad/s/√Hz, m/s²/√Hz, T/√Hz]
 //       range: {gyro: 7.85, accel: 200, mag: 8e-5}    # optional [rad/s, m/s², T] (full scale)
+//       accel_bias: {sigma: 1.5e-4, random_walk: 0}  # optional [m/s², m/s²/√s] (datasheet:
+//                                          #   bias stability, bias random walk); the still
+//                                          #   windows' orientation covariance carries the bias
+//                                          #   (PosePipelineSettings::accel_bias_*); absent: 0
 //       earth: ned                         # required: ned | enu (the earth frame of R_EW)
 //       gravity: 9.81                      # optional [m/s²], local gravity, 9.7 to 9.9
 //       to_marker: [0.01, 0, 0.02]         # optional [m]: the lever arm r_IM_I from the IMU to
@@ -202,9 +206,11 @@ struct ImuSensorSpec {
   double accel_noise_density = 0.0;  ///< [m/s²/√Hz]
   double mag_noise_density = 0.0;    ///< [T/√Hz]
   /// Full-scale ranges; defaults: transport::SensorRanges (what every process refuses beyond).
-  double gyro_range = 40.0;                                     ///< [rad/s]
-  double accel_range = 320.0;                                   ///< [m/s²]
-  double mag_range = 5e-3;                                      ///< [T]
+  double gyro_range = 40.0;             ///< [rad/s]
+  double accel_range = 320.0;           ///< [m/s²]
+  double mag_range = 5e-3;              ///< [T]
+  double accel_bias_sigma = 0.0;        ///< accelerometer bias σ per axis [m/s²]
+  double accel_bias_random_walk = 0.0;  ///< accelerometer bias random walk [m/s²/√s]
   estimation::EarthFrame earth = estimation::EarthFrame::kNed;  ///< the earth frame of R_EW
   double gravity = 9.81;                                        ///< local gravity magnitude [m/s²]
   /// IMU → first marker r_IM_I in the mounting frame [m] (zero: the IMU taken at the marker).
