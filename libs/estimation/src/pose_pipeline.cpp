@@ -151,12 +151,10 @@ Status PosePipeline::AddImu(double t, const Eigen::Vector3d& gyro_B, const Eigen
     FilterReset(t);
     return Refuse("imu: " + s.error());
   }
+  // The previous window carried by the gyro; across a gap the rotation is unseen: dropped.
+  if (carried_ && t - carried_->t > settings_.max_gap) carried_.reset();
   if (carried_) {
     // Rate over (t_{k−1}, t_k] read at t_k (the filter's convention).
-    const double dt = t - carried_->t;
-    if (dt > settings_.max_gap) carried_.reset();  // rotation unseen: nothing to carry
-  }
-  if (carried_) {
     const double dt = t - carried_->t;
     carried_->R_I0I = carried_->R_I0I * geometry::Exp((gyro_B - ori_.bias_B()) * dt);
     carried_->var_gyro += std::pow(settings_.orientation.gyro_noise_density, 2) * dt;
@@ -307,10 +305,9 @@ void PosePipeline::CloseWindow() {
       ++counters_.heading_disagreements;
     }
   }
-  if (pose.has_orientation)
+  if (pose.has_orientation) {
     carried_ =
         Carried{pose.R_EI, Eigen::Matrix3d::Identity(), u.dot(C_th * u), 0.0, 0.0, t_last_imu_};
-  if (pose.has_orientation) {
     pose.covariance = Eigen::MatrixXd::Zero(6, 6);
     pose.covariance.topLeftCorner<3, 3>() = C_p;
     pose.covariance.bottomRightCorner<3, 3>() = C_th;
