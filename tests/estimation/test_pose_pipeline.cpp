@@ -115,6 +115,7 @@ Outcome Simulate(int num_stops, unsigned seed, double still_s = 1.5, double move
 // false-alarm rate of 1e-3 (see OnePosePerStopWithAConsistentCovariance).
 struct NeesBand {
   double nees, lo, hi;
+  double hotelling;  // the mean Hotelling factor of the windows' scatter covariances
 };
 NeesBand WindowNees(const Outcome& o) {
   double nees = 0, hotelling = 0;
@@ -129,7 +130,7 @@ NeesBand WindowNees(const Outcome& o) {
   }
   const double n = static_cast<double>(o.poses.size());
   return {nees / n, ChiSquareQuantileWh(-3.2905, 6 * n) / n,
-          hotelling / n * ChiSquareQuantileWh(3.2905, 6 * n) / n};
+          hotelling / n * ChiSquareQuantileWh(3.2905, 6 * n) / n, hotelling / n};
 }
 
 // Half the position samples lost: the window is then ~40 raw positions, and its position must
@@ -181,8 +182,9 @@ TEST(PosePipeline, TheAccelerometerBiasCovarianceIsTheFqasResponseToABias) {
       const Eigen::Matrix3d C = AccelBiasOrientationCovariance(earth, g, dip, sigma);
       const Eigen::Matrix3d C_fd = sigma * sigma * J * J.transpose();
       EXPECT_LT((C - C_fd).norm(), 1e-6 * C_fd.norm()) << C << "\n\n" << C_fd;
-      // The heading row is not zero: the dip couples tilt into heading (tan 65.6° = 2.2).
-      EXPECT_GT(std::abs(C_fd(2, 2)) + std::abs(C_fd(0, 0)), 0.0);
+      // The dip couples tilt into heading: the FQA's heading variance is tan²(dip) σ²/g² (4.8×
+      // the tilt's; 0 if the coupling were missing).
+      EXPECT_NEAR(C_fd(2, 2) * g * g / (sigma * sigma), std::pow(std::tan(dip), 2), 1e-3);
     }
   }
   // No magnetometer dip, no heading coupling: the heading row and column are zero.
@@ -209,10 +211,8 @@ TEST(PosePipeline, ConsistentCovarianceUnderAnAccelerometerBiasWalk) {
     const Outcome o = Simulate(101, 40 + k, 1.5, 1.0, {}, 0.0, walk, told);
     const NeesBand b = WindowNees(o);
     nees += b.nees / runs;
-    // The band's upper edge over its χ² quantile is the run's Hotelling factor.
-    const double m = static_cast<double>(o.poses.size());
-    expected += 6.0 * b.hi / (ChiSquareQuantileWh(3.2905, 6 * m) / m) / runs;
-    n = m;
+    expected += 6.0 * b.hotelling / runs;
+    n = static_cast<double>(o.poses.size());
     control += WindowNees(Simulate(101, 40 + k, 1.5, 1.0, {}, 0.0, walk)).nees / runs;
   }
   const double half = 3.2905 * std::sqrt((2.0 + 12.0 / n) / runs);

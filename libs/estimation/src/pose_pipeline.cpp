@@ -51,8 +51,7 @@ void PosePipeline::Reset() {
   q_count_ = 0;
   raw_p_.clear();
   raw_R_.clear();
-  has_t_imu0_ = false;
-  t_imu0_ = 0.0;
+  t_imu0_.reset();
   carried_.reset();
 }
 
@@ -113,10 +112,7 @@ Status PosePipeline::AddImu(double t, const Eigen::Vector3d& gyro_B, const Eigen
   if (!gyro_B.allFinite()) return Refuse("imu.gyro: not finite");
   if (!f_B.allFinite()) return Refuse("imu.accel: not finite");
   if (!m_B.allFinite()) return Refuse("imu.mag: not finite");
-  if (!has_t_imu0_) {
-    has_t_imu0_ = true;
-    t_imu0_ = t;
-  }
+  if (!t_imu0_) t_imu0_ = t;
   if (settings_.rest_from_joints && !filters_started_) {
     if (!still_) {
       has_t_ = true;
@@ -278,9 +274,9 @@ void PosePipeline::CloseWindow() {
   const double s = settings_.covariance_scale;
   C_p = s * C_p + std::pow(settings_.position_floor_sigma, 2) * Eigen::Matrix3d::Identity();
   C_th = s * C_th + std::pow(settings_.orientation_floor_sigma, 2) * Eigen::Matrix3d::Identity();
-  const double var_ba =
-      std::pow(settings_.accel_bias_sigma, 2) +
-      std::pow(settings_.accel_bias_random_walk, 2) * std::max(0.0, wp->t_end - t_imu0_);
+  const double var_ba = std::pow(settings_.accel_bias_sigma, 2) +
+                        std::pow(settings_.accel_bias_random_walk, 2) *
+                            std::max(0.0, wp->t_end - t_imu0_.value_or(wp->t_end));
   if (var_ba > 0.0) {
     // The heading couples to the tilt through the field's dip (0 before the reference is
     // learned: no magnetometer reference, no coupling known).

@@ -159,7 +159,8 @@ class PosePipeline {
     std::int64_t windows_dropped = 0;  ///< windows without a usable pose (or the warm-up)
     std::int64_t imu_before_rest = 0;  ///< IMU samples before the filters started (at rest)
     std::int64_t filter_resets = 0;    ///< a filter's state went non-finite: both restarted
-    /// windows whose heading disagreed with the stop's start (heading_consistency_chi2)
+    /// windows whose heading disagreed with the previous window carried by the gyro, their
+    /// heading variance widened (heading_consistency_chi2)
     std::int64_t heading_disagreements = 0;
     std::string last_error;  ///< last refusal or drop reason
   };
@@ -225,8 +226,7 @@ class PosePipeline {
   };
   std::optional<Carried> carried_;
   // The first IMU sample [s], the start of the accelerometer bias's random walk.
-  bool has_t_imu0_ = false;
-  double t_imu0_ = 0.0;
+  std::optional<double> t_imu0_;
   bool window_in_start_stop_ = false;
   Eigen::VectorXd q_sum_;
   int q_count_ = 0;
