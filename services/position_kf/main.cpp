@@ -5,6 +5,10 @@
 // replay at any speed gives the same estimates. Bad samples are rejected and counted in HEALTH.
 // The IMU → marker lever arm (cell sensors.imu.to_marker, --lever-arm, --estimate-lever-arm) gets
 // ω_B = gyro − the paired orientation's gyro bias; an estimated lever arm is logged at exit.
+// The filter works in the position sensor's frame W: accelerations are turned from the IMU's earth
+// frame by R_WE, the cell's earth_from_world (given as a prior or fixed) until the identifier's
+// KINEMATIC_PARAMS of the cell's model say where it found that frame (a guessed earth frame: the
+// identity until then, as without a cell).
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -13,6 +17,7 @@
 #include <cstring>
 #include <stdexcept>
 
+#include "rcal/geometry/so3.hpp"
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/services/cell_imu.hpp"
 #include "rcal/services/common.hpp"
@@ -79,7 +84,8 @@ int main(int argc, char** argv) {
 
   try {
     if (!cell_path.empty()) {
-      const io::CellSpec cell = io::LoadCellSpec(services::RepoPath(cell_path));
+      const io::BuiltCell built = io::LoadCell(services::RepoPath(cell_path));
+      const io::CellSpec& cell = built.spec;
       services::ApplyCellImu(cell, app, "position_kf", &settings.earth, &earth, &settings.gravity,
                              &options.ranges);
       if (app.count("--position-sigma") == 0)
@@ -99,6 +105,20 @@ int main(int argc, char** argv) {
       options.position_channel = cell.channels.position;
       options.tool_position_channel = cell.channels.tool_position;
       options.health_channel = cell.channels.health;
+      options.kinematic_params_channel = cell.channels.kinematic_params;
+      if (built.model.has_earth()) {
+        options.model = std::make_shared<const kinematics::KinematicModel>(built.model);
+        const bool guessed = cell.frames.earth_from_world &&
+                             cell.frames.earth_from_world->mode == io::SetupMode::kGuess;
+        if (!guessed)
+          options.world_from_earth = built.model.EarthFromWorld(built.model.Nominal()).transpose();
+        spdlog::info(
+            "position sensor frame ← IMU earth frame: {}; then the identifier's estimate "
+            "({})",
+            guessed ? "the identity until the identifier's first estimate (earth_from_world: guess)"
+                    : "the cell's earth_from_world",
+            options.kinematic_params_channel);
+      }
     }
     if (!lever_arm.empty())
       settings.lever_arm_B = Eigen::Vector3d(lever_arm[0], lever_arm[1], lever_arm[2]);
@@ -118,6 +138,14 @@ int main(int argc, char** argv) {
     const auto& h = node.health();
     spdlog::info("stopped: received {}, rejected {}, published {}", h.received(), h.rejected(),
                  h.published());
+    if (options.model) {
+      const Eigen::Vector3d rpy_EW = geometry::ToRpy(node.filter().R_WE().transpose());
+      spdlog::info(
+          "R_EW (earth ← position sensor frame) rpy [{:.4f}, {:.4f}, {:.4f}] rad, from {} "
+          "identifier estimates ({} of another model ignored)",
+          rpy_EW.x(), rpy_EW.y(), rpy_EW.z(), node.world_from_earth_updates(),
+          node.ignored_params());
+    }
     if (settings.estimate_lever_arm) {
       const Eigen::Vector3d r_B = node.filter().lever_arm_B();
       const Eigen::Vector3d sigma = node.filter().lever_arm_covariance().diagonal().cwiseSqrt();

@@ -148,6 +148,28 @@ TEST(Model, EachMarkerIsTheFlangeFrameAppliedToItsOwnOffset) {
             0.05);
 }
 
+// R_EW alone: without an IMU mounting the orientation Forward gives is R_EW · R_WT, so the earth
+// rotation is that orientation less the chain's; at x = 0 it is the builder's roll-pitch-yaw.
+TEST(Model, EarthFromWorldIsTheRotationForwardPutsBeforeTheChain) {
+  const Eigen::Vector3d rpy_EW(0.02, 0.03, 1.2);
+  ModelBuilder b("earth");
+  b.DhLink(0.15, -kPi / 2, 0.25, 0.0, Rev("j1"))
+      .DhLink(0.57, 0.0, 0.0, -kPi / 2, Rev("j2"))
+      .EarthFrame(rpy_EW);
+  const KinematicModel m = b.Build();
+  ASSERT_TRUE(m.has_earth());
+  EXPECT_FALSE(Grb3016().has_earth());
+  EXPECT_LT((m.EarthFromWorld(m.Nominal()) - geometry::FromRpy(rpy_EW)).norm(), 1e-15);
+  std::mt19937 rng(5);
+  for (int trial = 0; trial < 5; ++trial) {
+    const Eigen::VectorXd q = RandomJoints(m, rng), x = RandomErrors(m, rng);
+    const Eigen::Matrix3d R_EW = m.Forward(q, x).R_EI * m.ToolFrame(q, x).linear().transpose();
+    EXPECT_LT((m.EarthFromWorld(x) - R_EW).norm(), 1e-14);
+  }
+  EXPECT_EQ(Grb3016().EarthFromWorld(Grb3016().Nominal()), Eigen::Matrix3d::Identity());
+  EXPECT_THROW(m.EarthFromWorld(Eigen::VectorXd::Zero(2)), std::invalid_argument);
+}
+
 TEST(Model, MarkerIdsAreDistinctAndEndTheChain) {
   ModelBuilder b("twice");
   b.DhLink(0.1, 0.0, 0.0, 0.0, Rev("j1")).MarkerOffset({0, 0, 0.1}, true, 3);

@@ -7,9 +7,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <memory>
 #include <vector>
 
 #include "rcal/health_t.hpp"
+#include "rcal/transport/adapters.hpp"
 #include "rcal/transport/lcm_transport.hpp"
 
 namespace rcal::transport {
@@ -299,6 +301,73 @@ TEST(PositionKfNode, TheLeverArmGetsTheGyroLessThePairedOrientationsBias) {
   EXPECT_EQ(node.filter().p_WM_W(), reference.p_WM_W());
   EXPECT_EQ(node.filter().P(), reference.P());
   EXPECT_NE(node.filter().p_WM_W(), raw_gyro.p_WM_W());
+}
+
+// The position sensor's frame (issue 17, item 2): position_kf turns accelerations by R_WE, the
+// identity until the identifier's KINEMATIC_PARAMS of the cell's model place the earth frame, then
+// R_EW(x)ᵀ, from the next accelerometer sample on: update for update the library filter told the
+// same R_WE at the same sample. Another model's estimate is ignored (counted, not an error); a
+// message naming the wrong parameters is refused, named, and changes nothing.
+TEST(PositionKfNode, TheIdentifiersEarthFrameTurnsTheAccelerations) {
+  kinematics::ModelBuilder b("earth");
+  b.DhLink(0.15, -M_PI / 2, 0.25, 0.0, {"j1", kinematics::JointType::kRevolute, -3.0, 3.0})
+      .MarkerOffset(Eigen::Vector3d(0.03, 0, 0.12))
+      .EarthFrame(Eigen::Vector3d::Zero());
+  auto model = std::make_shared<const kinematics::KinematicModel>(b.Build());
+  Eigen::VectorXd x = model->Nominal();
+  x(model->FindParameter("earth_rz")) = 0.87;  // the tracker turned about the vertical
+  x(model->FindParameter("earth_rx")) = -0.01;
+  const Eigen::Matrix3d R_WE = model->EarthFromWorld(x).transpose();
+  const Eigen::VectorXd sigma = Eigen::VectorXd::Constant(model->num_params(), 1e-3);
+  const kinematic_params_t params =
+      ToKinematicParams(*model, x, sigma, {}, "earth-robot", 1'000'000, 12);
+  kinematic_params_t wrong = params;
+  wrong.names[0] = "not_a1";
+  kinematics::ModelBuilder other_b("other");
+  other_b.DhLink(0.1, 0.0, 0.0, 0.0, {"j1", kinematics::JointType::kRevolute, -3.0, 3.0});
+  const kinematics::KinematicModel other = other_b.Build();
+  const kinematic_params_t foreign =
+      ToKinematicParams(other, other.Nominal(), Eigen::VectorXd::Zero(other.num_params()), {},
+                        "other-robot", 1'000'000, 3);
+
+  const estimation::PositionKfSettings settings = EnuPositionKfSettings();
+  LcmTransport t("memq://");
+  Outputs out(t);
+  PositionKfNode::Options options;
+  options.model = model;
+  PositionKfNode node(t, settings, options);
+  estimation::PositionKf reference(settings), never_told(settings);
+  constexpr int kTold = 100;  // the identifier's estimate arrives before sample kTold
+  for (int k = 0; k < 300; ++k) {
+    const int64_t u = k * kPeriod;
+    if (k == kTold) {
+      t.Publish("KINEMATIC_PARAMS", foreign);
+      t.Publish("KINEMATIC_PARAMS", wrong);
+      t.Publish("KINEMATIC_PARAMS", params);
+      Drain(t);
+      ASSERT_TRUE(reference.SetWorldFromEarth(R_WE).ok());
+    }
+    node.OnImu(Imu(u, k));
+    node.OnOrientation(OrientationAt(u));
+    if (k % 5 == 0) node.OnPosition(PositionAt(u, k));
+    Drain(t);
+    const ImuSample s = *ImuFromMessage(Imu(u, k), nullptr);
+    for (estimation::PositionKf* kf : {&reference, &never_told}) {
+      (void)kf->UpdateAccel(SensorSeconds(u), s.f_B, Eigen::Matrix3d::Identity(), s.gyro_B);
+      if (k % 5 == 0)
+        (void)kf->UpdatePosition(SensorSeconds(u),
+                                 Eigen::Map<const Eigen::Vector3d>(PositionAt(u, k).p));
+    }
+  }
+  EXPECT_EQ(node.world_from_earth_updates(), 1);
+  EXPECT_EQ(node.ignored_params(), 1);
+  EXPECT_EQ(node.health().rejected(), 1);
+  EXPECT_NE(node.health().last_error().find("kinematic_params.names[0]"), std::string::npos)
+      << node.health().last_error();
+  EXPECT_LT((node.filter().R_WE() - R_WE).norm(), 1e-15);
+  EXPECT_EQ(node.filter().p_WM_W(), reference.p_WM_W());
+  EXPECT_EQ(node.filter().P(), reference.P());
+  EXPECT_GT((node.filter().a_W() - never_told.a_W()).norm(), 1e-4);
 }
 
 // A driver (or a replay) that stalled sends what fell due at once: 6 s of IMU and POSITION

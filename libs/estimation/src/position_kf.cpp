@@ -80,9 +80,23 @@ Eigen::Matrix3d PositionKf::position_covariance() const {
   return C;
 }
 
-Eigen::Vector3d PositionKf::EarthAcceleration(const Eigen::Vector3d& f_B,
+Eigen::Vector3d PositionKf::WorldAcceleration(const Eigen::Vector3d& f_B,
                                               const Eigen::Matrix3d& R_EB) const {
-  return R_EB * f_B - settings_.gravity * UpVector(settings_.earth);
+  // Gravity leaves in E, before the turn into W (header comment).
+  return R_WE_ * (R_EB * f_B - settings_.gravity * UpVector(settings_.earth));
+}
+
+Status PositionKf::SetWorldFromEarth(const Eigen::Matrix3d& R_WE) {
+  const bool rotation = R_WE.allFinite() &&
+                        (R_WE * R_WE.transpose() - Eigen::Matrix3d::Identity()).norm() <= 1e-6 &&
+                        R_WE.determinant() > 0.0;
+  if (rotation) {
+    R_WE_ = R_WE;
+    return Status::Ok();
+  }
+  ++counters_.input_rejected;
+  return Status::Error(R_WE.allFinite() ? "position_kf: R_WE is not a rotation"
+                                        : "position_kf: R_WE is not finite");
 }
 
 Status PositionKf::Check(double t, const Eigen::Vector3d& v, const char* name) {
@@ -167,13 +181,13 @@ Status PositionKf::UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen
   has_last_omega_ = true;
   if (!initialized_) return Status::Ok();
   PredictTo(t);
-  const Eigen::Vector3d z = EarthAcceleration(f_B, R_EB);
-  // h = A − R_EB M r_B, M = [α]× + [ω]×² (header comment).
+  const Eigen::Vector3d z = WorldAcceleration(f_B, R_EB);
+  // h = A − R_WB M r_B, R_WB = R_WE R_EB, M = [α]× + [ω]×² (header comment).
   const Eigen::Matrix3d W = geometry::Skew(omega_B);
   const Eigen::Matrix3d M = geometry::Skew(alpha_B) + W * W;
   Eigen::Matrix<double, 3, 12> H = Eigen::Matrix<double, 3, 12>::Zero();
   for (int i = 0; i < 3; ++i) H(i, IA(i)) = 1.0;
-  H.rightCols<3>() = -R_EB * M;
+  H.rightCols<3>() = -(R_WE_ * R_EB) * M;
   const Eigen::Matrix3d R =
       settings_.accel_sigma * settings_.accel_sigma * Eigen::Matrix3d::Identity();
   const Eigen::Vector3d y = z - H * x_;

@@ -95,6 +95,14 @@ Eigen::Isometry3d KinematicModel::ToolFrame(const Eigen::VectorXd& q,
   return T_WT;
 }
 
+Eigen::Matrix3d KinematicModel::EarthFromWorld(const Eigen::VectorXd& x) const {
+  if (x.size() != num_params())
+    throw std::invalid_argument("x has " + std::to_string(x.size()) + " parameters, model '" +
+                                name() + "' has " + std::to_string(num_params()));
+  // The earth ETs depend on no joint (ModelBuilder::EarthFrame), so q is not read.
+  return RotationProduct(earth_, Eigen::VectorXd(), x);
+}
+
 ToolPose KinematicModel::Forward(const Eigen::VectorXd& q, const Eigen::VectorXd& x) const {
   const Eigen::Isometry3d T_WT = ToolFrame(q, x);
   return {T_WT.translation(),

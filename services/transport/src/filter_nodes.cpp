@@ -1,5 +1,7 @@
 #include "rcal/transport/filter_nodes.hpp"
 
+#include "rcal/transport/adapters.hpp"
+
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <chrono>
@@ -243,6 +245,27 @@ PositionKfNode::PositionKfNode(Transport& t, const estimation::PositionKfSetting
       undecodable);
   t_.Subscribe<position_sample_t>(
       o_.position_channel, [this](const position_sample_t& m) { OnPosition(m); }, undecodable);
+  if (!kf_.SetWorldFromEarth(o_.world_from_earth))
+    throw std::invalid_argument("position_kf: Options::world_from_earth is not a rotation");
+  if (o_.model && o_.model->has_earth())
+    t_.Subscribe<kinematic_params_t>(
+        o_.kinematic_params_channel, [this](const kinematic_params_t& m) { OnKinematicParams(m); },
+        undecodable);
+}
+
+void PositionKfNode::OnKinematicParams(const kinematic_params_t& msg) {
+  health_.Received();
+  // Another model's estimate (a pose-level identifier on the same bus): not this cell's earth.
+  if (msg.model_id != ModelId(*o_.model)) {
+    ++ignored_params_;
+    return;
+  }
+  std::string error;
+  const auto x = ParamsFromMessage(msg, *o_.model, &error);
+  if (!x) return Reject(error);
+  if (const auto s = kf_.SetWorldFromEarth(o_.model->EarthFromWorld(*x).transpose()); !s)
+    return Reject("kinematic_params.values: the earth frame's " + s.error());
+  ++world_from_earth_updates_;
 }
 
 void PositionKfNode::Announce() {

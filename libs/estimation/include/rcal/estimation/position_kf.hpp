@@ -3,16 +3,20 @@
 // position sensor and by the accelerometer rotated into the earth frame.
 //
 // Frame convention (one, used everywhere in this filter): all states and the position sensor
-// are in the earth frame E of the orientation estimate (NED or ENU, z vertical, as
-// OrientationKf), point W = E. The accelerometer's specific force f_B is rotated with the
-// orientation estimate and gravity is removed:
-//   a_E = R_EB f_B + g_E,   g_E = −g · up_E   (g_E = [0,0,+g] in NED, [0,0,−g] in ENU).
+// are in the position sensor's frame W. The orientation estimate is in the earth frame E (NED or
+// ENU, z vertical, as OrientationKf); the accelerometer's specific force f_B is rotated with it,
+// gravity is removed in E, and the result is turned into W:
+//   a_W = R_WE (R_EB f_B + g_E),   g_E = −g · up_E   (g_E = [0,0,+g] in NED, [0,0,−g] in ENU).
 // This settles the NOTES.md erratum on Eqs. 25/29 (NED stated, gravity removed as if z were up).
+// R_WE (world ← earth, SetWorldFromEarth) is the identity until told: the paper's W = E. A
+// tracker turned against the earth frame (any real one) needs it, or every acceleration enters
+// turned by that angle; gravity is removed before the turn, so an error δ in R_WE costs only
+// δ × the tool's own acceleration, never δ × g.
 //
 // State (Eq. 27 order): x = [p_x, V_x, A_x, p_y, V_y, A_y, p_z, V_z, A_z], with p_WM_W [m] the
-// marker position, V [m/s], A [m/s²] its acceleration, all in E. The paper's A is the
+// marker position, V [m/s], A [m/s²] its acceleration, all in W. The paper's A is the
 // body-frame acceleration with M_H2S in Φ (Eq. 28) and gravity as an input (Eq. 29); taking A in
-// E instead moves the rotation and gravity into the accelerometer measurement, and Φ becomes
+// W instead moves the rotation and gravity into the accelerometer measurement, and Φ becomes
 // the same constant-acceleration block per axis (PaperPhiPos() gives the paper's form, with
 // the row-7 erratum: p_z does not depend on V_y):
 //   Φ_axis = [1 Δt Δt²/2; 0 1 Δt; 0 0 1],   x⁻ = Φ x,   P⁻ = Φ P Φᵀ + Q,
@@ -20,11 +24,12 @@
 // Measurements (H′ of Eq. 31, missing in the text): the position sensor observes p
 // (H = rows of p), the accelerometer observes A (H = rows of A).
 // Lever arm (beyond the paper): the IMU is not at the marker. With r_B the IMU → marker
-// vector in the body frame [m], p_M = p_I + R_EB r_B, so the marker's acceleration is
-//   A = ä_I + R_EB ([α_B]× + [ω_B]×²) r_B,   ä_I = R_EB f_B + g_E (what the accelerometer gives),
+// vector in the body frame [m], p_M = p_I + R_WB r_B (R_WB = R_WE R_EB), so the marker's
+// acceleration is
+//   A = ä_I + R_WB ([α_B]× + [ω_B]×²) r_B,   ä_I = R_WE (R_EB f_B + g_E) (the accelerometer's),
 // ω_B the body rate [rad/s] (UpdateAccel's omega_B) and α_B its derivative, differenced between
-// accelerometer updates. The accelerometer's measurement is then z = R_EB f_B + g_E with
-// h = A − R_EB M r_B, M = [α_B]× + [ω_B]×². With estimate_lever_arm r_B joins the state
+// accelerometer updates. The accelerometer's measurement is then z = R_WE (R_EB f_B + g_E) with
+// h = A − R_WB M r_B, M = [α_B]× + [ω_B]×². With estimate_lever_arm r_B joins the state
 // (constant; initial value lever_arm_B, σ lever_arm_sigma) and is observed whenever the body
 // turns; otherwise lever_arm_B is taken as known (zero: the paper's filter). Update as NOTES.md
 // Eqs. 15–17, Joseph form. The position sensor is χ²-gated: NIS = yᵀS⁻¹y > position_gate_chi2
@@ -86,7 +91,7 @@ class PositionKf {
   };
 
   explicit PositionKf(const PositionKfSettings& settings = {});
-  /// Forgets the state and the counters (but `resets`).
+  /// Forgets the state and the counters (but `resets`); R_WE is kept.
   void Reset();
 
   /// Accelerometer sample at t [s] (not before the last update): specific force f_B [m/s²] in
@@ -100,9 +105,17 @@ class PositionKf {
   /// initialises the filter. Returns Ok also when gated (see last_position_accepted()).
   Status UpdatePosition(double t, const Eigen::Vector3d& p_WM_W);
 
+  /// The position sensor's frame W against the orientation's earth frame E: R_WE (earth →
+  /// world), a rotation. Takes effect from the next accelerometer sample; the state (already in
+  /// W) is kept. Refused (counted in input_rejected, nothing changed) when not finite or not a
+  /// rotation (|R Rᵀ − I| > 1e-6 or det < 0).
+  Status SetWorldFromEarth(const Eigen::Matrix3d& R_WE);
+  const Eigen::Matrix3d& R_WE() const { return R_WE_; }
+
   bool initialized() const { return initialized_; }
   double t() const { return t_; }
-  /// Position p_WM_W [m], velocity [m/s] and acceleration [m/s²], all in the earth frame.
+  /// Position p_WM_W [m], velocity [m/s] and acceleration [m/s²], all in the position sensor's
+  /// frame W.
   Eigen::Vector3d p_WM_W() const;
   Eigen::Vector3d v_W() const;
   Eigen::Vector3d a_W() const;
@@ -118,8 +131,9 @@ class PositionKf {
   bool last_position_accepted() const { return last_position_accepted_; }
   const Counters& counters() const { return counters_; }
 
-  /// Earth-frame acceleration a_E = R_EB f_B − g·up_E [m/s²] (what the accelerometer update uses).
-  Eigen::Vector3d EarthAcceleration(const Eigen::Vector3d& f_B, const Eigen::Matrix3d& R_EB) const;
+  /// World-frame acceleration a_W = R_WE (R_EB f_B − g·up_E) [m/s²] (what the accelerometer
+  /// update uses).
+  Eigen::Vector3d WorldAcceleration(const Eigen::Vector3d& f_B, const Eigen::Matrix3d& R_EB) const;
 
  private:
   // State: the 9 of Eq. 27, then r_B (3; constant, uncertain only when estimated).
@@ -137,6 +151,7 @@ class PositionKf {
   Vec9 x_ = Vec9::Zero();
   Mat9 P_ = Mat9::Identity();
   Counters counters_;
+  Eigen::Matrix3d R_WE_ = Eigen::Matrix3d::Identity();
   double last_position_nis_ = 0.0;
   bool last_position_accepted_ = false;
   int consecutive_rejections_ = 0;

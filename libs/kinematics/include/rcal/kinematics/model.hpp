@@ -128,6 +128,12 @@ class KinematicModel {
   /// Marker position and IMU orientation at joints q with parameter errors x.
   ToolPose Forward(const Eigen::VectorXd& q, const Eigen::VectorXd& x) const;
 
+  /// Whether the model has an earth ← world rotation (ModelBuilder::EarthFrame).
+  bool has_earth() const { return !earth_.empty(); }
+  /// The earth ← world rotation R_EW at parameter errors x (identity without an earth frame):
+  /// the frame Forward's R_EI is in, against the position sensor's world frame.
+  Eigen::Matrix3d EarthFromWorld(const Eigen::VectorXd& x) const;
+
   /// Pose of the end of the chain (the tool/marker frame) in the world frame, T_WT. This is the
   /// frame the IK corrector places.
   Eigen::Isometry3d ToolFrame(const Eigen::VectorXd& q, const Eigen::VectorXd& x) const;

@@ -19,6 +19,7 @@
 #include <cstdint>
 #include <functional>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 
@@ -26,6 +27,8 @@
 #include "rcal/estimation/position_kf.hpp"
 #include "rcal/estimation/time_gate.hpp"
 #include "rcal/imu_sample_t.hpp"
+#include "rcal/kinematic_params_t.hpp"
+#include "rcal/kinematics/model.hpp"
 #include "rcal/orientation_estimate_t.hpp"
 #include "rcal/position_sample_t.hpp"
 #include "rcal/tool_position_estimate_t.hpp"
@@ -173,8 +176,17 @@ class PositionKfNode {
     std::string position_channel = "POSITION";
     std::string tool_position_channel = "TOOL_POSITION";
     std::string health_channel = "HEALTH";
+    std::string kinematic_params_channel = "KINEMATIC_PARAMS";
     estimation::TimeGateSettings time;  ///< each stream's time gate (IMU, ORIENTATION, POSITION)
     SensorRanges ranges;
+    /// The position sensor's frame against the IMU's earth frame, R_WE (world ← earth), until
+    /// the identifier's first estimate (a cell's earth_from_world given as a prior; identity:
+    /// W = E, the paper's).
+    Eigen::Matrix3d world_from_earth = Eigen::Matrix3d::Identity();
+    /// The cell's model. With an earth frame, R_WE follows the identifier's estimate of it
+    /// (KINEMATIC_PARAMS of this model: R_WE = R_EW(x)ᵀ); another model's estimates are ignored
+    /// (counted in ignored_params()). Null: R_WE stays world_from_earth.
+    std::shared_ptr<const kinematics::KinematicModel> model;
   };
   PositionKfNode(Transport& t, const estimation::PositionKfSettings& settings, Options options);
   PositionKfNode(Transport& t, const estimation::PositionKfSettings& settings)
@@ -187,9 +199,14 @@ class PositionKfNode {
   void OnImu(const imu_sample_t& msg);
   void OnOrientation(const orientation_estimate_t& msg);
   void OnPosition(const position_sample_t& msg);
+  /// The identifier's estimate: R_WE from its earth frame, from the next accelerometer sample on.
+  void OnKinematicParams(const kinematic_params_t& msg);
   void OnUndecodable(const std::string& reason);
 
   const estimation::PositionKf& filter() const { return kf_; }
+  /// KINEMATIC_PARAMS R_WE was taken from, and those of another model (ignored).
+  int64_t world_from_earth_updates() const { return world_from_earth_updates_; }
+  int64_t ignored_params() const { return ignored_params_; }
   const Health& health() const { return health_; }
   /// Accelerometer samples dropped because their orientation never came.
   int64_t unpaired_accel() const { return unpaired_accel_; }
@@ -231,6 +248,7 @@ class PositionKfNode {
   std::multimap<int64_t, std::pair<AccelSample, Attitude>> ready_accel_;
   std::multimap<int64_t, Eigen::Vector3d> pending_position_;
   int64_t unpaired_accel_ = 0;
+  int64_t world_from_earth_updates_ = 0, ignored_params_ = 0;
   estimation::TimeGate imu_gate_, orientation_gate_, position_gate_;
 };
 
