@@ -43,6 +43,12 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--accel-sigma", settings.accel_sigma, "earth-frame acceleration σ [m/s²]")
       ->capture_default_str();
+  app.add_option("--jerk-noise", settings.jerk_noise,
+                 "white-jerk PSD of the marker's motion model [m/s³/√Hz] (the paper's w′: how "
+                 "fast the tool's acceleration may change; lower trusts the accelerometer between "
+                 "position samples more)")
+      ->check(CLI::Range(1e-3, 1e4))
+      ->capture_default_str();
   app.add_option("--orientation-wait", orientation_wait,
                  "IMU sensor time a position sample waits for a stopped orientation stream [s]")
       ->check(CLI::Range(0.0, 3600.0))
