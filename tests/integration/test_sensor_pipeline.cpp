@@ -228,8 +228,9 @@ TEST_F(SensorPipeline, CalibratesToTheOfflineFigure) {
 // demo's tracker is turned 50° about the vertical against the earth frame, which the identifier
 // finds from the first poses (earth_from_world: guess). position_kf, which turns every acceleration
 // by that estimate once KINEMATIC_PARAMS name it, follows the simulator's marker in motion closer
-// than the position sensor alone and closer than the same filter (the library, fed the same
-// recorded streams) taking the tracker's frame as the earth frame, as position_kf did before.
+// than the same filter (the library, fed the same recorded streams) taking the tracker's frame as
+// the earth frame, as position_kf did before, which is itself closer than the paper's filter (the
+// IMU taken at the marker); at the tracker's samples it is closer than the tracker alone.
 TEST_F(SensorPipeline, PositionKfFollowsTheMarkerInTheTrackersFrame) {
   RCAL_IN_NAMESPACE("SensorPipeline.PositionKfFollowsTheMarkerInTheTrackersFrame");
   constexpr int kCalHere = 16;

@@ -181,7 +181,7 @@ class PositionKfNode {
     SensorRanges ranges;
     /// The position sensor's frame against the IMU's earth frame, R_WE (world ← earth), until
     /// the identifier's first estimate (a cell's earth_from_world given as a prior; identity:
-    /// W = E, the paper's).
+    /// W = E, the paper's). A rotation: the constructor throws std::invalid_argument otherwise.
     Eigen::Matrix3d world_from_earth = Eigen::Matrix3d::Identity();
     /// The cell's model. With an earth frame, R_WE follows the identifier's estimate of it
     /// (KINEMATIC_PARAMS of this model: R_WE = R_EW(x)ᵀ); another model's estimates are ignored
