@@ -10,6 +10,7 @@
 #include <memory>
 #include <vector>
 
+#include "rcal/geometry/so3.hpp"
 #include "rcal/health_t.hpp"
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/lcm_transport.hpp"
@@ -317,7 +318,8 @@ TEST(PositionKfNode, TheIdentifiersEarthFrameTurnsTheAccelerations) {
   Eigen::VectorXd x = model->Nominal();
   x(model->FindParameter("earth_rz")) = 0.87;  // the tracker turned about the vertical
   x(model->FindParameter("earth_rx")) = -0.01;
-  const Eigen::Matrix3d R_WE = model->EarthFromWorld(x).transpose();
+  // R_EW = Rz(yaw) Ry(pitch) Rx(roll), the builder's convention, written out independently.
+  const Eigen::Matrix3d R_WE = geometry::FromRpy(-0.01, 0.0, 0.87).transpose();
   const Eigen::VectorXd sigma = Eigen::VectorXd::Constant(model->num_params(), 1e-3);
   const kinematic_params_t params =
       ToKinematicParams(*model, x, sigma, {}, "earth-robot", 1'000'000, 12);

@@ -1,11 +1,12 @@
 #include "rcal/transport/filter_nodes.hpp"
 
-#include "rcal/transport/adapters.hpp"
-
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <stdexcept>
+
+#include "rcal/transport/adapters.hpp"
 
 namespace rcal::transport {
 namespace {
