@@ -5,6 +5,9 @@
 // replay at any speed gives the same estimates. Bad samples are rejected and counted in HEALTH.
 // The IMU → marker lever arm (cell sensors.imu.to_marker, --lever-arm, --estimate-lever-arm) gets
 // ω_B = gyro − the paired orientation's gyro bias; an estimated lever arm is logged at exit.
+// The paper's filter by default; --motion-model accelerometer-driven lets the accelerometer drive
+// the acceleration state with a world-frame acceleration bias that takes the orientation's error
+// (estimation::AccelerometerDrivenSettings).
 // The filter works in the position sensor's frame W: accelerations are turned from the IMU's earth
 // frame by R_WE, the cell's earth_from_world (given as a prior or fixed) until the identifier's
 // KINEMATIC_PARAMS of the cell's model say where it found that frame (a guessed earth frame: the
@@ -30,7 +33,11 @@ int main(int argc, char** argv) {
   std::string lcm_url, earth = "ned";
   double orientation_wait = 1.0;
   transport::PositionKfNode::Options options;
+  // The paper's filter by default. --motion-model accelerometer-driven takes
+  // estimation::AccelerometerDrivenSettings() (its σ and bias walk unless given): closer than the
+  // tracker on the simulated cells, but it runs off on BROAD's fast and vibrating trials (README).
   estimation::PositionKfSettings settings;
+  std::string motion_model = "white-jerk";
   CLI::App app{
       "position_kf: the position Kalman filter on the position sensor and the accelerometer.\n"
       "Subscribes IMU, ORIENTATION, POSITION; publishes TOOL_POSITION and HEALTH.\n"
@@ -41,7 +48,23 @@ int main(int argc, char** argv) {
   app.add_option("--gravity", settings.gravity, "local gravity [m/s²]")->capture_default_str();
   app.add_option("--position-sigma", settings.position_sigma, "position sensor σ per axis [m]")
       ->capture_default_str();
-  app.add_option("--accel-sigma", settings.accel_sigma, "earth-frame acceleration σ [m/s²]")
+  app.add_option("--accel-sigma", settings.accel_sigma,
+                 "σ of one world-frame acceleration [m/s²] (the accelerometer's noise and the "
+                 "orientation's error that the bias state does not take)")
+      ->check(CLI::Range(1e-6, 100.0))
+      ->capture_default_str();
+  app.add_option(
+         "--motion-model", motion_model,
+         "where the jerk noise enters: white-jerk (the paper's Eq. 30) or "
+         "accelerometer-driven (the acceleration alone: position and velocity integrate the "
+         "accelerometer, with an acceleration bias state; --accel-sigma and "
+         "--accel-bias-walk default to 0.1 then)")
+      ->check(CLI::IsMember({"accelerometer-driven", "white-jerk"}))
+      ->capture_default_str();
+  app.add_option("--accel-bias-walk", settings.accel_bias_walk,
+                 "random walk of the world-frame acceleration bias state (the orientation's error "
+                 "times g, the accelerometer's bias) [m/s²/√s]; 0 = no bias state")
+      ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
   app.add_option("--jerk-noise", settings.jerk_noise,
                  "white-jerk PSD of the marker's motion model [m/s³/√Hz] (the paper's w′: how "
@@ -85,6 +108,12 @@ int main(int argc, char** argv) {
                  "--earth, --gravity, --position-sigma and --marker-id, when given, override it");
   CLI11_PARSE(app, argc, argv);
   settings.earth = earth == "enu" ? estimation::EarthFrame::kEnu : estimation::EarthFrame::kNed;
+  if (motion_model == "accelerometer-driven") {
+    const estimation::PositionKfSettings driven = estimation::AccelerometerDrivenSettings();
+    settings.motion_model = driven.motion_model;
+    if (app.count("--accel-sigma") == 0) settings.accel_sigma = driven.accel_sigma;
+    if (app.count("--accel-bias-walk") == 0) settings.accel_bias_walk = driven.accel_bias_walk;
+  }
   options.orientation_wait_us = static_cast<int64_t>(orientation_wait * 1e6);
   options.orientation_timeout_us = static_cast<int64_t>(orientation_timeout * 1e6);
 
@@ -116,8 +145,13 @@ int main(int argc, char** argv) {
         options.model = std::make_shared<const kinematics::KinematicModel>(built.model);
         const bool guessed = cell.frames.earth_from_world &&
                              cell.frames.earth_from_world->mode == io::SetupMode::kGuess;
-        if (!guessed)
+        if (guessed)
+          options.world_from_earth_covariance = Eigen::Matrix3d::Identity();  // 1 rad² per axis
+        else {
           options.world_from_earth = built.model.EarthFromWorld(built.model.Nominal()).transpose();
+          options.world_from_earth_covariance =
+              built.model.WorldFromEarthCovariance(built.model.Nominal(), built.PriorSigma());
+        }
         spdlog::info(
             "position sensor frame ← IMU earth frame: {}; then the identifier's estimate "
             "({})",
@@ -133,9 +167,12 @@ int main(int argc, char** argv) {
     transport::LcmTransport t(lcm_url);
     transport::PositionKfNode node(t, settings, options);
     node.Announce();
-    spdlog::info("position_kf on {} (earth {}, lever arm r_B [{}, {}, {}] m{})", t.url(), earth,
-                 settings.lever_arm_B.x(), settings.lever_arm_B.y(), settings.lever_arm_B.z(),
-                 settings.estimate_lever_arm ? ", estimated" : "");
+    spdlog::info(
+        "position_kf on {} (earth {}, lever arm r_B [{}, {}, {}] m{}; {} model, acceleration "
+        "bias walk {} m/s²/√s, σ {} m/s²)",
+        t.url(), earth, settings.lever_arm_B.x(), settings.lever_arm_B.y(),
+        settings.lever_arm_B.z(), settings.estimate_lever_arm ? ", estimated" : "", motion_model,
+        settings.accel_bias_walk, settings.accel_sigma);
     if (const int rc =
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
         rc != 0)
@@ -151,6 +188,12 @@ int main(int argc, char** argv) {
           "identifier estimates ({} of another model ignored)",
           rpy_EW.x(), rpy_EW.y(), rpy_EW.z(), node.world_from_earth_updates(),
           node.ignored_params());
+    }
+    if (settings.accel_bias_walk > 0.0) {
+      const Eigen::Vector3d b_W = node.filter().accel_bias_W();
+      spdlog::info(
+          "acceleration bias b_W (position sensor frame) at exit: [{:.4f}, {:.4f}, {:.4f}] m/s²",
+          b_W.x(), b_W.y(), b_W.z());
     }
     if (settings.estimate_lever_arm) {
       const Eigen::Vector3d r_B = node.filter().lever_arm_B();

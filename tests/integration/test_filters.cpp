@@ -44,9 +44,11 @@ struct Offline {
   // position_kf computes it (the gyro less the published orientation's bias).
   std::string trial = kTrial;  // the replayed file and its first `rows` rows
   int rows = kRows;
+  // `guessed_frame`: a cell whose earth_from_world is a guess, for which position_kf takes W = E
+  // with 1 rad² of doubt per axis until an identifier places the frame.
   explicit Offline(int64_t orientation_from = std::numeric_limits<int64_t>::min(),
                    bool estimate_lever_arm = false, std::string trial_file = kTrial,
-                   int num_rows = kRows)
+                   int num_rows = kRows, bool guessed_frame = false)
       : trial(std::move(trial_file)), rows(num_rows) {
     const bool full = orientation_from == std::numeric_limits<int64_t>::min();
     const auto table = io::CsvTable::Load(trial);
@@ -57,6 +59,10 @@ struct Offline {
     ps.estimate_lever_arm = estimate_lever_arm;
     estimation::OrientationKf okf(os);
     estimation::PositionKf pkf(ps);
+    if (guessed_frame) {
+      EXPECT_TRUE(
+          pkf.SetWorldFromEarth(Eigen::Matrix3d::Identity(), Eigen::Matrix3d::Identity()).ok());
+    }
     double next_pos_t = -INFINITY;
     for (int k = 0; k < std::min(rows, table.rows()); ++k) {
       auto c = [&](const char* name) { return table.At(k, name); };
@@ -386,8 +392,9 @@ TEST_F(Filters, TheCellFileGivesEarthFrameSigmaAndChannels) {
   const std::string cell = (dir_ / "cell.yaml").string();
   io::AtomicWriteFile(cell, text);
 
-  // position_kf estimates the lever arm the cell says to (sensors.imu.to_marker: estimate).
-  const Offline ref(std::numeric_limits<int64_t>::min(), true);
+  // position_kf estimates the lever arm the cell says to (sensors.imu.to_marker: estimate), and
+  // doubts the earth frame the cell only guesses.
+  const Offline ref(std::numeric_limits<int64_t>::min(), true, kTrial, kRows, true);
   Listener l("ORIENTATION_C", "TOOL_POSITION_C");
   const pid_t okf = Start({RCAL_ORIENTATION_KF, "--cell", cell, "--lcm-url", kUrl}, "okf.log");
   const pid_t pkf = Start({RCAL_POSITION_KF, "--cell", cell, "--lcm-url", kUrl}, "pkf.log");

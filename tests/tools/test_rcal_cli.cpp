@@ -876,6 +876,35 @@ TEST(RcalCli, DetectionSweepImuRunsEveryCell) {
   EXPECT_EQ(j.at("rows")[0].at("cause"), "");
 }
 
+// position_kf's settings from their sweep, small: the demo cell (8 simulated cases, one seed)
+// and BROAD's fast-translation trial 16 (real IMU, optical truth). On the simulated cases the
+// minimax is the accelerometer-driven filter with a bias state, better than the paper's filter on
+// every case; with the real trial in, the paper's filter is chosen: the accelerometer-driven one
+// runs off there (why position_kf keeps the paper's by default).
+TEST(RcalCli, PositionKfSweepKeepsThePapersFilterWhenRealDataRunsTheOtherOff) {
+  const fs::path d = TempDir("pkf_sweep");
+  const Result r = RunRcal(
+      "position-kf-sweep --seeds 1 --cell grb3016 --broad-trial "
+      "../shared/data/broad/broad_16_100hz.csv --json " +
+      (d / "s.json").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json j = ReadJson(d / "s.json");
+  ASSERT_EQ(j.at("cases"), 9);
+  const json& sim = j.at("chosen_simulated");
+  EXPECT_GT(sim.at("accel_bias_walk").get<double>(), 0.0) << r.output;
+  EXPECT_LT(sim.at("worst_ratio").get<double>(), 0.9) << r.output;
+  EXPECT_EQ(j.at("chosen").at("accel_bias_walk").get<double>(), 0.0) << r.output;
+  EXPECT_EQ(j.at("chosen").at("worst_ratio").get<double>(), 1.0);
+  ASSERT_EQ(j.at("groups").size(), 5u);  // two IMU classes × 20 and 100 Hz on the demo cell, BROAD
+  for (int g = 0; g < 4; ++g)
+    EXPECT_LT(j.at("groups")[g].at("paper_moving_rmse_m").get<double>(), 2e-3);
+  // The simulated cases' choice on the real trial: far off (seen: 0.61 m against 3.3 mm).
+  const json& broad = j.at("groups")[4];
+  EXPECT_EQ(broad.at("imu"), "BROAD");
+  EXPECT_GT(broad.at("simulated_choice_moving_rmse_m").get<double>(),
+            10.0 * broad.at("paper_moving_rmse_m").get<double>());
+}
+
 // The README's table of rcal analyze on IMU streams (trials 02, 07, 10, 15, 30): effects named,
 // their evidence, base and extended RMSE, Allan deviations. Deterministic, so every figure of
 // tests/tools/golden/analyze_broad.json must be reproduced (relative 1e-6). Each entry is the

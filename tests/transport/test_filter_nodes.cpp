@@ -307,8 +307,10 @@ TEST(PositionKfNode, TheLeverArmGetsTheGyroLessThePairedOrientationsBias) {
 // The position sensor's frame (issue 17, item 2): position_kf turns accelerations by R_WE, the
 // identity until the identifier's KINEMATIC_PARAMS of the cell's model place the earth frame, then
 // R_EW(x)ᵀ, from the next accelerometer sample on: update for update the library filter told the
-// same R_WE at the same sample. Another model's estimate is ignored (counted, not an error); a
-// message naming the wrong parameters is refused, named, and changes nothing.
+// same R_WE at the same sample, with the covariance of R_WE the message's sigmas give (three
+// earth angles of 1 mrad: 1e-6 rad² per axis). Another model's estimate is ignored (counted, not
+// an error); a message naming the wrong parameters, or with a NaN σ, is refused, named, and
+// changes nothing.
 TEST(PositionKfNode, TheIdentifiersEarthFrameTurnsTheAccelerations) {
   kinematics::ModelBuilder b("earth");
   b.DhLink(0.15, -M_PI / 2, 0.25, 0.0, {"j1", kinematics::JointType::kRevolute, -3.0, 3.0})
@@ -325,6 +327,10 @@ TEST(PositionKfNode, TheIdentifiersEarthFrameTurnsTheAccelerations) {
       ToKinematicParams(*model, x, sigma, {}, "earth-robot", 1'000'000, 12);
   kinematic_params_t wrong = params;
   wrong.names[0] = "not_a1";
+  kinematic_params_t nan_sigma = params;
+  nan_sigma.sigmas[2] = NAN;
+  const Eigen::Matrix3d C_WE = model->WorldFromEarthCovariance(x, sigma);
+  EXPECT_NEAR(C_WE.trace(), 3e-6, 1e-8);
   kinematics::ModelBuilder other_b("other");
   other_b.DhLink(0.1, 0.0, 0.0, 0.0, {"j1", kinematics::JointType::kRevolute, -3.0, 3.0});
   const kinematics::KinematicModel other = other_b.Build();
@@ -345,9 +351,16 @@ TEST(PositionKfNode, TheIdentifiersEarthFrameTurnsTheAccelerations) {
     if (k == kTold) {
       t.Publish("KINEMATIC_PARAMS", foreign);
       t.Publish("KINEMATIC_PARAMS", wrong);
+      Drain(t);
+      EXPECT_NE(node.health().last_error().find("kinematic_params.names[0]"), std::string::npos)
+          << node.health().last_error();
+      t.Publish("KINEMATIC_PARAMS", nan_sigma);
+      Drain(t);
+      EXPECT_NE(node.health().last_error().find("kinematic_params.sigmas"), std::string::npos)
+          << node.health().last_error();
       t.Publish("KINEMATIC_PARAMS", params);
       Drain(t);
-      ASSERT_TRUE(reference.SetWorldFromEarth(R_WE).ok());
+      ASSERT_TRUE(reference.SetWorldFromEarth(R_WE, C_WE).ok());
     }
     node.OnImu(Imu(u, k));
     node.OnOrientation(OrientationAt(u));
@@ -363,10 +376,9 @@ TEST(PositionKfNode, TheIdentifiersEarthFrameTurnsTheAccelerations) {
   }
   EXPECT_EQ(node.world_from_earth_updates(), 1);
   EXPECT_EQ(node.ignored_params(), 1);
-  EXPECT_EQ(node.health().rejected(), 1);
-  EXPECT_NE(node.health().last_error().find("kinematic_params.names[0]"), std::string::npos)
-      << node.health().last_error();
+  EXPECT_EQ(node.health().rejected(), 2);
   EXPECT_LT((node.filter().R_WE() - R_WE).norm(), 1e-15);
+  EXPECT_EQ(node.filter().R_WE_covariance(), C_WE);
   EXPECT_EQ(node.filter().p_WM_W(), reference.p_WM_W());
   EXPECT_EQ(node.filter().P(), reference.P());
   EXPECT_GT((node.filter().a_W() - never_told.a_W()).norm(), 1e-4);

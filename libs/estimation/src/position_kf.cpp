@@ -2,6 +2,7 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 #include <string>
@@ -42,6 +43,14 @@ Eigen::Matrix<double, 9, 1> PaperGammaPos(double g, double t) {
   u(IP(2)) = -g * t * t / 2.0;
   u(IV(2)) = -g * t;
   return u;
+}
+
+PositionKfSettings AccelerometerDrivenSettings() {
+  PositionKfSettings s;
+  s.motion_model = MotionModel::kAccelerometerDriven;
+  s.accel_bias_walk = 0.1;
+  s.accel_sigma = 0.1;
+  return s;
 }
 
 PositionKf::PositionKf(const PositionKfSettings& settings) : settings_(settings) {
@@ -86,17 +95,26 @@ Eigen::Vector3d PositionKf::WorldAcceleration(const Eigen::Vector3d& f_B,
   return R_WE_ * (R_EB * f_B - settings_.gravity * UpVector(settings_.earth));
 }
 
-Status PositionKf::SetWorldFromEarth(const Eigen::Matrix3d& R_WE) {
+Status PositionKf::SetWorldFromEarth(const Eigen::Matrix3d& R_WE,
+                                     const Eigen::Matrix3d& covariance) {
   const bool rotation = R_WE.allFinite() &&
                         (R_WE * R_WE.transpose() - Eigen::Matrix3d::Identity()).norm() <= 1e-6 &&
                         R_WE.determinant() > 0.0;
-  if (rotation) {
+  const bool cov_ok =
+      covariance.allFinite() &&
+      (covariance - covariance.transpose()).norm() <= 1e-9 * std::max(1.0, covariance.norm()) &&
+      covariance.diagonal().minCoeff() >= 0.0;
+  if (rotation && cov_ok) {
     R_WE_ = R_WE;
+    R_WE_covariance_ = covariance;
     return Status::Ok();
   }
   ++counters_.input_rejected;
-  return Status::Error(R_WE.allFinite() ? "position_kf: R_WE is not a rotation"
-                                        : "position_kf: R_WE is not finite");
+  if (!rotation)
+    return Status::Error(R_WE.allFinite() ? "position_kf: R_WE is not a rotation"
+                                          : "position_kf: R_WE is not finite");
+  return Status::Error(
+      "position_kf: R_WE's covariance is not finite, not symmetric or has a negative variance");
 }
 
 Status PositionKf::Check(double t, const Eigen::Vector3d& v, const char* name) {
@@ -124,34 +142,46 @@ void PositionKf::PredictTo(double t) {
   Phi_axis << 1, dt, dt * dt / 2, 0, 1, dt, 0, 0, 1;
   const double qj = settings_.jerk_noise * settings_.jerk_noise;
   const double dt2 = dt * dt, dt3 = dt2 * dt, dt4 = dt3 * dt, dt5 = dt4 * dt;
-  Eigen::Matrix3d Q_axis;
-  Q_axis << dt5 / 20, dt4 / 8, dt3 / 6, dt4 / 8, dt3 / 3, dt2 / 2, dt3 / 6, dt2 / 2, dt;
+  Eigen::Matrix3d Q_axis = Eigen::Matrix3d::Zero();
+  if (settings_.motion_model == MotionModel::kWhiteJerk)
+    Q_axis << dt5 / 20, dt4 / 8, dt3 / 6, dt4 / 8, dt3 / 3, dt2 / 2, dt3 / 6, dt2 / 2, dt;
+  else
+    Q_axis(2, 2) = dt;  // A alone (header comment)
   Q_axis *= qj;
-  Mat9 Phi = Mat9::Identity(), Q = Mat9::Zero();  // r_B constant
+  MatN Phi = MatN::Identity(), Q = MatN::Zero();  // r_B constant, b_W a random walk
   for (int i = 0; i < 3; ++i) {
     Phi.block<3, 3>(3 * i, 3 * i) = Phi_axis;
     Q.block<3, 3>(3 * i, 3 * i) = Q_axis;
   }
+  Q.block<3, 3>(kBias, kBias)
+      .diagonal()
+      .setConstant(settings_.accel_bias_walk * settings_.accel_bias_walk * dt);
   x_ = Phi * x_;
   P_ = Phi * P_ * Phi.transpose() + Q;
   P_ = 0.5 * (P_ + P_.transpose());
 }
 
 void PositionKf::Initialise(double t, const Eigen::Vector3d& p) {
-  // The lever arm learned so far survives a re-initialisation of the position.
-  const Eigen::Vector3d r = initialized_ || counters_.position_samples > 0
-                                ? Eigen::Vector3d(x_.tail<3>())
-                                : settings_.lever_arm_B;
-  const Eigen::Matrix3d P_r = initialized_ || counters_.position_samples > 0
-                                  ? Eigen::Matrix3d(P_.bottomRightCorner<3, 3>())
-                                  : Eigen::Matrix3d::Identity() *
-                                        (settings_.estimate_lever_arm
-                                             ? settings_.lever_arm_sigma * settings_.lever_arm_sigma
-                                             : 0.0);
+  // The lever arm and the bias learned so far survive a re-initialisation of the position (the
+  // bias keeps its σ: it has walked for no longer than the rejections lasted).
+  const bool learned = initialized_ || counters_.position_samples > 0;
+  const double s_r = settings_.estimate_lever_arm ? settings_.lever_arm_sigma : 0.0;
+  const double s_b = settings_.accel_bias_walk > 0.0 ? settings_.initial_accel_bias_sigma : 0.0;
+  const Eigen::Matrix<double, 6, 1> r_b =
+      learned ? Eigen::Matrix<double, 6, 1>(x_.tail<6>())
+              : (Eigen::Matrix<double, 6, 1>() << settings_.lever_arm_B, Eigen::Vector3d::Zero())
+                    .finished();
+  Eigen::Matrix<double, 6, 6> P_rb = Eigen::Matrix<double, 6, 6>::Zero();
+  if (learned) {
+    P_rb = P_.bottomRightCorner<6, 6>();
+  } else {
+    P_rb.topLeftCorner<3, 3>().diagonal().setConstant(s_r * s_r);
+    P_rb.bottomRightCorner<3, 3>().diagonal().setConstant(s_b * s_b);
+  }
   x_.setZero();
   P_.setZero();
-  x_.tail<3>() = r;
-  P_.bottomRightCorner<3, 3>() = P_r;
+  x_.tail<6>() = r_b;
+  P_.bottomRightCorner<6, 6>() = P_rb;
   for (int i = 0; i < 3; ++i) {
     x_(IP(i)) = p(i);
     P_(IP(i), IP(i)) = settings_.position_sigma * settings_.position_sigma;
@@ -182,19 +212,24 @@ Status PositionKf::UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen
   if (!initialized_) return Status::Ok();
   PredictTo(t);
   const Eigen::Vector3d z = WorldAcceleration(f_B, R_EB);
-  // h = A − R_WB M r_B, R_WB = R_WE R_EB, M = [α]× + [ω]×² (header comment).
+  // h = A − R_WB M r_B + b_W, R_WB = R_WE R_EB, M = [α]× + [ω]×² (header comment).
   const Eigen::Matrix3d W = geometry::Skew(omega_B);
   const Eigen::Matrix3d M = geometry::Skew(alpha_B) + W * W;
-  Eigen::Matrix<double, 3, 12> H = Eigen::Matrix<double, 3, 12>::Zero();
+  Eigen::Matrix<double, 3, kN> H = Eigen::Matrix<double, 3, kN>::Zero();
   for (int i = 0; i < 3; ++i) H(i, IA(i)) = 1.0;
-  H.rightCols<3>() = -(R_WE_ * R_EB) * M;
-  const Eigen::Matrix3d R =
-      settings_.accel_sigma * settings_.accel_sigma * Eigen::Matrix3d::Identity();
+  H.middleCols<3>(kLever) = -(R_WE_ * R_EB) * M;
+  if (settings_.accel_bias_walk > 0.0) H.middleCols<3>(kBias).setIdentity();
+  Eigen::Matrix3d R = settings_.accel_sigma * settings_.accel_sigma * Eigen::Matrix3d::Identity();
+  if (!R_WE_covariance_.isZero()) {
+    // The frame's uncertainty (SetWorldFromEarth): ∂(Exp(δφ) z)/∂δφ = −[z]×.
+    const Eigen::Matrix3d Z = geometry::Skew(z);
+    R += Z * R_WE_covariance_ * Z.transpose();
+  }
   const Eigen::Vector3d y = z - H * x_;
   const Eigen::Matrix3d S = H * P_ * H.transpose() + R;
-  const Eigen::Matrix<double, 12, 3> K = P_ * H.transpose() * S.inverse();
+  const Eigen::Matrix<double, kN, 3> K = P_ * H.transpose() * S.inverse();
   x_ += K * y;
-  const Mat9 IKH = Mat9::Identity() - K * H;
+  const MatN IKH = MatN::Identity() - K * H;
   P_ = IKH * P_ * IKH.transpose() + K * R * K.transpose();
   ++counters_.accel_samples;
   return GuardState(t);
@@ -222,7 +257,7 @@ Status PositionKf::UpdatePosition(double t, const Eigen::Vector3d& p_WM_W) {
     return Status::Ok();
   }
   PredictTo(t);
-  Eigen::Matrix<double, 3, 12> H = Eigen::Matrix<double, 3, 12>::Zero();
+  Eigen::Matrix<double, 3, kN> H = Eigen::Matrix<double, 3, kN>::Zero();
   for (int i = 0; i < 3; ++i) H(i, IP(i)) = 1.0;
   const Eigen::Matrix3d R =
       settings_.position_sigma * settings_.position_sigma * Eigen::Matrix3d::Identity();
@@ -242,9 +277,9 @@ Status PositionKf::UpdatePosition(double t, const Eigen::Vector3d& p_WM_W) {
     return Status::Ok();
   }
   consecutive_rejections_ = 0;
-  const Eigen::Matrix<double, 12, 3> K = P_ * H.transpose() * S_inv;
+  const Eigen::Matrix<double, kN, 3> K = P_ * H.transpose() * S_inv;
   x_ += K * y;
-  const Mat9 IKH = Mat9::Identity() - K * H;
+  const MatN IKH = MatN::Identity() - K * H;
   P_ = IKH * P_ * IKH.transpose() + K * R * K.transpose();
   P_ = 0.5 * (P_ + P_.transpose());
   ++counters_.position_samples;

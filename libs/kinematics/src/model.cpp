@@ -1,5 +1,7 @@
 #include "rcal/kinematics/model.hpp"
 
+#include "rcal/geometry/so3.hpp"
+
 #include <stdexcept>
 
 namespace rcal::kinematics {
@@ -101,6 +103,30 @@ Eigen::Matrix3d KinematicModel::EarthFromWorld(const Eigen::VectorXd& x) const {
                                 name() + "' has " + std::to_string(num_params()));
   // The earth ETs depend on no joint (ModelBuilder::EarthFrame), so q is not read.
   return RotationProduct(earth_, Eigen::VectorXd(), x);
+}
+
+Eigen::Matrix3d KinematicModel::WorldFromEarthCovariance(const Eigen::VectorXd& x,
+                                                         const Eigen::VectorXd& sigma) const {
+  if (sigma.size() != num_params())
+    throw std::invalid_argument("sigma has " + std::to_string(sigma.size()) +
+                                " parameters, model '" + name() + "' has " +
+                                std::to_string(num_params()));
+  Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
+  if (!has_earth()) return C;
+  const Eigen::Matrix3d R_WE = EarthFromWorld(x).transpose();
+  const double h = 1e-6;
+  Eigen::VectorXd xp = x, xm = x;
+  for (int i = 0; i < num_params(); ++i) {
+    if (!(sigma(i) > 0.0)) continue;
+    xp(i) = x(i) + h;
+    xm(i) = x(i) - h;
+    const Eigen::Vector3d J = (geometry::Log(EarthFromWorld(xp).transpose() * R_WE.transpose()) -
+                               geometry::Log(EarthFromWorld(xm).transpose() * R_WE.transpose())) /
+                              (2.0 * h);
+    C += sigma(i) * sigma(i) * J * J.transpose();
+    xp(i) = xm(i) = x(i);
+  }
+  return C;
 }
 
 ToolPose KinematicModel::Forward(const Eigen::VectorXd& q, const Eigen::VectorXd& x) const {

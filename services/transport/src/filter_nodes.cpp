@@ -246,8 +246,9 @@ PositionKfNode::PositionKfNode(Transport& t, const estimation::PositionKfSetting
       undecodable);
   t_.Subscribe<position_sample_t>(
       o_.position_channel, [this](const position_sample_t& m) { OnPosition(m); }, undecodable);
-  if (!kf_.SetWorldFromEarth(o_.world_from_earth))
-    throw std::invalid_argument("position_kf: Options::world_from_earth is not a rotation");
+  if (const auto st = kf_.SetWorldFromEarth(o_.world_from_earth, o_.world_from_earth_covariance);
+      !st)
+    throw std::invalid_argument("Options::world_from_earth: " + st.error());
   if (o_.model && o_.model->has_earth())
     t_.Subscribe<kinematic_params_t>(
         o_.kinematic_params_channel, [this](const kinematic_params_t& m) { OnKinematicParams(m); },
@@ -264,7 +265,16 @@ void PositionKfNode::OnKinematicParams(const kinematic_params_t& msg) {
   std::string error;
   const auto x = ParamsFromMessage(msg, *o_.model, &error);
   if (!x) return Reject(error);
-  if (const auto s = kf_.SetWorldFromEarth(o_.model->EarthFromWorld(*x).transpose()); !s)
+  const auto n = static_cast<size_t>(o_.model->num_params());
+  if (msg.sigmas.size() != n)
+    return Reject("kinematic_params.sigmas: " + std::to_string(msg.sigmas.size()) +
+                  " values, model has " + std::to_string(n));
+  const Eigen::Map<const Eigen::VectorXd> sigma(msg.sigmas.data(), static_cast<Eigen::Index>(n));
+  if (!sigma.allFinite() || sigma.minCoeff() < 0.0 || sigma.maxCoeff() > 1e3)
+    return Reject("kinematic_params.sigmas: not finite, negative or beyond 1e3");
+  if (const auto s = kf_.SetWorldFromEarth(o_.model->EarthFromWorld(*x).transpose(),
+                                           o_.model->WorldFromEarthCovariance(*x, sigma));
+      !s)
     return Reject("kinematic_params.values: the earth frame's " + s.error());
   ++world_from_earth_updates_;
 }

@@ -31,11 +31,34 @@
 // accelerometer updates. The accelerometer's measurement is then z = R_WE (R_EB f_B + g_E) with
 // h = A − R_WB M r_B, M = [α_B]× + [ω_B]×². With estimate_lever_arm r_B joins the state
 // (constant; initial value lever_arm_B, σ lever_arm_sigma) and is observed whenever the body
-// turns; otherwise lever_arm_B is taken as known (zero: the paper's filter). Update as NOTES.md
-// Eqs. 15–17, Joseph form. The position sensor is χ²-gated: NIS = yᵀS⁻¹y > position_gate_chi2
-// rejects it (counted). Bad input and out-of-order time are refused with a Status; the state is
-// unchanged. A state that goes non-finite anyway is never kept: the filter resets
-// (Counters::resets) and the update returns an Error saying so; the next position sample
+// turns; otherwise lever_arm_B is taken as known (zero: the paper's filter).
+// Acceleration bias (beyond the paper): an orientation error δθ leaves g × δθ in every
+// gravity-compensated acceleration (0.07 m/s² at 7 mrad of tilt), and it is not white: it changes
+// as slowly as the orientation error does. Counted as white accelerometer noise (accel_sigma) it
+// forces a large σ, and the acceleration between position samples then rests on the jerk model
+// alone. With accel_bias_walk > 0 a world-frame bias b_W [m/s²] joins the state as a random walk
+// (σ accel_bias_walk √Δt), h gains + b_W, and the position sensor, which sees its double integral,
+// makes it observable; accel_sigma can then be the accelerometer's own noise.
+// Motion model (MotionModel): the paper's white jerk (Eq. 30) puts q_j² into p and V as well as
+// A over each step (V gains q_j² Δt³/3), so between position samples the velocity wanders by the
+// jerk model however well the accelerometer pins A: with q_j = 50 that is 3 cm/s per 10 ms step.
+// kAccelerometerDriven puts the jerk noise on A alone (Q_axis = diag(0, 0, q_j² Δt)): A is free
+// to follow each accelerometer sample, p and V integrate it with no noise of their own, which is
+// a strapdown integration of the accelerometer written in Eq. 27's state. It needs the
+// accelerometer's stream (without it A's variance still grows, reaching p and V one step later)
+// and, because the accelerometer's errors then reach the position unfiltered, the bias state.
+// The two belong together: z = A + b_W separates A from b_W only through the position sensor
+// and the rates at which each may change; under white jerk with a small q_j a change of the
+// tool's acceleration is as well explained by the bias, which takes it and the position runs off
+// (measured on the simulated cells: tens of mm at accel_bias_walk 0.2, q_j 0.1). With A driven
+// by the accelerometer, b_W is learned from the position sensor alone. It trusts its
+// accelerations, so real errors that grow with the motion (BROAD's fast and vibrating trials)
+// make it run off where the paper's filter holds: the default stays the paper's (README).
+// SetWorldFromEarth's covariance keeps it from trusting a frame it does not know. Update as
+// NOTES.md Eqs. 15–17, Joseph form. The position sensor is χ²-gated: NIS = yᵀS⁻¹y >
+// position_gate_chi2 rejects it (counted). Bad input and out-of-order time are refused with a
+// Status; the state is unchanged. A state that goes non-finite anyway is never kept: the filter
+// resets (Counters::resets) and the update returns an Error saying so; the next position sample
 // initialises it again.
 #pragma once
 
@@ -54,11 +77,19 @@ Eigen::Matrix<double, 9, 9> PaperPhiPos(const Eigen::Matrix3d& M, double t);
 /// Γ_pos u (Eq. 29): gravity g [m/s²] removed along z as the paper writes it (z up).
 Eigen::Matrix<double, 9, 1> PaperGammaPos(double g, double t);
 
+/// How the white-jerk noise enters the state (header comment).
+enum class MotionModel {
+  kWhiteJerk,            ///< the paper's Eq. 30: p, V and A, correlated
+  kAccelerometerDriven,  ///< A alone: p and V integrate the accelerometer-pinned A
+};
+
 struct PositionKfSettings {
   EarthFrame earth = EarthFrame::kNed;
   double gravity = 9.81;  ///< [m/s²]
   /// White-jerk PSD driving A (paper's w′, Eq. 30) [m/s³/√Hz].
   double jerk_noise = 50.0;
+  /// Where the jerk noise enters (header comment): the paper's white jerk, or A alone.
+  MotionModel motion_model = MotionModel::kWhiteJerk;
   /// Standard deviation of one earth-frame acceleration measurement [m/s²] (accelerometer
   /// noise plus g times the orientation error).
   double accel_sigma = 0.3;
@@ -77,7 +108,22 @@ struct PositionKfSettings {
   bool estimate_lever_arm = false;
   /// Initial σ of each component of r_B when estimated [m].
   double lever_arm_sigma = 0.2;
+  /// Random walk of the world-frame acceleration bias b_W [m/s²/√s] (see the header comment).
+  /// 0 = no bias state (the paper's filter).
+  double accel_bias_walk = 0.0;
+  /// Initial σ of each component of b_W when it is estimated [m/s²].
+  double initial_accel_bias_sigma = 0.2;
 };
+
+/// The accelerometer-driven filter's settings (position_kf --motion-model accelerometer-driven;
+/// the defaults above are the paper's filter): MotionModel::kAccelerometerDriven,
+/// accel_bias_walk 0.1 m/s²/√s, accel_sigma 0.1 m/s². Chosen as the minimax over simulated
+/// cells, tracker rates, lever arms, a navigation-grade and a consumer-grade IMU (rcal
+/// position-kf-sweep reruns it). Too small a bias walk or σ is a cliff (the bias cannot follow
+/// the orientation's error), too large a gentle slope, hence the larger side. On BROAD's real
+/// fast-motion and vibration trials no σ or walk of this filter holds (README): the paper's
+/// filter stays the default.
+PositionKfSettings AccelerometerDrivenSettings();
 
 class PositionKf {
  public:
@@ -106,11 +152,17 @@ class PositionKf {
   Status UpdatePosition(double t, const Eigen::Vector3d& p_WM_W);
 
   /// The position sensor's frame W against the orientation's earth frame E: R_WE (earth →
-  /// world), a rotation. Takes effect from the next accelerometer sample; the state (already in
-  /// W) is kept. Refused (counted in input_rejected, nothing changed) when not finite or not a
-  /// rotation (|R Rᵀ − I| > 1e-6 or det < 0).
-  Status SetWorldFromEarth(const Eigen::Matrix3d& R_WE);
+  /// world), a rotation, and the covariance [rad²] of its error as a rotation vector on the left
+  /// in W (R_WE,true = Exp(δφ_W) R_WE; zero: known). Takes effect from the next accelerometer
+  /// sample; the state (already in W) is kept. An uncertain frame adds [a]× Σ [a]×ᵀ to each
+  /// acceleration's noise (a = the measured a_W; first order in δφ): an acceleration turned by an
+  /// unknown angle says only its size. Refused (counted in input_rejected, nothing changed) when
+  /// R_WE is not finite or not a rotation (|R Rᵀ − I| > 1e-6 or det < 0), or the covariance is
+  /// not finite, not symmetric or has a negative diagonal.
+  Status SetWorldFromEarth(const Eigen::Matrix3d& R_WE,
+                           const Eigen::Matrix3d& covariance = Eigen::Matrix3d::Zero());
   const Eigen::Matrix3d& R_WE() const { return R_WE_; }
+  const Eigen::Matrix3d& R_WE_covariance() const { return R_WE_covariance_; }
 
   bool initialized() const { return initialized_; }
   double t() const { return t_; }
@@ -119,12 +171,16 @@ class PositionKf {
   Eigen::Vector3d p_WM_W() const;
   Eigen::Vector3d v_W() const;
   Eigen::Vector3d a_W() const;
-  /// State x in Eq. 27 order and its covariance (without the lever arm).
+  /// State x in Eq. 27 order and its covariance (without the lever arm and the bias).
   Eigen::Matrix<double, 9, 1> x() const { return x_.head<9>(); }
   Eigen::Matrix<double, 9, 9> P() const { return P_.topLeftCorner<9, 9>(); }
   /// IMU → marker lever arm r_B [m] (body frame) and its covariance [m²] (zero when known).
-  Eigen::Vector3d lever_arm_B() const { return x_.tail<3>(); }
-  Eigen::Matrix3d lever_arm_covariance() const { return P_.bottomRightCorner<3, 3>(); }
+  Eigen::Vector3d lever_arm_B() const { return x_.segment<3>(kLever); }
+  Eigen::Matrix3d lever_arm_covariance() const { return P_.block<3, 3>(kLever, kLever); }
+  /// World-frame acceleration bias b_W [m/s²] and its covariance [m²/s⁴] (zero when
+  /// accel_bias_walk is 0).
+  Eigen::Vector3d accel_bias_W() const { return x_.segment<3>(kBias); }
+  Eigen::Matrix3d accel_bias_covariance() const { return P_.block<3, 3>(kBias, kBias); }
   /// Covariance of p_WM_W [m²].
   Eigen::Matrix3d position_covariance() const;
   double last_position_nis() const { return last_position_nis_; }
@@ -136,9 +192,13 @@ class PositionKf {
   Eigen::Vector3d WorldAcceleration(const Eigen::Vector3d& f_B, const Eigen::Matrix3d& R_EB) const;
 
  private:
-  // State: the 9 of Eq. 27, then r_B (3; constant, uncertain only when estimated).
-  using Mat9 = Eigen::Matrix<double, 12, 12>;
-  using Vec9 = Eigen::Matrix<double, 12, 1>;
+  // State: the 9 of Eq. 27, then r_B (3; constant, uncertain only when estimated), then b_W (3;
+  // a random walk, zero and certain when accel_bias_walk is 0).
+  static constexpr int kLever = 9;
+  static constexpr int kBias = 12;
+  static constexpr int kN = 15;
+  using MatN = Eigen::Matrix<double, kN, kN>;
+  using VecN = Eigen::Matrix<double, kN, 1>;
   void PredictTo(double t);
   Status Check(double t, const Eigen::Vector3d& v, const char* name);
   // After an update: Ok, or the state went non-finite and the filter was reset (an Error).
@@ -148,10 +208,11 @@ class PositionKf {
   PositionKfSettings settings_;
   bool initialized_ = false;
   double t_ = 0.0;
-  Vec9 x_ = Vec9::Zero();
-  Mat9 P_ = Mat9::Identity();
+  VecN x_ = VecN::Zero();
+  MatN P_ = MatN::Identity();
   Counters counters_;
   Eigen::Matrix3d R_WE_ = Eigen::Matrix3d::Identity();
+  Eigen::Matrix3d R_WE_covariance_ = Eigen::Matrix3d::Zero();
   double last_position_nis_ = 0.0;
   bool last_position_accepted_ = false;
   int consecutive_rejections_ = 0;

@@ -133,6 +133,12 @@ class KinematicModel {
   /// The earth ← world rotation R_EW at parameter errors x (identity without an earth frame):
   /// the frame Forward's R_EI is in, against the position sensor's world frame.
   Eigen::Matrix3d EarthFromWorld(const Eigen::VectorXd& x) const;
+  /// Covariance [rad²] of R_WE = EarthFromWorld(x)ᵀ when the parameters err independently by
+  /// sigma [m | rad] (one per parameter, ≥ 0), as a rotation vector δφ_W on the left
+  /// (R_WE,true = Exp(δφ_W) R_WE): Σ σ_i² J_i J_iᵀ with J_i = ∂δφ_W/∂x_i by central
+  /// differences (step 1e-6). Zero without an earth frame.
+  Eigen::Matrix3d WorldFromEarthCovariance(const Eigen::VectorXd& x,
+                                           const Eigen::VectorXd& sigma) const;
 
   /// Pose of the end of the chain (the tool/marker frame) in the world frame, T_WT. This is the
   /// frame the IK corrector places.

@@ -183,8 +183,12 @@ class PositionKfNode {
     /// the identifier's first estimate (a cell's earth_from_world given as a prior; identity:
     /// W = E, the paper's). A rotation: the constructor throws std::invalid_argument otherwise.
     Eigen::Matrix3d world_from_earth = Eigen::Matrix3d::Identity();
+    /// The covariance [rad²] of world_from_earth's error (PositionKf::SetWorldFromEarth): zero
+    /// when known, large (1 rad² per axis) when W = E is only a stand-in for a guessed frame.
+    Eigen::Matrix3d world_from_earth_covariance = Eigen::Matrix3d::Zero();
     /// The cell's model. With an earth frame, R_WE follows the identifier's estimate of it
-    /// (KINEMATIC_PARAMS of this model: R_WE = R_EW(x)ᵀ); another model's estimates are ignored
+    /// (KINEMATIC_PARAMS of this model: R_WE = R_EW(x)ᵀ, its covariance from the message's
+    /// sigmas by KinematicModel::WorldFromEarthCovariance); another model's estimates are ignored
     /// (counted in ignored_params()). Null: R_WE stays world_from_earth.
     std::shared_ptr<const kinematics::KinematicModel> model;
   };
