@@ -86,6 +86,16 @@ estimation::PositionKfSettings SettingsFor(const Config& c) {
   return s;
 }
 
+// RMS of the summed squares (moving or every row; at the samples) and the mean NEES, per filter.
+std::vector<Score> Scores(const std::vector<double>& ss_m, int n_m, const std::vector<double>& ss_s,
+                          int n_s, const std::vector<double>& nees, int n) {
+  std::vector<Score> out;
+  for (size_t i = 0; i < ss_m.size(); ++i)
+    out.push_back({std::sqrt(ss_m[i] / std::max(n_m, 1)), std::sqrt(ss_s[i] / std::max(n_s, 1)),
+                   nees[i] / std::max(n, 1)});
+  return out;
+}
+
 // A BROAD trial: its IMU rows through the orientation KF, a 1 mm tracker simulated from the optical
 // truth at 20 Hz, every filter estimating the lever arm; scored at every row after 5 s.
 std::vector<Score> RunBroad(const Case& k, const std::vector<Config>& configs) {
@@ -133,11 +143,7 @@ std::vector<Score> RunBroad(const Case& k, const std::vector<Config>& configs) {
       n_s += sample;
     }
   }
-  std::vector<Score> out;
-  for (size_t i = 0; i < kfs.size(); ++i)
-    out.push_back({std::sqrt(ss[i] / std::max(n, 1)), std::sqrt(ss_s[i] / std::max(n_s, 1)),
-                   nees[i] / std::max(n, 1)});
-  return out;
+  return Scores(ss, n, ss_s, n_s, nees, n);
 }
 
 // Runs every configuration on one case (one simulated stream, one orientation KF).
@@ -201,11 +207,7 @@ std::vector<Score> RunCase(const Case& k, const std::vector<Config>& configs) {
       ++n;
     }
   }
-  std::vector<Score> out;
-  for (size_t i = 0; i < kfs.size(); ++i)
-    out.push_back({std::sqrt(ss_m[i] / std::max(n_m, 1)), std::sqrt(ss_s[i] / std::max(n_s, 1)),
-                   nees[i] / std::max(n, 1)});
-  return out;
+  return Scores(ss_m, n_m, ss_s, n_s, nees, n);
 }
 
 double Median(std::vector<double> v) {
