@@ -1,4 +1,4 @@
-// Every rcal LCM message type: the first byte picks the type (mod 15, the order of DecodeAs), the
+// Every rcal LCM message type: the first byte picks the type (mod 16, the order of DecodeAs), the
 // rest is the encoded message, bounds-checked, decoded and adapted as the processes do.
 #include <cstddef>
 #include <cstdint>

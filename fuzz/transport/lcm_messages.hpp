@@ -12,6 +12,7 @@
 #include <string_view>
 #include <type_traits>
 
+#include "rcal/arm_conditions_t.hpp"
 #include "rcal/calibration_status_t.hpp"
 #include "rcal/clock_offset_t.hpp"
 #include "rcal/health_t.hpp"
@@ -73,6 +74,11 @@ inline void Adapt(const next_poses_t& m) {
   if (auto n = transport::NextPosesFromMessage(m, Grb3016(), &error))
     (void)cell::NextStopToFollow(n->q, {Eigen::VectorXd::Zero(Grb3016().num_joints())});
 }
+// still_window: the controller's report checked before it stands for a window's context.
+inline void Adapt(const arm_conditions_t& m) {
+  std::string error;
+  (void)transport::ArmConditionsFromMessage(m, &error);
+}
 inline void Adapt(const model_discrepancy_t& m) {
   std::string error;
   (void)transport::ModelDiscrepancyFromMessage(m, &error);
@@ -106,9 +112,9 @@ void Decode(const std::uint8_t* data, std::size_t size) {
   }
 }
 
-/// Decodes as the type with this index (mod 15).
+/// Decodes as the type with this index (mod 16).
 inline void DecodeAs(unsigned index, const std::uint8_t* data, std::size_t size) {
-  switch (index % 15) {
+  switch (index % 16) {
     case 0:
       return Decode<calibration_status_t>(data, size);
     case 1:
@@ -137,6 +143,8 @@ inline void DecodeAs(unsigned index, const std::uint8_t* data, std::size_t size)
       return Decode<next_poses_t>(data, size);
     case 14:
       return Decode<model_discrepancy_t>(data, size);
+    case 15:
+      return Decode<arm_conditions_t>(data, size);
     default:
       return Decode<tool_position_estimate_t>(data, size);
   }
@@ -145,7 +153,7 @@ inline void DecodeAs(unsigned index, const std::uint8_t* data, std::size_t size)
 /// Decodes as the type the pipeline publishes on `channel` (pose_measurement_t if none).
 inline void DecodeChannel(std::string_view channel, const std::uint8_t* data, std::size_t size) {
   namespace ch = transport::channels;
-  const std::string_view names[15] = {ch::kCalibrationStatus,
+  const std::string_view names[16] = {ch::kCalibrationStatus,
                                       ch::kHealth,
                                       ch::kIkCommand,
                                       ch::kIkRequest,
@@ -159,8 +167,9 @@ inline void DecodeChannel(std::string_view channel, const std::uint8_t* data, st
                                       ch::kToolPosition,
                                       ch::kClockOffset,
                                       ch::kNextPoses,
-                                      ch::kModelDiscrepancy};
-  for (unsigned i = 0; i < 15; ++i)
+                                      ch::kModelDiscrepancy,
+                                      ch::kArmConditions};
+  for (unsigned i = 0; i < 16; ++i)
     if (!names[i].empty() && names[i] == channel) return DecodeAs(i, data, size);
   DecodeAs(8, data, size);
 }

@@ -19,7 +19,12 @@
 // covariance σ² I) on the cell's channels, utime = --start-utime + t_sim. The demo's sim file
 // (config/cells/grb3016.sim.yaml) is the experiment's cell of seed 1. The programme
 // ends with the move to the first test stop, so the last calibration window closes exactly as
-// offline and no test window follows. Paced by --speed (0: as fast as possible).
+// offline and no test window follows. Paced by --speed (0: as fast as possible). The simulated
+// controller also reports the arm's conditions (ARM_CONDITIONS, once per second of sensor time:
+// the arm's temperature warming as sim::SessionSettings says, with --sim-warmup as the time
+// constant, plus its 0.3 K sensor noise; payload 0, the arm carries none), and with --sim-effect
+// (thermal causes only at this level: the arm grows with its temperature, or with time) the
+// tool moves as the extended model says under the true, noise-free temperature.
 //
 // Source `replay FILE`: a raw-stream CSV in the BROAD layout (sources.hpp) published as IMU (every
 // row) and POSITION (decimated to --position-rate), utime from the file; or a pose dataset
@@ -255,8 +260,9 @@ class Lease {
 // the sim file's truth.
 int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec& sim_spec,
                  unsigned seed, int num_cal, int num_test,
-                 const std::vector<std::string>& step_offsets, bool follow, bool linger,
-                 int64_t start_utime, double speed, const Resume& resume,
+                 const std::vector<std::string>& step_offsets,
+                 const std::vector<std::string>& sim_effects, double warmup_s, bool follow,
+                 bool linger, int64_t start_utime, double speed, const Resume& resume,
                  rcal::transport::LcmTransport& t) {
   using namespace rcal;
   // SimulateWindows' programme: the home pose, then the calibration and test stops.
@@ -264,6 +270,36 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
   const auto& model = sim_run.cell.model;
   const io::CellChannels& channels = built.spec.channels;
   sim::ToolMotionTruth& truth = sim_run.truth;
+  // The arm's conditions: a warming temperature (the session's curve, τ = warmup_s), no payload.
+  sim::SessionSettings session;
+  session.warmup_time_constant_s = warmup_s;
+  session.payloads_kg = {0.0};
+  const double t0_s = static_cast<double>(start_utime) * 1e-6;  // [s] sensor time at t_sim = 0
+  auto conditions_at = [session, t0_s](double t_sim) {
+    kinematics::EffectContext c;
+    c.time_s = t0_s + t_sim;  // the clock still_window stamps its poses with
+    c.temperature_c = sim::WarmedTo(session, t_sim);
+    c.payload_kg = 0.0;
+    return c;
+  };
+  std::vector<sim::TruthEffect> truth_effects;
+  for (const std::string& text : sim_effects) {
+    truth_effects.push_back(sim::ParseEffectSpec(text, model));
+    if (truth_effects.back().effect.cause != kinematics::EffectCause::kThermal)
+      throw std::runtime_error("--sim-effect " + text +
+                               ": at --level sensors only thermal growth (by temperature or "
+                               "time); a payload, approach or joint effect needs --level poses");
+    spdlog::info(
+        "the simulated arm grows with its {} ({}), warming with τ {} s",
+        truth_effects.back().effect.thermal_source == kinematics::Effect::ThermalSource::kTime
+            ? "time"
+            : "temperature",
+        text, warmup_s);
+  }
+  if (!truth_effects.empty()) {
+    sim::EffectTruth et = sim::MakeEffectTruth(model, truth_effects);
+    truth.set_effects(std::move(et.model), std::move(et.e), conditions_at);
+  }
   if (follow && !step_offsets.empty())
     throw std::runtime_error(
         "--follow-next-poses and --step-offset: not both at --level sensors (the step's time is "
@@ -360,6 +396,19 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
     if (services::StopRequested()) break;
     lease.Before(k++);
     count(t.Publish(channels.joints, transport::ToJointState(model, f->q, utime)));
+    if (const auto tick = std::llround(f->t * ss.rate_hz);
+        tick % std::max<int64_t>(1, std::llround(ss.rate_hz)) == 0) {
+      // The controller's report, once per second: the temperature as its sensor reads it (its
+      // noise drawn from the report's own seed, so a resumed run reports the same).
+      sim::Rng report_rng(static_cast<uint64_t>(seed) * 1000 + 11 + static_cast<uint64_t>(tick));
+      std::normal_distribution<double> n(0.0, 1.0);
+      transport::ArmConditions c;
+      c.utime = utime;
+      c.temperature_c =
+          conditions_at(f->t).temperature_c + session.temperature_noise_c * n(report_rng);
+      c.payload_kg = 0.0;
+      count(t.Publish(channels.arm_conditions, transport::ToArmConditions(c)));
+    }
     transport::ImuSample imu;
     imu.utime = utime;
     imu.gyro_B = f->imu.gyro_S;
@@ -493,12 +542,19 @@ int main(int argc, char** argv) {
   std::vector<std::string> sim_effects;
   app.add_option(
       "--sim-effect", sim_effects,
-      "sim poses: a non-geometric effect the simulated arm has, CAUSE[:JOINT]=V[,V] as "
+      "sim: a non-geometric effect the simulated arm has (at --level sensors thermal causes "
+      "only), CAUSE[:JOINT]=V[,V] as "
       "rcal simulate --effect takes it (joint_compliance:j2=2e-6, joint_periodic:j3=1e-4,"
       "5e-5, joint_scale:j4=2e-4, backlash:j5=5e-5, thermal=1.2e-5, thermal:time=3e-9; "
       "repeatable). Every stop's context is published with its pose either way: time since "
       "the start, a warming temperature, a payload of 0, 5 or 10 kg, the approach "
       "direction");
+  double warmup_s = sim::SessionSettings{}.warmup_time_constant_s;
+  app.add_option("--sim-warmup", warmup_s,
+                 "sim sensors: the time constant [s] of the arm's warm-up (+12 K) that the "
+                 "simulated controller reports on ARM_CONDITIONS")
+      ->check(CLI::Range(1.0, 1e6))
+      ->capture_default_str();
   bool follow = false;
   app.add_flag("--follow-next-poses", follow,
                "sim: go where ekf_identifier's NEXT_POSES asks (its best suggestion) instead of to "
@@ -556,13 +612,10 @@ int main(int argc, char** argv) {
     const cell::CellSimSpec sim_spec = cell::LoadCellSimSpec(services::RepoPath(sim_path));
     const io::BuiltCell built = io::LoadCell(sim_spec.cell);
     if (app.get_option("--seed")->count() == 0) seed = sim_spec.seed;
-    if (level == "sensors" && !sim_effects.empty())
-      throw std::runtime_error(
-          "--sim-effect: the sensor-level simulator moves the arm by its geometry alone; give "
-          "--level poses");
     if (level == "sensors")
       return RunSensorSim(built, sim_spec, seed, poses > 0 ? poses : sim_spec.num_cal, test_poses,
-                          step_offsets, follow, linger, start_utime, speed, resume, t);
+                          step_offsets, sim_effects, warmup_s, follow, linger, start_utime, speed,
+                          resume, t);
     // Pose level: the cell's model at the sim file's truth, measured as the cell's position sensor
     // measures (its largest σ per axis; orientation when it is a 6-DoF tracker), one pose per stop.
     const auto& model = built.model;

@@ -34,8 +34,13 @@
 // simulator, a replay) nothing changes.
 // Context (for an identifier with non-geometric effects): each pose carries the approach
 // direction, the sign of each joint's move from the last still window to this one (none at the
-// first), and its time (the window's end, s of sensor time); temperature unknown (NaN) and payload
-// 0, which no stream of the cell carries yet.
+// first), its time (the window's end, s of sensor time), and the arm's temperature and payload
+// from ARM_CONDITIONS (the controller's reports, its own time gate; estimation::
+// ArmConditionsHistory): the newest report at or before the window's end, if at most
+// --conditions-max-age old. A cell that sends no ARM_CONDITIONS gets temperature unknown (NaN)
+// and payload 0, as before; once reports have come, a window with none standing (the controller
+// went quiet) goes out so too, and is counted in HEALTH gaps with the reason in last_error. A
+// report not measured (NaN) stays unknown; a payload not known (NaN) goes out as 0.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -45,6 +50,7 @@
 #include <optional>
 
 #include "rcal/clock_offset_t.hpp"
+#include "rcal/estimation/arm_conditions.hpp"
 #include "rcal/estimation/clock_offset.hpp"
 #include "rcal/estimation/pose_pipeline.hpp"
 #include "rcal/io/cell_yaml.hpp"
@@ -67,9 +73,11 @@ class StillWindowNode {
   /// The final HEALTH (on a clean stop): the counts up to the end.
   void Finish() { health_.Final(t_); }
   StillWindowNode(const io::BuiltCell& cell, const estimation::TimeGateSettings& time,
-                  transport::Transport& t, const std::string& name, double clock_fraction)
+                  transport::Transport& t, const std::string& name, double clock_fraction,
+                  double conditions_max_age)
       : pipeline_(cell.pipeline),
         clock_fraction_(clock_fraction),
+        conditions_(conditions_max_age),
         warmup_(cell.spec.still_window.warmup),
         R_IS_(cell.spec.imu ? cell.spec.imu->R_IS : Eigen::Matrix3d::Identity()),
         channels_(cell.spec.channels),
@@ -78,7 +86,8 @@ class StillWindowNode {
         health_(name),
         joints_gate_(time),
         imu_gate_(time),
-        position_gate_(time) {
+        position_gate_(time),
+        conditions_gate_(time) {
     t_.Subscribe<joint_state_t>(
         channels_.joints, [this](const joint_state_t& m) { OnJoints(m); },
         [this](const std::string& e) { Bad(e); });
@@ -90,6 +99,9 @@ class StillWindowNode {
         [this](const std::string& e) { Bad(e); });
     t_.Subscribe<clock_offset_t>(
         channels_.clock_offset, [this](const clock_offset_t& m) { OnClock(m); },
+        [this](const std::string& e) { Bad(e); });
+    t_.Subscribe<arm_conditions_t>(
+        channels_.arm_conditions, [this](const arm_conditions_t& m) { OnConditions(m); },
         [this](const std::string& e) { Bad(e); });
   }
   int emitted() const { return emitted_; }
@@ -187,6 +199,43 @@ class StillWindowNode {
     if (!clocks) return Bad(error);
     clocks_ = std::move(*clocks);
   }
+  void OnConditions(const arm_conditions_t& m) {
+    health_.Received();
+    std::string error;
+    const auto c = transport::ArmConditionsFromMessage(m, &error);
+    if (!c) return Bad(error);
+    // Its own gate: a duplicate, an older or a far-future report is refused and counted; the
+    // controller restarting on a new time base drops the reports of the old one.
+    const auto v = health_.Gate(conditions_gate_, c->utime, "arm_conditions.utime");
+    if (v == estimation::TimeVerdict::kResynchronised) conditions_.Clear();
+    if (!estimation::Usable(v)) {
+      spdlog::warn("rejected: {}", health_.last_error());
+      return;
+    }
+    if (!conditions_seen_)
+      spdlog::info("ARM_CONDITIONS: {:.2f} °C, payload {:.3f} kg: poses carry them from now on",
+                   c->temperature_c, c->payload_kg);
+    conditions_seen_ = true;
+    conditions_.Add({Seconds(c->utime), c->temperature_c, c->payload_kg});
+  }
+  // The arm's conditions standing at the window's end t_end [s] into `context` (file comment).
+  void TakeConditions(double t_end, kinematics::EffectContext& context) {
+    if (!conditions_seen_) return;
+    const auto c = conditions_.At(t_end);
+    if (!c) {
+      health_.Gap(1);
+      health_.Error("window ending " + std::to_string(t_end) +
+                    " s: no ARM_CONDITIONS report within " + std::to_string(conditions_.max_age()) +
+                    " s before it (temperature not known)");
+      if (!conditions_missing_) spdlog::warn("{}", health_.last_error());
+      conditions_missing_ = true;
+      return;
+    }
+    if (conditions_missing_) spdlog::info("ARM_CONDITIONS stand for the windows again");
+    conditions_missing_ = false;
+    context.temperature_c = c->temperature_c;
+    context.payload_kg = std::isnan(c->payload_kg) ? 0.0 : c->payload_kg;
+  }
   // Why a window of `length_s` may not be formed with the clocks as they are ("" when it may):
   // estimation::MayFormStillWindow for every source whose offset is estimated.
   std::string ClockVeto(double length_s) const {
@@ -234,6 +283,7 @@ class StillWindowNode {
     kinematics::EffectContext context;
     context.time_s = p.t_end;
     context.dq_sign = approach;
+    TakeConditions(p.t_end, context);
     if (t_.Publish(channels_.pose_measurement,
                    transport::ToMessage(z, utime, emitted_, marker_id_, context))) {
       health_.Published();
@@ -249,6 +299,9 @@ class StillWindowNode {
   double clock_fraction_;
   // The input's latest CLOCK_OFFSET, if it sends one.
   std::optional<std::vector<transport::SourceClock>> clocks_;
+  // The controller's ARM_CONDITIONS reports (none: the cell sends none).
+  estimation::ArmConditionsHistory conditions_;
+  bool conditions_seen_ = false, conditions_missing_ = false;
   double warmup_;
   Eigen::Matrix3d R_IS_;
   io::CellChannels channels_;
@@ -261,7 +314,7 @@ class StillWindowNode {
   int emitted_ = 0;
   Eigen::VectorXd q_last_stop_;  // joints of the last still window (its pose or not)
   std::int64_t dropped_ = 0, resets_ = 0, disagreements_ = 0;
-  estimation::TimeGate joints_gate_, imu_gate_, position_gate_;
+  estimation::TimeGate joints_gate_, imu_gate_, position_gate_, conditions_gate_;
 };
 
 }  // namespace
@@ -271,7 +324,8 @@ int main(int argc, char** argv) {
   estimation::TimeGateSettings time;
   CLI::App app{
       "still_window: still-window pose measurements from the raw sensor streams.\n"
-      "Subscribes JOINTS, IMU, POSITION; runs the pose pipeline (orientation + position KF, "
+      "Subscribes JOINTS, IMU, POSITION (and ARM_CONDITIONS, CLOCK_OFFSET); runs the pose pipeline "
+      "(orientation + position KF, "
       "still windows); publishes POSE_MEASUREMENT per window and HEALTH.\n"
       "LCM URL: --lcm-url, else $RCAL_LCM_URL, else udpm://239.255.76.67:7667?ttl=0."};
   app.add_option("--cell", cell_path,
@@ -286,6 +340,12 @@ int main(int argc, char** argv) {
                  "this fraction of the window's length")
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
+  double conditions_max_age = 10.0;
+  app.add_option("--conditions-max-age", conditions_max_age,
+                 "ARM_CONDITIONS: how old [s] the newest report before a window's end may be and "
+                 "still give its pose the temperature and payload")
+      ->check(CLI::Range(0.0, 3600.0))
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
   try {
@@ -294,7 +354,7 @@ int main(int argc, char** argv) {
     transport::LcmTransport t(lcm_url);
     spdlog::info("still_window on {}: cell {} ({}), {}", t.url(), cell.spec.name, cell.spec.source,
                  cell.pipeline.use_orientation ? "position and orientation" : "positions only");
-    StillWindowNode node(cell, time, t, name, clock_fraction);
+    StillWindowNode node(cell, time, t, name, clock_fraction, conditions_max_age);
     if (const int rc =
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
         rc != 0)

@@ -3,7 +3,9 @@
 // real processes over UDP multicast in a private network namespace) while it calibrates:
 //   - IMU, JOINTS, POSITION and POSE_MEASUREMENT copies with utime = 2^62,
 //   - IMU copies with gyro = 1e300 rad/s (finite, beyond any gyro's range),
-//   - an exact duplicate of every POSITION message.
+//   - an exact duplicate of every POSITION message,
+//   - for every ARM_CONDITIONS report of the simulated controller: an exact duplicate, a copy at
+//     utime = 2^62 and one a µs later in kelvin (300 °C and more: beyond any arm).
 // Before the fix one of them stopped the pipeline for good (every later sample "out of order",
 // NaN orientations, HEALTH silent, the window covariance 5-8 % too small). Now each is refused
 // and counted in HEALTH, HEALTH keeps beating, nothing non-finite is published, and the
@@ -21,6 +23,7 @@
 
 #include "netns.hpp"
 #include "offline_identification.hpp"
+#include "rcal/arm_conditions_t.hpp"
 #include "rcal/calibration_status_t.hpp"
 #include "rcal/cell/sim_cell.hpp"
 #include "rcal/health_t.hpp"
@@ -86,6 +89,20 @@ TEST_F(Poison, PoisonMessagesAreRefusedCountedAndChangeNoCalibration) {
   t.Subscribe<health_t>(ch::kHealth, [&](const health_t& h) {
     health[h.process] = h;
     if (poisoned) ++beats_after_poison[h.process];
+  });
+  int sent_conditions = 0;
+  std::set<int64_t> conditions_seen;  // reports already poisoned (we receive our own copies)
+  t.Subscribe<arm_conditions_t>(ch::kArmConditions, [&](const arm_conditions_t& m) {
+    if (m.utime == kPoison || m.temperature_c > 100 || !conditions_seen.insert(m.utime).second)
+      return;
+    arm_conditions_t far = m, kelvin = m;
+    far.utime = kPoison;
+    kelvin.utime = m.utime + 1;
+    kelvin.temperature_c += 273.15;
+    t.Publish(ch::kArmConditions, m);  // the exact duplicate
+    t.Publish(ch::kArmConditions, far);
+    t.Publish(ch::kArmConditions, kelvin);
+    ++sent_conditions;
   });
   t.Subscribe<orientation_estimate_t>(ch::kOrientation, [&](const orientation_estimate_t& m) {
     ++orientations;
@@ -156,8 +173,10 @@ TEST_F(Poison, PoisonMessagesAreRefusedCountedAndChangeNoCalibration) {
   EXPECT_EQ(Stop(ok), 0);
   EXPECT_EQ(Stop(sw), 0);
   EXPECT_EQ(Stop(ekf), 0);
-  std::printf("sent: %d duplicate POSITION, %d far-future, %d 1e300 gyro\n", sent_duplicates,
-              sent_far, sent_gyro);
+  std::printf(
+      "sent: %d duplicate POSITION, %d far-future, %d 1e300 gyro, %d ARM_CONDITIONS × 3 "
+      "(duplicate, far-future, kelvin)\n",
+      sent_duplicates, sent_far, sent_gyro, sent_conditions);
   for (const auto& [name, h] : health)
     std::printf(
         "HEALTH %s: received %lld rejected %lld duplicates %lld out_of_horizon %lld gaps %lld "
@@ -185,7 +204,11 @@ TEST_F(Poison, PoisonMessagesAreRefusedCountedAndChangeNoCalibration) {
                                          [&](int64_t u) { return u <= hs.utime - 500'000; });
   EXPECT_GT(before_beat, 0.9 * sent_duplicates);
   EXPECT_GE(hs.duplicates + hs.out_of_order + hs.dropped, before_beat);
-  EXPECT_LE(hs.duplicates, sent_duplicates);
+  EXPECT_LE(hs.duplicates, sent_duplicates + sent_conditions);
+  // The controller's poisoned reports: refused, and no pose took them (the arm is at 20 °C and
+  // warms by a fraction of a kelvin in this run).
+  ASSERT_GT(sent_conditions, 10);
+  EXPECT_GE(hs.rejected + hs.dropped, hs.duplicates + hs.out_of_horizon + sent_conditions);
   EXPECT_GT(hs.duplicates, 0.5 * sent_duplicates);
   EXPECT_GE(hs.out_of_horizon, 1);
   EXPECT_GE(ho.out_of_horizon, 1);
@@ -210,6 +233,7 @@ TEST_F(Poison, PoisonMessagesAreRefusedCountedAndChangeNoCalibration) {
   ASSERT_EQ(poses.size(), w.cal.size());
   std::string error;
   for (size_t k = 0; k < poses.size(); ++k) {
+    EXPECT_NEAR(poses[k].temperature_c, 20.3, 1.5) << "window " << k;
     const auto z = transport::FromMessage(poses[k], &error);
     ASSERT_TRUE(z) << error;
     const Eigen::Vector3d dp = z->p_WM_W - w.cal[k].p_WM_W;

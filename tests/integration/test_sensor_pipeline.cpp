@@ -37,8 +37,10 @@
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/kinematic_params_t.hpp"
+#include "rcal/model_discrepancy_t.hpp"
 #include "rcal/next_poses_t.hpp"
 #include "rcal/pose_measurement_t.hpp"
+#include "rcal/sim/effects.hpp"
 #include "rcal/sim/pose_sim.hpp"
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
@@ -60,7 +62,8 @@ struct LiveRun {
   std::vector<pose_measurement_t> poses;
   std::optional<kinematic_params_t> params;
   std::optional<calibration_status_t> status;
-  std::vector<next_poses_t> next;  // every NEXT_POSES
+  std::vector<next_poses_t> next;                  // every NEXT_POSES
+  std::vector<model_discrepancy_t> discrepancies;  // every MODEL_DISCREPANCY
   std::filesystem::path checkpoint;
 };
 
@@ -75,10 +78,11 @@ class SensorPipeline : public ProcessFixture {
   }
 
   // sensor_acquisition --source sim --level sensors --sim SIM --poses CAL --test-poses TEST
-  // (then `more`, at 20x) → still_window → ekf_identifier, both --cell CELL, until CAL poses were
-  // judged; every process then stopped and its exit checked.
+  // (then `more`, at 20x) → still_window → ekf_identifier (then `ekf_more`), both --cell CELL,
+  // until CAL poses were judged; every process then stopped and its exit checked.
   LiveRun RunCell(const std::string& cell_file, const std::string& sim_file, int cal, int test,
-                  const std::vector<std::string>& more = {}) {
+                  const std::vector<std::string>& more = {},
+                  const std::vector<std::string>& ekf_more = {}) {
     LiveRun run;
     transport::LcmTransport t(kUrl);
     t.Subscribe<pose_measurement_t>(transport::channels::kPoseMeasurement,
@@ -89,10 +93,15 @@ class SensorPipeline : public ProcessFixture {
                                       [&](const calibration_status_t& s) { run.status = s; });
     t.Subscribe<next_poses_t>(transport::channels::kNextPoses,
                               [&](const next_poses_t& m) { run.next.push_back(m); });
+    t.Subscribe<model_discrepancy_t>(
+        transport::channels::kModelDiscrepancy,
+        [&](const model_discrepancy_t& m) { run.discrepancies.push_back(m); });
     run.checkpoint = dir_ / "ekf_identifier.checkpoint.json";
-    const pid_t ekf = Start({RCAL_EKF_IDENTIFIER, "--lcm-url", kUrl, "--cell", cell_file,
-                             "--checkpoint", run.checkpoint.string()},
-                            "ekf_identifier.log");
+    std::vector<std::string> ekf_cmd = {
+        RCAL_EKF_IDENTIFIER,    "--lcm-url", kUrl, "--cell", cell_file, "--checkpoint",
+        run.checkpoint.string()};
+    ekf_cmd.insert(ekf_cmd.end(), ekf_more.begin(), ekf_more.end());
+    const pid_t ekf = Start(ekf_cmd, "ekf_identifier.log");
     const pid_t sw =
         Start({RCAL_STILL_WINDOW, "--lcm-url", kUrl, "--cell", cell_file}, "still_window.log");
     // Both listening (the identifier announces itself with a CALIBRATION_STATUS).
@@ -171,7 +180,7 @@ TEST_F(SensorPipeline, CalibratesToTheOfflineFigure) {
   const LiveRun run = RunCell(RCAL_SOURCE_DIR "/config/cells/grb3016.yaml",
                               RCAL_SOURCE_DIR "/config/cells/grb3016.sim.yaml", kCal, kTest,
                               {"--seed", std::to_string(kSeed)});
-  const auto& [poses, params, status, next, checkpoint] = run;
+  const auto& [poses, params, status, next, discrepancies, checkpoint] = run;
 
   ASSERT_TRUE(status.has_value());
   ASSERT_TRUE(params.has_value());
@@ -469,6 +478,70 @@ TEST_F(SensorPipeline, AnArmSteppedMidRunIsDetectedNamedAndFollowed) {
   EXPECT_GT(before_mm, 0.4);
 }
 
+// A sensor-level cell whose arm grows as it warms (issue 15, item 4 at sensor level): the
+// simulated controller reports the arm's temperature on ARM_CONDITIONS (warming +12 K with a
+// 100 s time constant, 0.3 K sensor noise), the simulated arm grows by κ = 5e-5 1/K with its true
+// temperature. still_window gives each pose the report standing at the window's end; the
+// identifier's discrepancy watch (every 50 poses, switch on) names thermal growth by temperature
+// and identifies κ live. Truth: the simulator's warming curve and κ. Control: the same cell without
+// the growth names nothing.
+TEST_F(SensorPipeline, TheControllersTemperatureReachesThePosesAndThermalGrowthIsNamedLive) {
+  RCAL_IN_NAMESPACE(
+      "SensorPipeline.TheControllersTemperatureReachesThePosesAndThermalGrowthIsNamedLive");
+  constexpr int kWarmCal = 55;
+  constexpr double kKappa = 5e-5;  // [1/K]
+  constexpr double kWarmup = 100;  // [s]
+  const std::string cell_file = RCAL_SOURCE_DIR "/config/cells/grb3016.yaml";
+  const std::string sim_file = RCAL_SOURCE_DIR "/config/cells/grb3016.sim.yaml";
+  const std::vector<std::string> watch = {"--discrepancy-every", "50", "--discrepancy-switch"};
+  const std::vector<std::string> warming = {"--seed", std::to_string(kSeed), "--sim-warmup",
+                                            std::to_string(kWarmup)};
+  std::vector<std::string> growing = warming;
+  growing.insert(growing.end(), {"--sim-effect", "thermal=" + std::to_string(kKappa)});
+  const LiveRun run = RunCell(cell_file, sim_file, kWarmCal, 5, growing, watch);
+  ASSERT_GE(run.poses.size(), 50u);
+  // Every pose carries the temperature the controller reported at its window's end: the warming
+  // curve there (the demo starts at sensor time 0) within the report's noise and a second's rise.
+  sim::SessionSettings session;
+  session.warmup_time_constant_s = kWarmup;
+  double rise = 0;
+  for (const pose_measurement_t& m : run.poses) {
+    const double t = static_cast<double>(m.utime) * 1e-6;
+    ASSERT_TRUE(std::isfinite(m.temperature_c)) << "pose " << m.pose_index;
+    const double slope = session.temperature_rise_c / kWarmup * std::exp(-t / kWarmup);  // [K/s]
+    EXPECT_NEAR(m.temperature_c, sim::WarmedTo(session, t), 5 * 0.3 + slope * 1.0)
+        << "pose " << m.pose_index << " at " << t << " s";
+    EXPECT_EQ(m.payload_kg, 0.0);
+    rise = m.temperature_c - run.poses.front().temperature_c;
+  }
+  EXPECT_GT(rise, 8.0);  // the arm warmed through the run
+  // Named by temperature at the first watch, switched in, κ within 3σ of the truth.
+  ASSERT_FALSE(run.discrepancies.empty());
+  const model_discrepancy_t& first = run.discrepancies.front();
+  ASSERT_GE(first.num_suspects, 1);
+  EXPECT_EQ(first.description[0], "thermal (temperature)");
+  EXPECT_EQ(first.switched_in, 1);
+  ASSERT_TRUE(run.params.has_value());
+  ASSERT_EQ(run.params->num_effect_params, 1);
+  EXPECT_EQ(run.params->effect_names[0], "thermal.temperature.kappa");
+  EXPECT_NEAR(run.params->effect_values[0], kKappa, 3 * run.params->effect_sigmas[0]);
+  EXPECT_LT(run.params->effect_sigmas[0], 0.2 * kKappa);
+  std::printf(
+      "thermal growth named by temperature at %d poses (z %.1f, χ²/dof %.2f), κ %.4g ± %.2g "
+      "1/K (truth %.4g); temperature rose %.1f K\n",
+      first.poses_used, first.z[0], first.chi2 / first.chi2_dof, run.params->effect_values[0],
+      run.params->effect_sigmas[0], kKappa, rise);
+  // Control: the same warming cell, the arm not growing: nothing suspected, nothing switched in
+  // (a fresh identifier, not resumed from the first run's checkpoint).
+  std::filesystem::remove(run.checkpoint);
+  const LiveRun control = RunCell(cell_file, sim_file, kWarmCal, 5, warming, watch);
+  ASSERT_FALSE(control.discrepancies.empty());
+  EXPECT_EQ(control.discrepancies.front().num_suspects, 0)
+      << control.discrepancies.front().description[0];
+  ASSERT_TRUE(control.params.has_value());
+  EXPECT_EQ(control.params->num_effect_params, 0);
+}
+
 // The demo's cell following the identifier's advice (sensor_acquisition --follow-next-poses,
 // issue 16): once the identifier advises, every stop is one of the suggestions of an advice
 // published before the arm left the stop before (the arm follows one stop behind: a window's pose
@@ -554,7 +627,7 @@ TEST_F(SensorPipeline, ThePandaCellCalibratesLiveAndItsLogGivesTheSameOffline) {
   const std::vector<Eigen::VectorXd> test_q(stops.begin() + kPandaCal, stops.end());
 
   const LiveRun run = RunCell(cell_file, sim_file, kPandaCal, kPandaTest);
-  const auto& [poses, params, status, next, checkpoint] = run;
+  const auto& [poses, params, status, next, discrepancies, checkpoint] = run;
   ASSERT_TRUE(params.has_value());
   ASSERT_TRUE(status.has_value());
   EXPECT_EQ(status->poses_accepted, kPandaCal);

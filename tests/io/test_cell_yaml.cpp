@@ -285,6 +285,9 @@ TEST(CellYaml, DefaultsAreTodaysSettings) {
   EXPECT_EQ(c.health, ch::kHealth);
   EXPECT_EQ(c.supervisor_state, ch::kSupervisorState);
   EXPECT_EQ(c.clock_offset, ch::kClockOffset);
+  EXPECT_EQ(c.next_poses, ch::kNextPoses);
+  EXPECT_EQ(c.model_discrepancy, ch::kModelDiscrepancy);
+  EXPECT_EQ(c.arm_conditions, ch::kArmConditions);
 }
 
 // A cell that sets nothing but the sensors today's defaults describe builds exactly today's

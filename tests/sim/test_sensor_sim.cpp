@@ -8,6 +8,7 @@
 #include <numbers>
 
 #include "rcal/geometry/so3.hpp"
+#include "rcal/sim/effects.hpp"
 #include "rcal/sim/pose_sim.hpp"
 
 namespace rcal::sim {
@@ -127,6 +128,43 @@ TEST(ToolMotionTruth, AnImuOffTheMarkerFeelsTheRigidBodyAccelerationAtItsPoint) 
   }
   EXPECT_GT(checked, 5);
   EXPECT_GT(largest_lever_m_s2, 0.05);  // the lever arm's terms are there to be found
+}
+
+// An arm that grows with time (thermal by time, ρ [1/s], t_ref 0): every length scales by
+// 1 + ρ t, so at a still stop the marker moves along a straight line at a constant rate (the
+// position is affine in the scale): equal steps over equal times, the velocity that rate, no
+// acceleration; at t = 0 it is the geometric arm. A model that is not the truth's is refused.
+TEST(ToolMotionTruth, AnArmGrowingWithTimeDriftsStraightAtAStillStop) {
+  const auto m = Cell();
+  const Eigen::VectorXd x = Truth(m);
+  const ToolMotionTruth plain(m, x, Program(m, 4, 3));
+  ToolMotionTruth grows = plain;
+  const EffectTruth et = MakeEffectTruth(m, {ParseEffectSpec("thermal:time=1e-5", m)});
+  grows.set_effects(et.model, et.e, [](double t) {
+    kinematics::EffectContext c;
+    c.time_s = t;
+    return c;
+  });
+  const auto [t_in, t_out] = grows.trajectory().StillInterval(2);
+  ASSERT_GT(t_out - t_in, 0.6);
+  const double t1 = t_in + 0.1, dt = 0.2;
+  const ToolState s1 = grows.At(t1), s2 = grows.At(t1 + dt), s3 = grows.At(t1 + 2 * dt);
+  const Eigen::Vector3d step = s2.p_WM_W - s1.p_WM_W;
+  EXPECT_GT(step.norm(), 2e-7);  // 1e-5/s × ~0.5 m × 0.2 s
+  EXPECT_LT((s3.p_WM_W - s2.p_WM_W - step).norm(), 1e-12);
+  EXPECT_LT((s2.v_WM_W - step / dt).norm(), 1e-9);
+  EXPECT_LT(s2.a_WM_W.norm(), 1e-6);
+  EXPECT_LT(s2.omega_I.norm(), 1e-9);  // lengths grow, angles stay
+  // Grown by ρ t against the geometric arm: the drift since t = 0 is t/dt steps.
+  EXPECT_LT((s2.p_WM_W - plain.At(t1 + dt).p_WM_W - step * (t1 + dt) / dt).norm(), 1e-9);
+  const ToolState g0 = grows.At(0.0), p0 = plain.At(0.0);
+  EXPECT_EQ(g0.p_WM_W, p0.p_WM_W);
+  // A model of other parameters, or an effect vector of the wrong size, is refused.
+  ToolMotionTruth other = plain;
+  EXPECT_THROW(other.set_effects(et.model, Eigen::VectorXd::Zero(2),
+                                 [](double) { return kinematics::EffectContext{}; }),
+               std::invalid_argument);
+  EXPECT_THROW(other.set_effects(et.model, et.e, nullptr), std::invalid_argument);
 }
 
 TEST(SensorSim, ImuAtRestReadsGravityAndTheFieldAndStreamsAreDeterministic) {

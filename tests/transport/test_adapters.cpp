@@ -518,6 +518,37 @@ TEST(ClockOffsetAdapter, SourcesAndRefusals) {
   EXPECT_EQ(error, "clock_offset.num_sources: -1 is not 0 to 4096");
 }
 
+// ARM_CONDITIONS (the controller's report, read by still_window): through the encoded bytes, NaN
+// kept as "not measured / not known", each bad field refused by name with a hint at the unit.
+TEST(ArmConditionsAdapter, RoundTripAndRefusals) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  std::string error;
+  const auto c =
+      ArmConditionsFromMessage(ThroughLcm(ToArmConditions({1'500'000, 31.25, 4.5})), &error);
+  ASSERT_TRUE(c) << error;
+  EXPECT_EQ(c->utime, 1'500'000);
+  EXPECT_EQ(c->temperature_c, 31.25);
+  EXPECT_EQ(c->payload_kg, 4.5);
+  const auto unknown = ArmConditionsFromMessage(ToArmConditions({7, nan, nan}), &error);
+  ASSERT_TRUE(unknown) << error;
+  EXPECT_TRUE(std::isnan(unknown->temperature_c));
+  EXPECT_TRUE(std::isnan(unknown->payload_kg));
+  const auto refused = [&](ArmConditions bad, const std::string& expected) {
+    error.clear();
+    EXPECT_FALSE(ArmConditionsFromMessage(ToArmConditions(bad), &error)) << expected;
+    EXPECT_EQ(error, expected);
+  };
+  const double inf = std::numeric_limits<double>::infinity();
+  refused({-1, 20.0, 0.0}, "arm_conditions.utime: -1 is negative");
+  refused({1, inf, 0.0}, "arm_conditions.temperature_c: infinite");
+  refused({1, 300.15, 0.0},
+          "arm_conditions.temperature_c: 300.150000 °C is not -60 to 200 (kelvin?)");
+  refused({1, -80.0, 0.0}, "arm_conditions.temperature_c: -80.000000 °C is not -60 to 200");
+  refused({1, 20.0, -inf}, "arm_conditions.payload_kg: infinite");
+  refused({1, 20.0, -0.5}, "arm_conditions.payload_kg: -0.500000 kg is not 0 to 1000");
+  refused({1, 20.0, 2500.0}, "arm_conditions.payload_kg: 2500.000000 kg is not 0 to 1000 (grams?)");
+}
+
 // NEXT_POSES: the advice round-trips through the encoded bytes; each malformed field is refused
 // by name, and a suggestion outside the joint limits is never passed on to a cell.
 TEST(NextPosesAdapter, RoundTripAndRefusals) {

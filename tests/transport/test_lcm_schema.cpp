@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "rcal/arm_conditions_t.hpp"
 #include "rcal/calibration_status_t.hpp"
 #include "rcal/clock_offset_t.hpp"
 #include "rcal/health_t.hpp"
@@ -102,6 +103,7 @@ TEST(LcmSchema, EveryLcmFileIsParsedAndEachFingerprintIsTheGeneratedCodes) {
   expect("next_poses_t", next_poses_t::getHash());
   expect("model_discrepancy_t", model_discrepancy_t::getHash());
   expect("clock_offset_t", clock_offset_t::getHash());
+  expect("arm_conditions_t", arm_conditions_t::getHash());
   expect("orientation_estimate_t", orientation_estimate_t::getHash());
   expect("pose_measurement_t", pose_measurement_t::getHash());
   expect("position_sample_t", position_sample_t::getHash());

@@ -346,7 +346,8 @@ void ReadChannels(const Reader& r, const YAML::Node& n, const std::string& p, Ce
       {"supervisor_state", &c->supervisor_state},
       {"clock_offset", &c->clock_offset},
       {"next_poses", &c->next_poses},
-      {"model_discrepancy", &c->model_discrepancy}};
+      {"model_discrepancy", &c->model_discrepancy},
+      {"arm_conditions", &c->arm_conditions}};
   std::set<std::string> keys;
   for (const auto& f : fields) keys.insert(f.first);
   r.CheckMap(n, p, keys);

@@ -136,13 +136,10 @@ EffectTruth MakeEffectTruth(const kinematics::KinematicModel& model,
   return out;
 }
 
-namespace {
-// The session's warm-up curve without its noise: T₀ + ΔT (1 − exp(−t/τ)) [°C].
 double WarmedTo(const SessionSettings& s, double t_s) {
   return s.temperature_start_c +
          s.temperature_rise_c * (1.0 - std::exp(-t_s / s.warmup_time_constant_s));
 }
-}  // namespace
 
 std::vector<kinematics::EffectContext> SampleSession(int num_joints, int count,
                                                      const SessionSettings& s, Rng& rng) {

@@ -22,6 +22,22 @@ ToolMotionTruth::ToolMotionTruth(const kinematics::KinematicModel& model,
   }
 }
 
+void ToolMotionTruth::set_effects(kinematics::ExtendedModel model, Eigen::VectorXd e,
+                                  ContextAt context) {
+  if (!context) throw std::invalid_argument("ToolMotionTruth::set_effects: no context");
+  if (model.base().num_params() != model_.num_params() || e.size() != model.num_effect_params())
+    throw std::invalid_argument(
+        "ToolMotionTruth::set_effects: the effects' model is not this truth's model, or e has "
+        "the wrong size");
+  effects_ =
+      std::make_shared<const Effects>(Effects{std::move(model), std::move(e), std::move(context)});
+}
+
+kinematics::ToolPose ToolMotionTruth::Pose(const Eigen::VectorXd& q, double t) const {
+  if (!effects_) return model_.Forward(q, x_true_);
+  return effects_->model.Forward(q, effects_->context(t), x_true_, effects_->e);
+}
+
 ToolState ToolMotionTruth::At(double t) const {
   ToolState s;
   s.t = t;
@@ -29,9 +45,9 @@ ToolState ToolMotionTruth::At(double t) const {
   trajectory_.Sample(t, s.q);
   trajectory_.Sample(t - h_, q_m);
   trajectory_.Sample(t + h_, q_p);
-  const kinematics::ToolPose pose = model_.Forward(s.q, x_true_);
-  const kinematics::ToolPose pm = model_.Forward(q_m, x_true_);
-  const kinematics::ToolPose pp = model_.Forward(q_p, x_true_);
+  const kinematics::ToolPose pose = Pose(s.q, t);
+  const kinematics::ToolPose pm = Pose(q_m, t - h_);
+  const kinematics::ToolPose pp = Pose(q_p, t + h_);
   s.p_WM_W = pose.p_WM_W;
   s.R_EI = pose.R_EI;
   s.v_WM_W = (pp.p_WM_W - pm.p_WM_W) / (2 * h_);

@@ -455,6 +455,33 @@ std::optional<std::vector<SourceClock>> ClockOffsetsFromMessage(const clock_offs
   return out;
 }
 
+arm_conditions_t ToArmConditions(const ArmConditions& c) {
+  arm_conditions_t m{};
+  m.utime = c.utime;
+  m.temperature_c = c.temperature_c;
+  m.payload_kg = c.payload_kg;
+  return m;
+}
+
+std::optional<ArmConditions> ArmConditionsFromMessage(const arm_conditions_t& m,
+                                                      std::string* error) {
+  auto fail = [&](const std::string& why) {
+    if (error) *error = "arm_conditions." + why;
+    return std::nullopt;
+  };
+  if (m.utime < 0) return fail("utime: " + std::to_string(m.utime) + " is negative");
+  // NaN says "not measured"; ±inf is no measurement of anything.
+  if (std::isinf(m.temperature_c)) return fail("temperature_c: infinite");
+  if (!std::isnan(m.temperature_c) && (m.temperature_c < -60.0 || m.temperature_c > 200.0))
+    return fail("temperature_c: " + std::to_string(m.temperature_c) + " °C is not -60 to 200" +
+                (m.temperature_c >= 213.0 && m.temperature_c <= 473.0 ? " (kelvin?)" : ""));
+  if (std::isinf(m.payload_kg)) return fail("payload_kg: infinite");
+  if (!std::isnan(m.payload_kg) && (m.payload_kg < 0.0 || m.payload_kg > 1000.0))
+    return fail("payload_kg: " + std::to_string(m.payload_kg) + " kg is not 0 to 1000" +
+                (m.payload_kg > 1000.0 ? " (grams?)" : ""));
+  return ArmConditions{m.utime, m.temperature_c, m.payload_kg};
+}
+
 next_poses_t ToNextPoses(const cell::NextPoseAdvice& a, int64_t utime, int32_t poses_used,
                          int num_joints) {
   next_poses_t m{};

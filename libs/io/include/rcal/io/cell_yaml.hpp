@@ -100,7 +100,7 @@
 //                                          # pose_measurement, kinematic_params,
 //                                          # calibration_status, ik_request, ik_command, health,
 //                                          # supervisor_state, clock_offset, next_poses,
-//                                          # model_discrepancy;
+//                                          # model_discrepancy, arm_conditions;
 //                                          # distinct, [A-Za-z0-9_./-], ≤ 63
 //   ros2:                                  # optional: the cell's ROS 2 drivers, read by ros2_input
 //                                          #   over DDS (ROS 2 wire types, no ROS installation)
@@ -267,6 +267,7 @@ struct CellChannels {
   std::string clock_offset = "CLOCK_OFFSET";
   std::string next_poses = "NEXT_POSES";                ///< next_poses_t (issue 16)
   std::string model_discrepancy = "MODEL_DISCREPANCY";  ///< model_discrepancy_t (issue 15)
+  std::string arm_conditions = "ARM_CONDITIONS";        ///< arm_conditions_t (issue 15)
 };
 
 /// One marker's ROS 2 topic (`ros2.positions[i]`).

@@ -68,6 +68,9 @@ struct SessionSettings {
   bool random_approach = true;  ///< dq sign drawn ±1 per joint and pose; false: all +1
 };
 
+/// The session's warm-up curve without its noise: T₀ + ΔT (1 − exp(−t/τ)) [°C] at t_s [s].
+double WarmedTo(const SessionSettings& settings, double t_s);
+
 /// The contexts of `count` poses of an arm with `num_joints` joints (all fields filled).
 std::vector<kinematics::EffectContext> SampleSession(int num_joints, int count,
                                                      const SessionSettings& settings, Rng& rng);

@@ -26,10 +26,13 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <functional>
+#include <memory>
 #include <optional>
 #include <random>
 #include <vector>
 
+#include "rcal/kinematics/joint_effects.hpp"
 #include "rcal/kinematics/model.hpp"
 #include "rcal/sim/imu_model.hpp"
 #include "rcal/sim/position_sensor_model.hpp"
@@ -64,6 +67,14 @@ class ToolMotionTruth {
   /// the marker point).
   void set_imu_to_marker_I(const Eigen::Vector3d& r_IM_I) { r_IM_I_ = r_IM_I; }
   const Eigen::Vector3d& imu_to_marker_I() const { return r_IM_I_; }
+  /// Non-geometric effects of the truth arm (issue 15: a sensor-level cell whose arm grows with
+  /// its temperature): from now on the tool moves as `model.Forward(q, context(t), x_true, e)`
+  /// (kinematics::ExtendedModel) instead of the geometry alone, `context(t)` the conditions at
+  /// sensor time t [s]. The context must be smooth in t (a warming temperature, the time): the
+  /// IMU's truth is its second difference. `model` must extend this truth's model (same
+  /// parameters); throws std::invalid_argument otherwise or without a context.
+  using ContextAt = std::function<kinematics::EffectContext(double t_s)>;
+  void set_effects(kinematics::ExtendedModel model, Eigen::VectorXd e, ContextAt context);
   /// Earth ← world rotation of the truth set-up (the model's earth segment at x_true).
   const Eigen::Matrix3d& R_EW() const { return R_EW_; }
   const JointTrajectory& trajectory() const { return trajectory_; }
@@ -81,6 +92,13 @@ class ToolMotionTruth {
   double h_;
   Eigen::Matrix3d R_EW_;
   Eigen::Vector3d r_IM_I_ = Eigen::Vector3d::Zero();
+  struct Effects {
+    kinematics::ExtendedModel model;
+    Eigen::VectorXd e;
+    ContextAt context;
+  };
+  std::shared_ptr<const Effects> effects_;  // null: the geometry alone
+  kinematics::ToolPose Pose(const Eigen::VectorXd& q, double t) const;
 };
 
 /// An encoder swapped and re-mastered (or slipped in a collision) while the arm works: from sensor

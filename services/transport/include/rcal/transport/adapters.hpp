@@ -8,10 +8,12 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "rcal/arm_conditions_t.hpp"
 #include "rcal/calibration_status_t.hpp"
 #include "rcal/cell/discrepancy_watch.hpp"
 #include "rcal/cell/next_poses.hpp"
@@ -158,6 +160,21 @@ struct SourceClock {
 /// offsets, σ ≥ 0 (+inf: unknown), state 0 to 3 (clock_offset.lcm); the reason names the field.
 std::optional<std::vector<SourceClock>> ClockOffsetsFromMessage(const clock_offset_t& msg,
                                                                 std::string* error);
+
+// ---- arm conditions (issue 15, item 4: a pose's context from the cell's drivers) ------------
+
+/// One ARM_CONDITIONS report: what the arm's controller says of the conditions it works under.
+struct ArmConditions {
+  int64_t utime = 0;  ///< [µs] sensor time (the joints' clock)
+  double temperature_c = std::numeric_limits<double>::quiet_NaN();  ///< [°C]; NaN: not measured
+  double payload_kg = std::numeric_limits<double>::quiet_NaN();     ///< [kg]; NaN: not known
+};
+arm_conditions_t ToArmConditions(const ArmConditions& c);
+/// ARM_CONDITIONS → the report. Checks (the reason names the field): utime ≥ 0; temperature NaN
+/// (not measured) or in [−60, 200] °C (a figure beyond it in [213, 473] is reported as kelvin?);
+/// payload NaN (not known) or in [0, 1000] kg (beyond: grams?); ±inf refused.
+std::optional<ArmConditions> ArmConditionsFromMessage(const arm_conditions_t& msg,
+                                                      std::string* error);
 
 // ---- next poses (issue 16) -------------------------------------------------------------------
 

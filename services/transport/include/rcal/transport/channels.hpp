@@ -18,5 +18,6 @@ inline constexpr const char* kSupervisorState = "SUPERVISOR_STATE";      ///< su
 inline constexpr const char* kClockOffset = "CLOCK_OFFSET";              ///< clock_offset_t
 inline constexpr const char* kNextPoses = "NEXT_POSES";                  ///< next_poses_t
 inline constexpr const char* kModelDiscrepancy = "MODEL_DISCREPANCY";    ///< model_discrepancy_t
+inline constexpr const char* kArmConditions = "ARM_CONDITIONS";          ///< arm_conditions_t
 
 }  // namespace rcal::transport::channels

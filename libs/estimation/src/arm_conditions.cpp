@@ -1,0 +1,46 @@
+#include "rcal/estimation/arm_conditions.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace rcal::estimation {
+
+ArmConditionsHistory::ArmConditionsHistory(double max_age, std::size_t capacity)
+    : max_age_(max_age), capacity_(capacity) {
+  if (!(max_age >= 0.0) || std::isinf(max_age))
+    throw std::invalid_argument("ArmConditionsHistory: max_age " + std::to_string(max_age) +
+                                " s is not a finite figure ≥ 0");
+  if (capacity == 0) throw std::invalid_argument("ArmConditionsHistory: capacity 0");
+}
+
+void ArmConditionsHistory::Add(const ArmConditionsReport& r) {
+  if (!std::isfinite(r.t))
+    throw std::invalid_argument("ArmConditionsHistory::Add: time not finite");
+  if (!reports_.empty()) {
+    if (r.t < reports_.back().t)
+      throw std::invalid_argument("ArmConditionsHistory::Add: t " + std::to_string(r.t) +
+                                  " s before the newest report's " +
+                                  std::to_string(reports_.back().t) + " s");
+    if (r.t == reports_.back().t) {
+      reports_.back() = r;
+      return;
+    }
+  }
+  reports_.push_back(r);
+  while (reports_.size() > capacity_) reports_.pop_front();
+}
+
+std::optional<ArmConditionsReport> ArmConditionsHistory::At(double t) const {
+  // The first report after t; the one before it stands at t.
+  const auto after =
+      std::upper_bound(reports_.begin(), reports_.end(), t,
+                       [](double time, const ArmConditionsReport& r) { return time < r.t; });
+  if (after == reports_.begin()) return std::nullopt;
+  const ArmConditionsReport& r = *std::prev(after);
+  if (t - r.t > max_age_) return std::nullopt;
+  return r;
+}
+
+}  // namespace rcal::estimation
