@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <numeric>
+#include <random>
 
 #include "identification_fixture.hpp"
 #include "rcal/identification/batch_lm.hpp"
@@ -177,6 +178,45 @@ TEST(PosePlanning, TaskRegionPlanLowersThePredictedTaskErrorBelowTheDOptimalOne)
   EXPECT_LT(t.task_mean_squared_m2, d_pp.Evaluate(d.chosen).task_mean_squared_m2);
   EXPECT_NEAR(t.task_mean_squared_m2, d_pp.Evaluate(t.chosen).task_mean_squared_m2,
               1e-9 * t.task_mean_squared_m2);
+}
+
+// The bound on what any `count` stops of the candidates can give (the approximate-design
+// relaxation): below every exact design tried (the planner's, random ones, one stop repeated), its
+// bracket closed to the tolerance, and (the prior made negligible) exactly 1/count in the stops:
+// the relaxed optimum's weights do not depend on count, so doubling the stops halves it.
+TEST(PosePlanning, NoSetOfStopsBeatsTheRelaxationsBound) {
+  Fixture f(400);
+  f.settings.criterion = PlanCriterion::kTaskRegion;
+  f.settings.prior_sigma_length = f.settings.setup_sigma_length = 1.0;
+  f.settings.prior_sigma_angle = f.settings.setup_sigma_angle = 1.0;
+  const PlanningProblem pp(f.model, f.model.Nominal(), f.candidates, f.settings, f.task);
+  const DesignBound b20 = pp.TaskMeanSquaredBound(20), b40 = pp.TaskMeanSquaredBound(40);
+  for (const DesignBound& b : {b20, b40}) {
+    EXPECT_GT(b.lower_m2, 0);
+    EXPECT_LE(b.lower_m2, b.relaxed_m2);
+    EXPECT_LE(b.relaxed_m2 - b.lower_m2, 0.01 * b.relaxed_m2) << b.iterations << " iterations";
+  }
+  EXPECT_NEAR(b40.relaxed_m2 / b20.relaxed_m2, 0.5, 0.01);
+  EXPECT_NEAR(b40.lower_m2 / b20.lower_m2, 0.5, 0.01);
+  // Exact designs: the planner's (near the bound), random ones (well above), a repeated stop.
+  const PosePlan planned = pp.Plan(20);
+  EXPECT_GE(planned.task_mean_squared_m2, b20.lower_m2);
+  EXPECT_LT(planned.task_mean_squared_m2, 1.15 * b20.relaxed_m2);
+  std::mt19937_64 rng(5);
+  std::vector<int> idx(pp.size());
+  std::iota(idx.begin(), idx.end(), 0);
+  for (int t = 0; t < 30; ++t) {
+    std::shuffle(idx.begin(), idx.end(), rng);
+    EXPECT_GE(pp.Evaluate({idx.begin(), idx.begin() + 20}).task_mean_squared_m2, b20.lower_m2);
+  }
+  std::vector<int> twice = planned.chosen;
+  twice.resize(10);
+  twice.insert(twice.end(), planned.chosen.begin(), planned.chosen.begin() + 10);
+  EXPECT_GE(pp.Evaluate(twice).task_mean_squared_m2, b20.lower_m2);
+  // Without task configurations there is no criterion to bound.
+  f.settings.criterion = PlanCriterion::kDOptimal;
+  const PlanningProblem no_task(f.model, f.model.Nominal(), f.candidates, f.settings);
+  EXPECT_THROW(no_task.TaskMeanSquaredBound(20), std::invalid_argument);
 }
 
 TEST(PosePlanning, CandidatesSatisfyTheConstraints) {

@@ -106,11 +106,16 @@ int Run(const Options& o) {
               plan.log_det, o.count, random_logdet[10], random_logdet.back());
   std::printf("  (per parameter: the planned confidence ellipsoid is %.2f× smaller in each axis)\n",
               std::exp(0.5 * (plan.log_det - random_logdet[10]) / plan.identifiable.size()));
-  if (!task.empty())
+  if (!task.empty()) {
     std::printf(
         "predicted RMS position error in the task region (%zu candidates inside): planned %.4f mm, "
         "random median %.4f mm\n",
         task.size(), std::sqrt(plan.task_mean_squared_m2) * kMm, std::sqrt(random_task[10]) * kMm);
+    // What no choice among these candidates can beat (the approximate-design bound).
+    const identification::DesignBound b = pp.TaskMeanSquaredBound(o.count);
+    std::printf("  no %d stops from these candidates predict below %.4f mm there (bound)\n",
+                o.count, std::sqrt(b.lower_m2) * kMm);
+  }
   std::printf("exchange: %d swaps in %d sweeps\nwrote %s\n", plan.exchanges, plan.sweeps,
               o.out.c_str());
   return 0;

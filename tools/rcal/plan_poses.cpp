@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <numeric>
 #include <random>
 
 #include "calibration_sweep.hpp"
@@ -113,6 +114,21 @@ ArmPlans PlanArm(const kinematics::KinematicModel& model, const PlanningReportSe
     if (n == 20 || plans.plan_seconds == 0) plans.plan_seconds = ThreadSeconds() - t0;
   }
   plans.iroc = Pick(candidates, pp.IrocGreedy(max_count).chosen);
+  // The figure (20 planned stops against 40 random) against what any 20 stops can do.
+  if (std::find(s.counts.begin(), s.counts.end(), 20) != s.counts.end())
+    plans.bound20_rms_m = std::sqrt(pp.TaskMeanSquaredBound(20).lower_m2);
+  if (std::find(s.counts.begin(), s.counts.end(), 40) != s.counts.end()) {
+    std::mt19937_64 draw(seed ^ 0x40);
+    std::vector<int> idx(candidates.size());
+    std::iota(idx.begin(), idx.end(), 0);
+    std::vector<double> ms;
+    for (int t = 0; t < 21; ++t) {
+      std::shuffle(idx.begin(), idx.end(), draw);
+      ms.push_back(pp.Evaluate({idx.begin(), idx.begin() + 40}).task_mean_squared_m2);
+    }
+    std::nth_element(ms.begin(), ms.begin() + 10, ms.end());
+    plans.random40_rms_m = std::sqrt(ms[10]);
+  }
   // Online next-best from the arm at the middle of its limits: the covariance after each stop
   // (the prior and the stops so far, linearised at the nominal) chooses the next.
   Eigen::VectorXd q_now(model.num_joints());

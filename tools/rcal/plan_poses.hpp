@@ -63,6 +63,11 @@ struct ArmPlans {
   /// first count), in visiting order, per strategy (random: its first draw).
   std::array<double, 4> path20{};
   double plan_seconds = 0;  ///< CPU time of the planned plan at 20 stops (or the first count)
+  /// Predicted RMS position error over the workspace [m] (linearised at the nominal): the least
+  /// any 20 stops from the candidates can give (PlanningProblem::TaskMeanSquaredBound: its
+  /// certified lower end), and the median of 21 draws of 40 random candidates. 0 when the counts
+  /// lack 20 (40).
+  double bound20_rms_m = 0, random40_rms_m = 0;
 };
 ArmPlans PlanArm(const kinematics::KinematicModel& model, const PlanningReportSettings& s,
                  std::uint64_t seed);

@@ -219,6 +219,89 @@ double PlanningProblem::TaskMeanSquared(const Eigen::MatrixXd& M) const {
   return (G_ * M.ldlt().solve(Eigen::MatrixXd::Identity(M.rows(), M.cols()))).trace();
 }
 
+DesignBound PlanningProblem::TaskMeanSquaredBound(int count, int max_iterations,
+                                                  double tolerance) const {
+  if (G_.size() == 0)
+    throw std::invalid_argument(
+        "design bound: no task configurations (the criterion is over them)");
+  if (count < 1) throw std::invalid_argument("design bound: count must be at least 1");
+  const int p = static_cast<int>(base_.size());
+  const int r = rows_;
+  const double n = count;
+  const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(p, p);
+  // f(M) = tr(G M⁻¹); the data part D(w) = count Σ wᵢ Aᵢ, M = Λ₀ + D.
+  const auto f = [&](const Eigen::MatrixXd& M) { return (G_ * M.ldlt().solve(I)).trace(); };
+  Eigen::VectorXd w = Eigen::VectorXd::Constant(size(), 1.0 / size());  // the random design
+  Eigen::MatrixXd D = Eigen::MatrixXd::Zero(p, p);
+  for (int i = 0; i < size(); ++i) {
+    const auto Wi = W_.middleCols(static_cast<Eigen::Index>(r) * i, r);
+    D.noalias() += (n * w(i)) * (Wi * Wi.transpose());
+  }
+  DesignBound b;
+  b.lower_m2 = 0;
+  b.relaxed_m2 = f(prior_ + D);
+  Eigen::VectorXd g(size());
+  for (int it = 0; it < max_iterations; ++it) {
+    b.iterations = it + 1;
+    const Eigen::MatrixXd M = prior_ + D;
+    // ∂f/∂wᵢ = −count tr(Wᵢᵀ M⁻¹ G M⁻¹ Wᵢ).
+    const Eigen::LLT<Eigen::MatrixXd> llt(M);
+    const Eigen::MatrixXd Z = llt.solve(W_);
+    const Eigen::MatrixXd Y = G_ * Z;
+    for (int i = 0; i < size(); ++i) {
+      const Eigen::Index c0 = static_cast<Eigen::Index>(r) * i;
+      g(i) = -n * (Z.middleCols(c0, r).array() * Y.middleCols(c0, r).array()).sum();
+    }
+    Eigen::Index j = 0;
+    const double g_min = g.minCoeff(&j);
+    const double value = f(M);
+    b.relaxed_m2 = std::min(b.relaxed_m2, value);
+    b.lower_m2 = std::max(b.lower_m2, value + g_min - g.dot(w));
+    if (b.relaxed_m2 - b.lower_m2 <= tolerance * b.relaxed_m2) break;
+    // First the multiplicative step of L-optimal design (wᵢ ∝ wᵢ √(−∂ᵢf), Silvey, Titterington &
+    // Torsney 1978: every weight moves at once, which Frank–Wolfe's one-vertex steps do slowly);
+    // kept when it lowers f (with the prior it need not), else the Frank–Wolfe step below.
+    {
+      Eigen::VectorXd w_m = w.array() * (-g.array()).max(0.0).sqrt();
+      const double sum = w_m.sum();
+      if (sum > 0) {
+        w_m /= sum;
+        Eigen::MatrixXd D_m = Eigen::MatrixXd::Zero(p, p);
+        for (int i = 0; i < size(); ++i) {
+          if (w_m(i) == 0) continue;
+          const auto Wi = W_.middleCols(static_cast<Eigen::Index>(r) * i, r);
+          D_m.noalias() += (n * w_m(i)) * (Wi * Wi.transpose());
+        }
+        if (f(prior_ + D_m) < value) {
+          w = w_m;
+          D = D_m;
+          continue;
+        }
+      }
+    }
+    // Toward vertex j: D(γ) = (1 − γ) D + γ count Aⱼ; f is convex in γ: golden section.
+    const auto Wj = W_.middleCols(static_cast<Eigen::Index>(r) * j, r);
+    const Eigen::MatrixXd Aj = n * (Wj * Wj.transpose());
+    const auto along = [&](double gamma) { return f(prior_ + (1.0 - gamma) * D + gamma * Aj); };
+    double lo = 0, hi = 1;
+    const double phi = 0.5 * (std::sqrt(5.0) - 1.0);
+    double a = hi - phi * (hi - lo), c = lo + phi * (hi - lo), fa = along(a), fc = along(c);
+    for (int k = 0; k < 40; ++k) {
+      if (fa < fc) {
+        hi = c, c = a, fc = fa, a = hi - phi * (hi - lo), fa = along(a);
+      } else {
+        lo = a, a = c, fa = fc, c = lo + phi * (hi - lo), fc = along(c);
+      }
+    }
+    const double gamma = 0.5 * (lo + hi);
+    w *= 1.0 - gamma;
+    w(j) += gamma;
+    D = (1.0 - gamma) * D + gamma * Aj;
+  }
+  b.relaxed_m2 = std::min(b.relaxed_m2, f(prior_ + D));
+  return b;
+}
+
 Eigen::VectorXd PlanningProblem::Gains(const Eigen::MatrixXd& M, PlanCriterion criterion) const {
   // Z = M⁻¹ Wᵀ (columns per row of a stop); stop i adds Wᵢᵀ Wᵢ, so with Bᵢ = I + Wᵢ M⁻¹ Wᵢᵀ:
   //   Δ log det M = log det Bᵢ,   Δ tr(G M⁻¹) = −tr(Bᵢ⁻¹ Wᵢ M⁻¹ G M⁻¹ Wᵢᵀ).

@@ -98,6 +98,14 @@ struct PlanningSettings {
   int base_set_candidates = 400;
 };
 
+/// How low the task-region criterion can go with `count` stops from the candidates (see
+/// PlanningProblem::TaskMeanSquaredBound).
+struct DesignBound {
+  double lower_m2 = 0;    ///< no `count` stops (repeats allowed) give tr(G M⁻¹) below this [m²]
+  double relaxed_m2 = 0;  ///< the best relaxed design found: the bound is within [lower, relaxed]
+  int iterations = 0;
+};
+
 /// A chosen set of stops.
 struct PosePlan {
   std::vector<int> chosen;          ///< indices into the candidates (selection order, then swaps)
@@ -136,6 +144,15 @@ class PlanningProblem {
   Eigen::VectorXd Gains(const Eigen::MatrixXd& M, PlanCriterion criterion) const;
   /// tr(G M⁻¹) [m²]: predicted mean squared position error over the task configurations.
   double TaskMeanSquared(const Eigen::MatrixXd& M) const;
+  /// The least predicted mean squared task-region error [m²] any `count` stops drawn from the
+  /// candidates (repeats allowed) can give under the linearised model: the approximate-design
+  /// relaxation (stop i taken with weight wᵢ ≥ 0, Σ wᵢ = 1, M(w) = Λ₀ + count Σ wᵢ Aᵢ; an exact
+  /// design is wᵢ = nᵢ / count) is convex, solved by Frank–Wolfe with an exact line search, and its
+  /// duality gap certifies `lower_m2` at any iterate: f(w*) ≥ f(w) + minⱼ ∂ⱼf − ∇fᵀw. Stops until
+  /// relaxed − lower ≤ `tolerance` · relaxed or after `max_iterations`. Needs task configurations
+  /// (std::invalid_argument otherwise).
+  DesignBound TaskMeanSquaredBound(int count, int max_iterations = 400,
+                                   double tolerance = 0.01) const;
   /// Column scale D (base set): parameter error δx_base = D · δx_scaled.
   const Eigen::VectorXd& scale() const { return scale_; }
 
