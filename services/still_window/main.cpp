@@ -40,7 +40,9 @@
 // --conditions-max-age old. A cell that sends no ARM_CONDITIONS gets temperature unknown (NaN)
 // and payload 0, as before; once reports have come, a window with none standing (the controller
 // went quiet) goes out so too, and is counted in HEALTH gaps with the reason in last_error. A
-// report not measured (NaN) stays unknown; a payload not known (NaN) goes out as 0.
+// report not measured (NaN) stays unknown; a payload not known (NaN) goes out as 0. A controller
+// that reports slowly: --conditions-max-age at least its period (the stream's time gate then
+// accepts reports that far apart, whatever --horizon says).
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -87,7 +89,7 @@ class StillWindowNode {
         joints_gate_(time),
         imu_gate_(time),
         position_gate_(time),
-        conditions_gate_(time) {
+        conditions_gate_(estimation::ArmConditionsGateSettings(time, conditions_max_age)) {
     t_.Subscribe<joint_state_t>(
         channels_.joints, [this](const joint_state_t& m) { OnJoints(m); },
         [this](const std::string& e) { Bad(e); });

@@ -50,5 +50,25 @@ TEST(ArmConditions, SameTimeReplacesOlderIsRefusedAndTheHistoryIsBounded) {
   EXPECT_THROW((ArmConditionsHistory{1.0, 0}), std::invalid_argument);
 }
 
+// A controller reporting every 30 s, with reports standing for 60 s: its gate accepts each
+// report (the sensors' 10 s horizon alone refuses nearly all of them), and still refuses one
+// beyond the widened horizon.
+TEST(ArmConditions, ASlowControllersReportsPassItsGate) {
+  const TimeGateSettings sensors;  // horizon 10 s
+  TimeGate slow(ArmConditionsGateSettings(sensors, 60.0)), plain(sensors);
+  int refused_slow = 0, refused_plain = 0;
+  for (int k = 0; k < 20; ++k) {
+    const int64_t u = k * 30'000'000LL;
+    refused_slow += !Usable(slow.Offer(u));
+    refused_plain += !Usable(plain.Offer(u));
+  }
+  EXPECT_EQ(refused_slow, 0);
+  EXPECT_GE(refused_plain, 15);
+  EXPECT_EQ(slow.Offer(19 * 30'000'000LL + 61'000'000LL), TimeVerdict::kBeyondHorizon);
+  // A max_age within the horizon leaves it as it is.
+  EXPECT_EQ(ArmConditionsGateSettings(sensors, 5.0).horizon_us, sensors.horizon_us);
+  EXPECT_EQ(ArmConditionsGateSettings(sensors, 60.0).horizon_us, 60'000'000);
+}
+
 }  // namespace
 }  // namespace rcal::estimation

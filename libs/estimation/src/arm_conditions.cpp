@@ -7,6 +7,13 @@
 
 namespace rcal::estimation {
 
+TimeGateSettings ArmConditionsGateSettings(TimeGateSettings sensor, double max_age) {
+  if (std::isfinite(max_age) && max_age > 0)
+    sensor.horizon_us =
+        std::max(sensor.horizon_us, static_cast<int64_t>(std::llround(max_age * 1e6)));
+  return sensor;
+}
+
 ArmConditionsHistory::ArmConditionsHistory(double max_age, std::size_t capacity)
     : max_age_(max_age), capacity_(capacity) {
   if (!(max_age >= 0.0) || std::isinf(max_age))

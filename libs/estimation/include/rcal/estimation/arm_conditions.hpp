@@ -16,6 +16,8 @@
 #include <limits>
 #include <optional>
 
+#include "rcal/estimation/time_gate.hpp"
+
 namespace rcal::estimation {
 
 /// One report of the arm's conditions.
@@ -24,6 +26,12 @@ struct ArmConditionsReport {
   double temperature_c = std::numeric_limits<double>::quiet_NaN();  ///< [°C]; NaN: not measured
   double payload_kg = std::numeric_limits<double>::quiet_NaN();     ///< [kg]; NaN: not known
 };
+
+/// The time gate of a conditions stream: `sensor`'s settings with the horizon widened to at
+/// least `max_age` [s]. A controller may report slowly (a temperature every 30 s); a report as far
+/// after the last as a report may stand for a window is not "beyond the horizon" (with the
+/// sensors' 10 s horizon such a stream would be refused report after report).
+TimeGateSettings ArmConditionsGateSettings(TimeGateSettings sensor, double max_age);
 
 class ArmConditionsHistory {
  public:
