@@ -228,18 +228,21 @@ DesignBound PlanningProblem::TaskMeanSquaredBound(int count, int max_iterations,
   const int p = static_cast<int>(base_.size());
   const int r = rows_;
   const double n = count;
-  const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(p, p);
-  // f(M) = tr(G M⁻¹); the data part D(w) = count Σ wᵢ Aᵢ, M = Λ₀ + D.
-  const auto f = [&](const Eigen::MatrixXd& M) { return (G_ * M.ldlt().solve(I)).trace(); };
+  // f(M) = tr(G M⁻¹) (TaskMeanSquared); the data part D(w) = count Σ wᵢ Aᵢ, M = Λ₀ + D.
+  const auto data_part = [&](const Eigen::VectorXd& weights) {
+    Eigen::MatrixXd out = Eigen::MatrixXd::Zero(p, p);
+    for (int i = 0; i < size(); ++i) {
+      if (weights(i) == 0) continue;
+      const auto Wi = W_.middleCols(static_cast<Eigen::Index>(r) * i, r);
+      out.noalias() += (n * weights(i)) * (Wi * Wi.transpose());
+    }
+    return out;
+  };
   Eigen::VectorXd w = Eigen::VectorXd::Constant(size(), 1.0 / size());  // the random design
-  Eigen::MatrixXd D = Eigen::MatrixXd::Zero(p, p);
-  for (int i = 0; i < size(); ++i) {
-    const auto Wi = W_.middleCols(static_cast<Eigen::Index>(r) * i, r);
-    D.noalias() += (n * w(i)) * (Wi * Wi.transpose());
-  }
+  Eigen::MatrixXd D = data_part(w);
   DesignBound b;
   b.lower_m2 = 0;
-  b.relaxed_m2 = f(prior_ + D);
+  b.relaxed_m2 = TaskMeanSquared(prior_ + D);
   Eigen::VectorXd g(size());
   for (int it = 0; it < max_iterations; ++it) {
     b.iterations = it + 1;
@@ -254,7 +257,7 @@ DesignBound PlanningProblem::TaskMeanSquaredBound(int count, int max_iterations,
     }
     Eigen::Index j = 0;
     const double g_min = g.minCoeff(&j);
-    const double value = f(M);
+    const double value = TaskMeanSquared(M);
     b.relaxed_m2 = std::min(b.relaxed_m2, value);
     b.lower_m2 = std::max(b.lower_m2, value + g_min - g.dot(w));
     if (b.relaxed_m2 - b.lower_m2 <= tolerance * b.relaxed_m2) break;
@@ -266,13 +269,8 @@ DesignBound PlanningProblem::TaskMeanSquaredBound(int count, int max_iterations,
       const double sum = w_m.sum();
       if (sum > 0) {
         w_m /= sum;
-        Eigen::MatrixXd D_m = Eigen::MatrixXd::Zero(p, p);
-        for (int i = 0; i < size(); ++i) {
-          if (w_m(i) == 0) continue;
-          const auto Wi = W_.middleCols(static_cast<Eigen::Index>(r) * i, r);
-          D_m.noalias() += (n * w_m(i)) * (Wi * Wi.transpose());
-        }
-        if (f(prior_ + D_m) < value) {
+        const Eigen::MatrixXd D_m = data_part(w_m);
+        if (TaskMeanSquared(prior_ + D_m) < value) {
           w = w_m;
           D = D_m;
           continue;
@@ -282,7 +280,9 @@ DesignBound PlanningProblem::TaskMeanSquaredBound(int count, int max_iterations,
     // Toward vertex j: D(γ) = (1 − γ) D + γ count Aⱼ; f is convex in γ: golden section.
     const auto Wj = W_.middleCols(static_cast<Eigen::Index>(r) * j, r);
     const Eigen::MatrixXd Aj = n * (Wj * Wj.transpose());
-    const auto along = [&](double gamma) { return f(prior_ + (1.0 - gamma) * D + gamma * Aj); };
+    const auto along = [&](double gamma) {
+      return TaskMeanSquared(prior_ + (1.0 - gamma) * D + gamma * Aj);
+    };
     double lo = 0, hi = 1;
     const double phi = 0.5 * (std::sqrt(5.0) - 1.0);
     double a = hi - phi * (hi - lo), c = lo + phi * (hi - lo), fa = along(a), fc = along(c);
@@ -298,7 +298,7 @@ DesignBound PlanningProblem::TaskMeanSquaredBound(int count, int max_iterations,
     w(j) += gamma;
     D = (1.0 - gamma) * D + gamma * Aj;
   }
-  b.relaxed_m2 = std::min(b.relaxed_m2, f(prior_ + D));
+  b.relaxed_m2 = std::min(b.relaxed_m2, TaskMeanSquared(prior_ + D));
   return b;
 }
 
