@@ -2,9 +2,9 @@
 // deserialised them — any joint names and counts, lengths that disagree, NaN, infinities, absurd
 // magnitudes, stamps anywhere (nanosec ≥ 1e9, negative, jumping back and forth), any frame ids —
 // goes through ros2_input's core exactly as the process feeds it (Ros2Input: the ROS 2 → rcal
-// conversions, the time gates, the magnetometer pairing, the reorder buffer and every source's
-// clock-offset estimator). A crash, a sanitizer report, an exception or an event leaving out of
-// time order is a finding.
+// conversions, the time gates, the magnetometer pairing, the reorder buffer, every source's
+// clock-offset estimator and the arm's temperature). A crash, a sanitizer report, an exception, an
+// event leaving out of time order or an ARM_CONDITIONS report its adapter refuses is a finding.
 //
 // Input: a sequence of records, each one opcode byte (which driver topic) then the bytes its
 // fields are read from; the stream ends when the bytes do.
@@ -18,6 +18,7 @@
 
 #include "rcal/dds/ros2_convert.hpp"
 #include "rcal/io/cell_yaml.hpp"
+#include "rcal/transport/adapters.hpp"
 #include "ros2_input.hpp"
 
 namespace {
@@ -104,8 +105,25 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   };
   const auto& names = demo.cell.ros2_joint_names;
   for (int records = 0; !b.empty() && records < 4000; ++records) {
-    const std::uint8_t op = b.U8() % 5;
-    if (op == 0) {
+    // Opcodes 250-255: the arm's temperature (the other bytes keep the meaning they had).
+    const std::uint8_t code = b.U8();
+    const std::uint8_t op = code >= 250 ? 5 : code % 5;
+    if (op == 5) {
+      dds::Sample<dds::Temperature> s;
+      auto& m = s.get();
+      m.header.stamp = Stamp(b, clock_us);
+      Frame(b, m.header, "arm");
+      m.temperature = b.Value(300.0);
+      m.variance = b.Value(1.0);
+      if (const auto c = in.OnTemperature(m)) {
+        // What goes out on ARM_CONDITIONS passes its own adapter's check.
+        std::string error;
+        if (!transport::ArmConditionsFromMessage(transport::ToArmConditions(*c), &error)) {
+          std::fprintf(stderr, "published a report its adapter refuses: %s\n", error.c_str());
+          std::abort();
+        }
+      }
+    } else if (op == 0) {
       dds::Sample<dds::JointState> s;
       auto& m = s.get();
       m.header.stamp = Stamp(b, clock_us);

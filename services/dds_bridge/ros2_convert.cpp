@@ -193,6 +193,27 @@ std::optional<MagReading> FromRos(const MagneticField& m, const transport::Senso
   return MagReading{*utime, b};
 }
 
+std::optional<transport::ArmConditions> FromRos(const Temperature& m, const std::string& topic,
+                                                std::string* error) {
+  const auto utime = Stamp(m.header, topic, error);
+  if (!utime) return std::nullopt;
+  if (!CheckValue(
+          m.temperature, [&] { return topic + ".temperature"; }, error))
+    return std::nullopt;
+  if (const std::string why = transport::TemperatureProblem(m.temperature); !why.empty())
+    return Fail(error, topic + ".temperature: " + why + " (ROS wants °C)"), std::nullopt;
+  if (!CheckValue(
+          m.variance, [&] { return topic + ".variance"; }, error))
+    return std::nullopt;
+  if (m.variance < 0)
+    return Fail(error, topic + ".variance: " + std::to_string(m.variance) + " is negative"),
+           std::nullopt;
+  transport::ArmConditions c;
+  c.utime = *utime;
+  c.temperature_c = m.temperature;
+  return c;
+}
+
 std::optional<transport::PositionSample> FromRos(const PoseStamped& m, int32_t marker_id,
                                                  const Eigen::Matrix3d& covariance,
                                                  const transport::SensorRanges& ranges,
@@ -260,6 +281,19 @@ std::optional<Sample<MagneticField>> ToRos(const MagReading& s, const char* fram
   auto& d = out.get();
   if (!FillHeader(d.header, s.utime, frame_id, "magnetic_field.utime", error)) return std::nullopt;
   SetVec(d.magnetic_field, s.m_S);
+  return out;
+}
+
+std::optional<Sample<Temperature>> ToRos(const transport::ArmConditions& c, double variance,
+                                         const char* frame_id, std::string* error) {
+  if (!std::isfinite(c.temperature_c) || !std::isfinite(variance) || variance < 0)
+    return Fail(error, "temperature: temperature or variance not finite, or variance negative"),
+           std::nullopt;
+  Sample<Temperature> out;
+  auto& d = out.get();
+  if (!FillHeader(d.header, c.utime, frame_id, "temperature.utime", error)) return std::nullopt;
+  d.temperature = c.temperature_c;
+  d.variance = variance;
   return out;
 }
 

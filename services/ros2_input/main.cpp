@@ -9,10 +9,11 @@
 //   rt<imu>           sensor_msgs::msg::dds_::Imu_             (cells with an IMU)
 //   rt<mag>           sensor_msgs::msg::dds_::MagneticField_   (optional)
 //   rt<position i>    geometry_msgs::msg::dds_::PointStamped_ or PoseStamped_, one per marker
+//   rt<temperature>   sensor_msgs::msg::dds_::Temperature_ (optional: the arm's temperature)
 // Publishes on LCM (the cell's channels): JOINTS, IMU, POSITION as sensor_acquisition does, so the
-// rest of the pipeline is unchanged; CLOCK_OFFSET (every source's offset, σ and state) at 1 Hz of
-// the joints' time and whenever a state changes; HEALTH at 1 Hz, with DDS samples lost or rejected
-// by the readers counted as dropped.
+// rest of the pipeline is unchanged; ARM_CONDITIONS for each temperature; CLOCK_OFFSET (every
+// source's offset, σ and state) at 1 Hz of the joints' time and whenever a state changes; HEALTH at
+// 1 Hz, with DDS samples lost or rejected by the readers counted as dropped.
 //
 // Cyclone binds to loopback only (config/cyclonedds-loopback.xml) unless CYCLONEDDS_URI is set.
 // Samples whose CDR Cyclone cannot deserialise never reach rcal (Cyclone drops them); everything
@@ -121,8 +122,9 @@ int TakeAll(Reader& r, LatencyHistogram& latency) {
 int main(int argc, char** argv) {
   CLI::App app{
       "ros2_input: a cell's ROS 2 drivers (sensor_msgs/JointState, Imu, MagneticField,\n"
-      "geometry_msgs/PointStamped or PoseStamped) over Cyclone DDS into the pipeline's JOINTS,\n"
-      "IMU and POSITION, every driver's stamps moved to the arm's clock (CLOCK_OFFSET).\n"
+      "Temperature, geometry_msgs/PointStamped or PoseStamped) over Cyclone DDS into the\n"
+      "pipeline's JOINTS, IMU, POSITION and ARM_CONDITIONS, every driver's stamps moved to the\n"
+      "arm's clock (CLOCK_OFFSET).\n"
       "Topics, joint names and frames from the cell file's ros2: section.\n"
       "Cyclone DDS: $CYCLONEDDS_URI, else config/cyclonedds-loopback.xml.\n"
       "LCM URL: --lcm-url, else $RCAL_LCM_URL, else udpm://239.255.76.67:7667?ttl=0."};
@@ -197,6 +199,18 @@ int main(int argc, char** argv) {
     if (!settings->imu_topic.empty())
       readers.push_back(MakeReader<dds::Imu>(participant.get(), settings->imu_topic,
                                              [&](const dds::Imu& m) { input.OnImu(m); }));
+    if (!settings->temperature_topic.empty())
+      readers.push_back(MakeReader<dds::Temperature>(
+          participant.get(), settings->temperature_topic, [&](const dds::Temperature& m) {
+            if (const auto c = input.OnTemperature(m)) {
+              if (t.Publish(ch.arm_conditions, transport::ToArmConditions(*c))) {
+                health.Published();
+                ++published;
+              } else {
+                health.Error("LCM publish failed");
+              }
+            }
+          }));
     for (size_t i = 0; i < settings->positions.size(); ++i) {
       const auto& p = settings->positions[i];
       if (p.pose)
@@ -256,9 +270,9 @@ int main(int argc, char** argv) {
                    c.source, static_cast<int>(c.state), 1e3 * c.offset, 1e3 * c.sigma, c.resets);
     spdlog::info(
         "stopped: {} samples published, {} late (dropped), {} IMU samples with a magnetometer "
-        "reading; DDS delivery latency median {:.1f} ms, 99 % {:.1f} ms over {} samples (+ the "
-        "reorder delay {:.0f} ms before publishing)",
-        published, input.late(), input.mag_paired(), latency.QuantileMs(0.5),
+        "reading, {} temperature reports; DDS delivery latency median {:.1f} ms, 99 % {:.1f} ms "
+        "over {} samples (+ the reorder delay {:.0f} ms before publishing)",
+        published, input.late(), input.mag_paired(), input.temperatures(), latency.QuantileMs(0.5),
         latency.QuantileMs(0.99), latency.count(), 1e3 * settings->reorder_delay);
     return 0;
   } catch (const std::exception& e) {

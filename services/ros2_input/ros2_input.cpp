@@ -5,6 +5,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "rcal/estimation/arm_conditions.hpp"
 #include "rcal/estimation/clock_offset.hpp"
 
 namespace rcal::ros2 {
@@ -155,6 +156,7 @@ Ros2InputSettings FromCell(const io::BuiltCell& cell) {
   s.joint_topic = r.joint_states;
   s.imu_topic = r.imu;
   s.mag_topic = r.magnetic_field;
+  s.temperature_topic = r.temperature;
   s.imu_frame = r.imu_frame;
   for (const io::Ros2PositionTopic& p : r.positions)
     s.positions.push_back({p.topic, p.marker, p.pose, p.frame_id});
@@ -182,6 +184,9 @@ Ros2Input::Ros2Input(const Ros2InputSettings& settings, const kinematics::Kinema
       joints_{settings.joint_topic, estimation::TimeGate(settings.gate)},
       imu_{settings.imu_topic, estimation::TimeGate(settings.gate)},
       mag_{settings.mag_topic, estimation::TimeGate(settings.gate)},
+      temperature_{settings.temperature_topic,
+                   estimation::TimeGate(estimation::ArmConditionsGateSettings(
+                       settings.gate, settings.temperature_horizon))},
       clocks_(std::make_unique<ClockOffsetTracker>(settings, model)) {
   if (static_cast<int>(s_.joint_names.size()) != model.num_joints())
     throw std::invalid_argument("ros2_input: " + std::to_string(s_.joint_names.size()) +
@@ -201,6 +206,8 @@ bool Ros2Input::Admit(Stream& st, int64_t utime, int clock_source) {
   if (!estimation::Usable(v)) return false;
   if (v == estimation::TimeVerdict::kResynchronised) {
     // A restarted driver: its clock is a new one.
+    if (&st == &joints_ || &st == &temperature_)
+      last_temperature_utime_ = std::numeric_limits<int64_t>::min();  // a new time base
     if (&st == &joints_) {
       // The arm's clock is the pipeline's: what waits in the buffer belongs to the old time base.
       clocks_->ResetAll();
@@ -333,6 +340,30 @@ void Ros2Input::OnPoint(size_t i, const dds::PointStamped& m) {
   auto p = dds::FromRos(m, s_.positions[i].marker, s_.position_covariance, s_.ranges,
                         s_.positions[i].topic, &error);
   OnPosition(i, std::move(p), dds::FrameId(m.header), error);
+}
+
+std::optional<transport::ArmConditions> Ros2Input::OnTemperature(const dds::Temperature& m) {
+  health_.Received();
+  std::string error;
+  auto c = dds::FromRos(m, s_.temperature_topic, &error);
+  if (!c) return Refuse(error), std::nullopt;
+  if (!Admit(temperature_, c->utime, -1)) return std::nullopt;
+  if (s_.estimate_clock_offsets) {
+    if (joints_utime_ == 0)
+      return Refuse(s_.temperature_topic +
+                    ": a temperature before the arm's first joints (no arm time to stamp it with)"),
+             std::nullopt;
+    c->utime = joints_utime_;
+  }
+  // Two reports between the same two joints' samples: the later one a microsecond on (a report at
+  // the same time would be a duplicate downstream).
+  if (c->utime <= last_temperature_utime_) {
+    if (!s_.estimate_clock_offsets) return std::nullopt;  // the gate saw to the driver's order
+    c->utime = last_temperature_utime_ + 1;
+  }
+  last_temperature_utime_ = c->utime;
+  ++temperatures_;
+  return c;
 }
 
 std::vector<ClockStatus> Ros2Input::Clocks() const {

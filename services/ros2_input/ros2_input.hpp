@@ -10,6 +10,13 @@
 //   positions  geometry_msgs/PointStamped (laser tracker) or PoseStamped (motion capture), one
 //              topic per marker → POSITION with the cell's σ², the stamp moved to the joints'
 //              clock.
+//   temperature  sensor_msgs/Temperature of the arm (optional) → ARM_CONDITIONS, published at
+//              once (not through the reorder buffer: still_window keeps the reports apart and
+//              takes the newest at or before each window's end). With clock_offsets `estimate`
+//              the report stands at the joints' newest time when it arrives: a temperature shows
+//              nothing to estimate its driver's clock from, and changes over minutes, against the
+//              milliseconds of delivery; with `none` its own stamp. Payload: NaN (no ROS 2
+//              message carries it; still_window then takes 0).
 //
 // Clocks. Every driver stamps with its own clock. With clock_offsets `estimate` each source's
 // offset against the joints (offset = t_source − t_joints) is estimated from the motion itself
@@ -65,6 +72,10 @@ struct Ros2InputSettings {
     std::string frame_id;  ///< required header.frame_id (empty: any)
   };
   std::vector<Position> positions;
+  std::string temperature_topic;  ///< empty: none
+  /// The temperature stream's time gate takes reports this far apart [s] (a controller that
+  /// reports on change, or slowly; the sensors' horizon is 10 s).
+  double temperature_horizon = 3600.0;
   Eigen::Matrix3d position_covariance = Eigen::Matrix3d::Zero();  ///< [m²], the cell's σ²
   transport::SensorRanges ranges;                                 ///< the cell's IMU ranges
   bool estimate_clock_offsets = true;
@@ -114,6 +125,9 @@ class Ros2Input {
   /// `i`: the index in settings().positions.
   void OnPose(size_t i, const dds::PoseStamped& m);
   void OnPoint(size_t i, const dds::PointStamped& m);
+  /// The arm's temperature → the ARM_CONDITIONS report to publish now (std::nullopt: refused and
+  /// counted, or no joints' time yet to stamp it with under `estimate`).
+  std::optional<transport::ArmConditions> OnTemperature(const dds::Temperature& m);
   /// The events to publish now, in time order: those reorder_delay older than the newest
   /// (`flush`: all).
   std::vector<sensors::SensorEvent> Ready(bool flush = false);
@@ -129,6 +143,8 @@ class Ros2Input {
   int64_t late() const { return late_; }
   /// IMU samples published with a magnetometer reading.
   int64_t mag_paired() const { return mag_paired_; }
+  /// Temperature reports turned into ARM_CONDITIONS.
+  int64_t temperatures() const { return temperatures_; }
   const Ros2InputSettings& settings() const { return s_; }
 
  private:
@@ -148,7 +164,7 @@ class Ros2Input {
   Ros2InputSettings s_;
   transport::Health& health_;
   dds::JointNameMap names_;
-  Stream joints_, imu_, mag_;  // the streams' time gates
+  Stream joints_, imu_, mag_, temperature_;  // the streams' time gates
   std::vector<Stream> positions_;
   // The recent magnetometer readings, increasing stamps (the IMU sample takes the nearest: the
   // two topics arrive in no fixed order relative to each other).
@@ -158,7 +174,8 @@ class Ros2Input {
   std::map<std::pair<int64_t, int64_t>, sensors::SensorEvent> queue_;
   int64_t sequence_ = 0, newest_ = std::numeric_limits<int64_t>::min(),
           released_ = std::numeric_limits<int64_t>::min();
-  int64_t joints_utime_ = 0, late_ = 0, mag_paired_ = 0;
+  int64_t joints_utime_ = 0, late_ = 0, mag_paired_ = 0, temperatures_ = 0;
+  int64_t last_temperature_utime_ = std::numeric_limits<int64_t>::min();  // joints' clock
 };
 
 }  // namespace rcal::ros2

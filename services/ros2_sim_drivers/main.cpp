@@ -9,6 +9,9 @@
 //   joints    --joint-rate (125 Hz), the controller's clock: t_joints = --start-utime + t
 //   IMU       the cell's IMU rate (libs/sim ImuModel noise), t_imu = t_joints + --imu-offset
 //   tracker   --position-rate (default the cell's), σ of the cell, t = t_joints + --position-offset
+//   temperature  1 Hz on the controller's (joints') clock, when the cell names a topic: the arm
+//             warming with time constant --sim-warmup as sensor_acquisition's controller reports
+//             it (cell::SimArmConditions: the same readings for the same seed)
 // every stamp but the joints' with Gaussian --jitter. Joint names are listed in a shuffled order
 // (--shuffle-seed; 0: chain order) with one extra joint of a gripper a driver might add.
 // --imu-restart-at T: at sim time T the IMU driver restarts, its clock starting again from
@@ -18,6 +21,7 @@
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
+#include <cmath>
 #include <memory>
 #include <numeric>
 #include <random>
@@ -57,8 +61,9 @@ struct Event {
 int main(int argc, char** argv) {
   CLI::App app{
       "ros2_sim_drivers: a simulated cell as its ROS 2 drivers (JointState, Imu, MagneticField,\n"
-      "PointStamped/PoseStamped on the cell's ros2 topics), each driver at its own rate and on\n"
-      "its own clock. Cyclone DDS: $CYCLONEDDS_URI, else config/cyclonedds-loopback.xml."};
+      "PointStamped/PoseStamped, Temperature on the cell's ros2 topics), each driver at its own\n"
+      "rate and on its own clock. Cyclone DDS: $CYCLONEDDS_URI, else "
+      "config/cyclonedds-loopback.xml."};
   std::string sim_path = "config/cells/grb3016.sim.yaml";
   unsigned seed = 0;
   int poses = 0, test_poses = 50, shuffle_seed = 3;
@@ -94,6 +99,11 @@ int main(int argc, char** argv) {
   app.add_option("--imu-restart-at", imu_restart_at,
                  "sim time [s] at which the IMU driver restarts (its clock starts over)");
   app.add_option("--start-utime", start_utime, "the joints' clock at sim time 0 [µs]")
+      ->capture_default_str();
+  double warmup_s = sim::SessionSettings{}.warmup_time_constant_s;
+  app.add_option("--sim-warmup", warmup_s,
+                 "time constant [s] of the arm's warm-up (+12 K) the temperature driver reports")
+      ->check(CLI::Range(1.0, 1e6))
       ->capture_default_str();
   app.add_option("--dds-domain", domain, "DDS domain (default: the cell's ros2.domain)");
   app.add_flag("--linger", linger, "stay up after the programme until SIGINT/SIGTERM");
@@ -133,6 +143,8 @@ int main(int argc, char** argv) {
         ros.magnetic_field.empty()
             ? 0
             : Writer<dds::MagneticField>(participant.get(), ros.magnetic_field);
+    const dds_entity_t temperature_w =
+        ros.temperature.empty() ? 0 : Writer<dds::Temperature>(participant.get(), ros.temperature);
     std::vector<dds_entity_t> pos_w;
     for (const auto& p : ros.positions)
       pos_w.push_back(p.pose ? Writer<dds::PoseStamped>(participant.get(), p.topic)
@@ -229,6 +241,20 @@ int main(int argc, char** argv) {
                             }
                           }});
       }
+    }
+    // The controller's temperature, once per second of its clock (no jitter: the joints' clock).
+    const cell::SimArmConditions conditions(warmup_s, start_utime, seed);
+    const double variance = std::pow(conditions.session().temperature_noise_c, 2);
+    for (int64_t k = 0; temperature_w && static_cast<double>(k) <= duration; ++k) {
+      const double t = static_cast<double>(k);
+      transport::ArmConditions c;
+      c.utime = start_utime + std::llround(t * 1e6);
+      c.temperature_c = conditions.Reported(t, k * std::llround(ss.rate_hz));
+      events.push_back({t, [&, c] {
+                          std::string error;
+                          if (auto s = dds::ToRos(c, variance, "arm", &error))
+                            write(temperature_w, &s->get());
+                        }});
     }
     std::stable_sort(events.begin(), events.end(),
                      [](const Event& a, const Event& b) { return a.t < b.t; });

@@ -270,36 +270,11 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
   const auto& model = sim_run.cell.model;
   const io::CellChannels& channels = built.spec.channels;
   sim::ToolMotionTruth& truth = sim_run.truth;
-  // The arm's conditions: a warming temperature (the session's curve, τ = warmup_s), no payload.
-  sim::SessionSettings session;
-  session.warmup_time_constant_s = warmup_s;
-  session.payloads_kg = {0.0};
-  const double t0_s = static_cast<double>(start_utime) * 1e-6;  // [s] sensor time at t_sim = 0
-  auto conditions_at = [session, t0_s](double t_sim) {
-    kinematics::EffectContext c;
-    c.time_s = t0_s + t_sim;  // the clock still_window stamps its poses with
-    c.temperature_c = sim::WarmedTo(session, t_sim);
-    c.payload_kg = 0.0;
-    return c;
-  };
-  std::vector<sim::TruthEffect> truth_effects;
-  for (const std::string& text : sim_effects) {
-    truth_effects.push_back(sim::ParseEffectSpec(text, model));
-    if (truth_effects.back().effect.cause != kinematics::EffectCause::kThermal)
-      throw std::runtime_error("--sim-effect " + text +
-                               ": at --level sensors only thermal growth (by temperature or "
-                               "time); a payload, approach or joint effect needs --level poses");
-    spdlog::info(
-        "the simulated arm grows with its {} ({}), warming with τ {} s",
-        truth_effects.back().effect.thermal_source == kinematics::Effect::ThermalSource::kTime
-            ? "time"
-            : "temperature",
-        text, warmup_s);
-  }
-  if (!truth_effects.empty()) {
-    sim::EffectTruth et = sim::MakeEffectTruth(model, truth_effects);
-    truth.set_effects(std::move(et.model), std::move(et.e), conditions_at);
-  }
+  // The arm's conditions: a warming temperature (the session's curve, τ = warmup_s), no payload;
+  // with --sim-effect the arm grows with it.
+  const cell::SimArmConditions conditions(warmup_s, start_utime, seed);
+  for (const std::string& line : conditions.ApplyEffects(sim_effects, sim_run))
+    spdlog::info("{}", line);
   if (follow && !step_offsets.empty())
     throw std::runtime_error(
         "--follow-next-poses and --step-offset: not both at --level sensors (the step's time is "
@@ -400,12 +375,9 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
         tick % std::max<int64_t>(1, std::llround(ss.rate_hz)) == 0) {
       // The controller's report, once per second: the temperature as its sensor reads it (its
       // noise drawn from the report's own seed, so a resumed run reports the same).
-      sim::Rng report_rng(static_cast<uint64_t>(seed) * 1000 + 11 + static_cast<uint64_t>(tick));
-      std::normal_distribution<double> n(0.0, 1.0);
       transport::ArmConditions c;
       c.utime = utime;
-      c.temperature_c =
-          conditions_at(f->t).temperature_c + session.temperature_noise_c * n(report_rng);
+      c.temperature_c = conditions.Reported(f->t, tick);
       c.payload_kg = 0.0;
       count(t.Publish(channels.arm_conditions, transport::ToArmConditions(c)));
     }

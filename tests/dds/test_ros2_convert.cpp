@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <random>
 
@@ -141,6 +142,48 @@ TEST(Ros2Convert, MagneticFieldInTeslaOnly) {
   ros->get().magnetic_field.y = std::numeric_limits<double>::infinity();
   EXPECT_FALSE(FromRos(ros->get(), transport::SensorRanges{}, "imu/mag", &error));
   EXPECT_EQ(error, "imu/mag.magnetic_field[1]: infinite");
+}
+
+TEST(Ros2Convert, TheArmsTemperatureInCelsiusOnly) {
+  std::string error;
+  transport::ArmConditions c;
+  c.utime = 1'500'000'123;
+  c.temperature_c = 31.25;
+  auto ros = ToRos(c, 0.09, "arm", &error);
+  ASSERT_TRUE(ros) << error;
+  EXPECT_EQ(ros->get().header.stamp.sec, 1500);
+  EXPECT_EQ(ros->get().header.stamp.nanosec, 123'000u);
+  const auto back = FromRos(ros->get(), "/arm/temperature", &error);
+  ASSERT_TRUE(back) << error;
+  EXPECT_EQ(back->utime, c.utime);
+  EXPECT_EQ(back->temperature_c, 31.25);
+  EXPECT_TRUE(std::isnan(back->payload_kg));  // no ROS 2 message says it
+  auto refused = [&](const std::function<void(Temperature&)>& spoil) {
+    auto m = ToRos(c, 0.09, "arm", &error);
+    spoil(m->get());
+    EXPECT_FALSE(FromRos(m->get(), "/arm/temperature", &error));
+    return error;
+  };
+  EXPECT_EQ(refused([](Temperature& m) { m.temperature = 304.4; }),
+            "/arm/temperature.temperature: 304.400000 °C is not -60 to 200 (kelvin?) (ROS wants "
+            "°C)");
+  EXPECT_EQ(refused([](Temperature& m) { m.temperature = std::nan(""); }),
+            "/arm/temperature.temperature: NaN");
+  EXPECT_EQ(refused([](Temperature& m) { m.temperature = -300; }),
+            "/arm/temperature.temperature: -300.000000 °C is not -60 to 200 (ROS wants °C)");
+  EXPECT_EQ(refused([](Temperature& m) { m.variance = -1; }),
+            "/arm/temperature.variance: -1.000000 is negative");
+  EXPECT_EQ(refused([](Temperature& m) { m.variance = HUGE_VAL; }),
+            "/arm/temperature.variance: infinite");
+  EXPECT_NE(refused([](Temperature& m) {
+              m.header.stamp.nanosec = 1'000'000'000u;
+            }).find("/arm/temperature.header.stamp"),
+            std::string::npos);
+  // 0 is "variance unknown" (sensor_msgs/Temperature): taken.
+  ros->get().variance = 0.0;
+  EXPECT_TRUE(FromRos(ros->get(), "/arm/temperature", &error)) << error;
+  c.temperature_c = std::nan("");
+  EXPECT_FALSE(ToRos(c, 0.09, "arm", &error));
 }
 
 TEST(Ros2Convert, TrackerPosesAndPointsBecomePositions) {

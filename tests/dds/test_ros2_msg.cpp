@@ -145,6 +145,8 @@ const RosMsg kRos2Msgs[] = {
     {"sensor_msgs", "MagneticField",
      "std_msgs/Header header\ngeometry_msgs/Vector3 magnetic_field\n"
      "float64[9] magnetic_field_covariance\n"},
+    {"sensor_msgs", "Temperature",
+     "std_msgs/Header header\nfloat64 temperature\nfloat64 variance\n"},
     {"tf2_msgs", "TFMessage", "geometry_msgs/TransformStamped[] transforms\n"},
     {"diagnostic_msgs", "KeyValue", "string key\nstring value\n"},
     {"diagnostic_msgs", "DiagnosticStatus",

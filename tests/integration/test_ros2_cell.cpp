@@ -37,6 +37,7 @@
 #include "rcal/joint_state_t.hpp"
 #include "rcal/kinematic_params_t.hpp"
 #include "rcal/pose_measurement_t.hpp"
+#include "rcal/sim/effects.hpp"
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/lcm_transport.hpp"
@@ -72,6 +73,7 @@ struct CellRun {
   // POSE_MEASUREMENT reaching this test: the still window closing, and the identifier's input.
   std::vector<double> pose_latency_s;
   std::deque<std::pair<int64_t, double>> joints_wall;  // (utime, wall [s]) of recent JOINTS
+  std::vector<pose_measurement_t> poses;
 };
 
 double WallSeconds() {
@@ -97,6 +99,7 @@ class Ros2Cell : public ProcessFixture {
       if (run.joints_wall.size() > 20000) run.joints_wall.pop_front();
     });
     t.Subscribe<pose_measurement_t>(ch::kPoseMeasurement, [&](const pose_measurement_t& m) {
+      run.poses.push_back(m);
       for (const auto& [u, wall] : run.joints_wall)
         if (u >= m.utime) {
           run.pose_latency_s.push_back(WallSeconds() - wall);
@@ -195,8 +198,11 @@ TEST_F(Ros2Cell, TheDemoCellCalibratesThroughItsRos2Drivers) {
     });
   };
 
-  const CellRun run =
-      RunCell({"--poses", std::to_string(kCal), "--test-poses", std::to_string(kTest)}, true, read);
+  // The arm warms with a time constant of 100 s (its controller's temperature driver).
+  constexpr double kWarmup = 100.0;
+  const CellRun run = RunCell({"--poses", std::to_string(kCal), "--test-poses",
+                               std::to_string(kTest), "--sim-warmup", std::to_string(kWarmup)},
+                              true, read);
   read();
   ASSERT_TRUE(run.params && run.status && run.clocks && run.input_health);
   const int accepted = run.status->poses_accepted;
@@ -258,6 +264,23 @@ TEST_F(Ros2Cell, TheDemoCellCalibratesThroughItsRos2Drivers) {
   for (const char* name :
        {"rcal/ros2_input", "rcal/still_window", "rcal/ekf_identifier", "rcal/clock_offsets"})
     EXPECT_TRUE(diagnosed.count(name)) << name;
+
+  // The arm's temperature (sensor_msgs/Temperature, 1 Hz on the controller's clock) reaches every
+  // pose: the warming curve at the window's end (the drivers' sim time 0 is utime 1e9 µs) within
+  // 5σ of the report's noise and the rise over a report's period and the reorder delay.
+  ASSERT_GE(run.poses.size(), static_cast<size_t>(kCal - 3));
+  sim::SessionSettings session;
+  session.warmup_time_constant_s = kWarmup;
+  for (const pose_measurement_t& m : run.poses) {
+    const double t = static_cast<double>(m.utime - 1'000'000'000) * 1e-6;  // [s] sim time
+    const double slope = session.temperature_rise_c / kWarmup * std::exp(-t / kWarmup);  // [K/s]
+    EXPECT_NEAR(m.temperature_c, sim::WarmedTo(session, t), 5 * 0.3 + slope * 1.5)
+        << "pose " << m.pose_index << " at " << t << " s";
+  }
+  const double rise = run.poses.back().temperature_c - run.poses.front().temperature_c;
+  std::printf("poses' temperature: %.2f to %.2f °C over %zu poses\n",
+              run.poses.front().temperature_c, run.poses.back().temperature_c, run.poses.size());
+  EXPECT_GT(rise, 3.0);
 }
 
 TEST_F(Ros2Cell, ARestartedImuDriverIsResynchronisedAndItsOffsetLockedAgain) {

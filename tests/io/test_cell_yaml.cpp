@@ -640,6 +640,8 @@ INSTANTIATE_TEST_SUITE_P(
                 "ros2.imu: 'imu/data' is not a ROS 2 topic name"},
         BadCase{kG, "  imu: /imu/data", "  imu: /imu//data", "is not a ROS 2 topic name"},
         BadCase{kG, "  imu: /imu/data\n", "", "ros2.imu: missing key (the cell has an IMU"},
+        BadCase{kG, "temperature: /arm/temperature", "temperature: arm temperature",
+                "ros2.temperature: 'arm temperature' is not a ROS 2 topic name"},
         BadCase{kG, "  domain: 0", "  domain: 0\n  topics: x", "ros2.topics: unknown key"},
         BadCase{kG, "type: PointStamped", "type: Point", "ros2.positions[0].type: expected"},
         BadCase{kG, "{marker: 0, topic: /tracker", "{marker: 4, topic: /tracker",
@@ -660,6 +662,7 @@ TEST(CellYaml, Ros2SectionNamesTheDriversTopics) {
   EXPECT_EQ(r.imu, "/imu/data");
   EXPECT_EQ(r.magnetic_field, "/imu/mag");
   EXPECT_EQ(r.imu_frame, "imu_link");
+  EXPECT_EQ(r.temperature, "/arm/temperature");
   ASSERT_EQ(r.positions.size(), 1u);
   EXPECT_EQ(r.positions[0].topic, "/tracker/point");
   EXPECT_FALSE(r.positions[0].pose);

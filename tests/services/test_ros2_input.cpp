@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <limits>
 
 #include "rcal/io/cell_yaml.hpp"
@@ -164,6 +165,65 @@ TEST_F(Ros2InputTest, ARestartedDriverIsResynchronisedAndItsClockEstimatedAnew) 
   EXPECT_EQ(clocks[0].resets, 1);
   EXPECT_EQ(clocks[1].resets, 0);
   EXPECT_EQ(clocks[0].state, ClockState::kFixed);  // clock_offsets: none
+}
+
+dds::Sample<dds::Temperature> RosTemperature(int64_t utime, double celsius) {
+  transport::ArmConditions c;
+  c.utime = utime;
+  c.temperature_c = celsius;
+  std::string error;
+  return std::move(*dds::ToRos(c, 0.09, "arm", &error));
+}
+
+TEST_F(Ros2InputTest, TheArmsTemperatureBecomesArmConditionsOnTheArmsClock) {
+  EXPECT_EQ(settings_.temperature_topic, "/arm/temperature");
+  {
+    // clock_offsets none: the drivers share the joints' clock, the report keeps its stamp.
+    Ros2Input in(settings_, cell_.model, health_);
+    const auto c = in.OnTemperature(RosTemperature(2'000'000, 24.5).get());
+    ASSERT_TRUE(c);
+    EXPECT_EQ(c->utime, 2'000'000);
+    EXPECT_EQ(c->temperature_c, 24.5);
+    EXPECT_TRUE(std::isnan(c->payload_kg));
+    // A duplicate, one out of order, and kelvin: refused, counted, named.
+    EXPECT_FALSE(in.OnTemperature(RosTemperature(2'000'000, 24.5).get()));
+    EXPECT_FALSE(in.OnTemperature(RosTemperature(1'000'000, 24.5).get()));
+    EXPECT_FALSE(in.OnTemperature(RosTemperature(3'000'000, 297.6).get()));
+    EXPECT_EQ(health_.duplicates(), 1);
+    EXPECT_EQ(health_.out_of_order(), 1);
+    EXPECT_NE(health_.last_error().find("/arm/temperature.temperature: 297.600000 °C"),
+              std::string::npos)
+        << health_.last_error();
+    // A controller that reports slowly (every 60 s, beyond the sensors' 10 s horizon) is taken.
+    EXPECT_TRUE(in.OnTemperature(RosTemperature(62'000'000, 25.0).get()));
+    EXPECT_EQ(health_.out_of_horizon(), 0);
+    EXPECT_EQ(in.temperatures(), 2);
+    // Nothing went into the sensor events.
+    EXPECT_TRUE(in.Ready(true).empty());
+  }
+  {
+    // clock_offsets estimate: the driver's clock is unknown (here its boot time, 5 s); the
+    // report stands at the arm's newest time when it arrives, none before the arm's first.
+    Ros2InputSettings s = settings_;
+    s.estimate_clock_offsets = true;
+    transport::Health health("ros2_input");
+    Ros2Input in(s, cell_.model, health);
+    EXPECT_FALSE(in.OnTemperature(RosTemperature(5'000'000, 24.0).get()));
+    EXPECT_NE(health.last_error().find("before the arm's first joints"), std::string::npos);
+    in.OnJointState(RosJoints(cell_, 1'700'000'000'000'000).get());
+    auto c = in.OnTemperature(RosTemperature(6'000'000, 24.1).get());
+    ASSERT_TRUE(c);
+    EXPECT_EQ(c->utime, 1'700'000'000'000'000);
+    // A second report before the next joints' sample: a microsecond on, not a duplicate.
+    c = in.OnTemperature(RosTemperature(6'500'000, 24.2).get());
+    ASSERT_TRUE(c);
+    EXPECT_EQ(c->utime, 1'700'000'000'000'001);
+    in.OnJointState(RosJoints(cell_, 1'700'000'000'008'000).get());
+    c = in.OnTemperature(RosTemperature(7'000'000, 24.3).get());
+    ASSERT_TRUE(c);
+    EXPECT_EQ(c->utime, 1'700'000'000'008'000);
+    EXPECT_EQ(health.rejected(), 1);
+  }
 }
 
 TEST_F(Ros2InputTest, ClockMessageListsEverySource) {

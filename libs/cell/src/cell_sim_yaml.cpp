@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <numbers>
+#include <random>
 #include <set>
 #include <stdexcept>
 
@@ -308,6 +309,55 @@ sim::SensorSimSettings SimSensorSettings(const io::BuiltCell& cell, const CellSi
   ss.position.dropouts = sim.dropout > 0;
   ss.position.dropout_probability = sim.dropout;
   return ss;
+}
+
+SimArmConditions::SimArmConditions(double warmup_s, int64_t start_utime, unsigned seed)
+    : t0_s_(static_cast<double>(start_utime) * 1e-6), seed_(seed) {
+  if (!(warmup_s > 0) || !std::isfinite(warmup_s))
+    throw std::invalid_argument("warm-up time constant " + std::to_string(warmup_s) +
+                                " s: not a positive figure");
+  session_.warmup_time_constant_s = warmup_s;
+  session_.payloads_kg = {0.0};
+}
+
+kinematics::EffectContext SimArmConditions::At(double t_sim) const {
+  kinematics::EffectContext c;
+  c.time_s = t0_s_ + t_sim;  // the clock still_window stamps its poses with
+  c.temperature_c = sim::WarmedTo(session_, t_sim);
+  c.payload_kg = 0.0;
+  return c;
+}
+
+double SimArmConditions::Reported(double t_sim, int64_t tick) const {
+  sim::Rng rng(static_cast<uint64_t>(seed_) * 1000 + 11 + static_cast<uint64_t>(tick));
+  std::normal_distribution<double> n(0.0, 1.0);
+  return At(t_sim).temperature_c + session_.temperature_noise_c * n(rng);
+}
+
+std::vector<std::string> SimArmConditions::ApplyEffects(const std::vector<std::string>& texts,
+                                                        SimProgramme& programme) const {
+  std::vector<sim::TruthEffect> effects;
+  std::vector<std::string> lines;
+  for (const std::string& text : texts) {
+    effects.push_back(sim::ParseEffectSpec(text, programme.cell.model));
+    const kinematics::Effect& e = effects.back().effect;
+    if (e.cause != kinematics::EffectCause::kThermal)
+      throw std::runtime_error("--sim-effect " + text +
+                               ": at --level sensors only thermal growth (by temperature or "
+                               "time); a payload, approach or joint effect needs --level poses");
+    lines.push_back("the simulated arm grows with its " +
+                    std::string(e.thermal_source == kinematics::Effect::ThermalSource::kTime
+                                    ? "time"
+                                    : "temperature") +
+                    " (" + text + "), warming with τ " +
+                    std::to_string(session_.warmup_time_constant_s) + " s");
+  }
+  if (!effects.empty()) {
+    sim::EffectTruth et = sim::MakeEffectTruth(programme.cell.model, effects);
+    programme.truth.set_effects(std::move(et.model), std::move(et.e),
+                                [c = *this](double t) { return c.At(t); });
+  }
+  return lines;
 }
 
 }  // namespace rcal::cell

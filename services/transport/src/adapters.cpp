@@ -463,6 +463,14 @@ arm_conditions_t ToArmConditions(const ArmConditions& c) {
   return m;
 }
 
+std::string TemperatureProblem(double t) {
+  if (std::isinf(t)) return "infinite";
+  if (!std::isnan(t) && (t < -60.0 || t > 200.0))
+    return std::to_string(t) + " °C is not -60 to 200" +
+           (t >= 213.0 && t <= 473.0 ? " (kelvin?)" : "");
+  return "";
+}
+
 std::optional<ArmConditions> ArmConditionsFromMessage(const arm_conditions_t& m,
                                                       std::string* error) {
   auto fail = [&](const std::string& why) {
@@ -471,10 +479,8 @@ std::optional<ArmConditions> ArmConditionsFromMessage(const arm_conditions_t& m,
   };
   if (m.utime < 0) return fail("utime: " + std::to_string(m.utime) + " is negative");
   // NaN says "not measured"; ±inf is no measurement of anything.
-  if (std::isinf(m.temperature_c)) return fail("temperature_c: infinite");
-  if (!std::isnan(m.temperature_c) && (m.temperature_c < -60.0 || m.temperature_c > 200.0))
-    return fail("temperature_c: " + std::to_string(m.temperature_c) + " °C is not -60 to 200" +
-                (m.temperature_c >= 213.0 && m.temperature_c <= 473.0 ? " (kelvin?)" : ""));
+  if (const std::string why = TemperatureProblem(m.temperature_c); !why.empty())
+    return fail("temperature_c: " + why);
   if (std::isinf(m.payload_kg)) return fail("payload_kg: infinite");
   if (!std::isnan(m.payload_kg) && (m.payload_kg < 0.0 || m.payload_kg > 1000.0))
     return fail("payload_kg: " + std::to_string(m.payload_kg) + " kg is not 0 to 1000" +

@@ -136,4 +136,35 @@ SimProgramme MakeSimProgramme(const io::BuiltCell& cell, const CellSimSpec& sim,
 sim::JointOffsetStep OffsetStepInProgramme(const SimProgramme& programme,
                                            const sim::JointOffsetStepSpec& spec);
 
+/// The arm's conditions in a sensor-level programme, as its simulated controller reports them
+/// (sensor_acquisition's ARM_CONDITIONS, ros2_sim_drivers' sensor_msgs/Temperature): the arm warms
+/// as sim::SessionSettings says (+12 K from 20 °C) with time constant `warmup_s`, carries no
+/// payload, and the controller reports once per second of sensor time with its sensor's 0.3 K
+/// noise.
+class SimArmConditions {
+ public:
+  /// `start_utime` [µs]: the sensor clock at sim time 0; `seed`: the run's (each report's noise is
+  /// drawn from its own generator, so a resumed run reports the same and the other streams are
+  /// unchanged). Throws std::invalid_argument when warmup_s is not positive.
+  SimArmConditions(double warmup_s, int64_t start_utime, unsigned seed);
+  /// The true conditions at sim time `t_sim` [s]: time_s on the sensor clock, the temperature
+  /// [°C], payload 0.
+  kinematics::EffectContext At(double t_sim) const;
+  /// The temperature [°C] the controller reports at `t_sim`; `tick`: the report's key (the sample
+  /// index at the sensors' rate: its noise's seed).
+  double Reported(double t_sim, int64_t tick) const;
+  /// `--sim-effect` texts (sim::ParseEffectSpec) on the programme's truth: the arm grows with its
+  /// true temperature (or time). Other causes are refused with the reason (a payload or approach
+  /// the sensor-level arm does not have, jumps the IMU would feel). Returns one line per effect
+  /// for the log.
+  std::vector<std::string> ApplyEffects(const std::vector<std::string>& texts,
+                                        SimProgramme& programme) const;
+  const sim::SessionSettings& session() const { return session_; }
+
+ private:
+  sim::SessionSettings session_;
+  double t0_s_;
+  unsigned seed_;
+};
+
 }  // namespace rcal::cell

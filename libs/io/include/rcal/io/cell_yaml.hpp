@@ -112,6 +112,8 @@
 //     imu: /imu/data                       # sensor_msgs/Imu, required iff sensors.imu
 //     magnetic_field: /imu/mag             # optional sensor_msgs/MagneticField (same clock)
 //     imu_frame: imu_link                  # optional: the header.frame_id IMU messages must carry
+//     temperature: /arm/temperature        # optional sensor_msgs/Temperature of the arm [°C]
+//                                          #   -> ARM_CONDITIONS (the poses' temperature)
 //     positions:                           # required: one per sensors.position.markers id
 //       - {marker: 0, topic: /tracker/point, type: PointStamped, frame: tracker}
 //                                          # type PointStamped (laser tracker) | PoseStamped
@@ -285,6 +287,9 @@ struct Ros2Spec {
   std::vector<std::string> joint_names;  ///< chain order; empty: the robot file's names
   std::string imu, magnetic_field;       ///< topics (empty: none)
   std::string imu_frame;                 ///< required header.frame_id of IMU messages (empty: any)
+  /// sensor_msgs/Temperature of the arm (its controller's, or a sensor on it) → ARM_CONDITIONS,
+  /// the poses' temperature (empty: none).
+  std::string temperature;
   std::vector<Ros2PositionTopic> positions;  ///< one per measured marker
   bool estimate_clock_offsets = true;        ///< false: the drivers share the joints' clock
   double max_clock_offset = 0.5;             ///< [s] largest offset searched

@@ -1,9 +1,10 @@
 // ROS 2 standard messages (idl/ros2_msgs.idl) <-> rcal's domain types: pure functions, no DDS
 // entities, no state. The input side reads what a cell's ROS 2 drivers publish (the arm's
-// sensor_msgs/JointState, the IMU's sensor_msgs/Imu and MagneticField, a motion-capture
-// geometry_msgs/PoseStamped or a laser tracker's PointStamped); the output side writes rcal's
-// results in the types stock ROS 2 tools show (tf2_msgs/TFMessage, diagnostic_msgs/DiagnosticArray,
-// geometry_msgs/PoseWithCovarianceStamped, std_msgs/String for robot_description).
+// sensor_msgs/JointState and sensor_msgs/Temperature, the IMU's sensor_msgs/Imu and
+// MagneticField, a motion-capture geometry_msgs/PoseStamped or a laser tracker's PointStamped); the
+// output side writes rcal's results in the types stock ROS 2 tools show (tf2_msgs/TFMessage,
+// diagnostic_msgs/DiagnosticArray, geometry_msgs/PoseWithCovarianceStamped, std_msgs/String for
+// robot_description).
 //
 // Conventions at this border: ROS quaternions are (x, y, z, w) fields, rcal's are w, x, y, z
 // (Eigen::Quaterniond). Stamps: builtin_interfaces/Time → utime [µs] on the publisher's clock (the
@@ -27,6 +28,7 @@
 #include "rcal/dds/convert.hpp"
 #include "rcal/health_t.hpp"
 #include "rcal/joint_state_t.hpp"
+#include "rcal/transport/adapters.hpp"
 #include "rcal/transport/filter_nodes.hpp"
 #include "ros2_msgs.h"
 
@@ -35,6 +37,7 @@ namespace rcal::dds {
 using JointState = sensor_msgs_msg_dds__JointState_;
 using Imu = sensor_msgs_msg_dds__Imu_;
 using MagneticField = sensor_msgs_msg_dds__MagneticField_;
+using Temperature = sensor_msgs_msg_dds__Temperature_;
 using PoseStamped = geometry_msgs_msg_dds__PoseStamped_;
 using PointStamped = geometry_msgs_msg_dds__PointStamped_;
 using PoseWithCovarianceStamped = geometry_msgs_msg_dds__PoseWithCovarianceStamped_;
@@ -50,6 +53,7 @@ using RosString = std_msgs_msg_dds__String_;
 RCAL_DDS_DESCRIPTOR(JointState, sensor_msgs_msg_dds__JointState__desc)
 RCAL_DDS_DESCRIPTOR(Imu, sensor_msgs_msg_dds__Imu__desc)
 RCAL_DDS_DESCRIPTOR(MagneticField, sensor_msgs_msg_dds__MagneticField__desc)
+RCAL_DDS_DESCRIPTOR(Temperature, sensor_msgs_msg_dds__Temperature__desc)
 RCAL_DDS_DESCRIPTOR(PoseStamped, geometry_msgs_msg_dds__PoseStamped__desc)
 RCAL_DDS_DESCRIPTOR(PointStamped, geometry_msgs_msg_dds__PointStamped__desc)
 RCAL_DDS_DESCRIPTOR(PoseWithCovarianceStamped,
@@ -102,6 +106,13 @@ struct MagReading {
 std::optional<MagReading> FromRos(const MagneticField& m, const transport::SensorRanges& ranges,
                                   const std::string& topic, std::string* error);
 
+/// Temperature → the arm's conditions (ARM_CONDITIONS) at the message's stamp [µs, the
+/// publisher's clock]: temperature [°C, as sensor_msgs/Temperature has it] finite and in
+/// [−60, 200] °C (kelvin is named: transport::TemperatureProblem); variance finite and ≥ 0 (0:
+/// unknown; not used further). Payload NaN: no ROS 2 message carries it.
+std::optional<transport::ArmConditions> FromRos(const Temperature& m, const std::string& topic,
+                                                std::string* error);
+
 /// PoseStamped (motion capture) → POSITION of `marker_id`: the pose's position [m] in the
 /// tracker's frame, covariance `covariance` (the cell's σ²). The orientation is not used (the
 /// IMU gives it) but must be a unit quaternion (±1e-3), else the sample is refused.
@@ -124,6 +135,10 @@ std::optional<Sample<Imu>> ToRos(const transport::ImuSample& s, const char* fram
                                  std::string* error);
 std::optional<Sample<MagneticField>> ToRos(const MagReading& s, const char* frame_id,
                                            std::string* error);
+/// The arm's temperature as a driver publishes it (variance [°C²], 0: unknown). Refused: a
+/// temperature that is not finite.
+std::optional<Sample<Temperature>> ToRos(const transport::ArmConditions& c, double variance,
+                                         const char* frame_id, std::string* error);
 std::optional<Sample<PoseStamped>> ToRosPose(const transport::PositionSample& s,
                                              const char* frame_id, std::string* error);
 std::optional<Sample<PointStamped>> ToRosPoint(const transport::PositionSample& s,

@@ -170,6 +170,10 @@ struct ArmConditions {
   double payload_kg = std::numeric_limits<double>::quiet_NaN();     ///< [kg]; NaN: not known
 };
 arm_conditions_t ToArmConditions(const ArmConditions& c);
+/// Why `temperature_c` is no temperature an arm works at: "" when it is one (in [−60, 200] °C, or
+/// NaN: not measured); else the reason, e.g. "300.000000 °C is not -60 to 200 (kelvin?)" (the hint
+/// for [213, 473]) or "infinite". Shared by every source of ARM_CONDITIONS.
+std::string TemperatureProblem(double temperature_c);
 /// ARM_CONDITIONS → the report. Checks (the reason names the field): utime ≥ 0; temperature NaN
 /// (not measured) or in [−60, 200] °C (a figure beyond it in [213, 473] is reported as kelvin?);
 /// payload NaN (not known) or in [0, 1000] kg (beyond: grams?); ±inf refused.
