@@ -322,8 +322,9 @@ int RunSweep(const Options& o) {
   json jres = json::array();
   std::printf(
       "| arm | measured | step | detected | delay median (max) [poses] | right joint/link named "
+      "| detected within 5 poses: rcal / best possible | best possible within 30 "
       "| error after 30 / before, median | false alarms / poses | steady state / former filter, "
-      "median |\n|---|---|---|---:|---:|---:|---:|---:|---:|\n");
+      "median |\n|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
   for (const std::string& path : arms) {
     for (bool full : {true, false}) {
       io::LoadedRobot robot = LoadRobotForCell(path, "", "", "auto");
@@ -333,10 +334,18 @@ int RunSweep(const Options& o) {
         std::vector<double> d(r.delays.begin(), r.delays.end());
         const double max_delay = d.empty() ? 0 : *std::max_element(d.begin(), d.end());
         const bool quiet = r.quiet_poses > 0;
+        auto mean = [](const std::vector<double>& v) {
+          double sum = 0;
+          for (double x : v) sum += x;
+          return v.empty() ? 0.0 : sum / static_cast<double>(v.size());
+        };
+        const double pct = r.seeds ? 100.0 / r.seeds : 0.0;
         std::printf(
-            "| %s | %s | %s | %d/%d | %.0f (%.0f) | %.0f %% | %.2f | %s | %s |\n", r.arm.c_str(),
-            full ? "full pose" : "positions", r.kind.c_str(), r.detected, r.seeds, Median(d),
-            max_delay, r.seeds ? 100.0 * r.named_right / r.seeds : 0.0, Median(r.recovery),
+            "| %s | %s | %s | %d/%d | %.0f (%.0f) | %.0f %% | %.0f %% / %.0f %% | %.0f %% | %.2f | "
+            "%s | %s |\n",
+            r.arm.c_str(), full ? "full pose" : "positions", r.kind.c_str(), r.detected, r.seeds,
+            Median(d), max_delay, pct * r.named_right, pct * r.detected_within_oracle_poses,
+            100.0 * mean(r.oracle_power), 100.0 * mean(r.oracle_power_after), Median(r.recovery),
             quiet ? (std::to_string(r.false_alarms) + " / " + std::to_string(r.quiet_poses)).c_str()
                   : "",
             quiet ? (std::to_string(Median(r.steady_ratio)).substr(0, 5)).c_str() : "");
@@ -355,7 +364,11 @@ int RunSweep(const Options& o) {
                         {"quiet_poses", r.quiet_poses},
                         {"steady_ratio", r.steady_ratio},
                         {"stepped", r.stepped},
-                        {"seed_delay", r.seed_delay}});
+                        {"seed_delay", r.seed_delay},
+                        {"detected_within_5", r.detected_within_oracle_poses},
+                        {"oracle_power_5", r.oracle_power},
+                        {"oracle_power_30", r.oracle_power_after},
+                        {"oracle_false_alarm", s.oracle_false_alarm}});
       }
     }
   }

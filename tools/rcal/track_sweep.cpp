@@ -1,8 +1,10 @@
 #include "track_sweep.hpp"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 
+#include "rcal/identification/change_detection.hpp"
 #include "rcal/identification/tracking.hpp"
 #include "rcal/kinematics/identifiability.hpp"
 #include "rcal/sim/pose_sim.hpp"
@@ -66,6 +68,29 @@ std::vector<int> LinkLengths(const kinematics::KinematicModel& model,
 
 }  // namespace
 
+double OraclePower(double noncentrality, double false_alarm) {
+  const double c = identification::ChiSquareUpperQuantileLog(std::log(false_alarm), 1.0);
+  const double a = std::sqrt(std::max(noncentrality, 0.0)), b = std::sqrt(c);
+  // Φ(x) = erfc(−x/√2)/2.
+  auto phi = [](double x) { return 0.5 * std::erfc(-x / std::sqrt(2.0)); };
+  return phi(a - b) + phi(-a - b);
+}
+
+double StepNoncentrality(const kinematics::KinematicModel& model, const Eigen::VectorXd& q_before,
+                         const Eigen::VectorXd& x_before, const Eigen::VectorXd& q_after,
+                         const Eigen::VectorXd& x_after, double position_sigma,
+                         double orientation_sigma, bool orientation) {
+  const kinematics::ToolPose a = model.Forward(q_before, x_before);
+  const kinematics::ToolPose b = model.Forward(q_after, x_after);
+  double lambda = (b.p_WM_W - a.p_WM_W).squaredNorm() / (position_sigma * position_sigma);
+  if (orientation) {
+    // The rotation between the two, in the earth frame (the noise is isotropic: any frame).
+    const Eigen::AngleAxisd d(b.R_EI * a.R_EI.transpose());
+    lambda += d.angle() * d.angle() / (orientation_sigma * orientation_sigma);
+  }
+  return lambda;
+}
+
 std::vector<TrackSweepResult> RunTrackSweep(const TrackSweepArm& arm, const TrackSweepSettings& s) {
   TrackSweepResult joint, length;
   joint.arm = length.arm = arm.name;
@@ -94,8 +119,18 @@ std::vector<TrackSweepResult> RunTrackSweep(const TrackSweepArm& arm, const Trac
       ++r.seeds;
       int delay = -1;
       bool right = false;
+      // The oracle's noncentrality: the step's whitened signature over the poses since it.
+      Eigen::VectorXd x_before = run.x_true;
+      if (param_stepped >= 0) x_before(param_stepped) -= s.length_step_m;
+      double lambda = 0;
       for (int k = 0; k < s.after_poses; ++k) {
-        const identification::EkfUpdateResult u = ekf.Update(run.Pose());
+        const kinematics::PoseMeasurement m = run.Pose();
+        lambda += StepNoncentrality(run.model, m.q, x_before, m.q + run.dq, run.x_true,
+                                    run.noise.position_sigma, run.noise.orientation_sigma,
+                                    run.noise.orientation);
+        if (k + 1 == s.oracle_poses)
+          r.oracle_power.push_back(OraclePower(lambda, s.oracle_false_alarm));
+        const identification::EkfUpdateResult u = ekf.Update(m);
         if (u.change && delay < 0) {
           delay = k + 1;
           const auto& c = *u.change;
@@ -107,6 +142,8 @@ std::vector<TrackSweepResult> RunTrackSweep(const TrackSweepArm& arm, const Trac
       r.stepped.push_back(kind == 0 ? run.model.joints()[joint_stepped].name
                                     : run.model.parameters()[param_stepped].name);
       r.seed_delay.push_back(delay);
+      r.oracle_power_after.push_back(OraclePower(lambda, s.oracle_false_alarm));
+      if (delay > 0 && delay <= s.oracle_poses) ++r.detected_within_oracle_poses;
       if (delay > 0) {
         ++r.detected;
         r.delays.push_back(delay);

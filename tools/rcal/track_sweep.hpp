@@ -4,7 +4,8 @@
 // sees an unchanged arm for many poses. Measured: the detection delay, whether the right joint or
 // link was named, the held-out error 30 poses after the step against the one before it, false
 // alarms, and the steady-state error against the filter as it was before change detection and
-// the window (window_poses 0, detect_changes off).
+// the window (window_poses 0, detect_changes off). And, per seed, what the best possible test
+// could do on the same poses (OraclePower): the bound the detected fraction is judged against.
 #pragma once
 
 #include <string>
@@ -29,6 +30,11 @@ struct TrackSweepSettings {
   int steady_poses = 1000;  ///< poses at which the steady-state error is compared
   double joint_step_rad = 1e-3;
   double length_step_m = 5e-4;
+  /// The oracle's false-alarm probability per test: the largest per-pose rate under which 0 false
+  /// alarms in the 10 000 poses × 20 seeds has a chance of at least 95 %
+  /// (−ln 0.95 / 200 000).
+  double oracle_false_alarm = 2.56e-7;
+  int oracle_poses = 5;             ///< the issue's detection delay [poses]
   identification::EkfSettings ekf;  ///< the identifier under test
 };
 
@@ -48,7 +54,29 @@ struct TrackSweepResult {
   /// Per seed: the joint or parameter stepped, and the delay (−1: not detected within 30).
   std::vector<std::string> stepped;
   std::vector<int> seed_delay;
+  /// Per seed: the probability that the best possible test detects the step within
+  /// oracle_poses (and within after_poses) poses: OraclePower of the step's own signature, see
+  /// StepNoncentrality. No detector at that false-alarm rate does better in expectation, so the
+  /// mean over seeds bounds the detected fraction.
+  std::vector<double> oracle_power, oracle_power_after;
+  int detected_within_oracle_poses = 0;  ///< steps detected within oracle_poses
 };
+
+/// The probability that a test of a known step direction and onset, at false-alarm probability
+/// `false_alarm`, claims the step: its statistic is χ²(1) with noncentrality λ =
+/// Σ_k |R_k^{-1/2} d_k|², and P(χ²₁(λ) > c) = Φ(√λ − √c) + Φ(−√λ − √c), c the χ²(1) quantile.
+/// That test (it knows when and which way the arm changed, and ignores what the filter does not
+/// know) is the most powerful at its false-alarm rate (Neyman–Pearson), so no detector beats it.
+double OraclePower(double noncentrality, double false_alarm);
+
+/// The step's signature in one measurement, whitened by the measurement noise: |d/σ|² where d is
+/// what the measured pose at `q` moves by between the arm before (q_before joints, x_before
+/// parameters) and after the change (position [m], and the rotation [rad] when the noise has
+/// orientation).
+double StepNoncentrality(const kinematics::KinematicModel& model, const Eigen::VectorXd& q_before,
+                         const Eigen::VectorXd& x_before, const Eigen::VectorXd& q_after,
+                         const Eigen::VectorXd& x_after, double position_sigma,
+                         double orientation_sigma, bool orientation);
 
 /// Runs the experiment on one arm: one result per step kind (joint offset, link length); the
 /// false alarms and steady state are in the joint-offset result. Seeded: seed s of arm a is the

@@ -80,7 +80,9 @@ struct EkfSettings {
   /// Probability per pose that an unchanged arm raises a change (the test's threshold is this,
   /// shared over the parameters and onsets tested: Bonferroni).
   double change_false_alarm = 1e-7;
-  int change_window = 10;    ///< recent poses the test looks at (onsets tried: all of them)
+  /// Recent poses the test looks at (onsets tried: all of them): a step too small to show in a
+  /// few poses is found once enough of them have piled up (30: the recovery horizon).
+  int change_window = 30;
   int change_min_poses = 2;  ///< poses since the onset before a step can be claimed
   /// Consecutive poses whose test must find the same step (onset and parameters) before it is
   /// claimed: a step fitted with the wrong onset (a pose before the change taken in, the step

@@ -1,0 +1,97 @@
+// tools/rcal/track_sweep: the seeded tracking sweep's yardstick. What the best possible test could
+// detect (OraclePower of the step's whitened signature, StepNoncentrality) is checked against the
+// noncentral χ² drawn directly and against closed-form signatures, and the identifier never
+// detects more often than it.
+#include "track_sweep.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "rcal/io/robot_urdf.hpp"
+#include "rcal/kinematics/model.hpp"
+#include "rcal/sim/pose_sim.hpp"
+
+namespace rcal::tool {
+namespace {
+
+kinematics::KinematicModel Grb3016() {
+  return io::LoadRobot(RCAL_SOURCE_DIR "/config/robots/grb3016.yaml").model;
+}
+
+TEST(TrackSweep, TheOraclesPowerIsTheNoncentralChiSquaresTail) {
+  // No step: a claim only at the false-alarm rate.
+  EXPECT_NEAR(OraclePower(0.0, 1e-3), 1e-3, 1e-6);
+  EXPECT_NEAR(OraclePower(0.0, 2.56e-7), 2.56e-7, 1e-10);
+  // Against (Z + √λ)² drawn (seeded): the fraction beyond the χ²(1) quantile at α = 1e-3
+  // (10.828).
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> z;
+  constexpr int kDraws = 200000;
+  double previous = 0;
+  for (double lambda : {2.0, 10.0, 20.0, 40.0}) {
+    int beyond = 0;
+    for (int i = 0; i < kDraws; ++i) {
+      const double v = z(rng) + std::sqrt(lambda);
+      beyond += v * v > 10.8276;
+    }
+    const double p = OraclePower(lambda, 1e-3), f = static_cast<double>(beyond) / kDraws;
+    EXPECT_NEAR(f, p, 5 * std::sqrt(p * (1 - p) / kDraws) + 1e-5) << "λ " << lambda;
+    EXPECT_GT(p, previous);  // a larger step is seen more often
+    previous = p;
+  }
+}
+
+TEST(TrackSweep, AStepsSignatureIsWhatItMovesTheToolBy) {
+  const kinematics::KinematicModel model = Grb3016();
+  sim::Rng rng(3);
+  const Eigen::VectorXd x = sim::RandomErrors(model, rng, 0.001, 0.002);
+  const Eigen::VectorXd q = sim::SampleJoints(model, 1, rng)[0];
+  // A revolute joint's offset δ turns the tool by δ: with the position not counted (σ huge),
+  // λ = (δ/σ)² whichever joint.
+  for (int j = 0; j < model.num_joints(); ++j) {
+    Eigen::VectorXd q_after = q;
+    q_after(j) += 1e-3;
+    EXPECT_NEAR(StepNoncentrality(model, q, x, q_after, x, 1e9, 1.745e-3, true),
+                std::pow(1e-3 / 1.745e-3, 2), 1e-6)
+        << model.joints()[j].name;
+  }
+  // A link length grown by Δ moves the tool by Δ and turns it not at all: λ = (Δ/σ)².
+  int length = -1;
+  for (int i = 0; i < model.num_params() && length < 0; ++i)
+    if (!model.parameters()[i].is_angle && model.parameters()[i].name == "a2") length = i;
+  ASSERT_GE(length, 0);
+  Eigen::VectorXd x_after = x;
+  x_after(length) += 5e-4;
+  EXPECT_NEAR(StepNoncentrality(model, q, x, q, x_after, 5e-5, 1.745e-3, true), 100.0, 1e-6);
+  EXPECT_NEAR(StepNoncentrality(model, q, x, q, x_after, 5e-5, 1.745e-3, false), 100.0, 1e-6);
+}
+
+TEST(TrackSweep, TheIdentifierNeverDetectsMoreOftenThanTheBestPossibleTest) {
+  TrackSweepArm arm{"grb3016", Grb3016(), false};
+  TrackSweepSettings s;
+  s.seeds = 12;  // each joint twice
+  s.quiet_poses = 0;
+  const std::vector<TrackSweepResult> results = RunTrackSweep(arm, s);
+  ASSERT_EQ(results.size(), 2u);
+  for (const TrackSweepResult& r : results) {
+    ASSERT_EQ(r.oracle_power.size(), static_cast<size_t>(r.seeds));
+    double expected = 0, variance = 0, expected_after = 0;
+    for (double p : r.oracle_power) expected += p, variance += p * (1 - p);
+    for (double p : r.oracle_power_after) expected_after += p;
+    std::printf("%s: detected within 5 poses %d, best possible %.1f (within 30: %d, %.1f) of %d\n",
+                r.kind.c_str(), r.detected_within_oracle_poses, expected, r.detected,
+                expected_after, r.seeds);
+    // The identifier's detections within 5 poses are draws of events no likelier than the
+    // oracle's: their count stays within the oracle's expectation and 3σ of its spread.
+    EXPECT_LE(r.detected_within_oracle_poses, expected + 3 * std::sqrt(variance) + 0.5) << r.kind;
+    for (size_t i = 0; i < r.oracle_power.size(); ++i)
+      EXPECT_GE(r.oracle_power_after[i], r.oracle_power[i]);  // more poses, more evidence
+  }
+  // A 0.5 mm length step is 10σ per pose: certain for the oracle, and for the identifier.
+  EXPECT_GT(results[1].oracle_power[0], 0.999);
+}
+
+}  // namespace
+}  // namespace rcal::tool
