@@ -206,10 +206,9 @@ bool Ros2Input::Admit(Stream& st, int64_t utime, int clock_source) {
   if (!estimation::Usable(v)) return false;
   if (v == estimation::TimeVerdict::kResynchronised) {
     // A restarted driver: its clock is a new one.
-    if (&st == &joints_ || &st == &temperature_)
-      last_temperature_utime_ = std::numeric_limits<int64_t>::min();  // a new time base
     if (&st == &joints_) {
       // The arm's clock is the pipeline's: what waits in the buffer belongs to the old time base.
+      last_temperature_utime_ = std::numeric_limits<int64_t>::min();
       clocks_->ResetAll();
       queue_.clear();
       released_ = newest_ = std::numeric_limits<int64_t>::min();
@@ -348,20 +347,17 @@ std::optional<transport::ArmConditions> Ros2Input::OnTemperature(const dds::Temp
   auto c = dds::FromRos(m, s_.temperature_topic, &error);
   if (!c) return Refuse(error), std::nullopt;
   if (!Admit(temperature_, c->utime, -1)) return std::nullopt;
+  // Under `none` the gate has put the driver's own stamps in order.
   if (s_.estimate_clock_offsets) {
     if (joints_utime_ == 0)
       return Refuse(s_.temperature_topic +
                     ": a temperature before the arm's first joints (no arm time to stamp it with)"),
              std::nullopt;
-    c->utime = joints_utime_;
+    // Two reports between the same two joints' samples: the later one a microsecond on (a
+    // report at the same time would be a duplicate downstream).
+    c->utime = std::max(joints_utime_, last_temperature_utime_ + 1);
+    last_temperature_utime_ = c->utime;
   }
-  // Two reports between the same two joints' samples: the later one a microsecond on (a report at
-  // the same time would be a duplicate downstream).
-  if (c->utime <= last_temperature_utime_) {
-    if (!s_.estimate_clock_offsets) return std::nullopt;  // the gate saw to the driver's order
-    c->utime = last_temperature_utime_ + 1;
-  }
-  last_temperature_utime_ = c->utime;
   ++temperatures_;
   return c;
 }

@@ -175,7 +175,8 @@ class Ros2Input {
   int64_t sequence_ = 0, newest_ = std::numeric_limits<int64_t>::min(),
           released_ = std::numeric_limits<int64_t>::min();
   int64_t joints_utime_ = 0, late_ = 0, mag_paired_ = 0, temperatures_ = 0;
-  int64_t last_temperature_utime_ = std::numeric_limits<int64_t>::min();  // joints' clock
+  // The last temperature published under `estimate` [µs, joints' clock].
+  int64_t last_temperature_utime_ = std::numeric_limits<int64_t>::min();
 };
 
 }  // namespace rcal::ros2
