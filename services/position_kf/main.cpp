@@ -7,7 +7,8 @@
 // ω_B = gyro − the paired orientation's gyro bias; an estimated lever arm is logged at exit.
 // The paper's filter by default; --motion-model accelerometer-driven lets the accelerometer drive
 // the acceleration state with a world-frame acceleration bias that takes the orientation's error
-// (estimation::AccelerometerDrivenSettings).
+// and an accelerometer noise that adapts to the position innovations
+// (estimation::AccelerometerDrivenSettings; --accel-noise-adaptation).
 // The filter works in the position sensor's frame W: accelerations are turned from the IMU's earth
 // frame by R_WE, the cell's earth_from_world (given as a prior or fixed) until the identifier's
 // KINEMATIC_PARAMS of the cell's model say where it found that frame (a guessed earth frame: the
@@ -72,6 +73,20 @@ int main(int argc, char** argv) {
                  "position samples more)")
       ->check(CLI::Range(1e-3, 1e4))
       ->capture_default_str();
+  app.add_option("--accel-relative-sigma", settings.accel_relative_sigma,
+                 "the accelerometer's error that grows with the tool's acceleration, relative "
+                 "[-] (σ_rel |a| joins --accel-sigma in quadrature: an orientation error turns "
+                 "the acceleration, a scale error scales it); accelerometer-driven defaults to "
+                 "its chosen value")
+      ->check(CLI::Range(0.0, 10.0))
+      ->capture_default_str();
+  app.add_option("--accel-noise-adaptation", settings.accel_noise_adaptation_tau,
+                 "time constant of the accelerometer noise's adaptation to the position "
+                 "innovations [s] (a factor on the accelerometer's variance and the jerk noise "
+                 "that keeps the NIS at its dimension); 0 = constant; accelerometer-driven "
+                 "defaults to 0.1")
+      ->check(CLI::Range(0.0, 3600.0))
+      ->capture_default_str();
   app.add_option("--orientation-wait", orientation_wait,
                  "IMU sensor time a position sample waits for a stopped orientation stream [s]")
       ->check(CLI::Range(0.0, 3600.0))
@@ -113,6 +128,10 @@ int main(int argc, char** argv) {
     settings.motion_model = driven.motion_model;
     if (app.count("--accel-sigma") == 0) settings.accel_sigma = driven.accel_sigma;
     if (app.count("--accel-bias-walk") == 0) settings.accel_bias_walk = driven.accel_bias_walk;
+    if (app.count("--accel-relative-sigma") == 0)
+      settings.accel_relative_sigma = driven.accel_relative_sigma;
+    if (app.count("--accel-noise-adaptation") == 0)
+      settings.accel_noise_adaptation_tau = driven.accel_noise_adaptation_tau;
   }
   options.orientation_wait_us = static_cast<int64_t>(orientation_wait * 1e6);
   options.orientation_timeout_us = static_cast<int64_t>(orientation_timeout * 1e6);
@@ -169,10 +188,11 @@ int main(int argc, char** argv) {
     node.Announce();
     spdlog::info(
         "position_kf on {} (earth {}, lever arm r_B [{}, {}, {}] m{}; {} model, acceleration "
-        "bias walk {} m/s²/√s, σ {} m/s²)",
+        "bias walk {} m/s²/√s, σ {} m/s², relative σ {}, noise adaptation τ {} s)",
         t.url(), earth, settings.lever_arm_B.x(), settings.lever_arm_B.y(),
         settings.lever_arm_B.z(), settings.estimate_lever_arm ? ", estimated" : "", motion_model,
-        settings.accel_bias_walk, settings.accel_sigma);
+        settings.accel_bias_walk, settings.accel_sigma, settings.accel_relative_sigma,
+        settings.accel_noise_adaptation_tau);
     if (const int rc =
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
         rc != 0)

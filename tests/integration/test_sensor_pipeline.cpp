@@ -243,7 +243,7 @@ TEST_F(SensorPipeline, CalibratesToTheOfflineFigure) {
 // simulator's marker at 100 Hz closer than the tracker alone does at its own 20 Hz samples, and
 // closer than the paper's filter (the library, fed the same recorded streams) with or without the
 // lever arm; within 15 % of the same filter told the true frame from the start (seen: 6 %); the
-// same filter taking W = E as certain runs off (the control: the frame matters).
+// same filter taking W = E as certain is worse (the control: the frame matters).
 TEST_F(SensorPipeline, PositionKfFollowsTheMarkerInTheTrackersFrame) {
   RCAL_IN_NAMESPACE("SensorPipeline.PositionKfFollowsTheMarkerInTheTrackersFrame");
   constexpr int kCalHere = 16;
@@ -415,7 +415,9 @@ TEST_F(SensorPipeline, PositionKfFollowsTheMarkerInTheTrackersFrame) {
   EXPECT_LT(live_mm, w_is_e_mm);
   EXPECT_LT(w_is_e_mm, paper_mm);
   EXPECT_LT(live_mm, 1.15 * driven_told_mm);
-  EXPECT_GT(driven_w_is_e_mm, 10.0 * live_mm);
+  // The frame matters: taking W = E costs the same filter (the adaptive noise keeps it from
+  // running off, as it did with a constant one: 72 mm) at least 10 % (seen: 0.97 against 0.78 mm).
+  EXPECT_GT(driven_w_is_e_mm, 1.1 * driven_told_mm);
 }
 
 // The arm changes mid-run (issue 15, live): sensor_acquisition --step-offset j2=1e-3@18, joint 2

@@ -64,6 +64,10 @@ inline void ExpectSameSettings(const estimation::PositionKfSettings& a,
   RCAL_EXPECT_FIELD(a, b, max_consecutive_rejections);
   RCAL_EXPECT_FIELD(a, b, initial_velocity_sigma);
   RCAL_EXPECT_FIELD(a, b, initial_accel_sigma);
+  RCAL_EXPECT_FIELD(a, b, accel_bias_walk);
+  RCAL_EXPECT_FIELD(a, b, accel_relative_sigma);
+  RCAL_EXPECT_FIELD(a, b, accel_noise_adaptation_tau);
+  RCAL_EXPECT_FIELD(a, b, accel_noise_max_scale);
 }
 
 inline void ExpectSameSettings(const estimation::StillDetectorSettings& a,

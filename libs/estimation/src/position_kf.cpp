@@ -50,6 +50,7 @@ PositionKfSettings AccelerometerDrivenSettings() {
   s.motion_model = MotionModel::kAccelerometerDriven;
   s.accel_bias_walk = 0.1;
   s.accel_sigma = 0.1;
+  s.accel_noise_adaptation_tau = 0.1;
   return s;
 }
 
@@ -68,6 +69,8 @@ void PositionKf::Reset() {
   last_position_nis_ = 0.0;
   last_position_accepted_ = false;
   consecutive_rejections_ = 0;
+  accel_noise_scale_ = 1.0;
+  last_position_t_ = 0.0;
   has_last_omega_ = false;
   last_omega_B_.setZero();
 }
@@ -146,8 +149,8 @@ void PositionKf::PredictTo(double t) {
   if (settings_.motion_model == MotionModel::kWhiteJerk)
     Q_axis << dt5 / 20, dt4 / 8, dt3 / 6, dt4 / 8, dt3 / 3, dt2 / 2, dt3 / 6, dt2 / 2, dt;
   else
-    Q_axis(2, 2) = dt;  // A alone (header comment)
-  Q_axis *= qj;
+    Q_axis(2, 2) = dt;                            // A alone (header comment)
+  Q_axis *= qj * accel_noise_scale_;              // λ: the adaptive noise (header comment)
   MatN Phi = MatN::Identity(), Q = MatN::Zero();  // r_B constant, b_W a random walk
   for (int i = 0; i < 3; ++i) {
     Phi.block<3, 3>(3 * i, 3 * i) = Phi_axis;
@@ -219,7 +222,11 @@ Status PositionKf::UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen
   for (int i = 0; i < 3; ++i) H(i, IA(i)) = 1.0;
   H.middleCols<3>(kLever) = -(R_WE_ * R_EB) * M;
   if (settings_.accel_bias_walk > 0.0) H.middleCols<3>(kBias).setIdentity();
-  Eigen::Matrix3d R = settings_.accel_sigma * settings_.accel_sigma * Eigen::Matrix3d::Identity();
+  // σ² + (σ_rel |a_W|)², times the adaptive λ (header comment).
+  const double s_rel = settings_.accel_relative_sigma * z.norm();
+  Eigen::Matrix3d R = accel_noise_scale_ *
+                      (settings_.accel_sigma * settings_.accel_sigma + s_rel * s_rel) *
+                      Eigen::Matrix3d::Identity();
   if (!R_WE_covariance_.isZero()) {
     // The frame's uncertainty (SetWorldFromEarth): ∂(Exp(δφ) z)/∂δφ = −[z]×.
     const Eigen::Matrix3d Z = geometry::Skew(z);
@@ -247,10 +254,24 @@ Status PositionKf::GuardState(double t) {
   return Status::Error(o.str());
 }
 
+void PositionKf::AdaptAccelNoise(double t) {
+  const double dt = t - last_position_t_;
+  last_position_t_ = t;
+  if (settings_.accel_noise_adaptation_tau <= 0.0 || !std::isfinite(last_position_nis_)) return;
+  // log λ ← log λ + a (min(NIS, 30)/3 − 1), a = Δt/τ ≤ 1 (header comment). Evaluated in the
+  // linear domain; the clamp keeps λ finite whatever the innovation was.
+  constexpr double kDof = 3.0, kNisCap = 30.0;
+  const double a = std::min(1.0, dt / settings_.accel_noise_adaptation_tau);
+  const double excess = std::min(last_position_nis_, kNisCap) / kDof - 1.0;
+  accel_noise_scale_ = std::clamp(accel_noise_scale_ * std::exp(a * excess), 1.0,
+                                  std::max(1.0, settings_.accel_noise_max_scale));
+}
+
 Status PositionKf::UpdatePosition(double t, const Eigen::Vector3d& p_WM_W) {
   if (auto s = Check(t, p_WM_W, "position p_WM_W"); !s) return s;
   if (!initialized_) {
     Initialise(t, p_WM_W);
+    last_position_t_ = t;
     ++counters_.position_samples;
     last_position_accepted_ = true;
     last_position_nis_ = 0.0;
@@ -265,6 +286,7 @@ Status PositionKf::UpdatePosition(double t, const Eigen::Vector3d& p_WM_W) {
   const Eigen::Matrix3d S = H * P_ * H.transpose() + R;
   const Eigen::Matrix3d S_inv = S.inverse();
   last_position_nis_ = y.dot(S_inv * y);
+  AdaptAccelNoise(t);
   if (settings_.position_gate_chi2 > 0.0 && last_position_nis_ > settings_.position_gate_chi2) {
     ++counters_.position_rejected;
     last_position_accepted_ = false;

@@ -54,7 +54,28 @@
 // by the accelerometer, b_W is learned from the position sensor alone. It trusts its
 // accelerations, so real errors that grow with the motion (BROAD's fast and vibrating trials)
 // make it run off where the paper's filter holds: the default stays the paper's (README).
-// SetWorldFromEarth's covariance keeps it from trusting a frame it does not know. Update as
+// SetWorldFromEarth's covariance keeps it from trusting a frame it does not know.
+// Motion-proportional accelerometer noise (beyond the paper; accel_relative_sigma): an orientation
+// error δθ turns the measured acceleration, δa = δθ × a_W, a scale error scales it, a time offset
+// δt adds ȧ δt: errors that grow with the motion, which the bias state (slow) and accel_sigma
+// (constant) cannot take. Each acceleration's variance is accel_sigma² + (σ_rel |a_W|)² per axis
+// (a_W the measured world acceleration, gravity removed): σ_rel is the relative error, e.g. 0.1
+// for an orientation error of 0.1 rad or a 10 % scale error.
+// Adaptive accelerometer noise (beyond the paper; accel_noise_adaptation_tau > 0): on real data
+// the accelerometer's errors grow with the motion (the orientation's error turns the tool's own
+// acceleration, a time offset meets the jerk, 100 Hz resampling aliases vibration and taps), by
+// factors no constant σ fits: sized for the calm phases, a fast one makes the position
+// innovations exceed the gate, the filter refuses the sensor that would correct it and runs off
+// (BROAD: to 0.5 m); sized for the fast ones, the calm ones are no better than the tracker. So a
+// factor λ ≥ 1 scales the accelerometer's variance accel_sigma² and the jerk PSD q_j² (both stand
+// for what the motion model leaves out, which grows together), and follows the position
+// innovations by covariance matching: at each position sample (gated or not), with a = Δt/τ (≤ 1),
+//   log λ ← log λ + a (min(NIS, 30)/3 − 1),   λ clamped to [1, accel_noise_max_scale],
+// a stochastic-approximation step toward E[NIS] = 3, the innovation's dimension: λ stays at 1
+// while the innovations are as the model predicts, grows within a few samples when they are
+// larger, and returns as fast when the motion calms. The cap 30 bounds what one glitch can do
+// (λ × e^{9a} at most). Mehra's covariance matching (IEEE TAC 1972) in the form of a single
+// scale, as fading-memory filters use it. Update as
 // NOTES.md Eqs. 15–17, Joseph form. The position sensor is χ²-gated: NIS = yᵀS⁻¹y >
 // position_gate_chi2 rejects it (counted). Bad input and out-of-order time are refused with a
 // Status; the state is unchanged. A state that goes non-finite anyway is never kept: the filter
@@ -113,6 +134,14 @@ struct PositionKfSettings {
   double accel_bias_walk = 0.0;
   /// Initial σ of each component of b_W when it is estimated [m/s²].
   double initial_accel_bias_sigma = 0.2;
+  /// The part of the accelerometer's error that grows with the tool's own acceleration [-]:
+  /// σ_rel |a_W| per axis joins accel_sigma in quadrature (see the header comment). 0 = none.
+  double accel_relative_sigma = 0.0;
+  /// Time constant [s] of the accelerometer noise's adaptation to the position innovations (see
+  /// the header comment); 0 = off (the paper's constant σ).
+  double accel_noise_adaptation_tau = 0.0;
+  /// Largest factor λ on accel_sigma² and q_j² [-] (1e4: σ × 100).
+  double accel_noise_max_scale = 1e4;
 };
 
 /// The accelerometer-driven filter's settings (position_kf --motion-model accelerometer-driven;
@@ -184,6 +213,9 @@ class PositionKf {
   /// Covariance of p_WM_W [m²].
   Eigen::Matrix3d position_covariance() const;
   double last_position_nis() const { return last_position_nis_; }
+  /// The adaptive factor λ on the accelerometer's variance and the jerk PSD [-] (1 when the
+  /// adaptation is off or the innovations are as predicted).
+  double accel_noise_scale() const { return accel_noise_scale_; }
   bool last_position_accepted() const { return last_position_accepted_; }
   const Counters& counters() const { return counters_; }
 
@@ -204,6 +236,8 @@ class PositionKf {
   // After an update: Ok, or the state went non-finite and the filter was reset (an Error).
   Status GuardState(double t);
   void Initialise(double t, const Eigen::Vector3d& p);
+  // The adaptive accelerometer noise's step at a position sample (header comment).
+  void AdaptAccelNoise(double t);
 
   PositionKfSettings settings_;
   bool initialized_ = false;
@@ -216,7 +250,9 @@ class PositionKf {
   double last_position_nis_ = 0.0;
   bool last_position_accepted_ = false;
   int consecutive_rejections_ = 0;
-  bool has_last_omega_ = false;  // for α_B by differencing
+  double accel_noise_scale_ = 1.0;  // λ (header comment)
+  double last_position_t_ = 0.0;    // for the adaptation's step a = Δt/τ
+  bool has_last_omega_ = false;     // for α_B by differencing
   double last_omega_t_ = 0.0;
   Eigen::Vector3d last_omega_B_ = Eigen::Vector3d::Zero();
 };
