@@ -19,6 +19,7 @@
 #include <random>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "command.hpp"
@@ -27,6 +28,7 @@
 #include "rcal/estimation/fqa.hpp"
 #include "rcal/estimation/orientation_kf.hpp"
 #include "rcal/estimation/position_kf.hpp"
+#include "rcal/estimation/position_kf_bank.hpp"
 #include "rcal/geometry/so3.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/imu_csv.hpp"
@@ -87,17 +89,21 @@ int RunFuse(const FuseOptions& opt) {
     if (!has) throw std::runtime_error("fuse: " + path + ": missing the " + what + " columns");
 
   est::OrientationKf okf(okf_settings);
-  est::PositionKf pkf(pkf_settings);
-  // Beside it, position_kf's accelerometer-driven filter (--motion-model accelerometer-driven:
-  // the accelerometer drives the acceleration, a bias state, the adaptive noise), on the same
-  // samples: closer than the position sensor on calm trials, behind the other on fast ones.
+  // The position estimate: a bank (position_kf_bank.hpp) of the paper's motion model (these
+  // settings) and position_kf's accelerometer-driven one (--motion-model accelerometer-driven: the
+  // accelerometer drives the acceleration, a bias state, the adaptive noise), weighted by how well
+  // each predicts the position sensor. Each is scored alone too.
   est::PositionKfSettings driven_settings = est::AccelerometerDrivenSettings();
   driven_settings.earth = pkf_settings.earth;
   driven_settings.gravity = pkf_settings.gravity;
   driven_settings.position_sigma = pkf_settings.position_sigma;
   driven_settings.estimate_lever_arm = pkf_settings.estimate_lever_arm;
   driven_settings.lever_arm_sigma = pkf_settings.lever_arm_sigma;
-  est::PositionKf driven(driven_settings);
+  est::PositionKfBankSettings bank_settings;
+  bank_settings.models = {pkf_settings, driven_settings};
+  est::PositionKfBank bank(bank_settings);
+  const est::PositionKf& pkf = bank.filters()[0];
+  const est::PositionKf& driven = bank.filters()[1];
   est::FqaSettings fqa_settings;
   fqa_settings.earth = est::EarthFrame::kEnu;
   fqa_settings.m_ref_E = est::MagneticNorth(est::EarthFrame::kEnu);
@@ -108,7 +114,8 @@ int RunFuse(const FuseOptions& opt) {
   double next_pos_t = -std::numeric_limits<double>::infinity();
 
   OrientationScore kf_score, fqa_score;
-  Rms pos_all, pos_moving, driven_all, driven_moving;
+  Rms pos_all, pos_moving, paper_all, paper_moving, driven_all, driven_moving;
+  double driven_weight = 0.0;  // Σ μ_driven over the scored rows
   long refused = 0, fqa_failed = 0, pos_samples = 0, non_finite = 0;
   std::vector<double> plot_t, e_tot, e_head, e_incl, e_fqa, plot_pt, e_pos;
   for (int k = 0; k < n; ++k) {
@@ -129,14 +136,12 @@ int RunFuse(const FuseOptions& opt) {
     const auto q_fqa = est::Fqa(f_B, m_B, fqa_settings);
     if (!q_fqa) ++fqa_failed;
     // Position KF: accelerometer every sample, the simulated position sensor at pos_rate_hz.
-    (void)pkf.UpdateAccel(t_k, f_B, okf.R_EB(), okf.omega_B());
-    (void)driven.UpdateAccel(t_k, f_B, okf.R_EB(), okf.omega_B());
+    (void)bank.UpdateAccel(t_k, f_B, okf.R_EB(), okf.omega_B());
     const Eigen::Vector3d& p_truth = trial.p_truth[k];
     if (t_k >= next_pos_t - 1e-9 && p_truth.allFinite()) {
       next_pos_t = (std::isfinite(next_pos_t) ? next_pos_t : t_k) + pos_period;
       const Eigen::Vector3d noise = sim::Draw3(pos_noise, rng);
-      (void)pkf.UpdatePosition(t_k, p_truth + noise);
-      (void)driven.UpdatePosition(t_k, p_truth + noise);
+      (void)bank.UpdatePosition(t_k, p_truth + noise);
       ++pos_samples;
     }
     const Eigen::Vector4d& q_truth = trial.q_truth[k];
@@ -154,20 +159,17 @@ int RunFuse(const FuseOptions& opt) {
       e_fqa.push_back(q_fqa ? BroadErrors(*q_fqa, q_truth).total * kRadToDeg
                             : std::numeric_limits<double>::quiet_NaN());
     }
-    if (driven.initialized() && p_truth.allFinite()) {
-      const double err = (driven.p_WM_W() - p_truth).norm();
-      if (std::isfinite(err)) {
-        driven_all.Add(err);
-        if (moving) driven_moving.Add(err);
-      } else if (non_finite++ == 0) {
-        spdlog::error(
-            "fuse: row {} (t = {} s): the accelerometer-driven position KF's estimate "
-            "is not finite",
-            k + 1, t_k);
-      }
+    for (auto [f, all, mov] : {std::tuple{&pkf, &paper_all, &paper_moving},
+                               std::tuple{&driven, &driven_all, &driven_moving}}) {
+      if (!f->initialized() || !p_truth.allFinite()) continue;
+      const double err = (f->p_WM_W() - p_truth).norm();
+      if (!std::isfinite(err)) continue;  // the bank's own estimate is checked below
+      all->Add(err);
+      if (moving) mov->Add(err);
     }
-    if (pkf.initialized() && p_truth.allFinite()) {
-      const double err = (pkf.p_WM_W() - p_truth).norm();
+    if (bank.initialized() && p_truth.allFinite()) {
+      const double err = (bank.p_WM_W() - p_truth).norm();
+      driven_weight += bank.probabilities()[1];
       if (!std::isfinite(err)) {
         if (non_finite++ == 0)
           spdlog::error("fuse: row {} (t = {} s): the position KF's estimate is not finite", k + 1,
@@ -198,8 +200,10 @@ int RunFuse(const FuseOptions& opt) {
   md << "\nMovement samples scored: " << kf_score.total.n << ". Position RMSE (position KF vs "
      << "truth): " << Fixed(pos_moving.value() * 1e3, 2) << " mm during movement, "
      << Fixed(pos_all.value() * 1e3, 2) << " mm overall (sensor: " << opt.pos_rate_hz << " Hz, "
-     << opt.pos_noise_m * 1e3 << " mm noise, seed " << opt.seed << "); accelerometer-driven "
-     << "filter " << Fixed(driven_moving.value() * 1e3, 2) << " mm during movement.\n"
+     << opt.pos_noise_m * 1e3 << " mm noise, seed " << opt.seed << "); the bank's filters alone "
+     << "during movement: the paper's motion model " << Fixed(paper_moving.value() * 1e3, 2)
+     << " mm, accelerometer-driven " << Fixed(driven_moving.value() * 1e3, 2) << " mm (weight "
+     << Fixed(pos_all.n > 0 ? driven_weight / static_cast<double>(pos_all.n) : 0.0, 2) << ").\n"
      << "Rejected: accelerometer " << oc.accel_rejected << " (χ² gate " << oc.accel_gated
      << "), magnetometer " << oc.mag_rejected << " (χ² gate " << oc.mag_gated << "), position "
      << pc.position_rejected << " of " << pos_samples << ", refused input " << refused
@@ -216,11 +220,16 @@ int RunFuse(const FuseOptions& opt) {
   j["fqa"] = ScoreJson(fqa_score);
   j["position_rmse_m"] = pos_all.value();
   j["position_rmse_movement_m"] = pos_moving.value();
+  j["position_paper_model"] = {{"rmse_m", paper_all.value()},
+                               {"rmse_movement_m", paper_moving.value()},
+                               {"rejected", pkf.counters().position_rejected}};
   j["position_accelerometer_driven"] = {
       {"rmse_m", driven_all.value()},
       {"rmse_movement_m", driven_moving.value()},
       {"rejected", driven.counters().position_rejected},
-      {"accel_noise_adaptation_tau_s", driven_settings.accel_noise_adaptation_tau}};
+      {"accel_noise_adaptation_tau_s", driven_settings.accel_noise_adaptation_tau},
+      {"mean_weight", pos_all.n > 0 ? driven_weight / static_cast<double>(pos_all.n) : 0.0}};
+  j["position_bank_evidence_tau_s"] = bank_settings.evidence_tau;
   j["position_sensor"] = {{"rate_hz", opt.pos_rate_hz},
                           {"noise_m", opt.pos_noise_m},
                           {"seed", opt.seed},

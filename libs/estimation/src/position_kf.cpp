@@ -4,6 +4,7 @@
 #include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <sstream>
 #include <string>
 
@@ -67,6 +68,7 @@ void PositionKf::Reset() {
   counters_ = {};
   counters_.resets = resets;
   last_position_nis_ = 0.0;
+  last_position_log_likelihood_ = 0.0;
   last_position_accepted_ = false;
   consecutive_rejections_ = 0;
   accel_noise_scale_ = 1.0;
@@ -272,6 +274,7 @@ Status PositionKf::UpdatePosition(double t, const Eigen::Vector3d& p_WM_W) {
   if (!initialized_) {
     Initialise(t, p_WM_W);
     last_position_t_ = t;
+    last_position_log_likelihood_ = 0.0;
     ++counters_.position_samples;
     last_position_accepted_ = true;
     last_position_nis_ = 0.0;
@@ -286,6 +289,9 @@ Status PositionKf::UpdatePosition(double t, const Eigen::Vector3d& p_WM_W) {
   const Eigen::Matrix3d S = H * P_ * H.transpose() + R;
   const Eigen::Matrix3d S_inv = S.inverse();
   last_position_nis_ = y.dot(S_inv * y);
+  // ln N(y; 0, S) = −½ (NIS + ln det S + 3 ln 2π): the sample's evidence for this filter's model.
+  last_position_log_likelihood_ = -0.5 * (last_position_nis_ + std::log(S.determinant()) +
+                                          3.0 * std::log(2.0 * std::numbers::pi));
   AdaptAccelNoise(t);
   if (settings_.position_gate_chi2 > 0.0 && last_position_nis_ > settings_.position_gate_chi2) {
     ++counters_.position_rejected;

@@ -213,6 +213,10 @@ class PositionKf {
   /// Covariance of p_WM_W [m²].
   Eigen::Matrix3d position_covariance() const;
   double last_position_nis() const { return last_position_nis_; }
+  /// ln N(y; 0, S) of the last position sample's innovation y under its predicted covariance S,
+  /// gated or not (0 for the sample that initialised the filter): how well this filter predicted
+  /// it (PositionKfBank weighs its filters by it).
+  double last_position_log_likelihood() const { return last_position_log_likelihood_; }
   /// The adaptive factor λ on the accelerometer's variance and the jerk PSD [-] (1 when the
   /// adaptation is off or the innovations are as predicted).
   double accel_noise_scale() const { return accel_noise_scale_; }
@@ -248,6 +252,7 @@ class PositionKf {
   Eigen::Matrix3d R_WE_ = Eigen::Matrix3d::Identity();
   Eigen::Matrix3d R_WE_covariance_ = Eigen::Matrix3d::Zero();
   double last_position_nis_ = 0.0;
+  double last_position_log_likelihood_ = 0.0;
   bool last_position_accepted_ = false;
   int consecutive_rejections_ = 0;
   double accel_noise_scale_ = 1.0;  // λ (header comment)

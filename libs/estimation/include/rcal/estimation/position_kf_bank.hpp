@@ -1,0 +1,73 @@
+// A bank of position KFs on the same samples, weighted by how well each predicts the position
+// sensor: multiple-model adaptive estimation (Magill, IEEE TAC 1965; Maybeck, Stochastic Models,
+// Estimation and Control, Vol. 2, §10.8) with a fading memory, so the weights follow the motion.
+//
+// Why: no one motion model fits a real tool (README, BROAD): the accelerometer-driven filter
+// (position_kf.hpp) holds the marker closer than the tracker while the accelerometer is good
+// (calm moves) and falls behind the paper's white-jerk filter when the accelerometer's errors grow
+// faster than its adaptation follows (fast translation); which one is better changes within a
+// trial. Each filter runs alone on every sample (no mixing of states, unlike an IMM: each is
+// stable by itself, so a wrong one cannot pull the right one off), and at each position sample
+// its evidence, the log-likelihood ℓ_i = ln N(y_i; 0, S_i) of its own innovation, enters a
+// fading sum
+//   L_i ← e^{−Δt/τ} L_i + ℓ_i,   μ_i = max(e^{L_i − max L}, μ_min) / Σ,
+// where τ = evidence_tau [s] is how long a sample's evidence counts, and μ_min keeps a model that
+// is wrong now able to come back. The estimate is the μ-weighted mixture of the filters' marker
+// positions, its covariance the mixture's (Σ μ_i (P_i + (p_i − p)(p_i − p)ᵀ)). Frames and units
+// as PositionKf: p_WM_W [m] in the position sensor's frame W.
+#pragma once
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "rcal/estimation/position_kf.hpp"
+
+namespace rcal::estimation {
+
+struct PositionKfBankSettings {
+  /// The filters' settings; empty: DefaultBankModels() (the paper's motion model and the
+  /// accelerometer-driven one, both with the adaptive noise).
+  std::vector<PositionKfSettings> models;
+  /// How long a position sample's evidence counts [s] (the fading memory's time constant).
+  double evidence_tau = 1.0;
+  /// Smallest weight of a model [-], so that one wrong now can come back.
+  double min_probability = 1e-3;
+};
+
+/// The two motion models the bank weighs by default, with `base`'s frame, gravity, position σ and
+/// lever arm: the paper's white jerk (σ 0.3 m/s²) and AccelerometerDrivenSettings(), both with
+/// the adaptive accelerometer noise (τ 0.1 s).
+std::vector<PositionKfSettings> DefaultBankModels(const PositionKfSettings& base);
+
+class PositionKfBank {
+ public:
+  explicit PositionKfBank(const PositionKfBankSettings& settings);
+  /// As PositionKf::UpdateAccel, for every filter. Returns the first filter's refusal, if any.
+  Status UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen::Matrix3d& R_EB,
+                     const Eigen::Vector3d& omega_B = Eigen::Vector3d::Zero());
+  /// As PositionKf::UpdatePosition, for every filter, then the weights (header comment).
+  Status UpdatePosition(double t, const Eigen::Vector3d& p_WM_W);
+  /// As PositionKf::SetWorldFromEarth, for every filter.
+  Status SetWorldFromEarth(const Eigen::Matrix3d& R_WE,
+                           const Eigen::Matrix3d& covariance = Eigen::Matrix3d::Zero());
+
+  /// Every filter initialised (they are, from the same first position sample on).
+  bool initialized() const;
+  /// The mixture's marker position p_WM_W [m] and its covariance [m²].
+  Eigen::Vector3d p_WM_W() const;
+  Eigen::Matrix3d position_covariance() const;
+  /// The models' weights μ_i [-] (sum 1), in the order of the settings' models.
+  const std::vector<double>& probabilities() const { return mu_; }
+  const std::vector<PositionKf>& filters() const { return filters_; }
+
+ private:
+  void Reweigh();
+  PositionKfBankSettings settings_;
+  std::vector<PositionKf> filters_;
+  std::vector<double> evidence_;  // L_i
+  std::vector<double> mu_;
+  bool has_last_t_ = false;
+  double last_t_ = 0.0;
+};
+
+}  // namespace rcal::estimation
