@@ -16,6 +16,7 @@
 
 #include "rcal/estimation/orientation_kf.hpp"
 #include "rcal/estimation/position_kf.hpp"
+#include "rcal/estimation/position_kf_bank.hpp"
 #include "rcal/io/csv_table.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/filter_nodes.hpp"
@@ -165,6 +166,32 @@ void BM_PositionKfRate(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations());
 }
 BENCHMARK(BM_PositionKfRate);
+
+// The bank rcal fuse runs (position_kf_bank.hpp: the paper's motion model and the
+// accelerometer-driven one, both with the adaptive noise, weighed at each position sample), on the
+// same samples as BM_PositionKfRate; items = IMU samples.
+void BM_PositionKfBankRate(benchmark::State& state) {
+  const Stream& d = Data();
+  estimation::PositionKfSettings base;
+  base.earth = estimation::EarthFrame::kEnu;
+  estimation::PositionKfBankSettings bs;
+  bs.models = estimation::DefaultBankModels(base);
+  estimation::PositionKfBank bank(bs);
+  const Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+  const int64_t n = static_cast<int64_t>(d.imu.size());
+  int64_t i = 0;
+  for (auto _ : state) {
+    const auto s = d.At(i);
+    const double t = transport::SensorSeconds(s.utime);
+    benchmark::DoNotOptimize(bank.UpdateAccel(t, s.f_B, R).ok());
+    if (i % 5 == 0 && d.pos[i % n].allFinite())
+      benchmark::DoNotOptimize(bank.UpdatePosition(t, d.pos[i % n]).ok());
+    benchmark::DoNotOptimize(bank.p_WM_W());
+    ++i;
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+BENCHMARK(BM_PositionKfBankRate);
 
 // The whole orientation node without a transport: decode-free OnImu (checks, filter, encode and
 // memq publish of the estimate): the highest IMU rate the orientation_kf process sustains.
