@@ -145,51 +145,45 @@ void BM_OrientationKfRate(benchmark::State& state) {
 }
 BENCHMARK(BM_OrientationKfRate);
 
-// PositionKf alone: one accelerometer update per IMU sample plus the position sensor at 20 Hz
-// (every 5th sample), with a fixed orientation; items = IMU samples.
-void BM_PositionKfRate(benchmark::State& state) {
+// One accelerometer update per IMU sample plus the position sensor at 20 Hz (every 5th sample),
+// with a fixed orientation, and the estimate read; items = IMU samples. F: a PositionKf or a
+// PositionKfBank (the same calls).
+template <typename F>
+void RunPositionFilter(benchmark::State& state, F& filter) {
   const Stream& d = Data();
-  estimation::PositionKfSettings ps;
-  ps.earth = estimation::EarthFrame::kEnu;
-  estimation::PositionKf kf(ps);
   const Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
   const int64_t n = static_cast<int64_t>(d.imu.size());
   int64_t i = 0;
   for (auto _ : state) {
     const auto s = d.At(i);
     const double t = transport::SensorSeconds(s.utime);
-    benchmark::DoNotOptimize(kf.UpdateAccel(t, s.f_B, R).ok());
+    benchmark::DoNotOptimize(filter.UpdateAccel(t, s.f_B, R).ok());
     if (i % 5 == 0 && d.pos[i % n].allFinite())
-      benchmark::DoNotOptimize(kf.UpdatePosition(t, d.pos[i % n]).ok());
+      benchmark::DoNotOptimize(filter.UpdatePosition(t, d.pos[i % n]).ok());
+    benchmark::DoNotOptimize(filter.p_WM_W());
     ++i;
   }
   state.SetItemsProcessed(state.iterations());
 }
+
+// PositionKf alone (the paper's filter).
+void BM_PositionKfRate(benchmark::State& state) {
+  estimation::PositionKfSettings ps;
+  ps.earth = estimation::EarthFrame::kEnu;
+  estimation::PositionKf kf(ps);
+  RunPositionFilter(state, kf);
+}
 BENCHMARK(BM_PositionKfRate);
 
 // The bank rcal fuse runs (position_kf_bank.hpp: the paper's motion model and the
-// accelerometer-driven one, both with the adaptive noise, weighed at each position sample), on the
-// same samples as BM_PositionKfRate; items = IMU samples.
+// accelerometer-driven one, both with the adaptive noise, weighed at each position sample).
 void BM_PositionKfBankRate(benchmark::State& state) {
-  const Stream& d = Data();
   estimation::PositionKfSettings base;
   base.earth = estimation::EarthFrame::kEnu;
   estimation::PositionKfBankSettings bs;
   bs.models = estimation::DefaultBankModels(base);
   estimation::PositionKfBank bank(bs);
-  const Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
-  const int64_t n = static_cast<int64_t>(d.imu.size());
-  int64_t i = 0;
-  for (auto _ : state) {
-    const auto s = d.At(i);
-    const double t = transport::SensorSeconds(s.utime);
-    benchmark::DoNotOptimize(bank.UpdateAccel(t, s.f_B, R).ok());
-    if (i % 5 == 0 && d.pos[i % n].allFinite())
-      benchmark::DoNotOptimize(bank.UpdatePosition(t, d.pos[i % n]).ok());
-    benchmark::DoNotOptimize(bank.p_WM_W());
-    ++i;
-  }
-  state.SetItemsProcessed(state.iterations());
+  RunPositionFilter(state, bank);
 }
 BENCHMARK(BM_PositionKfBankRate);
 

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <random>
 #include <stdexcept>
 #include <vector>
@@ -61,6 +62,26 @@ TEST(PositionKfBank, WeightsAreTheFadedLikelihoodsOfEachFiltersInnovations) {
     EXPECT_NEAR((bank.p_WM_W() - mix).norm(), 0.0, 1e-12);
   }
   EXPECT_GT(std::abs(L0 - L1), 1.0);  // the two models were told apart
+}
+
+// The evidence itself against a closed form: right after the sample that initialised a filter,
+// P_pp = σ² I, so a second sample at the same time has S = 2σ² I and
+// ℓ = −½ (|y|²/(2σ²) + 3 ln(2σ²) + 3 ln 2π), whatever the motion model.
+TEST(PositionKfBank, TheEvidenceIsTheInnovationsGaussianLogLikelihood) {
+  PositionKfSettings s;
+  s.position_sigma = 2e-3;
+  s.position_gate_chi2 = 0.0;
+  for (const PositionKfSettings& m : DefaultBankModels(s)) {
+    PositionKf kf(m);
+    ASSERT_TRUE(kf.UpdatePosition(1.0, Eigen::Vector3d(0.1, 0.2, 0.3)).ok());
+    EXPECT_EQ(kf.last_position_log_likelihood(), 0.0);
+    const Eigen::Vector3d y(3e-3, -1e-3, 4e-3);
+    ASSERT_TRUE(kf.UpdatePosition(1.0, Eigen::Vector3d(0.1, 0.2, 0.3) + y).ok());
+    const double v = 2.0 * s.position_sigma * s.position_sigma;
+    const double expected =
+        -0.5 * (y.squaredNorm() / v + 3.0 * std::log(v) + 3.0 * std::log(2.0 * std::numbers::pi));
+    EXPECT_NEAR(kf.last_position_log_likelihood(), expected, 1e-9 * std::abs(expected));
+  }
 }
 
 TEST(PositionKfBank, RefusesSettingsThatCannotWeigh) {

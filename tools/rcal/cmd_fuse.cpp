@@ -93,12 +93,8 @@ int RunFuse(const FuseOptions& opt) {
   // settings) and position_kf's accelerometer-driven one (--motion-model accelerometer-driven: the
   // accelerometer drives the acceleration, a bias state, the adaptive noise), weighted by how well
   // each predicts the position sensor. Each is scored alone too.
-  est::PositionKfSettings driven_settings = est::AccelerometerDrivenSettings();
-  driven_settings.earth = pkf_settings.earth;
-  driven_settings.gravity = pkf_settings.gravity;
-  driven_settings.position_sigma = pkf_settings.position_sigma;
-  driven_settings.estimate_lever_arm = pkf_settings.estimate_lever_arm;
-  driven_settings.lever_arm_sigma = pkf_settings.lever_arm_sigma;
+  // The accelerometer-driven model with these settings' frame, gravity, position σ and lever arm.
+  const est::PositionKfSettings driven_settings = est::DefaultBankModels(pkf_settings)[1];
   est::PositionKfBankSettings bank_settings;
   bank_settings.models = {pkf_settings, driven_settings};
   est::PositionKfBank bank(bank_settings);

@@ -51,18 +51,16 @@ Status PositionKfBank::SetWorldFromEarth(const Eigen::Matrix3d& R_WE,
 }
 
 Status PositionKfBank::UpdatePosition(double t, const Eigen::Vector3d& p_WM_W) {
-  std::vector<bool> was_initialized;
-  for (const PositionKf& f : filters_) was_initialized.push_back(f.initialized());
+  // A filter that (re-)initialises on this sample has no evidence from it (its ℓ is 0), nor do
+  // the others then: the sample starts a new comparison.
+  const bool fresh = !initialized();
   Status first = Status::Ok();
   for (PositionKf& f : filters_)
     if (Status s = f.UpdatePosition(t, p_WM_W); !s && first) first = s;
   if (!first) return first;
-  // L_i ← e^{−Δt/τ} L_i + ℓ_i; a filter that (re-)initialised on this sample has no evidence
-  // from it (its ℓ is 0), nor do the others then: the sample started a new comparison.
+  // L_i ← e^{−Δt/τ} L_i + ℓ_i.
   const double fade =
       has_last_t_ ? std::exp(-std::max(0.0, t - last_t_) / settings_.evidence_tau) : 0.0;
-  const bool fresh =
-      std::find(was_initialized.begin(), was_initialized.end(), false) != was_initialized.end();
   for (size_t i = 0; i < filters_.size(); ++i) {
     const double l = filters_[i].last_position_log_likelihood();
     evidence_[i] = fade * evidence_[i] + (fresh || !std::isfinite(l) ? 0.0 : l);
