@@ -205,13 +205,16 @@ BENCHMARK(BM_OrientationNodeRate);
 
 // The position node without a transport: per IMU sample its IMU and ORIENTATION messages (the
 // pairing by utime, the ordered flush, the accelerometer update, encode and publish), plus a
-// POSITION message every 5th sample (20 Hz at 100 Hz IMU); items = IMU samples.
+// POSITION message every 5th sample (20 Hz at 100 Hz IMU); items = IMU samples. position_kf's
+// default filter: the bank of DefaultBankModels.
 void BM_PositionNodeRate(benchmark::State& state) {
   const Stream& d = Data();
   transport::LcmTransport t("memq://");
   estimation::PositionKfSettings ps;
   ps.earth = estimation::EarthFrame::kEnu;
-  transport::PositionKfNode node(t, ps);
+  estimation::PositionKfBankSettings bs;
+  bs.models = estimation::DefaultBankModels(ps);
+  transport::PositionKfNode node(t, bs, {});
   estimation::OrientationKf okf(Enu());
   const int64_t n = static_cast<int64_t>(d.imu.size());
   // Orientation messages precomputed (the orientation filter is not what is measured here).

@@ -5,10 +5,14 @@
 // replay at any speed gives the same estimates. Bad samples are rejected and counted in HEALTH.
 // The IMU → marker lever arm (cell sensors.imu.to_marker, --lever-arm, --estimate-lever-arm) gets
 // ω_B = gyro − the paired orientation's gyro bias; an estimated lever arm is logged at exit.
-// The paper's filter by default; --motion-model accelerometer-driven lets the accelerometer drive
-// the acceleration state with a world-frame acceleration bias that takes the orientation's error
-// and an accelerometer noise that adapts to the position innovations
-// (estimation::AccelerometerDrivenSettings; --accel-noise-adaptation).
+// By default a bank of two motion models run side by side, whose mixture is published, each
+// weighted by how well it predicts the position samples (estimation::PositionKfBank,
+// DefaultBankModels; --bank-evidence-tau): the paper's white-jerk filter and the
+// accelerometer-driven one (the accelerometer drives the acceleration state, a world-frame
+// acceleration bias takes the orientation's error), both with an accelerometer noise that adapts
+// to the position innovations. rcal position-kf-sweep chose it: closer than the paper's filter
+// on every one of 96 simulated and real cases (README). --motion-model white-jerk (the paper's
+// filter alone) or accelerometer-driven run one model, with the noise options.
 // The filter works in the position sensor's frame W: accelerations are turned from the IMU's earth
 // frame by R_WE, the cell's earth_from_world (given as a prior or fixed) until the identifier's
 // KINEMATIC_PARAMS of the cell's model say where it found that frame (a guessed earth frame: the
@@ -34,11 +38,11 @@ int main(int argc, char** argv) {
   std::string lcm_url, earth = "ned";
   double orientation_wait = 1.0;
   transport::PositionKfNode::Options options;
-  // The paper's filter by default. --motion-model accelerometer-driven takes
-  // estimation::AccelerometerDrivenSettings() (its σ and bias walk unless given): closer than the
-  // tracker on the simulated cells, but it runs off on BROAD's fast and vibrating trials (README).
+  // The bank by default (header comment). --motion-model accelerometer-driven takes
+  // estimation::AccelerometerDrivenSettings() (its σ and bias walk unless given); white-jerk the
+  // paper's filter, with the settings' defaults unless given.
   estimation::PositionKfSettings settings;
-  std::string motion_model = "white-jerk";
+  std::string motion_model = "bank";
   CLI::App app{
       "position_kf: the position Kalman filter on the position sensor and the accelerometer.\n"
       "Subscribes IMU, ORIENTATION, POSITION; publishes TOOL_POSITION and HEALTH.\n"
@@ -56,11 +60,13 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option(
          "--motion-model", motion_model,
-         "where the jerk noise enters: white-jerk (the paper's Eq. 30) or "
-         "accelerometer-driven (the acceleration alone: position and velocity integrate the "
-         "accelerometer, with an acceleration bias state; --accel-sigma and "
-         "--accel-bias-walk default to 0.1 then)")
-      ->check(CLI::IsMember({"accelerometer-driven", "white-jerk"}))
+         "bank (the two models below side by side, each with its adaptive accelerometer "
+         "noise, their estimates weighted by how well each predicts the positions; the motion "
+         "noise options do not apply), or one model: where the jerk noise enters, white-jerk "
+         "(the paper's Eq. 30) or accelerometer-driven (the acceleration alone: position and "
+         "velocity integrate the accelerometer, with an acceleration bias state; --accel-sigma "
+         "and --accel-bias-walk default to 0.1 then)")
+      ->check(CLI::IsMember({"accelerometer-driven", "white-jerk", "bank"}))
       ->capture_default_str();
   app.add_option("--accel-bias-walk", settings.accel_bias_walk,
                  "random walk of the world-frame acceleration bias state (the orientation's error "
@@ -86,6 +92,12 @@ int main(int argc, char** argv) {
                  "that keeps the NIS at its dimension); 0 = constant; accelerometer-driven "
                  "defaults to 0.1")
       ->check(CLI::Range(0.0, 3600.0))
+      ->capture_default_str();
+  estimation::PositionKfBankSettings bank;
+  app.add_option("--bank-evidence-tau", bank.evidence_tau,
+                 "--motion-model bank: how long a position sample's evidence counts in the "
+                 "models' weights [s]")
+      ->check(CLI::Range(1e-3, 3600.0))
       ->capture_default_str();
   app.add_option("--orientation-wait", orientation_wait,
                  "IMU sensor time a position sample waits for a stopped orientation stream [s]")
@@ -132,6 +144,22 @@ int main(int argc, char** argv) {
       settings.accel_relative_sigma = driven.accel_relative_sigma;
     if (app.count("--accel-noise-adaptation") == 0)
       settings.accel_noise_adaptation_tau = driven.accel_noise_adaptation_tau;
+  }
+  if (motion_model == "bank") {
+    // The bank's models are DefaultBankModels (chosen by rcal position-kf-sweep): a motion noise
+    // given here would apply to neither, so it is refused rather than ignored.
+    for (const char* o : {"--accel-sigma", "--accel-bias-walk", "--jerk-noise",
+                          "--accel-relative-sigma", "--accel-noise-adaptation"})
+      if (app.count(o) > 0) {
+        spdlog::error(
+            "{} sets one motion model's noise: with --motion-model white-jerk or "
+            "accelerometer-driven (the bank, the default, runs its own two)",
+            o);
+        return 2;
+      }
+  } else if (app.count("--bank-evidence-tau") > 0) {
+    spdlog::error("--bank-evidence-tau applies to --motion-model bank only");
+    return 2;
   }
   options.orientation_wait_us = static_cast<int64_t>(orientation_wait * 1e6);
   options.orientation_timeout_us = static_cast<int64_t>(orientation_timeout * 1e6);
@@ -184,15 +212,24 @@ int main(int argc, char** argv) {
     if (estimate_lever_arm) settings.estimate_lever_arm = true;
     services::InstallStopHandlers();
     transport::LcmTransport t(lcm_url);
-    transport::PositionKfNode node(t, settings, options);
+    // One model is a bank of one (its estimates unchanged).
+    bank.models = motion_model == "bank" ? estimation::DefaultBankModels(settings)
+                                         : std::vector<estimation::PositionKfSettings>{settings};
+    transport::PositionKfNode node(t, bank, options);
     node.Announce();
-    spdlog::info(
-        "position_kf on {} (earth {}, lever arm r_B [{}, {}, {}] m{}; {} model, acceleration "
-        "bias walk {} m/s²/√s, σ {} m/s², relative σ {}, noise adaptation τ {} s)",
-        t.url(), earth, settings.lever_arm_B.x(), settings.lever_arm_B.y(),
-        settings.lever_arm_B.z(), settings.estimate_lever_arm ? ", estimated" : "", motion_model,
-        settings.accel_bias_walk, settings.accel_sigma, settings.accel_relative_sigma,
-        settings.accel_noise_adaptation_tau);
+    spdlog::info("position_kf on {} (earth {}, lever arm r_B [{}, {}, {}] m{}; {} model{})",
+                 t.url(), earth, settings.lever_arm_B.x(), settings.lever_arm_B.y(),
+                 settings.lever_arm_B.z(), settings.estimate_lever_arm ? ", estimated" : "",
+                 motion_model,
+                 motion_model == "bank" ? fmt::format(", evidence τ {} s", bank.evidence_tau)
+                                        : std::string());
+    for (const estimation::PositionKfSettings& m : bank.models)
+      spdlog::info(
+          "  {} motion model: acceleration bias walk {} m/s²/√s, σ {} m/s², relative σ {}, "
+          "noise adaptation τ {} s",
+          m.motion_model == estimation::MotionModel::kAccelerometerDriven ? "accelerometer-driven"
+                                                                          : "white-jerk",
+          m.accel_bias_walk, m.accel_sigma, m.accel_relative_sigma, m.accel_noise_adaptation_tau);
     if (const int rc =
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
         rc != 0)
@@ -209,19 +246,28 @@ int main(int argc, char** argv) {
           rpy_EW.x(), rpy_EW.y(), rpy_EW.z(), node.world_from_earth_updates(),
           node.ignored_params());
     }
-    if (settings.accel_bias_walk > 0.0) {
-      const Eigen::Vector3d b_W = node.filter().accel_bias_W();
-      spdlog::info(
-          "acceleration bias b_W (position sensor frame) at exit: [{:.4f}, {:.4f}, {:.4f}] m/s²",
-          b_W.x(), b_W.y(), b_W.z());
-    }
-    if (settings.estimate_lever_arm) {
-      const Eigen::Vector3d r_B = node.filter().lever_arm_B();
-      const Eigen::Vector3d sigma = node.filter().lever_arm_covariance().diagonal().cwiseSqrt();
-      spdlog::info(
-          "lever arm r_B (IMU → marker, IMU axes) estimated: [{:.4f}, {:.4f}, {:.4f}] m ± "
-          "[{:.4f}, {:.4f}, {:.4f}] m",
-          r_B.x(), r_B.y(), r_B.z(), sigma.x(), sigma.y(), sigma.z());
+    const auto& filters = node.bank().filters();
+    for (size_t i = 0; i < filters.size(); ++i) {
+      const estimation::PositionKf& f = filters[i];
+      const std::string which =
+          filters.size() > 1
+              ? fmt::format("model {} (weight {:.3f}): ", i + 1, node.bank().probabilities()[i])
+              : std::string();
+      if (bank.models[i].accel_bias_walk > 0.0) {
+        const Eigen::Vector3d b_W = f.accel_bias_W();
+        spdlog::info(
+            "{}acceleration bias b_W (position sensor frame) at exit: [{:.4f}, {:.4f}, {:.4f}] "
+            "m/s²",
+            which, b_W.x(), b_W.y(), b_W.z());
+      }
+      if (settings.estimate_lever_arm) {
+        const Eigen::Vector3d r_B = f.lever_arm_B();
+        const Eigen::Vector3d sigma = f.lever_arm_covariance().diagonal().cwiseSqrt();
+        spdlog::info(
+            "{}lever arm r_B (IMU → marker, IMU axes) estimated: [{:.4f}, {:.4f}, {:.4f}] m ± "
+            "[{:.4f}, {:.4f}, {:.4f}] m",
+            which, r_B.x(), r_B.y(), r_B.z(), sigma.x(), sigma.y(), sigma.z());
+      }
     }
     return 0;
   } catch (const std::exception& e) {

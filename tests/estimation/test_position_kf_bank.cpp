@@ -84,6 +84,105 @@ TEST(PositionKfBank, TheEvidenceIsTheInnovationsGaussianLogLikelihood) {
   }
 }
 
+// A bank of one filter is that filter, bit for bit (position_kf's single-model mode runs as one).
+TEST(PositionKfBank, ABankOfOneIsItsFilter) {
+  PositionKfSettings s;
+  s.accel_noise_adaptation_tau = 0.1;
+  PositionKf kf(s);
+  PositionKfBank bank(s);
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> N(0.0, 1.0);
+  for (int k = 0; k < 200; ++k) {
+    const double t = 0.01 * k;
+    const Eigen::Vector3d f = Eigen::Vector3d(0.3, 0.0, -kG) + 0.05 * sim::Draw3(N, rng);
+    ASSERT_TRUE(kf.UpdateAccel(t, f, Eigen::Matrix3d::Identity()).ok());
+    ASSERT_TRUE(bank.UpdateAccel(t, f, Eigen::Matrix3d::Identity()).ok());
+    if (k % 5 != 0) continue;
+    const Eigen::Vector3d z = Eigen::Vector3d(0.15 * t * t, 0.0, 0.0) + 1e-3 * sim::Draw3(N, rng);
+    ASSERT_TRUE(kf.UpdatePosition(t, z).ok());
+    ASSERT_TRUE(bank.UpdatePosition(t, z).ok());
+    ASSERT_EQ(bank.probabilities()[0], 1.0);
+    ASSERT_EQ(bank.p_WM_W(), kf.p_WM_W());
+    ASSERT_EQ(bank.v_W(), kf.v_W());
+    ASSERT_EQ(bank.position_velocity_covariance(), kf.position_velocity_covariance());
+  }
+  // [p; v]'s covariance is the state covariance's p and V entries (Eq. 27 order per axis).
+  const Eigen::Matrix<double, 9, 9> P = kf.P();
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) {
+      EXPECT_EQ(kf.position_velocity_covariance()(a, b), P(3 * a, 3 * b));
+      EXPECT_EQ(kf.position_velocity_covariance()(a, 3 + b), P(3 * a, 3 * b + 1));
+      EXPECT_EQ(kf.position_velocity_covariance()(3 + a, 3 + b), P(3 * a + 1, 3 * b + 1));
+    }
+}
+
+// The mixture's [p; v] mean and covariance against samples drawn from the mixture itself (pick a
+// filter with its weight, draw from its Gaussian): 400 000 draws, seeded. Two models that disagree
+// (the accelerometer-driven one told a biased accelerometer), so the spread of the means counts.
+TEST(PositionKfBank, TheMixturesCovarianceIsThatOfDrawsFromTheMixture) {
+  PositionKfSettings base;
+  base.position_sigma = 1e-4;
+  PositionKfBankSettings bs;
+  bs.models = DefaultBankModels(base);
+  for (PositionKfSettings& m : bs.models) {
+    m.accel_noise_adaptation_tau = 0.0;  // constant noise: the driven model keeps its error
+    m.accel_bias_walk = 0.0;
+    m.position_gate_chi2 = 0.0;
+  }
+  bs.min_probability = 0.2;  // both weights well inside (0, 1), so both components are drawn
+  PositionKfBank bank(bs);
+  for (int k = 0; k < 100; ++k) {
+    const double t = 0.01 * k;
+    // 2 m/s² of accelerometer error the position does not show.
+    ASSERT_TRUE(
+        bank.UpdateAccel(t, Eigen::Vector3d(2.0, 0.0, -kG), Eigen::Matrix3d::Identity()).ok());
+    if (k % 5 == 0) {
+      ASSERT_TRUE(bank.UpdatePosition(t, Eigen::Vector3d(0.2, 0.1, 0.3)).ok());
+    }
+  }
+  const std::vector<double>& mu = bank.probabilities();
+  ASSERT_GT(std::min(mu[0], mu[1]), 0.1);
+  Eigen::Matrix<double, 6, 1> mean_i[2];
+  Eigen::Matrix<double, 6, 6> L_i[2];
+  for (int i = 0; i < 2; ++i) {
+    const PositionKf& f = bank.filters()[static_cast<size_t>(i)];
+    mean_i[i] << f.p_WM_W(), f.v_W();
+    L_i[i] = f.position_velocity_covariance().llt().matrixL();
+  }
+  // The components' means differ: the spread-of-means term d dᵀ is a good part of the covariance.
+  const Eigen::Matrix<double, 6, 6> within =
+      mu[0] * bank.filters()[0].position_velocity_covariance() +
+      mu[1] * bank.filters()[1].position_velocity_covariance();
+  ASSERT_GT((bank.position_covariance() - within.topLeftCorner<3, 3>()).norm(),
+            0.3 * bank.position_covariance().norm());
+  std::mt19937_64 rng(11);
+  std::normal_distribution<double> N(0.0, 1.0);
+  std::uniform_real_distribution<double> U(0.0, 1.0);
+  const int n = 400'000;
+  Eigen::Matrix<double, 6, 1> sum = Eigen::Matrix<double, 6, 1>::Zero();
+  Eigen::Matrix<double, 6, 6> sum2 = Eigen::Matrix<double, 6, 6>::Zero();
+  for (int k = 0; k < n; ++k) {
+    const int i = U(rng) < mu[0] ? 0 : 1;
+    Eigen::Matrix<double, 6, 1> w;
+    for (int a = 0; a < 6; ++a) w(a) = N(rng);
+    const Eigen::Matrix<double, 6, 1> x = mean_i[i] + L_i[i] * w;
+    sum += x;
+    sum2 += x * x.transpose();
+  }
+  const Eigen::Matrix<double, 6, 1> mean = sum / n;
+  const Eigen::Matrix<double, 6, 6> cov = sum2 / n - mean * mean.transpose();
+  const Eigen::Matrix<double, 6, 6> C = bank.position_velocity_covariance();
+  Eigen::Matrix<double, 6, 1> expected_mean;
+  expected_mean << bank.p_WM_W(), bank.v_W();
+  for (int a = 0; a < 6; ++a) {
+    // Sampling error of a mean: σ/√n; of a variance: about √2 σ²/√n (and more for a mixture).
+    EXPECT_NEAR(mean(a), expected_mean(a), 5.0 * std::sqrt(C(a, a) / n)) << a;
+    EXPECT_NEAR(cov(a, a), C(a, a), 0.03 * C(a, a)) << a;
+  }
+  EXPECT_NEAR((cov - C).norm() / C.norm(), 0.0, 0.03);
+  EXPECT_EQ(bank.position_covariance(), (C.topLeftCorner<3, 3>()));
+}
+
 TEST(PositionKfBank, RefusesSettingsThatCannotWeigh) {
   PositionKfBankSettings s;
   s.evidence_tau = 0.0;

@@ -13,6 +13,7 @@
 #include "netns.hpp"
 #include "rcal/estimation/orientation_kf.hpp"
 #include "rcal/estimation/position_kf.hpp"
+#include "rcal/estimation/position_kf_bank.hpp"
 #include "rcal/health_t.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/csv_table.hpp"
@@ -58,7 +59,10 @@ struct Offline {
     ps.earth = estimation::EarthFrame::kEnu;
     ps.estimate_lever_arm = estimate_lever_arm;
     estimation::OrientationKf okf(os);
-    estimation::PositionKf pkf(ps);
+    // position_kf's default: the bank of DefaultBankModels.
+    estimation::PositionKfBankSettings bs;
+    bs.models = estimation::DefaultBankModels(ps);
+    estimation::PositionKfBank pkf(bs);
     if (guessed_frame) {
       EXPECT_TRUE(
           pkf.SetWorldFromEarth(Eigen::Matrix3d::Identity(), Eigen::Matrix3d::Identity()).ok());

@@ -304,6 +304,56 @@ TEST(PositionKfNode, TheLeverArmGetsTheGyroLessThePairedOrientationsBias) {
   EXPECT_NE(node.filter().p_WM_W(), raw_gyro.p_WM_W());
 }
 
+// position_kf --motion-model bank: the node runs estimation::PositionKfBank, and each
+// TOOL_POSITION is the mixture's p, v and 6×6 covariance, update for update the library bank fed
+// the same samples in order. The two models disagree here (the accelerometer says 0.01 m/s² of
+// swing the positions do not show), so the mixture is neither filter.
+TEST(PositionKfNode, ABankPublishesTheMixtureOfItsModels) {
+  estimation::PositionKfBankSettings bank_settings;
+  bank_settings.models = estimation::DefaultBankModels(EnuPositionKfSettings());
+  LcmTransport t("memq://");
+  Outputs out(t);
+  PositionKfNode node(t, bank_settings, PositionKfNode::Options{});
+  estimation::PositionKfBank reference(bank_settings);
+  std::vector<tool_position_estimate_t> expected;
+  for (int k = 0; k < 300; ++k) {
+    const int64_t u = k * kPeriod;
+    node.OnImu(Imu(u, k));
+    node.OnOrientation(OrientationAt(u));
+    if (k % 5 == 0) node.OnPosition(PositionAt(u, k));
+    Drain(t);
+    const ImuSample s = *ImuFromMessage(Imu(u, k), nullptr);
+    ASSERT_TRUE(
+        reference.UpdateAccel(SensorSeconds(u), s.f_B, Eigen::Matrix3d::Identity(), s.gyro_B));
+    if (reference.initialized()) expected.push_back(ToToolPositionEstimate(reference, u));
+    if (k % 5 == 0) {
+      ASSERT_TRUE(reference.UpdatePosition(SensorSeconds(u),
+                                           Eigen::Map<const Eigen::Vector3d>(PositionAt(u, k).p)));
+      expected.push_back(ToToolPositionEstimate(reference, u));
+    }
+  }
+  EXPECT_EQ(node.health().rejected(), 0);
+  ASSERT_EQ(out.tool.size(), expected.size());
+  for (size_t i = 0; i < expected.size(); ++i) {
+    ASSERT_EQ(out.tool[i].utime, expected[i].utime);
+    for (int a = 0; a < 3; ++a) {
+      ASSERT_EQ(out.tool[i].p[a], expected[i].p[a]) << i;
+      ASSERT_EQ(out.tool[i].v[a], expected[i].v[a]) << i;
+    }
+    for (int a = 0; a < 36; ++a) ASSERT_EQ(out.tool[i].covariance[a], expected[i].covariance[a]);
+  }
+  // The mixture, not one of its filters: their positions differ, and it is neither.
+  const auto& mu = node.bank().probabilities();
+  const Eigen::Map<const Eigen::Vector3d> last(out.tool.back().p);
+  EXPECT_GT((node.bank().filters()[0].p_WM_W() - node.bank().filters()[1].p_WM_W()).norm(), 1e-7);
+  EXPECT_NE(last, node.bank().filters()[0].p_WM_W());
+  EXPECT_NE(last, node.bank().filters()[1].p_WM_W());
+  EXPECT_NEAR((last - (mu[0] * node.bank().filters()[0].p_WM_W() +
+                       mu[1] * node.bank().filters()[1].p_WM_W()))
+                  .norm(),
+              0.0, 1e-15);
+}
+
 // The position sensor's frame (issue 17, item 2): position_kf turns accelerations by R_WE, the
 // identity until the identifier's KINEMATIC_PARAMS of the cell's model place the earth frame, then
 // R_EW(x)ᵀ, from the next accelerometer sample on: update for update the library filter told the

@@ -1,6 +1,7 @@
 // rcal position-kf-sweep [--seeds N] [--cell NAME] [--broad] [--json FILE]: how
-// estimation::AccelerometerDrivenSettings() were chosen, and why position_kf keeps the paper's
-// filter by default (with --broad the real trials choose it), rerun. The simulated cells' own
+// estimation::AccelerometerDrivenSettings() were chosen, and why position_kf runs the bank of it
+// and the paper's model (estimation::PositionKfBank of DefaultBankModels, the last candidate) by
+// default, rerun. The simulated cells' own
 // streams (GRB3016 demo, 0.5 mm tracker; Panda, 30 µm) at two tracker rates (20, 100 Hz), with the
 // IMU at the marker and 14 cm off it (told to the filter), from a navigation-grade IMU (the cells'
 // own) and a consumer-grade one (10× gyro noise, 5× accelerometer noise, constant and walking
@@ -10,7 +11,8 @@
 // --broad, the BROAD trials in ../shared/data/broad are cases too (real IMU and optical truth; a 1
 // mm-per-axis tracker simulated from the truth at 20 Hz, N seeds; the lever arm estimated, as rcal
 // fuse does; scored at every row after 5 s). The grid: the accelerometer-driven model with a bias
-// state, σ × bias walk; the reference: the paper's filter (white jerk, no bias, σ 0.3 m/s²). The
+// state, σ × bias walk, with and without the adaptive noise, and the bank; the reference: the
+// paper's filter (white jerk, no bias, σ 0.3 m/s²). The
 // choice is the minimax of the RMSE ratio to the paper's over every case; each leave-one-group-out
 // fold (an IMU class, a cell or a rate left out) chooses on the rest and is scored on what it left
 // out. Not a timed benchmark: the figures are errors.
@@ -20,6 +22,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -30,6 +33,7 @@
 #include "rcal/cell/cell_sim_yaml.hpp"
 #include "rcal/estimation/orientation_kf.hpp"
 #include "rcal/estimation/position_kf.hpp"
+#include "rcal/estimation/position_kf_bank.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/io/csv_table.hpp"
@@ -65,7 +69,9 @@ struct Config {
   double accel_sigma = 0.3, bias_walk = 0.0;  // bias_walk 0: the paper's motion model, no bias
   double adapt_tau = 0.0;                     // the adaptive accelerometer noise's τ [s]; 0: off
   double relative_sigma = 0.0;                // the motion-proportional accelerometer noise [-]
+  bool bank = false;  // estimation::PositionKfBank of DefaultBankModels (the fields above unused)
   std::string Name() const {
+    if (bank) return "bank (paper + accelerometer-driven)";
     std::string n =
         bias_walk == 0.0
             ? "paper" + (accel_sigma == 0.3 ? std::string() : " sigma " + Fmt(accel_sigma, 2))
@@ -74,6 +80,15 @@ struct Config {
     return adapt_tau > 0.0 ? n + " adaptive " + Fmt(adapt_tau, 2) + " s" : n;
   }
 };
+
+// A candidate in the JSON: its settings (the bank's models are DefaultBankModels).
+json ConfigJson(const Config& c) {
+  return {{"bank", c.bank},
+          {"accel_sigma", c.accel_sigma},
+          {"accel_bias_walk", c.bias_walk},
+          {"accel_noise_adaptation_tau_s", c.adapt_tau},
+          {"accel_relative_sigma", c.relative_sigma}};
+}
 
 // The accelerometer-driven filter's σ × bias walk with a constant noise, the adaptive noise
 // (position_kf.hpp) on the neighbourhood of the earlier choice, and the paper's filter with it.
@@ -87,10 +102,22 @@ std::vector<Config> Grid() {
         for (double s : {0.03, 0.1, 0.3, 1.0}) g.push_back({s, w, tau, rel});
       for (double s : {0.3, 1.0}) g.push_back({s, 0.0, tau, rel});
     }
+  Config bank;
+  bank.bank = true;
+  g.push_back(bank);
   return g;
 }
 
-estimation::PositionKfSettings SettingsFor(const Config& c) {
+// The filter of c; `frame` sets what the case fixes (frames, σ, lever arm) on its settings.
+estimation::PositionKfBank FilterFor(
+    const Config& c, const std::function<void(estimation::PositionKfSettings*)>& frame) {
+  if (c.bank) {
+    estimation::PositionKfSettings base;
+    frame(&base);
+    estimation::PositionKfBankSettings bs;
+    bs.models = estimation::DefaultBankModels(base);
+    return estimation::PositionKfBank(bs);
+  }
   estimation::PositionKfSettings s;
   if (c.bias_walk > 0.0) {
     s = estimation::AccelerometerDrivenSettings();
@@ -99,7 +126,8 @@ estimation::PositionKfSettings SettingsFor(const Config& c) {
   s.accel_sigma = c.accel_sigma;
   s.accel_noise_adaptation_tau = c.adapt_tau;
   s.accel_relative_sigma = c.relative_sigma;
-  return s;
+  frame(&s);
+  return estimation::PositionKfBank(s);
 }
 
 // RMS of the summed squares (moving or every row; at the samples) and the mean NEES, per filter.
@@ -119,13 +147,12 @@ std::vector<Score> RunBroad(const Case& k, const std::vector<Config>& configs) {
   estimation::OrientationKfSettings os;
   os.earth = estimation::EarthFrame::kEnu;
   estimation::OrientationKf okf(os);
-  std::vector<estimation::PositionKf> kfs;
-  for (const Config& c : configs) {
-    estimation::PositionKfSettings ps = SettingsFor(c);
-    ps.earth = os.earth;
-    ps.estimate_lever_arm = true;
-    kfs.emplace_back(ps);
-  }
+  std::vector<estimation::PositionKfBank> kfs;
+  for (const Config& c : configs)
+    kfs.push_back(FilterFor(c, [&](estimation::PositionKfSettings* ps) {
+      ps->earth = os.earth;
+      ps->estimate_lever_arm = true;
+    }));
   std::mt19937_64 rng(k.seed);
   std::normal_distribution<double> N(0.0, 1e-3);
   std::vector<double> ss(configs.size()), ss_s(configs.size()), nees(configs.size());
@@ -188,14 +215,14 @@ std::vector<Score> RunCase(const Case& k, const std::vector<Config>& configs) {
   sim::SensorSim sensors(prog.truth, ss, k.seed);
   estimation::OrientationKf okf(os);
   const Eigen::Matrix3d R_IS = built.spec.imu->R_IS;
-  std::vector<estimation::PositionKf> kfs;
+  std::vector<estimation::PositionKfBank> kfs;
   for (const Config& c : configs) {
-    estimation::PositionKfSettings ps = SettingsFor(c);
-    ps.earth = os.earth;
-    ps.gravity = os.gravity;
-    ps.position_sigma = built.spec.position.sigma.maxCoeff();
-    if (k.lever) ps.lever_arm_B = prog.truth.imu_to_marker_I();
-    kfs.emplace_back(ps);
+    kfs.push_back(FilterFor(c, [&](estimation::PositionKfSettings* ps) {
+      ps->earth = os.earth;
+      ps->gravity = os.gravity;
+      ps->position_sigma = built.spec.position.sigma.maxCoeff();
+      if (k.lever) ps->lever_arm_B = prog.truth.imu_to_marker_I();
+    }));
     (void)kfs.back().SetWorldFromEarth(prog.truth.R_EW().transpose());
   }
   std::vector<double> ss_m(configs.size()), ss_s(configs.size()), nees(configs.size());
@@ -208,7 +235,7 @@ std::vector<Score> RunCase(const Case& k, const std::vector<Config>& configs) {
     const bool moving = f->truth.v_WM_W.norm() > 0.05;
     const bool scored = f->t >= 5.0;
     for (size_t i = 0; i < kfs.size(); ++i) {
-      estimation::PositionKf& kf = kfs[i];
+      estimation::PositionKfBank& kf = kfs[i];
       (void)kf.UpdateAccel(f->t, a, okf.R_EB(), g - okf.bias_B());
       if (f->position) (void)kf.UpdatePosition(f->t, f->position->p_M);
       if (!scored || !kf.initialized()) continue;
@@ -298,10 +325,17 @@ int Run(const Options& o) {
   };
   std::printf(
       "the accelerometer-driven filter's (minimax among its candidates): %s, worst ratio %s, "
-      "median %s on the simulated cases and %s on the real ones\n\n",
+      "median %s on the simulated cases and %s on the real ones\n",
       configs[chosen_driven].Name().c_str(), Fmt(worst(chosen_driven, all), 3).c_str(),
       Fmt(median_ratio(chosen_driven, false), 3).c_str(),
       Fmt(median_ratio(chosen_driven, true), 3).c_str());
+  // The bank of the two models (position_kf --motion-model bank), the last candidate.
+  std::printf(
+      "the bank of the paper's and the accelerometer-driven model: worst ratio %s, median %s on "
+      "the simulated cases and %s on the real ones\n\n",
+      Fmt(worst(configs.size() - 1, all), 3).c_str(),
+      Fmt(median_ratio(configs.size() - 1, false), 3).c_str(),
+      Fmt(median_ratio(configs.size() - 1, true), 3).c_str());
 
   // The table: medians over seeds and lever arms.
   std::vector<std::vector<std::string>> table;
@@ -378,41 +412,37 @@ int Run(const Options& o) {
       const size_t c = choose(train);
       folds_table.push_back(
           {key + " = " + held, configs[c].Name(), Fmt(worst(c, train), 3), Fmt(worst(c, test), 3)});
-      folds.push_back({{"left_out", key + " = " + held},
-                       {"accel_sigma", configs[c].accel_sigma},
-                       {"accel_bias_walk", configs[c].bias_walk},
-                       {"accel_noise_adaptation_tau_s", configs[c].adapt_tau},
-                       {"accel_relative_sigma", configs[c].relative_sigma},
-                       {"train_worst_ratio", worst(c, train)},
-                       {"held_out_worst_ratio", worst(c, test)}});
+      json fold = ConfigJson(configs[c]);
+      fold["left_out"] = key + " = " + held;
+      fold["train_worst_ratio"] = worst(c, train);
+      fold["held_out_worst_ratio"] = worst(c, test);
+      folds.push_back(fold);
     }
   }
   std::printf("%s", MdTable({"left out", "chosen on the rest", "worst ratio to the paper's, rest",
                              "worst ratio, left out"},
                             folds_table)
                         .c_str());
+  json chosen_simulated = ConfigJson(configs[chosen_sim]);
+  chosen_simulated["worst_ratio"] = simulated.empty() ? 1.0 : worst(chosen_sim, simulated);
+  json chosen_all = ConfigJson(configs[chosen]);
+  chosen_all["worst_ratio"] = worst(chosen, all);
+  json driven = ConfigJson(configs[chosen_driven]);
+  driven["worst_ratio"] = worst(chosen_driven, all);
+  driven["median_ratio_simulated"] = median_ratio(chosen_driven, false);
+  driven["median_ratio_real"] = median_ratio(chosen_driven, true);
+  // The bank (the last candidate): its worst and median ratios, as the driven filter's.
+  const size_t bank = configs.size() - 1;
+  json bank_json = ConfigJson(configs[bank]);
+  bank_json["worst_ratio"] = worst(bank, all);
+  bank_json["median_ratio_simulated"] = median_ratio(bank, false);
+  bank_json["median_ratio_real"] = median_ratio(bank, true);
   const json j = {{"seeds", o.seeds},
                   {"cases", cases.size()},
-                  {"chosen_simulated",
-                   {{"accel_sigma", configs[chosen_sim].accel_sigma},
-                    {"accel_bias_walk", configs[chosen_sim].bias_walk},
-                    {"accel_noise_adaptation_tau_s", configs[chosen_sim].adapt_tau},
-                    {"accel_relative_sigma", configs[chosen_sim].relative_sigma},
-                    {"worst_ratio", simulated.empty() ? 1.0 : worst(chosen_sim, simulated)}}},
-                  {"chosen",
-                   {{"accel_sigma", configs[chosen].accel_sigma},
-                    {"accel_bias_walk", configs[chosen].bias_walk},
-                    {"accel_noise_adaptation_tau_s", configs[chosen].adapt_tau},
-                    {"accel_relative_sigma", configs[chosen].relative_sigma},
-                    {"worst_ratio", worst(chosen, all)}}},
-                  {"chosen_accelerometer_driven",
-                   {{"accel_sigma", configs[chosen_driven].accel_sigma},
-                    {"accel_bias_walk", configs[chosen_driven].bias_walk},
-                    {"accel_noise_adaptation_tau_s", configs[chosen_driven].adapt_tau},
-                    {"accel_relative_sigma", configs[chosen_driven].relative_sigma},
-                    {"worst_ratio", worst(chosen_driven, all)},
-                    {"median_ratio_simulated", median_ratio(chosen_driven, false)},
-                    {"median_ratio_real", median_ratio(chosen_driven, true)}}},
+                  {"chosen_simulated", chosen_simulated},
+                  {"chosen", chosen_all},
+                  {"chosen_accelerometer_driven", driven},
+                  {"bank", bank_json},
                   {"groups", groups},
                   {"folds", folds}};
   if (!o.json_path.empty()) io::AtomicWriteFile(o.json_path, j.dump(2));
@@ -421,7 +451,8 @@ int Run(const Options& o) {
 
 const RegisterCommand kPositionKfSweep(
     "position-kf-sweep",
-    "The accelerometer-driven position KF's σ and bias walk against the paper's filter: "
+    "The position KF's motion models (accelerometer-driven σ, bias walk, adaptive noise; the "
+    "bank of two) against the paper's filter: "
     "simulated cells and BROAD, minimax and leave-one-group-out",
     [](CLI::App& sub) -> std::function<int()> {
       auto o = std::make_shared<Options>();

@@ -94,6 +94,14 @@ Eigen::Matrix3d PositionKf::position_covariance() const {
   return C;
 }
 
+Eigen::Matrix<double, 6, 6> PositionKf::position_velocity_covariance() const {
+  const int idx[6] = {IP(0), IP(1), IP(2), IV(0), IV(1), IV(2)};
+  Eigen::Matrix<double, 6, 6> C;
+  for (int r = 0; r < 6; ++r)
+    for (int c = 0; c < 6; ++c) C(r, c) = P_(idx[r], idx[c]);
+  return C;
+}
+
 Eigen::Vector3d PositionKf::WorldAcceleration(const Eigen::Vector3d& f_B,
                                               const Eigen::Matrix3d& R_EB) const {
   // Gravity leaves in E, before the turn into W (header comment).

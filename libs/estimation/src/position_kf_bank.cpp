@@ -34,6 +34,14 @@ PositionKfBank::PositionKfBank(const PositionKfBankSettings& settings) : setting
   mu_.assign(filters_.size(), 1.0 / static_cast<double>(filters_.size()));
 }
 
+void PositionKfBank::Reset() {
+  for (PositionKf& f : filters_) f.Reset();
+  evidence_.assign(filters_.size(), 0.0);
+  mu_.assign(filters_.size(), 1.0 / static_cast<double>(filters_.size()));
+  has_last_t_ = false;
+  last_t_ = 0.0;
+}
+
 Status PositionKfBank::UpdateAccel(double t, const Eigen::Vector3d& f_B,
                                    const Eigen::Matrix3d& R_EB, const Eigen::Vector3d& omega_B) {
   Status first = Status::Ok();
@@ -92,14 +100,33 @@ Eigen::Vector3d PositionKfBank::p_WM_W() const {
   return p;
 }
 
+Eigen::Vector3d PositionKfBank::v_W() const {
+  Eigen::Vector3d v = Eigen::Vector3d::Zero();
+  for (size_t i = 0; i < filters_.size(); ++i) v += mu_[i] * filters_[i].v_W();
+  return v;
+}
+
 Eigen::Matrix3d PositionKfBank::position_covariance() const {
-  const Eigen::Vector3d p = p_WM_W();
-  Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
+  return position_velocity_covariance().topLeftCorner<3, 3>();
+}
+
+Eigen::Matrix<double, 6, 6> PositionKfBank::position_velocity_covariance() const {
+  Eigen::Matrix<double, 6, 1> mean;
+  mean << p_WM_W(), v_W();
+  Eigen::Matrix<double, 6, 6> C = Eigen::Matrix<double, 6, 6>::Zero();
   for (size_t i = 0; i < filters_.size(); ++i) {
-    const Eigen::Vector3d d = filters_[i].p_WM_W() - p;
-    C += mu_[i] * (filters_[i].position_covariance() + d * d.transpose());
+    Eigen::Matrix<double, 6, 1> d;
+    d << filters_[i].p_WM_W(), filters_[i].v_W();
+    d -= mean;
+    C += mu_[i] * (filters_[i].position_velocity_covariance() + d * d.transpose());
   }
   return C;
+}
+
+std::int64_t PositionKfBank::resets() const {
+  std::int64_t n = 0;
+  for (const PositionKf& f : filters_) n += f.counters().resets;
+  return n;
 }
 
 }  // namespace rcal::estimation

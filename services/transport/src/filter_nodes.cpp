@@ -138,16 +138,27 @@ std::optional<Eigen::Matrix3d> RotationFromMessage(const orientation_estimate_t&
   return Eigen::Quaterniond(q(0), q(1), q(2), q(3)).toRotationMatrix();
 }
 
-tool_position_estimate_t ToToolPositionEstimate(const estimation::PositionKf& kf, int64_t utime) {
+namespace {
+// F: a PositionKf or a PositionKfBank (the same accessors).
+template <typename F>
+tool_position_estimate_t ToolPositionEstimate(const F& kf, int64_t utime) {
   tool_position_estimate_t m;
   m.utime = utime;
   Put3(kf.p_WM_W(), m.p);
   Put3(kf.v_W(), m.v);
-  // State order per axis [p, V, A] (x = [p_x V_x A_x p_y ...]); [p; v] indices:
-  const int idx[6] = {0, 3, 6, 1, 4, 7};
-  for (int r = 0; r < 6; ++r)
-    for (int c = 0; c < 6; ++c) m.covariance[6 * r + c] = kf.P()(idx[r], idx[c]);
+  Eigen::Map<Eigen::Matrix<double, 6, 6, Eigen::RowMajor>>(m.covariance) =
+      kf.position_velocity_covariance();
   return m;
+}
+}  // namespace
+
+tool_position_estimate_t ToToolPositionEstimate(const estimation::PositionKf& kf, int64_t utime) {
+  return ToolPositionEstimate(kf, utime);
+}
+
+tool_position_estimate_t ToToolPositionEstimate(const estimation::PositionKfBank& kf,
+                                                int64_t utime) {
+  return ToolPositionEstimate(kf, utime);
 }
 
 // ---- orientation node -------------------------------------------------------------------------
@@ -229,7 +240,7 @@ int64_t PositionKfNode::ImuWatermark() const {
   return stopped ? *last_imu_ - o_.orientation_wait_us : INT64_MIN;
 }
 
-PositionKfNode::PositionKfNode(Transport& t, const estimation::PositionKfSettings& settings,
+PositionKfNode::PositionKfNode(Transport& t, const estimation::PositionKfBankSettings& settings,
                                Options options)
     : t_(t),
       o_(std::move(options)),
@@ -320,7 +331,7 @@ void PositionKfNode::StartOver() {
 }
 
 void PositionKfNode::FilterFailed(const std::string& reason, int64_t resets_before) {
-  if (kf_.counters().resets != resets_before) health_.FilterReset(reason);
+  if (kf_.resets() != resets_before) health_.FilterReset(reason);
   Reject(reason);
 }
 
@@ -425,7 +436,7 @@ void PositionKfNode::Flush(int64_t watermark) {
                std::to_string(*last_applied_));
         continue;
       }
-      const int64_t resets = kf_.counters().resets;
+      const int64_t resets = kf_.resets();
       const auto& [imu, attitude] = sample;
       // ω_B from the gyro less the orientation filter's bias: the lever arm's rotational terms
       // (nothing when the lever arm is zero and not estimated).
@@ -444,7 +455,7 @@ void PositionKfNode::Flush(int64_t watermark) {
                " came after the filter reached " + std::to_string(*last_applied_));
         continue;
       }
-      const int64_t resets = kf_.counters().resets;
+      const int64_t resets = kf_.resets();
       const auto status = kf_.UpdatePosition(SensorSeconds(utime), p);
       if (!status) {
         FilterFailed("position_sample: " + status.error(), resets);

@@ -212,6 +212,8 @@ class PositionKf {
   Eigen::Matrix3d accel_bias_covariance() const { return P_.block<3, 3>(kBias, kBias); }
   /// Covariance of p_WM_W [m²].
   Eigen::Matrix3d position_covariance() const;
+  /// Covariance of [p_WM_W; v_W], 6×6 [m², m²/s, m²/s²] (TOOL_POSITION's).
+  Eigen::Matrix<double, 6, 6> position_velocity_covariance() const;
   double last_position_nis() const { return last_position_nis_; }
   /// ln N(y; 0, S) of the last position sample's innovation y under its predicted covariance S,
   /// gated or not (0 for the sample that initialised the filter): how well this filter predicted

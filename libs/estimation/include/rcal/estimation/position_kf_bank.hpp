@@ -18,6 +18,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <cstdint>
 #include <vector>
 
 #include "rcal/estimation/position_kf.hpp"
@@ -41,7 +42,14 @@ std::vector<PositionKfSettings> DefaultBankModels(const PositionKfSettings& base
 
 class PositionKfBank {
  public:
+  /// Throws std::invalid_argument on settings that cannot weigh (evidence_tau not a positive
+  /// time, min_probability outside [0, 1)).
   explicit PositionKfBank(const PositionKfBankSettings& settings);
+  /// A bank of one filter: the filter itself (its weight is 1, its estimates are the bank's).
+  explicit PositionKfBank(const PositionKfSettings& settings)
+      : PositionKfBank(PositionKfBankSettings{{settings}}) {}
+  /// Every filter's PositionKf::Reset(), and the evidence forgotten.
+  void Reset();
   /// As PositionKf::UpdateAccel, for every filter. Returns the first filter's refusal, if any.
   Status UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen::Matrix3d& R_EB,
                      const Eigen::Vector3d& omega_B = Eigen::Vector3d::Zero());
@@ -56,6 +64,12 @@ class PositionKfBank {
   /// The mixture's marker position p_WM_W [m] and its covariance [m²].
   Eigen::Vector3d p_WM_W() const;
   Eigen::Matrix3d position_covariance() const;
+  /// The mixture's velocity v_W [m/s] and the covariance of [p_WM_W; v_W], 6×6 [m², m²/s,
+  /// m²/s²] (Σ μ_i (P_i + d_i d_iᵀ), d_i the filter's [p; v] less the mixture's).
+  Eigen::Vector3d v_W() const;
+  Eigen::Matrix<double, 6, 6> position_velocity_covariance() const;
+  /// The filters' PositionKf::Counters::resets summed (a state that went non-finite).
+  std::int64_t resets() const;
   /// The models' weights μ_i [-] (sum 1), in the order of the settings' models.
   const std::vector<double>& probabilities() const { return mu_; }
   const std::vector<PositionKf>& filters() const { return filters_; }

@@ -25,6 +25,7 @@
 
 #include "rcal/estimation/orientation_kf.hpp"
 #include "rcal/estimation/position_kf.hpp"
+#include "rcal/estimation/position_kf_bank.hpp"
 #include "rcal/estimation/time_gate.hpp"
 #include "rcal/imu_sample_t.hpp"
 #include "rcal/kinematic_params_t.hpp"
@@ -84,8 +85,11 @@ orientation_estimate_t ToOrientationEstimate(const estimation::OrientationKf& kf
 std::optional<Eigen::Matrix3d> RotationFromMessage(const orientation_estimate_t& msg,
                                                    std::string* error);
 
-/// The position KF's current estimate: p, v and the 6×6 covariance of [p; v].
+/// The position KF's current estimate: p, v and the 6×6 covariance of [p; v]; a bank's is the
+/// mixture's.
 tool_position_estimate_t ToToolPositionEstimate(const estimation::PositionKf& kf, int64_t utime);
+tool_position_estimate_t ToToolPositionEstimate(const estimation::PositionKfBank& kf,
+                                                int64_t utime);
 
 /// Sensor time [s] of a utime [µs]: the one conversion every filter node and offline reference
 /// uses, so that both feed the filter bit-identical times.
@@ -192,7 +196,11 @@ class PositionKfNode {
     /// (counted in ignored_params()). Null: R_WE stays world_from_earth.
     std::shared_ptr<const kinematics::KinematicModel> model;
   };
-  PositionKfNode(Transport& t, const estimation::PositionKfSettings& settings, Options options);
+  /// A bank of motion models (estimation::PositionKfBank): TOOL_POSITION is their mixture.
+  PositionKfNode(Transport& t, const estimation::PositionKfBankSettings& settings, Options options);
+  /// One filter (a bank of one: its estimates unchanged).
+  PositionKfNode(Transport& t, const estimation::PositionKfSettings& settings, Options options)
+      : PositionKfNode(t, estimation::PositionKfBankSettings{{settings}}, std::move(options)) {}
   PositionKfNode(Transport& t, const estimation::PositionKfSettings& settings)
       : PositionKfNode(t, settings, Options{}) {}
 
@@ -207,7 +215,10 @@ class PositionKfNode {
   void OnKinematicParams(const kinematic_params_t& msg);
   void OnUndecodable(const std::string& reason);
 
-  const estimation::PositionKf& filter() const { return kf_; }
+  /// The models' filters and their weights.
+  const estimation::PositionKfBank& bank() const { return kf_; }
+  /// The first model's filter (the only one when built from one PositionKfSettings).
+  const estimation::PositionKf& filter() const { return kf_.filters().front(); }
   /// KINEMATIC_PARAMS R_WE was taken from, and those of another model (ignored).
   int64_t world_from_earth_updates() const { return world_from_earth_updates_; }
   int64_t ignored_params() const { return ignored_params_; }
@@ -231,7 +242,7 @@ class PositionKfNode {
   void FilterFailed(const std::string& reason, int64_t resets_before);
   Transport& t_;
   Options o_;
-  estimation::PositionKf kf_;
+  estimation::PositionKfBank kf_;
   Health health_;
   std::optional<int64_t> last_imu_, last_orientation_, last_position_, last_applied_;
   int64_t latest_ = 0;
