@@ -12,6 +12,8 @@
 //   temperature  1 Hz on the controller's (joints') clock, when the cell names a topic: the arm
 //             warming with time constant --sim-warmup as sensor_acquisition's controller reports
 //             it (cell::SimArmConditions: the same readings for the same seed)
+// --sim-effect thermal=κ (or thermal:time=ρ, as sensor_acquisition takes it) makes the arm grow
+// with its true temperature (or time): every marker the tracker sees, and the IMU's motion.
 // every stamp but the joints' with Gaussian --jitter. Joint names are listed in a shuffled order
 // (--shuffle-seed; 0: chain order) with one extra joint of a gripper a driver might add.
 // --imu-restart-at T: at sim time T the IMU driver restarts, its clock starting again from
@@ -105,6 +107,11 @@ int main(int argc, char** argv) {
                  "time constant [s] of the arm's warm-up (+12 K) the temperature driver reports")
       ->check(CLI::Range(1.0, 1e6))
       ->capture_default_str();
+  std::vector<std::string> sim_effects;
+  app.add_option("--sim-effect", sim_effects,
+                 "a non-geometric effect the simulated arm has, as sensor_acquisition --level "
+                 "sensors takes it: thermal growth with its temperature, thermal=KAPPA [1/K], or "
+                 "with time, thermal:time=RHO [1/s] (repeatable)");
   app.add_option("--dds-domain", domain, "DDS domain (default: the cell's ros2.domain)");
   app.add_flag("--linger", linger, "stay up after the programme until SIGINT/SIGTERM");
   CLI11_PARSE(app, argc, argv);
@@ -122,11 +129,23 @@ int main(int argc, char** argv) {
     if (domain < 0) domain = ros.domain;
 
     // The programme of sensor_acquisition --source sim --level sensors.
-    const cell::SimProgramme programme =
-        cell::MakeSimProgramme(built, sim_spec, seed, poses, test_poses);
+    cell::SimProgramme programme = cell::MakeSimProgramme(built, sim_spec, seed, poses, test_poses);
     const cell::Cell& cell = programme.cell;
     const auto& model = cell.model;
     const sim::ToolMotionTruth& truth = programme.truth;
+    // The tracker per marker: its own truth (the marker's slot) on the programme's motion.
+    std::vector<sim::ToolMotionTruth> marker_truth;
+    for (const auto& p : ros.positions)
+      marker_truth.emplace_back(
+          model.ForMarker(model.markers().empty() ? 0 : model.MarkerSlot(p.marker)), cell.x_true,
+          truth.trajectory());
+    // The controller's conditions (the temperature driver below), and with --sim-effect the arm
+    // growing with them: the IMU's truth and every marker's.
+    const cell::SimArmConditions conditions(warmup_s, start_utime, seed);
+    std::vector<sim::ToolMotionTruth*> grown = {&programme.truth};
+    for (sim::ToolMotionTruth& m : marker_truth) grown.push_back(&m);
+    for (const std::string& line : conditions.ApplyEffects(sim_effects, grown))
+      spdlog::info("{}", line);
     const sim::SensorSimSettings ss = cell::SimSensorSettings(built, sim_spec);
     sim::SensorSim sensors(truth, ss, seed);
     const double duration = truth.trajectory().duration();
@@ -214,12 +233,6 @@ int main(int argc, char** argv) {
     }
     std::normal_distribution<double> pos_noise(0.0, built.spec.position.sigma.maxCoeff());
     const int64_t n_pos = static_cast<int64_t>(std::floor(duration * position_rate));
-    // The tracker per marker: its own truth (the marker's slot), sampled at the tracker's rate.
-    std::vector<sim::ToolMotionTruth> marker_truth;
-    for (const auto& p : ros.positions)
-      marker_truth.emplace_back(
-          model.ForMarker(model.markers().empty() ? 0 : model.MarkerSlot(p.marker)), cell.x_true,
-          truth.trajectory());
     for (int64_t k = 0; k <= n_pos; ++k) {
       const double t = static_cast<double>(k) / position_rate;
       for (size_t i = 0; i < ros.positions.size(); ++i) {
@@ -243,7 +256,6 @@ int main(int argc, char** argv) {
       }
     }
     // The controller's temperature, once per second of its clock (no jitter: the joints' clock).
-    const cell::SimArmConditions conditions(warmup_s, start_utime, seed);
     const double variance = std::pow(conditions.session().temperature_noise_c, 2);
     for (int64_t k = 0; temperature_w && static_cast<double>(k) <= duration; ++k) {
       const double t = static_cast<double>(k);

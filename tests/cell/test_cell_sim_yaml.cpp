@@ -15,7 +15,9 @@
 #include "../io/settings_eq.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/robot_yaml.hpp"
+#include "rcal/sim/effects.hpp"
 #include "rcal/sim/pose_sim.hpp"
+#include "rcal/sim/sensor_sim.hpp"
 
 namespace rcal::cell {
 namespace {
@@ -145,6 +147,55 @@ TEST(CellSimYaml, TheImuToMarkerLeverArmReachesTheProgrammesTruth) {
   EXPECT_EQ(sim.imu_to_marker_I, Eigen::Vector3d(0.1, -0.05, 0.08));
   EXPECT_EQ(MakeSimProgramme(d.cell, sim, 1, 2, 0).truth.imu_to_marker_I(),
             Eigen::Vector3d(0.1, -0.05, 0.08));
+}
+
+// --sim-effect on a tracker per marker (ros2_sim_drivers): the UR10's two markers, each its own
+// truth on the programme's motion, grow with the arm as it warms. At any time, each marker's truth
+// is where the extended model of the arm (sim::MakeEffectTruth on the arm, then its marker view)
+// puts that marker at the true conditions, and the growth shows (the ungrown truth is > 0.1 mm
+// off by the end); the IMU's truth (the programme's) grows too.
+TEST(SimArmConditions, EveryMarkersTruthGrowsWithTheArm) {
+  Loaded d = Load("ur10");
+  SimProgramme programme = MakeSimProgramme(d.cell, d.sim, 1, 4, 0);
+  const kinematics::KinematicModel& model = programme.cell.model;
+  ASSERT_EQ(model.markers().size(), 2u);
+  std::vector<sim::ToolMotionTruth> markers, ungrown;
+  for (const kinematics::Marker& m : model.markers())
+    markers.emplace_back(model.ForMarker(model.MarkerSlot(m.id)), programme.cell.x_true,
+                         programme.truth.trajectory());
+  ungrown = markers;
+  const sim::ToolMotionTruth programme_ungrown = programme.truth;
+  const SimArmConditions conditions(100.0, 0, 1);
+  std::vector<sim::ToolMotionTruth*> truths = {&programme.truth};
+  for (sim::ToolMotionTruth& m : markers) truths.push_back(&m);
+  const std::vector<std::string> lines = conditions.ApplyEffects({"thermal=5e-5"}, truths);
+  ASSERT_EQ(lines.size(), 1u);
+  const sim::EffectTruth arm =
+      sim::MakeEffectTruth(model, {sim::ParseEffectSpec("thermal=5e-5", model)});
+  const double end = programme.truth.trajectory().duration();
+  double growth = 0;
+  for (double t = 0.0; t <= end; t += end / 37) {
+    const kinematics::EffectContext c = conditions.At(t);
+    for (size_t i = 0; i < markers.size(); ++i) {
+      const sim::ToolState s = markers[i].At(t);
+      const int slot = model.MarkerSlot(model.markers()[i].id);
+      const Eigen::Vector3d expected =
+          arm.model.ForMarker(slot).Forward(s.q, c, programme.cell.x_true, arm.e).p_WM_W;
+      EXPECT_LT((s.p_WM_W - expected).norm(), 1e-12) << "marker " << i << " at " << t << " s";
+      growth = std::max(growth, (s.p_WM_W - ungrown[i].At(t).p_WM_W).norm());
+    }
+    EXPECT_LT((programme.truth.At(t).p_WM_W -
+               arm.model.Forward(programme.truth.At(t).q, c, programme.cell.x_true, arm.e).p_WM_W)
+                  .norm(),
+              1e-12);
+  }
+  EXPECT_GT(growth, 1e-4);
+  EXPECT_GT((programme.truth.At(end).p_WM_W - programme_ungrown.At(end).p_WM_W).norm(), 1e-4);
+  // A joint effect is refused at sensor level, naming why.
+  EXPECT_NE(ErrorOf([&] {
+              conditions.ApplyEffects({"joint_compliance:j2=2e-6"}, truths);
+            }).find("only thermal growth"),
+            std::string::npos);
 }
 
 // The panda's IMU has turned axes, the UR10 none: the simulator's mounting and the run's

@@ -336,10 +336,16 @@ double SimArmConditions::Reported(double t_sim, int64_t tick) const {
 
 std::vector<std::string> SimArmConditions::ApplyEffects(const std::vector<std::string>& texts,
                                                         SimProgramme& programme) const {
+  return ApplyEffects(texts, std::vector<sim::ToolMotionTruth*>{&programme.truth});
+}
+
+std::vector<std::string> SimArmConditions::ApplyEffects(
+    const std::vector<std::string>& texts, const std::vector<sim::ToolMotionTruth*>& truths) const {
+  if (truths.empty()) throw std::invalid_argument("SimArmConditions::ApplyEffects: no truth");
   std::vector<sim::TruthEffect> effects;
   std::vector<std::string> lines;
   for (const std::string& text : texts) {
-    effects.push_back(sim::ParseEffectSpec(text, programme.cell.model));
+    effects.push_back(sim::ParseEffectSpec(text, truths.front()->model()));
     const kinematics::Effect& e = effects.back().effect;
     if (e.cause != kinematics::EffectCause::kThermal)
       throw std::runtime_error("--sim-effect " + text +
@@ -352,10 +358,13 @@ std::vector<std::string> SimArmConditions::ApplyEffects(const std::vector<std::s
                     " (" + text + "), warming with τ " +
                     std::to_string(session_.warmup_time_constant_s) + " s");
   }
-  if (!effects.empty()) {
-    sim::EffectTruth et = sim::MakeEffectTruth(programme.cell.model, effects);
-    programme.truth.set_effects(std::move(et.model), std::move(et.e),
-                                [c = *this](double t) { return c.At(t); });
+  if (effects.empty()) return lines;
+  for (sim::ToolMotionTruth* truth : truths) {
+    // Each marker's own chain with the arm's effects (their parameters are the arm's, not the
+    // marker's).
+    sim::EffectTruth et = sim::MakeEffectTruth(truth->model(), effects);
+    truth->set_effects(std::move(et.model), std::move(et.e),
+                       [c = *this](double t) { return c.At(t); });
   }
   return lines;
 }

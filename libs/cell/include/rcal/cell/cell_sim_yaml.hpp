@@ -159,6 +159,10 @@ class SimArmConditions {
   /// for the log.
   std::vector<std::string> ApplyEffects(const std::vector<std::string>& texts,
                                         SimProgramme& programme) const;
+  /// The same effects on each of `truths` (non-null), each the motion of its own marker (a
+  /// tracker per marker: ros2_sim_drivers), all of one arm: every marker grows with it.
+  std::vector<std::string> ApplyEffects(const std::vector<std::string>& texts,
+                                        const std::vector<sim::ToolMotionTruth*>& truths) const;
   const sim::SessionSettings& session() const { return session_; }
 
  private:
