@@ -3,8 +3,9 @@
 // magnitudes, stamps anywhere (nanosec ≥ 1e9, negative, jumping back and forth), any frame ids —
 // goes through ros2_input's core exactly as the process feeds it (Ros2Input: the ROS 2 → rcal
 // conversions, the time gates, the magnetometer pairing, the reorder buffer, every source's
-// clock-offset estimator and the arm's temperature). A crash, a sanitizer report, an exception, an
-// event leaving out of time order or an ARM_CONDITIONS report its adapter refuses is a finding.
+// clock-offset estimator and the arm's temperature and payload). A crash, a sanitizer report, an
+// exception, an event leaving out of time order or an ARM_CONDITIONS report its adapter refuses is
+// a finding.
 //
 // Input: a sequence of records, each one opcode byte (which driver topic) then the bytes its
 // fields are read from; the stream ends when the bytes do.
@@ -14,6 +15,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <limits>
+#include <optional>
 #include <string>
 
 #include "rcal/dds/ros2_convert.hpp"
@@ -105,9 +107,18 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   };
   const auto& names = demo.cell.ros2_joint_names;
   for (int records = 0; !b.empty() && records < 4000; ++records) {
-    // Opcodes 250-255: the arm's temperature (the other bytes keep the meaning they had).
+    // Opcodes 250-252: the arm's temperature, 253-255: its payload (the other bytes keep the
+    // meaning they had).
     const std::uint8_t code = b.U8();
-    const std::uint8_t op = code >= 250 ? 5 : code % 5;
+    const std::uint8_t op = code >= 253 ? 6 : code >= 250 ? 5 : code % 5;
+    // What goes out on ARM_CONDITIONS passes its own adapter's check.
+    auto check = [](const std::optional<transport::ArmConditions>& c) {
+      std::string error;
+      if (c && !transport::ArmConditionsFromMessage(transport::ToArmConditions(*c), &error)) {
+        std::fprintf(stderr, "published a report its adapter refuses: %s\n", error.c_str());
+        std::abort();
+      }
+    };
     if (op == 5) {
       dds::Sample<dds::Temperature> s;
       auto& m = s.get();
@@ -115,14 +126,17 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       Frame(b, m.header, "arm");
       m.temperature = b.Value(300.0);
       m.variance = b.Value(1.0);
-      if (const auto c = in.OnTemperature(m)) {
-        // What goes out on ARM_CONDITIONS passes its own adapter's check.
-        std::string error;
-        if (!transport::ArmConditionsFromMessage(transport::ToArmConditions(*c), &error)) {
-          std::fprintf(stderr, "published a report its adapter refuses: %s\n", error.c_str());
-          std::abort();
-        }
-      }
+      check(in.OnTemperature(m));
+    } else if (op == 6) {
+      dds::Sample<dds::InertiaStamped> s;
+      auto& m = s.get();
+      m.header.stamp = Stamp(b, clock_us);
+      Frame(b, m.header, "tool0");
+      m.inertia.m = b.Value(2000.0);
+      m.inertia.com.x = b.Value(1.0);
+      m.inertia.ixx = b.Value(1.0);
+      m.inertia.izz = b.Value(1.0);
+      check(in.OnPayload(m));
     } else if (op == 0) {
       dds::Sample<dds::JointState> s;
       auto& m = s.get();

@@ -214,6 +214,27 @@ std::optional<transport::ArmConditions> FromRos(const Temperature& m, const std:
   return c;
 }
 
+std::optional<transport::ArmConditions> FromRos(const InertiaStamped& m, const std::string& topic,
+                                                std::string* error) {
+  const auto utime = Stamp(m.header, topic, error);
+  if (!utime) return std::nullopt;
+  const geometry_msgs_msg_dds__Inertia_& i = m.inertia;
+  if (!CheckValue(
+          i.m, [&] { return topic + ".inertia.m"; }, error))
+    return std::nullopt;
+  if (const std::string why = transport::PayloadProblem(i.m); !why.empty())
+    return Fail(error, topic + ".inertia.m: " + why + " (ROS wants kg)"), std::nullopt;
+  const double rest[] = {i.com.x, i.com.y, i.com.z, i.ixx, i.ixy, i.ixz, i.iyy, i.iyz, i.izz};
+  for (double v : rest)
+    if (!std::isfinite(v))
+      return Fail(error, topic + ".inertia: the centre of mass or the tensor is not finite"),
+             std::nullopt;
+  transport::ArmConditions c;
+  c.utime = *utime;
+  c.payload_kg = i.m;
+  return c;
+}
+
 std::optional<transport::PositionSample> FromRos(const PoseStamped& m, int32_t marker_id,
                                                  const Eigen::Matrix3d& covariance,
                                                  const transport::SensorRanges& ranges,
@@ -294,6 +315,17 @@ std::optional<Sample<Temperature>> ToRos(const transport::ArmConditions& c, doub
   if (!FillHeader(d.header, c.utime, frame_id, "temperature.utime", error)) return std::nullopt;
   d.temperature = c.temperature_c;
   d.variance = variance;
+  return out;
+}
+
+std::optional<Sample<InertiaStamped>> ToRosPayload(const transport::ArmConditions& c,
+                                                   const char* frame_id, std::string* error) {
+  if (!std::isfinite(c.payload_kg))
+    return Fail(error, "payload: payload_kg not finite"), std::nullopt;
+  Sample<InertiaStamped> out;
+  auto& d = out.get();
+  if (!FillHeader(d.header, c.utime, frame_id, "payload.utime", error)) return std::nullopt;
+  d.inertia.m = c.payload_kg;
   return out;
 }
 

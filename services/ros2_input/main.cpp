@@ -10,10 +10,12 @@
 //   rt<mag>           sensor_msgs::msg::dds_::MagneticField_   (optional)
 //   rt<position i>    geometry_msgs::msg::dds_::PointStamped_ or PoseStamped_, one per marker
 //   rt<temperature>   sensor_msgs::msg::dds_::Temperature_ (optional: the arm's temperature)
+//   rt<payload>       geometry_msgs::msg::dds_::InertiaStamped_ (optional: what the arm carries)
 // Publishes on LCM (the cell's channels): JOINTS, IMU, POSITION as sensor_acquisition does, so the
-// rest of the pipeline is unchanged; ARM_CONDITIONS for each temperature; CLOCK_OFFSET (every
-// source's offset, σ and state) at 1 Hz of the joints' time and whenever a state changes; HEALTH at
-// 1 Hz, with DDS samples lost or rejected by the readers counted as dropped.
+// rest of the pipeline is unchanged; ARM_CONDITIONS for each temperature or payload report;
+// CLOCK_OFFSET (every source's offset, σ and state) at 1 Hz of the joints' time and whenever a
+// state changes; HEALTH at 1 Hz, with DDS samples lost or rejected by the readers counted as
+// dropped.
 //
 // Cyclone binds to loopback only (config/cyclonedds-loopback.xml) unless CYCLONEDDS_URI is set.
 // Samples whose CDR Cyclone cannot deserialise never reach rcal (Cyclone drops them); everything
@@ -199,18 +201,24 @@ int main(int argc, char** argv) {
     if (!settings->imu_topic.empty())
       readers.push_back(MakeReader<dds::Imu>(participant.get(), settings->imu_topic,
                                              [&](const dds::Imu& m) { input.OnImu(m); }));
+    // The arm's conditions (temperature, payload): published at once, one stream.
+    auto conditions = [&](const std::optional<transport::ArmConditions>& c) {
+      if (!c) return;
+      if (t.Publish(ch.arm_conditions, transport::ToArmConditions(*c))) {
+        health.Published();
+        ++published;
+      } else {
+        health.Error("LCM publish failed");
+      }
+    };
     if (!settings->temperature_topic.empty())
       readers.push_back(MakeReader<dds::Temperature>(
-          participant.get(), settings->temperature_topic, [&](const dds::Temperature& m) {
-            if (const auto c = input.OnTemperature(m)) {
-              if (t.Publish(ch.arm_conditions, transport::ToArmConditions(*c))) {
-                health.Published();
-                ++published;
-              } else {
-                health.Error("LCM publish failed");
-              }
-            }
-          }));
+          participant.get(), settings->temperature_topic,
+          [&](const dds::Temperature& m) { conditions(input.OnTemperature(m)); }));
+    if (!settings->payload_topic.empty())
+      readers.push_back(MakeReader<dds::InertiaStamped>(
+          participant.get(), settings->payload_topic,
+          [&](const dds::InertiaStamped& m) { conditions(input.OnPayload(m)); }));
     for (size_t i = 0; i < settings->positions.size(); ++i) {
       const auto& p = settings->positions[i];
       if (p.pose)
@@ -270,10 +278,11 @@ int main(int argc, char** argv) {
                    c.source, static_cast<int>(c.state), 1e3 * c.offset, 1e3 * c.sigma, c.resets);
     spdlog::info(
         "stopped: {} samples published, {} late (dropped), {} IMU samples with a magnetometer "
-        "reading, {} temperature reports; DDS delivery latency median {:.1f} ms, 99 % {:.1f} ms "
-        "over {} samples (+ the reorder delay {:.0f} ms before publishing)",
-        published, input.late(), input.mag_paired(), input.temperatures(), latency.QuantileMs(0.5),
-        latency.QuantileMs(0.99), latency.count(), 1e3 * settings->reorder_delay);
+        "reading, {} temperature and {} payload reports; DDS delivery latency median {:.1f} ms, "
+        "99 % {:.1f} ms over {} samples (+ the reorder delay {:.0f} ms before publishing)",
+        published, input.late(), input.mag_paired(), input.temperatures(), input.payloads(),
+        latency.QuantileMs(0.5), latency.QuantileMs(0.99), latency.count(),
+        1e3 * settings->reorder_delay);
     return 0;
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());

@@ -157,6 +157,7 @@ Ros2InputSettings FromCell(const io::BuiltCell& cell) {
   s.imu_topic = r.imu;
   s.mag_topic = r.magnetic_field;
   s.temperature_topic = r.temperature;
+  s.payload_topic = r.payload;
   s.imu_frame = r.imu_frame;
   for (const io::Ros2PositionTopic& p : r.positions)
     s.positions.push_back({p.topic, p.marker, p.pose, p.frame_id});
@@ -187,6 +188,8 @@ Ros2Input::Ros2Input(const Ros2InputSettings& settings, const kinematics::Kinema
       temperature_{settings.temperature_topic,
                    estimation::TimeGate(estimation::ArmConditionsGateSettings(
                        settings.gate, settings.temperature_horizon))},
+      payload_{settings.payload_topic, estimation::TimeGate(estimation::ArmConditionsGateSettings(
+                                           settings.gate, settings.temperature_horizon))},
       clocks_(std::make_unique<ClockOffsetTracker>(settings, model)) {
   if (static_cast<int>(s_.joint_names.size()) != model.num_joints())
     throw std::invalid_argument("ros2_input: " + std::to_string(s_.joint_names.size()) +
@@ -208,7 +211,7 @@ bool Ros2Input::Admit(Stream& st, int64_t utime, int clock_source) {
     // A restarted driver: its clock is a new one.
     if (&st == &joints_) {
       // The arm's clock is the pipeline's: what waits in the buffer belongs to the old time base.
-      last_temperature_utime_ = std::numeric_limits<int64_t>::min();
+      conditions_.utime = std::numeric_limits<int64_t>::min();
       clocks_->ResetAll();
       queue_.clear();
       released_ = newest_ = std::numeric_limits<int64_t>::min();
@@ -344,22 +347,42 @@ void Ros2Input::OnPoint(size_t i, const dds::PointStamped& m) {
 std::optional<transport::ArmConditions> Ros2Input::OnTemperature(const dds::Temperature& m) {
   health_.Received();
   std::string error;
-  auto c = dds::FromRos(m, s_.temperature_topic, &error);
+  auto c = Conditions(dds::FromRos(m, s_.temperature_topic, &error), temperature_, error);
+  if (c) ++temperatures_;
+  return c;
+}
+
+std::optional<transport::ArmConditions> Ros2Input::OnPayload(const dds::InertiaStamped& m) {
+  health_.Received();
+  std::string error;
+  auto c = Conditions(dds::FromRos(m, s_.payload_topic, &error), payload_, error);
+  if (c) ++payloads_;
+  return c;
+}
+
+std::optional<transport::ArmConditions> Ros2Input::Conditions(
+    std::optional<transport::ArmConditions> c, Stream& st, const std::string& error) {
   if (!c) return Refuse(error), std::nullopt;
-  if (!Admit(temperature_, c->utime, -1)) return std::nullopt;
+  if (!Admit(st, c->utime, -1)) return std::nullopt;
   // Under `none` the gate has put the driver's own stamps in order.
+  int64_t utime = c->utime;
   if (s_.estimate_clock_offsets) {
     if (joints_utime_ == 0)
-      return Refuse(s_.temperature_topic +
-                    ": a temperature before the arm's first joints (no arm time to stamp it with)"),
+      return Refuse(st.name +
+                    ": a report before the arm's first joints (no arm time to stamp it "
+                    "with)"),
              std::nullopt;
-    // Two reports between the same two joints' samples: the later one a microsecond on (a
-    // report at the same time would be a duplicate downstream).
-    c->utime = std::max(joints_utime_, last_temperature_utime_ + 1);
-    last_temperature_utime_ = c->utime;
+    utime = joints_utime_;
   }
-  ++temperatures_;
-  return c;
+  // One stream of conditions: after the last report (two reports between the same two joints'
+  // samples, or the other topic's report stamped later: a microsecond on; one at the same time
+  // would be a duplicate downstream).
+  conditions_.utime = std::max(utime, conditions_.utime == std::numeric_limits<int64_t>::min()
+                                          ? utime
+                                          : conditions_.utime + 1);
+  if (!std::isnan(c->temperature_c)) conditions_.temperature_c = c->temperature_c;
+  if (!std::isnan(c->payload_kg)) conditions_.payload_kg = c->payload_kg;
+  return conditions_;
 }
 
 std::vector<ClockStatus> Ros2Input::Clocks() const {

@@ -15,8 +15,12 @@
 //              takes the newest at or before each window's end). With clock_offsets `estimate`
 //              the report stands at the joints' newest time when it arrives: a temperature shows
 //              nothing to estimate its driver's clock from, and changes over minutes, against the
-//              milliseconds of delivery; with `none` its own stamp. Payload: NaN (no ROS 2
-//              message carries it; still_window then takes 0).
+//              milliseconds of delivery; with `none` its own stamp.
+//   payload    geometry_msgs/InertiaStamped of what the arm carries (optional; its mass m [kg])
+//              → ARM_CONDITIONS, as the temperature. The two make one stream of conditions: each
+//              report carries the newest of both (NaN for one not yet reported; still_window
+//              takes a NaN payload as 0), at a time after the last report (a report that would
+//              stand at or before it stands 1 µs after it).
 //
 // Clocks. Every driver stamps with its own clock. With clock_offsets `estimate` each source's
 // offset against the joints (offset = t_source − t_joints) is estimated from the motion itself
@@ -73,8 +77,9 @@ struct Ros2InputSettings {
   };
   std::vector<Position> positions;
   std::string temperature_topic;  ///< empty: none
-  /// The temperature stream's time gate takes reports this far apart [s] (a controller that
-  /// reports on change, or slowly; the sensors' horizon is 10 s).
+  std::string payload_topic;      ///< geometry_msgs/InertiaStamped; empty: none
+  /// The temperature's and the payload's time gates take reports this far apart [s] (a
+  /// controller that reports on change, or slowly; the sensors' horizon is 10 s).
   double temperature_horizon = 3600.0;
   Eigen::Matrix3d position_covariance = Eigen::Matrix3d::Zero();  ///< [m²], the cell's σ²
   transport::SensorRanges ranges;                                 ///< the cell's IMU ranges
@@ -128,6 +133,8 @@ class Ros2Input {
   /// The arm's temperature → the ARM_CONDITIONS report to publish now (std::nullopt: refused and
   /// counted, or no joints' time yet to stamp it with under `estimate`).
   std::optional<transport::ArmConditions> OnTemperature(const dds::Temperature& m);
+  /// The payload the arm carries → the ARM_CONDITIONS report to publish now, as OnTemperature.
+  std::optional<transport::ArmConditions> OnPayload(const dds::InertiaStamped& m);
   /// The events to publish now, in time order: those reorder_delay older than the newest
   /// (`flush`: all).
   std::vector<sensors::SensorEvent> Ready(bool flush = false);
@@ -145,6 +152,8 @@ class Ros2Input {
   int64_t mag_paired() const { return mag_paired_; }
   /// Temperature reports turned into ARM_CONDITIONS.
   int64_t temperatures() const { return temperatures_; }
+  /// Payload reports turned into ARM_CONDITIONS.
+  int64_t payloads() const { return payloads_; }
   const Ros2InputSettings& settings() const { return s_; }
 
  private:
@@ -160,11 +169,15 @@ class Ros2Input {
   void Refuse(const std::string& reason);
   void OnPosition(size_t i, std::optional<transport::PositionSample> p, const std::string& frame_id,
                   const std::string& error);
+  // A temperature or payload report (the other field NaN) of stream `st` → the conditions report
+  // with the newest of both, stamped (see the file comment); std::nullopt: refused.
+  std::optional<transport::ArmConditions> Conditions(std::optional<transport::ArmConditions> c,
+                                                     Stream& st, const std::string& error);
 
   Ros2InputSettings s_;
   transport::Health& health_;
   dds::JointNameMap names_;
-  Stream joints_, imu_, mag_, temperature_;  // the streams' time gates
+  Stream joints_, imu_, mag_, temperature_, payload_;  // the streams' time gates
   std::vector<Stream> positions_;
   // The recent magnetometer readings, increasing stamps (the IMU sample takes the nearest: the
   // two topics arrive in no fixed order relative to each other).
@@ -174,9 +187,9 @@ class Ros2Input {
   std::map<std::pair<int64_t, int64_t>, sensors::SensorEvent> queue_;
   int64_t sequence_ = 0, newest_ = std::numeric_limits<int64_t>::min(),
           released_ = std::numeric_limits<int64_t>::min();
-  int64_t joints_utime_ = 0, late_ = 0, mag_paired_ = 0, temperatures_ = 0;
-  // The last temperature published under `estimate` [µs, joints' clock].
-  int64_t last_temperature_utime_ = std::numeric_limits<int64_t>::min();
+  int64_t joints_utime_ = 0, late_ = 0, mag_paired_ = 0, temperatures_ = 0, payloads_ = 0;
+  // The newest conditions published: their time [µs, joints' clock], temperature and payload.
+  transport::ArmConditions conditions_{std::numeric_limits<int64_t>::min()};
 };
 
 }  // namespace rcal::ros2

@@ -12,6 +12,8 @@
 //   temperature  1 Hz on the controller's (joints') clock, when the cell names a topic: the arm
 //             warming with time constant --sim-warmup as sensor_acquisition's controller reports
 //             it (cell::SimArmConditions: the same readings for the same seed)
+//   payload   1 Hz with the temperature, when the cell names a topic: geometry_msgs/InertiaStamped
+//             of what the arm carries (the sensor-level arm carries none: 0 kg)
 // --sim-effect thermal=κ (or thermal:time=ρ, as sensor_acquisition takes it) makes the arm grow
 // with its true temperature (or time): every marker the tracker sees, and the IMU's motion.
 // every stamp but the joints' with Gaussian --jitter. Joint names are listed in a shuffled order
@@ -164,6 +166,8 @@ int main(int argc, char** argv) {
             : Writer<dds::MagneticField>(participant.get(), ros.magnetic_field);
     const dds_entity_t temperature_w =
         ros.temperature.empty() ? 0 : Writer<dds::Temperature>(participant.get(), ros.temperature);
+    const dds_entity_t payload_w =
+        ros.payload.empty() ? 0 : Writer<dds::InertiaStamped>(participant.get(), ros.payload);
     std::vector<dds_entity_t> pos_w;
     for (const auto& p : ros.positions)
       pos_w.push_back(p.pose ? Writer<dds::PoseStamped>(participant.get(), p.topic)
@@ -255,17 +259,23 @@ int main(int argc, char** argv) {
                           }});
       }
     }
-    // The controller's temperature, once per second of its clock (no jitter: the joints' clock).
+    // The controller's temperature and payload, once per second of its clock (no jitter: the
+    // joints' clock).
     const double variance = std::pow(conditions.session().temperature_noise_c, 2);
-    for (int64_t k = 0; temperature_w && static_cast<double>(k) <= duration; ++k) {
+    for (int64_t k = 0; (temperature_w || payload_w) && static_cast<double>(k) <= duration; ++k) {
       const double t = static_cast<double>(k);
       transport::ArmConditions c;
       c.utime = start_utime + std::llround(t * 1e6);
       c.temperature_c = conditions.Reported(t, k * std::llround(ss.rate_hz));
+      c.payload_kg = conditions.At(t).payload_kg;
       events.push_back({t, [&, c] {
                           std::string error;
-                          if (auto s = dds::ToRos(c, variance, "arm", &error))
-                            write(temperature_w, &s->get());
+                          if (temperature_w)
+                            if (auto s = dds::ToRos(c, variance, "arm", &error))
+                              write(temperature_w, &s->get());
+                          if (payload_w)
+                            if (auto s = dds::ToRosPayload(c, "tool0", &error))
+                              write(payload_w, &s->get());
                         }});
     }
     std::stable_sort(events.begin(), events.end(),

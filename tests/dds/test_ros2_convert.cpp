@@ -157,7 +157,7 @@ TEST(Ros2Convert, TheArmsTemperatureInCelsiusOnly) {
   ASSERT_TRUE(back) << error;
   EXPECT_EQ(back->utime, c.utime);
   EXPECT_EQ(back->temperature_c, 31.25);
-  EXPECT_TRUE(std::isnan(back->payload_kg));  // no ROS 2 message says it
+  EXPECT_TRUE(std::isnan(back->payload_kg));  // another topic says it (InertiaStamped)
   auto refused = [&](const std::function<void(Temperature&)>& spoil) {
     auto m = ToRos(c, 0.09, "arm", &error);
     spoil(m->get());
@@ -184,6 +184,46 @@ TEST(Ros2Convert, TheArmsTemperatureInCelsiusOnly) {
   EXPECT_TRUE(FromRos(ros->get(), "/arm/temperature", &error)) << error;
   c.temperature_c = std::nan("");
   EXPECT_FALSE(ToRos(c, 0.09, "arm", &error));
+}
+
+// The payload (geometry_msgs/InertiaStamped, its mass m): kilograms only, through the encoded
+// round trip; grams are named, a tensor that is not finite refused.
+TEST(Ros2Convert, ThePayloadInKilogramsOnly) {
+  std::string error;
+  transport::ArmConditions c;
+  c.utime = 1'500'000'123;
+  c.payload_kg = 5.5;
+  auto ros = ToRosPayload(c, "tool0", &error);
+  ASSERT_TRUE(ros) << error;
+  EXPECT_EQ(ros->get().header.stamp.sec, 1500);
+  EXPECT_EQ(ros->get().inertia.m, 5.5);
+  const auto back = FromRos(ros->get(), "/arm/payload", &error);
+  ASSERT_TRUE(back) << error;
+  EXPECT_EQ(back->utime, c.utime);
+  EXPECT_EQ(back->payload_kg, 5.5);
+  EXPECT_TRUE(std::isnan(back->temperature_c));  // another topic says it (Temperature)
+  auto refused = [&](const std::function<void(InertiaStamped&)>& spoil) {
+    auto m = ToRosPayload(c, "tool0", &error);
+    spoil(m->get());
+    EXPECT_FALSE(FromRos(m->get(), "/arm/payload", &error));
+    return error;
+  };
+  EXPECT_EQ(refused([](InertiaStamped& m) { m.inertia.m = 5500; }),
+            "/arm/payload.inertia.m: 5500.000000 kg is not 0 to 1000 (grams?) (ROS wants kg)");
+  EXPECT_EQ(refused([](InertiaStamped& m) { m.inertia.m = -1; }),
+            "/arm/payload.inertia.m: -1.000000 kg is not 0 to 1000 (ROS wants kg)");
+  EXPECT_EQ(refused([](InertiaStamped& m) { m.inertia.m = std::nan(""); }),
+            "/arm/payload.inertia.m: NaN");
+  EXPECT_EQ(refused([](InertiaStamped& m) { m.inertia.ixx = HUGE_VAL; }),
+            "/arm/payload.inertia: the centre of mass or the tensor is not finite");
+  EXPECT_EQ(refused([](InertiaStamped& m) { m.inertia.com.y = std::nan(""); }),
+            "/arm/payload.inertia: the centre of mass or the tensor is not finite");
+  EXPECT_NE(refused([](InertiaStamped& m) {
+              m.header.stamp.nanosec = 1'000'000'000u;
+            }).find("/arm/payload.header.stamp"),
+            std::string::npos);
+  c.payload_kg = std::nan("");
+  EXPECT_FALSE(ToRosPayload(c, "tool0", &error));
 }
 
 TEST(Ros2Convert, TrackerPosesAndPointsBecomePositions) {

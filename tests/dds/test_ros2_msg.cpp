@@ -131,6 +131,10 @@ const RosMsg kRos2Msgs[] = {
     {"geometry_msgs", "PoseWithCovariance", "Pose pose\nfloat64[36] covariance\n"},
     {"geometry_msgs", "PoseWithCovarianceStamped",
      "std_msgs/Header header\nPoseWithCovariance pose\n"},
+    {"geometry_msgs", "Inertia",
+     "float64 m\ngeometry_msgs/Vector3 com\nfloat64 ixx\nfloat64 ixy\nfloat64 ixz\nfloat64 iyy\n"
+     "float64 iyz\nfloat64 izz\n"},
+    {"geometry_msgs", "InertiaStamped", "std_msgs/Header header\nInertia inertia\n"},
     {"geometry_msgs", "Transform", "Vector3 translation\nQuaternion rotation\n"},
     {"geometry_msgs", "TransformStamped",
      "std_msgs/Header header\nstring child_frame_id\nTransform transform\n"},

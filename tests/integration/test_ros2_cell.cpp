@@ -8,6 +8,8 @@
 //   * the calibration reaches ≤ 1.5× the offline figure of the same cell (the offline
 //     `rcal experiment paper --sensors` computation, as SensorPipeline);
 //   * each driver's clock offset is recovered within 2 ms and locked;
+//   * the arm's temperature (sensor_msgs/Temperature) and payload (geometry_msgs/InertiaStamped)
+//     reach ARM_CONDITIONS as one stream, and every pose carries the temperature;
 //   * TF (rt/tf_static) carries exactly the identified set-up frames, diagnostics every process;
 //   * a restarted IMU driver (its stamps jump back) is re-synchronised and its offset re-locked;
 //   * malformed and oversized samples are counted in ros2_input's HEALTH and never crash it;
@@ -26,6 +28,7 @@
 
 #include "dds_reader.hpp"
 #include "netns.hpp"
+#include "rcal/arm_conditions_t.hpp"
 #include "rcal/calibration_status_t.hpp"
 #include "rcal/cell/cell_sim_yaml.hpp"
 #include "rcal/cell/sim_cell.hpp"
@@ -79,6 +82,7 @@ struct CellRun {
   std::deque<std::pair<int64_t, double>> joints_wall;  // (utime, wall [s]) of recent JOINTS
   std::vector<pose_measurement_t> poses;
   std::vector<model_discrepancy_t> discrepancies;  // every MODEL_DISCREPANCY
+  std::vector<arm_conditions_t> conditions;        // every ARM_CONDITIONS
 };
 
 double WallSeconds() {
@@ -111,6 +115,8 @@ class Ros2Cell : public ProcessFixture {
           break;
         }
     });
+    t.Subscribe<arm_conditions_t>(ch::kArmConditions,
+                                  [&](const arm_conditions_t& m) { run.conditions.push_back(m); });
     t.Subscribe<model_discrepancy_t>(ch::kModelDiscrepancy, [&](const model_discrepancy_t& m) {
       run.discrepancies.push_back(m);
     });
@@ -297,6 +303,21 @@ TEST_F(Ros2Cell, TheDemoCellCalibratesThroughItsRos2Drivers) {
   std::printf("poses' temperature: %.2f to %.2f °C over %zu poses\n",
               run.poses.front().temperature_c, run.poses.back().temperature_c, run.poses.size());
   EXPECT_GT(rise, 3.0);
+  // The payload (geometry_msgs/InertiaStamped at 1 Hz with the temperature; the simulated arm
+  // carries none): on ARM_CONDITIONS beside the temperature, one stream in time order, every
+  // report with both once both have come.
+  ASSERT_GT(run.conditions.size(), 20u);
+  int both = 0;
+  for (size_t i = 0; i < run.conditions.size(); ++i) {
+    const arm_conditions_t& c = run.conditions[i];
+    if (i > 0) {
+      EXPECT_GT(c.utime, run.conditions[i - 1].utime);
+    }
+    if (std::isnan(c.payload_kg) || std::isnan(c.temperature_c)) continue;
+    EXPECT_EQ(c.payload_kg, 0.0);
+    ++both;
+  }
+  EXPECT_GT(both, static_cast<int>(run.conditions.size()) - 3);
 }
 
 // The ROS 2 twin of

@@ -642,6 +642,8 @@ INSTANTIATE_TEST_SUITE_P(
         BadCase{kG, "  imu: /imu/data\n", "", "ros2.imu: missing key (the cell has an IMU"},
         BadCase{kG, "temperature: /arm/temperature", "temperature: arm temperature",
                 "ros2.temperature: 'arm temperature' is not a ROS 2 topic name"},
+        BadCase{kG, "payload: /arm/payload", "payload: 5 kg",
+                "ros2.payload: '5 kg' is not a ROS 2 topic name"},
         BadCase{kG, "  domain: 0", "  domain: 0\n  topics: x", "ros2.topics: unknown key"},
         BadCase{kG, "type: PointStamped", "type: Point", "ros2.positions[0].type: expected"},
         BadCase{kG, "{marker: 0, topic: /tracker", "{marker: 4, topic: /tracker",
@@ -663,6 +665,7 @@ TEST(CellYaml, Ros2SectionNamesTheDriversTopics) {
   EXPECT_EQ(r.magnetic_field, "/imu/mag");
   EXPECT_EQ(r.imu_frame, "imu_link");
   EXPECT_EQ(r.temperature, "/arm/temperature");
+  EXPECT_EQ(r.payload, "/arm/payload");
   ASSERT_EQ(r.positions.size(), 1u);
   EXPECT_EQ(r.positions[0].topic, "/tracker/point");
   EXPECT_FALSE(r.positions[0].pose);

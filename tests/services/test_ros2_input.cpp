@@ -226,6 +226,50 @@ TEST_F(Ros2InputTest, TheArmsTemperatureBecomesArmConditionsOnTheArmsClock) {
   }
 }
 
+dds::Sample<dds::InertiaStamped> RosPayload(int64_t utime, double kg) {
+  transport::ArmConditions c;
+  c.utime = utime;
+  c.payload_kg = kg;
+  std::string error;
+  return std::move(*dds::ToRosPayload(c, "tool0", &error));
+}
+
+// The payload (geometry_msgs/InertiaStamped) and the temperature make one stream of conditions:
+// each report carries the newest of both, in time order (a report stamped before the last one
+// stands a microsecond after it); a payload in grams is refused and named.
+TEST_F(Ros2InputTest, ThePayloadAndTheTemperatureMakeOneStreamOfConditions) {
+  EXPECT_EQ(settings_.payload_topic, "/arm/payload");
+  Ros2Input in(settings_, cell_.model, health_);  // clock_offsets none: own stamps
+  auto c = in.OnTemperature(RosTemperature(2'000'000, 24.5).get());
+  ASSERT_TRUE(c);
+  EXPECT_TRUE(std::isnan(c->payload_kg));  // none reported yet
+  c = in.OnPayload(RosPayload(3'000'000, 5.0).get());
+  ASSERT_TRUE(c);
+  EXPECT_EQ(c->utime, 3'000'000);
+  EXPECT_EQ(c->temperature_c, 24.5);
+  EXPECT_EQ(c->payload_kg, 5.0);
+  c = in.OnTemperature(RosTemperature(4'000'000, 25.0).get());
+  ASSERT_TRUE(c);
+  EXPECT_EQ(c->temperature_c, 25.0);
+  EXPECT_EQ(c->payload_kg, 5.0);
+  // In order on its own topic, before the last report of the stream: just after that report.
+  c = in.OnPayload(RosPayload(3'500'000, 7.0).get());
+  ASSERT_TRUE(c);
+  EXPECT_EQ(c->utime, 4'000'001);
+  EXPECT_EQ(c->temperature_c, 25.0);
+  EXPECT_EQ(c->payload_kg, 7.0);
+  EXPECT_FALSE(in.OnPayload(RosPayload(3'500'000, 7.0).get()));  // a duplicate
+  EXPECT_FALSE(in.OnPayload(RosPayload(5'000'000, 7000.0).get()));
+  EXPECT_NE(health_.last_error().find("/arm/payload.inertia.m: 7000.000000 kg"), std::string::npos)
+      << health_.last_error();
+  EXPECT_EQ(health_.duplicates(), 1);
+  EXPECT_EQ(in.payloads(), 2);
+  EXPECT_EQ(in.temperatures(), 2);
+  // Every report is one ARM_CONDITIONS accepts.
+  std::string error;
+  EXPECT_TRUE(transport::ArmConditionsFromMessage(transport::ToArmConditions(*c), &error)) << error;
+}
+
 TEST_F(Ros2InputTest, ClockMessageListsEverySource) {
   Ros2Input in(settings_, cell_.model, health_);
   const clock_offset_t m = in.ClockMessage(123);

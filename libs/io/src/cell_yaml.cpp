@@ -390,9 +390,10 @@ void CheckRosTopic(const Reader& r, const YAML::Node& n, const std::string& path
 
 void ReadRos2(const Reader& r, const YAML::Node& n, const std::string& p, const CellSpec& spec,
               Ros2Spec* o) {
-  r.CheckMap(n, p,
-             {"domain", "joint_states", "joint_names", "imu", "magnetic_field", "imu_frame",
-              "temperature", "positions", "clock_offsets", "max_clock_offset", "frame_prefix"});
+  r.CheckMap(
+      n, p,
+      {"domain", "joint_states", "joint_names", "imu", "magnetic_field", "imu_frame", "temperature",
+       "payload", "positions", "clock_offsets", "max_clock_offset", "frame_prefix"});
   if (n["domain"]) o->domain = static_cast<int>(r.Integer(n["domain"], p + ".domain", 0, 232));
   auto topic = [&](const char* key, std::string* out) {
     if (!n[key]) return;
@@ -403,6 +404,7 @@ void ReadRos2(const Reader& r, const YAML::Node& n, const std::string& p, const 
   topic("imu", &o->imu);
   topic("magnetic_field", &o->magnetic_field);
   topic("temperature", &o->temperature);
+  topic("payload", &o->payload);
   if (n["imu_frame"]) o->imu_frame = r.String(n["imu_frame"], p + ".imu_frame");
   if (n["joint_names"]) {
     const YAML::Node list = n["joint_names"];

@@ -471,6 +471,13 @@ std::string TemperatureProblem(double t) {
   return "";
 }
 
+std::string PayloadProblem(double kg) {
+  if (std::isinf(kg)) return "infinite";
+  if (!std::isnan(kg) && (kg < 0.0 || kg > 1000.0))
+    return std::to_string(kg) + " kg is not 0 to 1000" + (kg > 1000.0 ? " (grams?)" : "");
+  return "";
+}
+
 std::optional<ArmConditions> ArmConditionsFromMessage(const arm_conditions_t& m,
                                                       std::string* error) {
   auto fail = [&](const std::string& why) {
@@ -481,10 +488,8 @@ std::optional<ArmConditions> ArmConditionsFromMessage(const arm_conditions_t& m,
   // NaN says "not measured"; ±inf is no measurement of anything.
   if (const std::string why = TemperatureProblem(m.temperature_c); !why.empty())
     return fail("temperature_c: " + why);
-  if (std::isinf(m.payload_kg)) return fail("payload_kg: infinite");
-  if (!std::isnan(m.payload_kg) && (m.payload_kg < 0.0 || m.payload_kg > 1000.0))
-    return fail("payload_kg: " + std::to_string(m.payload_kg) + " kg is not 0 to 1000" +
-                (m.payload_kg > 1000.0 ? " (grams?)" : ""));
+  if (const std::string why = PayloadProblem(m.payload_kg); !why.empty())
+    return fail("payload_kg: " + why);
   return ArmConditions{m.utime, m.temperature_c, m.payload_kg};
 }
 

@@ -114,6 +114,8 @@
 //     imu_frame: imu_link                  # optional: the header.frame_id IMU messages must carry
 //     temperature: /arm/temperature        # optional sensor_msgs/Temperature of the arm [°C]
 //                                          #   -> ARM_CONDITIONS (the poses' temperature)
+//     payload: /arm/payload                # optional geometry_msgs/InertiaStamped of what the
+//                                          #   arm carries (its m [kg]) -> ARM_CONDITIONS
 //     positions:                           # required: one per sensors.position.markers id
 //       - {marker: 0, topic: /tracker/point, type: PointStamped, frame: tracker}
 //                                          # type PointStamped (laser tracker) | PoseStamped
@@ -290,6 +292,9 @@ struct Ros2Spec {
   /// sensor_msgs/Temperature of the arm (its controller's, or a sensor on it) → ARM_CONDITIONS,
   /// the poses' temperature (empty: none).
   std::string temperature;
+  /// geometry_msgs/InertiaStamped of what the arm carries (its mass m [kg]) → ARM_CONDITIONS, the
+  /// poses' payload (empty: none).
+  std::string payload;
   std::vector<Ros2PositionTopic> positions;  ///< one per measured marker
   bool estimate_clock_offsets = true;        ///< false: the drivers share the joints' clock
   double max_clock_offset = 0.5;             ///< [s] largest offset searched

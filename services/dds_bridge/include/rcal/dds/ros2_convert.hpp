@@ -38,6 +38,7 @@ using JointState = sensor_msgs_msg_dds__JointState_;
 using Imu = sensor_msgs_msg_dds__Imu_;
 using MagneticField = sensor_msgs_msg_dds__MagneticField_;
 using Temperature = sensor_msgs_msg_dds__Temperature_;
+using InertiaStamped = geometry_msgs_msg_dds__InertiaStamped_;
 using PoseStamped = geometry_msgs_msg_dds__PoseStamped_;
 using PointStamped = geometry_msgs_msg_dds__PointStamped_;
 using PoseWithCovarianceStamped = geometry_msgs_msg_dds__PoseWithCovarianceStamped_;
@@ -54,6 +55,7 @@ RCAL_DDS_DESCRIPTOR(JointState, sensor_msgs_msg_dds__JointState__desc)
 RCAL_DDS_DESCRIPTOR(Imu, sensor_msgs_msg_dds__Imu__desc)
 RCAL_DDS_DESCRIPTOR(MagneticField, sensor_msgs_msg_dds__MagneticField__desc)
 RCAL_DDS_DESCRIPTOR(Temperature, sensor_msgs_msg_dds__Temperature__desc)
+RCAL_DDS_DESCRIPTOR(InertiaStamped, geometry_msgs_msg_dds__InertiaStamped__desc)
 RCAL_DDS_DESCRIPTOR(PoseStamped, geometry_msgs_msg_dds__PoseStamped__desc)
 RCAL_DDS_DESCRIPTOR(PointStamped, geometry_msgs_msg_dds__PointStamped__desc)
 RCAL_DDS_DESCRIPTOR(PoseWithCovarianceStamped,
@@ -109,8 +111,14 @@ std::optional<MagReading> FromRos(const MagneticField& m, const transport::Senso
 /// Temperature → the arm's conditions (ARM_CONDITIONS) at the message's stamp [µs, the
 /// publisher's clock]: temperature [°C, as sensor_msgs/Temperature has it] finite and in
 /// [−60, 200] °C (kelvin is named: transport::TemperatureProblem); variance finite and ≥ 0 (0:
-/// unknown; not used further). Payload NaN: no ROS 2 message carries it.
+/// unknown; not used further). Payload NaN: another topic carries it (InertiaStamped).
 std::optional<transport::ArmConditions> FromRos(const Temperature& m, const std::string& topic,
+                                                std::string* error);
+/// InertiaStamped (the payload the arm carries) → the arm's conditions at the message's stamp:
+/// payload = inertia.m [kg], finite and in [0, 1000] kg (grams are named:
+/// transport::PayloadProblem); the centre of mass and the tensor must be finite (not used
+/// further). Temperature NaN: another topic carries it (Temperature).
+std::optional<transport::ArmConditions> FromRos(const InertiaStamped& m, const std::string& topic,
                                                 std::string* error);
 
 /// PoseStamped (motion capture) → POSITION of `marker_id`: the pose's position [m] in the
@@ -139,6 +147,10 @@ std::optional<Sample<MagneticField>> ToRos(const MagReading& s, const char* fram
 /// temperature that is not finite.
 std::optional<Sample<Temperature>> ToRos(const transport::ArmConditions& c, double variance,
                                          const char* frame_id, std::string* error);
+/// The payload as a controller would publish it: m = payload_kg, centre of mass and tensor zero
+/// (a point mass at the flange). Refused: a payload that is not finite.
+std::optional<Sample<InertiaStamped>> ToRosPayload(const transport::ArmConditions& c,
+                                                   const char* frame_id, std::string* error);
 std::optional<Sample<PoseStamped>> ToRosPose(const transport::PositionSample& s,
                                              const char* frame_id, std::string* error);
 std::optional<Sample<PointStamped>> ToRosPoint(const transport::PositionSample& s,

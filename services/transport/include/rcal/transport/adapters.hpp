@@ -174,6 +174,10 @@ arm_conditions_t ToArmConditions(const ArmConditions& c);
 /// NaN: not measured); else the reason, e.g. "300.000000 °C is not -60 to 200 (kelvin?)" (the hint
 /// for [213, 473]) or "infinite". Shared by every source of ARM_CONDITIONS.
 std::string TemperatureProblem(double temperature_c);
+/// Why `payload_kg` is no payload an arm carries: "" when it is one (in [0, 1000] kg, or NaN: not
+/// known); else the reason, e.g. "5000.000000 kg is not 0 to 1000 (grams?)" or "infinite".
+/// Shared by every source of ARM_CONDITIONS.
+std::string PayloadProblem(double payload_kg);
 /// ARM_CONDITIONS → the report. Checks (the reason names the field): utime ≥ 0; temperature NaN
 /// (not measured) or in [−60, 200] °C (a figure beyond it in [213, 473] is reported as kelvin?);
 /// payload NaN (not known) or in [0, 1000] kg (beyond: grams?); ±inf refused.
