@@ -99,6 +99,12 @@ int main(int argc, char** argv) {
                  "models' weights [s]")
       ->check(CLI::Range(1e-3, 3600.0))
       ->capture_default_str();
+  app.add_option("--accel-gate", settings.accel_gate_chi2,
+                 "χ² gate on the accelerometer's 3-dof innovation (a tap or shock the motion "
+                 "cannot have is refused and counted; 16.27 is the 0.999 quantile, as the "
+                 "positions'); 0 = off; any motion model, the bank's too")
+      ->check(CLI::Range(0.0, 1e6))
+      ->capture_default_str();
   app.add_option("--orientation-wait", orientation_wait,
                  "IMU sensor time a position sample waits for a stopped orientation stream [s]")
       ->check(CLI::Range(0.0, 3600.0))
@@ -253,6 +259,8 @@ int main(int argc, char** argv) {
           filters.size() > 1
               ? fmt::format("model {} (weight {:.3f}): ", i + 1, node.bank().probabilities()[i])
               : std::string();
+      spdlog::info("{}position samples refused by the χ² gate {}, accelerometer samples {}", which,
+                   f.counters().position_rejected, f.counters().accel_rejected);
       if (bank.models[i].accel_bias_walk > 0.0) {
         const Eigen::Vector3d b_W = f.accel_bias_W();
         spdlog::info(

@@ -244,7 +244,12 @@ Status PositionKf::UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen
   }
   const Eigen::Vector3d y = z - H * x_;
   const Eigen::Matrix3d S = H * P_ * H.transpose() + R;
-  const Eigen::Matrix<double, kN, 3> K = P_ * H.transpose() * S.inverse();
+  const Eigen::Matrix3d S_inv = S.inverse();
+  if (settings_.accel_gate_chi2 > 0.0 && !(y.dot(S_inv * y) <= settings_.accel_gate_chi2)) {
+    ++counters_.accel_rejected;
+    return GuardState(t);  // the prediction to t stands
+  }
+  const Eigen::Matrix<double, kN, 3> K = P_ * H.transpose() * S_inv;
   x_ += K * y;
   const MatN IKH = MatN::Identity() - K * H;
   P_ = IKH * P_ * IKH.transpose() + K * R * K.transpose();

@@ -77,10 +77,12 @@
 // (λ × e^{9a} at most). Mehra's covariance matching (IEEE TAC 1972) in the form of a single
 // scale, as fading-memory filters use it. Update as
 // NOTES.md Eqs. 15–17, Joseph form. The position sensor is χ²-gated: NIS = yᵀS⁻¹y >
-// position_gate_chi2 rejects it (counted). Bad input and out-of-order time are refused with a
-// Status; the state is unchanged. A state that goes non-finite anyway is never kept: the filter
-// resets (Counters::resets) and the update returns an Error saying so; the next position sample
-// initialises it again.
+// position_gate_chi2 rejects it (counted); so is the accelerometer when accel_gate_chi2 > 0 (its
+// innovation against the predicted acceleration: a tap or shock the motion cannot have, which
+// the adaptive noise would otherwise take in, is skipped). Bad input and out-of-order time are
+// refused with a Status; the state is unchanged. A state that goes non-finite anyway is never kept:
+// the filter resets (Counters::resets) and the update returns an Error saying so; the next position
+// sample initialises it again.
 #pragma once
 
 #include <Eigen/Core>
@@ -142,6 +144,10 @@ struct PositionKfSettings {
   double accel_noise_adaptation_tau = 0.0;
   /// Largest factor λ on accel_sigma² and q_j² [-] (1e4: σ × 100).
   double accel_noise_max_scale = 1e4;
+  /// χ² gate on the 3-dof accelerometer innovation (the measured world acceleration against the
+  /// predicted one, under its predicted covariance); 0 = off. A sample beyond it (a tap, a
+  /// shock the 100 Hz samples alias) is skipped and counted in accel_rejected.
+  double accel_gate_chi2 = 0.0;
 };
 
 /// The accelerometer-driven filter's settings (position_kf --motion-model accelerometer-driven;
@@ -160,6 +166,7 @@ class PositionKf {
     std::int64_t accel_samples = 0;      ///< accelerometer updates applied
     std::int64_t position_samples = 0;   ///< position samples accepted
     std::int64_t position_rejected = 0;  ///< position samples rejected by the χ² gate
+    std::int64_t accel_rejected = 0;     ///< accelerometer samples rejected by its χ² gate
     std::int64_t input_rejected = 0;     ///< refused calls (bad input, time order)
     std::int64_t reinitialised = 0;      ///< re-initialisations after a run of rejections
     std::int64_t resets = 0;             ///< state went non-finite: reset (kept by Reset)

@@ -35,9 +35,9 @@ struct PositionKfBankSettings {
   double min_probability = 1e-3;
 };
 
-/// The two motion models the bank weighs by default, with `base`'s frame, gravity, position σ and
-/// lever arm: the paper's white jerk (σ 0.3 m/s²) and AccelerometerDrivenSettings(), both with
-/// the adaptive accelerometer noise (τ 0.1 s).
+/// The two motion models the bank weighs by default, with `base`'s frame, gravity, position σ,
+/// gates and lever arm: the paper's white jerk (σ 0.3 m/s²) and AccelerometerDrivenSettings(), both
+/// with the adaptive accelerometer noise (τ 0.1 s).
 std::vector<PositionKfSettings> DefaultBankModels(const PositionKfSettings& base);
 
 class PositionKfBank {
