@@ -406,6 +406,23 @@ TEST(PositionKf, AdaptiveAccelerometerNoiseHoldsThroughBurstsTheModelDoesNotKnow
   EXPECT_LT(median(scale_after), 2.0);  // …and comes back after them
 }
 
+// A tool swinging on three sinusoids (up to 5 m/s²) while it turns: the marker's position p [m]
+// and acceleration a [m/s²] (earth = world) and the orientation R_EB at t [s].
+struct SwingState {
+  Eigen::Vector3d p, a;
+  Eigen::Matrix3d R_EB;
+};
+SwingState SwingingTool(double t) {
+  const Eigen::Vector3d amp(1.0, 1.0, 0.8), w(0.9, 1.7, 2.3), phase(0.3, 1.1, -0.4);
+  SwingState s;
+  for (int i = 0; i < 3; ++i) {
+    s.p(i) = amp(i) * std::sin(w(i) * t + phase(i));
+    s.a(i) = -w(i) * w(i) * s.p(i);
+  }
+  s.R_EB = geometry::FromRpy(0.3 * std::sin(0.5 * t), 0.2, 0.4 * t);
+  return s;
+}
+
 // The accelerometer's χ² gate (accel_gate_chi2): taps (one 100 Hz sample of 60 m/s² on one axis,
 // every 2 s, what the tapping trial of BROAD shows) on a tool swinging at up to 5 m/s². The paper's
 // model with the adaptive noise takes each tap into its acceleration and the position leaves the
@@ -422,7 +439,6 @@ TEST(PositionKf, TheAccelerometerGateRefusesTapsTheMotionCannotHave) {
   PositionKfSettings gated = open;
   gated.accel_gate_chi2 = 16.27;
   const Eigen::Vector3d up = UpVector(EarthFrame::kEnu);
-  const Eigen::Vector3d amp(1.0, 1.0, 0.8), w(0.9, 1.7, 2.3), phase(0.3, 1.1, -0.4);
   double se_open = 0, se_gated = 0;
   int n = 0, taps = 0;
   std::int64_t refused = 0;
@@ -433,12 +449,7 @@ TEST(PositionKf, TheAccelerometerGateRefusesTapsTheMotionCannotHave) {
       PositionKf o(open), g(gated);
       for (int k = 0; k < 3000; ++k) {
         const double t = k * 0.01;
-        Eigen::Vector3d p, a;
-        for (int i = 0; i < 3; ++i) {
-          p(i) = amp(i) * std::sin(w(i) * t + phase(i));
-          a(i) = -w(i) * w(i) * p(i);
-        }
-        const Eigen::Matrix3d R_EB = geometry::FromRpy(0.3 * std::sin(0.5 * t), 0.2, 0.4 * t);
+        const auto [p, a, R_EB] = SwingingTool(t);
         Eigen::Vector3d f_B = R_EB.transpose() * (a + kG * up) + 6e-3 * sim::Draw3(N, rng);
         const bool tap = tapping && k % 200 == 137;
         if (tap) {
@@ -496,7 +507,6 @@ TEST(PositionKf, MotionProportionalNoiseKeepsAScaledAccelerometerConsistent) {
   PositionKfSettings relative = constant;
   relative.accel_relative_sigma = 0.1;
   const Eigen::Vector3d up = UpVector(EarthFrame::kEnu);
-  const Eigen::Vector3d amp(1.0, 1.0, 0.8), w(0.9, 1.7, 2.3), phase(0.3, 1.1, -0.4);
   double se_c = 0, se_r = 0, nees_c = 0, nees_r = 0;
   int n = 0;
   for (std::uint64_t seed = 1; seed <= 3; ++seed) {
@@ -505,12 +515,7 @@ TEST(PositionKf, MotionProportionalNoiseKeepsAScaledAccelerometerConsistent) {
     PositionKf c(constant), r(relative);
     for (int k = 0; k < 3000; ++k) {
       const double t = k * 0.01;
-      Eigen::Vector3d p, a;
-      for (int i = 0; i < 3; ++i) {
-        p(i) = amp(i) * std::sin(w(i) * t + phase(i));
-        a(i) = -w(i) * w(i) * p(i);
-      }
-      const Eigen::Matrix3d R_EB = geometry::FromRpy(0.3 * std::sin(0.5 * t), 0.2, 0.4 * t);
+      const auto [p, a, R_EB] = SwingingTool(t);
       // 10 % scale error on the body's own acceleration (gravity read right: a static
       // calibration), plus navigation-grade noise.
       const Eigen::Vector3d f_B =
