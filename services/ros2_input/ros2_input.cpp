@@ -377,9 +377,8 @@ std::optional<transport::ArmConditions> Ros2Input::Conditions(
   // One stream of conditions: after the last report (two reports between the same two joints'
   // samples, or the other topic's report stamped later: a microsecond on; one at the same time
   // would be a duplicate downstream).
-  conditions_.utime = std::max(utime, conditions_.utime == std::numeric_limits<int64_t>::min()
-                                          ? utime
-                                          : conditions_.utime + 1);
+  // (conditions_.utime starts at INT64_MIN, so + 1 cannot overflow and takes any first time.)
+  conditions_.utime = std::max(utime, conditions_.utime + 1);
   if (!std::isnan(c->temperature_c)) conditions_.temperature_c = c->temperature_c;
   if (!std::isnan(c->payload_kg)) conditions_.payload_kg = c->payload_kg;
   return conditions_;
