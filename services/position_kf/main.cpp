@@ -10,8 +10,9 @@
 // DefaultBankModels; --bank-evidence-tau): the paper's white-jerk filter and the
 // accelerometer-driven one (the accelerometer drives the acceleration state, a world-frame
 // acceleration bias takes the orientation's error), both with an accelerometer noise that adapts
-// to the position innovations. rcal position-kf-sweep chose it: closer than the paper's filter
-// on every one of 96 simulated and real cases (README). --motion-model white-jerk (the paper's
+// to the position innovations, and an accelerometer χ² gate that refuses taps (--accel-gate).
+// rcal position-kf-sweep chose it: closer than the paper's filter on every one of 96 simulated
+// and real cases (README). --motion-model white-jerk (the paper's
 // filter alone) or accelerometer-driven run one model, with the noise options.
 // The filter works in the position sensor's frame W: accelerations are turned from the IMU's earth
 // frame by R_WE, the cell's earth_from_world (given as a prior or fixed) until the identifier's
@@ -102,9 +103,9 @@ int main(int argc, char** argv) {
   app.add_option("--accel-gate", settings.accel_gate_chi2,
                  "χ² gate on the accelerometer's 3-dof innovation (a tap or shock the motion "
                  "cannot have is refused and counted; 16.27 is the 0.999 quantile, as the "
-                 "positions'); 0 = off; any motion model, the bank's too")
-      ->check(CLI::Range(0.0, 1e6))
-      ->capture_default_str();
+                 "positions'); 0 = off; default: the bank's 16.27 (rcal position-kf-sweep), off "
+                 "for one motion model")
+      ->check(CLI::Range(0.0, 1e6));
   app.add_option("--orientation-wait", orientation_wait,
                  "IMU sensor time a position sample waits for a stopped orientation stream [s]")
       ->check(CLI::Range(0.0, 3600.0))
@@ -221,6 +222,10 @@ int main(int argc, char** argv) {
     // One model is a bank of one (its estimates unchanged).
     bank.models = motion_model == "bank" ? estimation::DefaultBankModels(settings)
                                          : std::vector<estimation::PositionKfSettings>{settings};
+    // --accel-gate, when given, on every model (the bank's own is kBankAccelGateChi2).
+    if (app.count("--accel-gate") > 0)
+      for (estimation::PositionKfSettings& m : bank.models)
+        m.accel_gate_chi2 = settings.accel_gate_chi2;
     transport::PositionKfNode node(t, bank, options);
     node.Announce();
     spdlog::info("position_kf on {} (earth {}, lever arm r_B [{}, {}, {}] m{}; {} model{})",
@@ -232,10 +237,11 @@ int main(int argc, char** argv) {
     for (const estimation::PositionKfSettings& m : bank.models)
       spdlog::info(
           "  {} motion model: acceleration bias walk {} m/s²/√s, σ {} m/s², relative σ {}, "
-          "noise adaptation τ {} s",
+          "noise adaptation τ {} s, accelerometer gate χ² {}",
           m.motion_model == estimation::MotionModel::kAccelerometerDriven ? "accelerometer-driven"
                                                                           : "white-jerk",
-          m.accel_bias_walk, m.accel_sigma, m.accel_relative_sigma, m.accel_noise_adaptation_tau);
+          m.accel_bias_walk, m.accel_sigma, m.accel_relative_sigma, m.accel_noise_adaptation_tau,
+          m.accel_gate_chi2 > 0.0 ? fmt::format("{}", m.accel_gate_chi2) : std::string("off"));
     if (const int rc =
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
         rc != 0)

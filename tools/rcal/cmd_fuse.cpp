@@ -94,7 +94,9 @@ int RunFuse(const FuseOptions& opt) {
   // accelerometer drives the acceleration, a bias state, the adaptive noise), weighted by how well
   // each predicts the position sensor. Each is scored alone too.
   // The accelerometer-driven model with these settings' frame, gravity, position σ and lever arm.
-  const est::PositionKfSettings driven_settings = est::DefaultBankModels(pkf_settings)[1];
+  // The accelerometer gate is these settings' (pos.accel_gate_chi2: the bank's by default).
+  est::PositionKfSettings driven_settings = est::DefaultBankModels(pkf_settings)[1];
+  driven_settings.accel_gate_chi2 = pkf_settings.accel_gate_chi2;
   est::PositionKfBankSettings bank_settings;
   bank_settings.models = {pkf_settings, driven_settings};
   est::PositionKfBank bank(bank_settings);
@@ -202,8 +204,10 @@ int RunFuse(const FuseOptions& opt) {
      << Fixed(pos_all.n > 0 ? driven_weight / static_cast<double>(pos_all.n) : 0.0, 2) << ").\n"
      << "Rejected: accelerometer " << oc.accel_rejected << " (χ² gate " << oc.accel_gated
      << "), magnetometer " << oc.mag_rejected << " (χ² gate " << oc.mag_gated << "), position "
-     << pc.position_rejected << " of " << pos_samples << ", refused input " << refused
-     << "; zero-rate updates " << oc.zero_rate_updates << " of " << oc.samples << " samples.\n";
+     << pc.position_rejected << " of " << pos_samples << " (the position KF's accelerometer gate "
+     << pc.accel_rejected << ", χ² " << pkf_settings.accel_gate_chi2 << "), refused input "
+     << refused << "; zero-rate updates " << oc.zero_rate_updates << " of " << oc.samples
+     << " samples.\n";
   if (non_finite > 0)
     md << "\n**FAILED**: " << non_finite
        << " estimates were not finite (left out of the scores above).\n";
@@ -218,11 +222,13 @@ int RunFuse(const FuseOptions& opt) {
   j["position_rmse_movement_m"] = pos_moving.value();
   j["position_paper_model"] = {{"rmse_m", paper_all.value()},
                                {"rmse_movement_m", paper_moving.value()},
-                               {"rejected", pkf.counters().position_rejected}};
+                               {"rejected", pkf.counters().position_rejected},
+                               {"accelerometer_rejected", pkf.counters().accel_rejected}};
   j["position_accelerometer_driven"] = {
       {"rmse_m", driven_all.value()},
       {"rmse_movement_m", driven_moving.value()},
       {"rejected", driven.counters().position_rejected},
+      {"accelerometer_rejected", driven.counters().accel_rejected},
       {"accel_noise_adaptation_tau_s", driven_settings.accel_noise_adaptation_tau},
       {"mean_weight", pos_all.n > 0 ? driven_weight / static_cast<double>(pos_all.n) : 0.0}};
   j["position_bank_evidence_tau_s"] = bank_settings.evidence_tau;

@@ -1,5 +1,7 @@
 #include "fuse_settings.hpp"
 
+#include "rcal/estimation/position_kf_bank.hpp"
+
 #include <algorithm>
 #include <charconv>
 #include <cmath>
@@ -49,6 +51,7 @@ std::vector<Field> PositionFields(est::PositionKfSettings& s) {
   return {{"pos.jerk_noise", "m_s3_sqrt_hz", &s.jerk_noise},
           {"pos.accel_sigma", "m_s2", &s.accel_sigma},
           {"pos.position_gate_chi2", "", &s.position_gate_chi2},
+          {"pos.accel_gate_chi2", "", &s.accel_gate_chi2},
           {"pos.accel_relative_sigma", "fraction", &s.accel_relative_sigma},
           {"pos.accel_noise_adaptation_tau", "s", &s.accel_noise_adaptation_tau},
           {"pos.lever_arm_sigma", "m", &s.lever_arm_sigma}};
@@ -118,6 +121,8 @@ est::PositionKfSettings BroadPositionSettings(double pos_noise_m) {
   // trial (24) at any σ.
   s.accel_sigma = 0.3;
   s.accel_noise_adaptation_tau = 0.1;
+  // The bank's accelerometer gate (rcal position-kf-sweep): the tapping trial's taps are refused.
+  s.accel_gate_chi2 = est::kBankAccelGateChi2;
   s.estimate_lever_arm = true;
   return s;
 }
