@@ -13,9 +13,11 @@
 //             warming with time constant --sim-warmup as sensor_acquisition's controller reports
 //             it (cell::SimArmConditions: the same readings for the same seed)
 //   payload   1 Hz with the temperature, when the cell names a topic: geometry_msgs/InertiaStamped
-//             of what the arm carries (the sensor-level arm carries none: 0 kg)
-// --sim-effect thermal=κ (or thermal:time=ρ, as sensor_acquisition takes it) makes the arm grow
-// with its true temperature (or time): every marker the tracker sees, and the IMU's motion.
+//             of what the controller was told the arm carries (none: 0 kg; --sim-payloads: one per
+//             stop, as sensor_acquisition's)
+// --sim-effect thermal=κ (or thermal:time=ρ) and joint_compliance:JOINT=c, as sensor_acquisition
+// takes them, make the arm grow with its true temperature (or time) and its joints give way under
+// gravity and the payload: every marker the tracker sees, and the IMU's motion.
 // every stamp but the joints' with Gaussian --jitter. Joint names are listed in a shuffled order
 // (--shuffle-seed; 0: chain order) with one extra joint of a gripper a driver might add.
 // --imu-restart-at T: at sim time T the IMU driver restarts, its clock starting again from
@@ -113,7 +115,14 @@ int main(int argc, char** argv) {
   app.add_option("--sim-effect", sim_effects,
                  "a non-geometric effect the simulated arm has, as sensor_acquisition --level "
                  "sensors takes it: thermal growth with its temperature, thermal=KAPPA [1/K], or "
-                 "with time, thermal:time=RHO [1/s] (repeatable)");
+                 "with time, thermal:time=RHO [1/s]; joint compliance under gravity and the "
+                 "payload, joint_compliance:JOINT=C [rad/(N·m)] (repeatable)");
+  std::vector<double> payloads_kg;
+  app.add_option("--sim-payloads", payloads_kg,
+                 "the arm carries a payload per stop drawn from these [kg] (e.g. 0,5,10), as "
+                 "sensor_acquisition --sim-payloads; without: none")
+      ->delimiter(',')
+      ->check(CLI::Range(0.0, 1000.0));
   app.add_option("--dds-domain", domain, "DDS domain (default: the cell's ros2.domain)");
   app.add_flag("--linger", linger, "stay up after the programme until SIGINT/SIGTERM");
   CLI11_PARSE(app, argc, argv);
@@ -143,7 +152,8 @@ int main(int argc, char** argv) {
           truth.trajectory());
     // The controller's conditions (the temperature driver below), and with --sim-effect the arm
     // growing with them: the IMU's truth and every marker's.
-    const cell::SimArmConditions conditions(warmup_s, start_utime, seed);
+    cell::SimArmConditions conditions(warmup_s, start_utime, seed);
+    if (!payloads_kg.empty()) conditions.SetPayloads(truth.trajectory(), payloads_kg);
     std::vector<sim::ToolMotionTruth*> grown = {&programme.truth};
     for (sim::ToolMotionTruth& m : marker_truth) grown.push_back(&m);
     for (const std::string& line : conditions.ApplyEffects(sim_effects, grown))
@@ -267,7 +277,7 @@ int main(int argc, char** argv) {
       transport::ArmConditions c;
       c.utime = start_utime + std::llround(t * 1e6);
       c.temperature_c = conditions.Reported(t, k * std::llround(ss.rate_hz));
-      c.payload_kg = conditions.At(t).payload_kg;
+      c.payload_kg = conditions.ReportedPayload(t);
       events.push_back({t, [&, c] {
                           std::string error;
                           if (temperature_w)

@@ -22,9 +22,11 @@
 // offline and no test window follows. Paced by --speed (0: as fast as possible). The simulated
 // controller also reports the arm's conditions (ARM_CONDITIONS, once per second of sensor time:
 // the arm's temperature warming as sim::SessionSettings says, with --sim-warmup as the time
-// constant, plus its 0.3 K sensor noise; payload 0, the arm carries none), and with --sim-effect
-// (thermal causes only at this level: the arm grows with its temperature, or with time) the
-// tool moves as the extended model says under the true, noise-free temperature.
+// constant, plus its 0.3 K sensor noise; the payload it was told to carry: none, or with
+// --sim-payloads one per stop, taken on as the arm leaves the stop before), and with --sim-effect
+// (thermal growth and joint compliance at this level: the arm grows with its temperature, or
+// with time; its joints give way under gravity and the payload) the tool moves as the extended
+// model says under the true, noise-free conditions.
 //
 // Source `replay FILE`: a raw-stream CSV in the BROAD layout (sources.hpp) published as IMU (every
 // row) and POSITION (decimated to --position-rate), utime from the file; or a pose dataset
@@ -59,6 +61,7 @@
 // programme (seed, stop counts, start time, rate) is an error naming the key (exit 1). The stops a
 // following cell chose are not in the checkpoint: a restarted one resumes on the programme's own
 // stops, its sensor time continuing.
+#include <fmt/ranges.h>
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -261,8 +264,9 @@ class Lease {
 int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec& sim_spec,
                  unsigned seed, int num_cal, int num_test,
                  const std::vector<std::string>& step_offsets,
-                 const std::vector<std::string>& sim_effects, double warmup_s, bool follow,
-                 bool linger, int64_t start_utime, double speed, const Resume& resume,
+                 const std::vector<std::string>& sim_effects,
+                 const std::vector<double>& payloads_kg, double warmup_s, bool follow, bool linger,
+                 int64_t start_utime, double speed, const Resume& resume,
                  rcal::transport::LcmTransport& t) {
   using namespace rcal;
   // SimulateWindows' programme: the home pose, then the calibration and test stops.
@@ -270,9 +274,19 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
   const auto& model = sim_run.cell.model;
   const io::CellChannels& channels = built.spec.channels;
   sim::ToolMotionTruth& truth = sim_run.truth;
-  // The arm's conditions: a warming temperature (the session's curve, τ = warmup_s), no payload;
-  // with --sim-effect the arm grows with it.
-  const cell::SimArmConditions conditions(warmup_s, start_utime, seed);
+  // The arm's conditions: a warming temperature (the session's curve, τ = warmup_s), a payload per
+  // stop with --sim-payloads (none without); with --sim-effect the arm grows with the temperature
+  // and its joints give way under the payload.
+  cell::SimArmConditions conditions(warmup_s, start_utime, seed);
+  if (!payloads_kg.empty()) {
+    if (follow)
+      throw std::runtime_error(
+          "--follow-next-poses and --sim-payloads: not both at --level sensors (a payload is "
+          "taken on as the arm leaves a programme's stop, which following moves)");
+    conditions.SetPayloads(truth.trajectory(), payloads_kg);
+    spdlog::info("the simulated arm carries a payload per stop, drawn from {} kg",
+                 fmt::join(payloads_kg, ", "));
+  }
   for (const std::string& line : conditions.ApplyEffects(sim_effects, sim_run))
     spdlog::info("{}", line);
   if (follow && !step_offsets.empty())
@@ -374,11 +388,12 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
     if (const auto tick = std::llround(f->t * ss.rate_hz);
         tick % std::max<int64_t>(1, std::llround(ss.rate_hz)) == 0) {
       // The controller's report, once per second: the temperature as its sensor reads it (its
-      // noise drawn from the report's own seed, so a resumed run reports the same).
+      // noise drawn from the report's own seed, so a resumed run reports the same) and the
+      // payload it was told to carry.
       transport::ArmConditions c;
       c.utime = utime;
       c.temperature_c = conditions.Reported(f->t, tick);
-      c.payload_kg = 0.0;
+      c.payload_kg = conditions.ReportedPayload(f->t);
       count(t.Publish(channels.arm_conditions, transport::ToArmConditions(c)));
     }
     transport::ImuSample imu;
@@ -514,13 +529,20 @@ int main(int argc, char** argv) {
   std::vector<std::string> sim_effects;
   app.add_option(
       "--sim-effect", sim_effects,
-      "sim: a non-geometric effect the simulated arm has (at --level sensors thermal causes "
-      "only), CAUSE[:JOINT]=V[,V] as "
+      "sim: a non-geometric effect the simulated arm has (at --level sensors thermal growth "
+      "and joint compliance only), CAUSE[:JOINT]=V[,V] as "
       "rcal simulate --effect takes it (joint_compliance:j2=2e-6, joint_periodic:j3=1e-4,"
       "5e-5, joint_scale:j4=2e-4, backlash:j5=5e-5, thermal=1.2e-5, thermal:time=3e-9; "
       "repeatable). Every stop's context is published with its pose either way: time since "
       "the start, a warming temperature, a payload of 0, 5 or 10 kg, the approach "
       "direction");
+  std::vector<double> payloads_kg;
+  app.add_option("--sim-payloads", payloads_kg,
+                 "sim sensors: the arm carries a payload per stop drawn from these [kg] (e.g. "
+                 "0,5,10), taken on as it leaves the stop before, reported on ARM_CONDITIONS; "
+                 "without: none")
+      ->delimiter(',')
+      ->check(CLI::Range(0.0, 1000.0));
   double warmup_s = sim::SessionSettings{}.warmup_time_constant_s;
   app.add_option("--sim-warmup", warmup_s,
                  "sim sensors: the time constant [s] of the arm's warm-up (+12 K) that the "
@@ -538,6 +560,13 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
+  if (!payloads_kg.empty() && (source != "sim" || level != "sensors")) {
+    // The pose-level simulator draws its own payload per stop (0, 5 or 10 kg); a replay has its
+    // file's.
+    std::fprintf(stderr,
+                 "sensor_acquisition: --sim-payloads is for --source sim --level sensors\n");
+    return 2;
+  }
   if (source == "replay" && replay_file.empty()) {
     std::fprintf(stderr, "sensor_acquisition: --source replay needs FILE\n");
     return 2;
@@ -586,8 +615,8 @@ int main(int argc, char** argv) {
     if (app.get_option("--seed")->count() == 0) seed = sim_spec.seed;
     if (level == "sensors")
       return RunSensorSim(built, sim_spec, seed, poses > 0 ? poses : sim_spec.num_cal, test_poses,
-                          step_offsets, sim_effects, warmup_s, follow, linger, start_utime, speed,
-                          resume, t);
+                          step_offsets, sim_effects, payloads_kg, warmup_s, follow, linger,
+                          start_utime, speed, resume, t);
     // Pose level: the cell's model at the sim file's truth, measured as the cell's position sensor
     // measures (its largest σ per axis; orientation when it is a 6-DoF tracker), one pose per stop.
     const auto& model = built.model;

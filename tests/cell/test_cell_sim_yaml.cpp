@@ -8,8 +8,10 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <functional>
+#include <set>
 #include <string>
 
 #include "../io/settings_eq.hpp"
@@ -191,11 +193,108 @@ TEST(SimArmConditions, EveryMarkersTruthGrowsWithTheArm) {
   }
   EXPECT_GT(growth, 1e-4);
   EXPECT_GT((programme.truth.At(end).p_WM_W - programme_ungrown.At(end).p_WM_W).norm(), 1e-4);
-  // A joint effect is refused at sensor level, naming why.
+  // An effect of the approach direction is refused at sensor level, naming why.
   EXPECT_NE(ErrorOf([&] {
-              conditions.ApplyEffects({"joint_compliance:j2=2e-6"}, truths);
-            }).find("only thermal growth"),
+              conditions.ApplyEffects({"backlash:j2=5e-5"}, truths);
+            }).find("thermal growth (by temperature or time) and joint compliance only"),
             std::string::npos);
+}
+
+// A pick-and-place arm at sensor level (SetPayloads): each stop holds its drawn payload, constant
+// and reported as it is from before its still interval until halfway through the next move; the
+// change blends in over half a second from the move's midpoint (quintic smoothstep). With
+// joint_compliance the truth is the extended model at the true payload (1e-12 m), the payload shows
+// at the loaded stops (5 or 10 kg at c = 2e-6 rad/(N·m) on joint 2: about 0.1 mm) and not at the
+// empty ones, and the tool's acceleration, which the IMU feels, differs from the unloaded arm's by
+// the sag's smooth change only (a step would be hundreds of m/s² at the simulator's differencing
+// step).
+TEST(SimArmConditions, APayloadPerStopBlendsInHalfwayThroughTheMoveToIt) {
+  Loaded d = Load("grb3016");
+  SimProgramme programme = MakeSimProgramme(d.cell, d.sim, 1, 8, 1);
+  const sim::ToolMotionTruth unloaded = programme.truth;
+  const sim::JointTrajectory& trajectory = programme.truth.trajectory();
+  SimArmConditions conditions(100.0, 0, 1);
+  conditions.SetPayloads(trajectory, {0.0, 5.0, 10.0});
+  const int n = trajectory.num_waypoints();
+  ASSERT_EQ(n, 10);  // home, 8 calibration stops, the first test stop
+  std::set<double> held;
+  for (int k = 0; k < n; ++k) {
+    held.insert(conditions.PayloadAt(k));
+    // From the end of the blend into this stop (at the latest three quarters into the move) to
+    // just before halfway into the next move.
+    const auto [a, b] = trajectory.StillInterval(k);
+    const double from_t = k == 0 ? 0.0 : a - 0.25 * (a - trajectory.StillInterval(k - 1).second);
+    const double until_t = k + 1 < n ? 0.5 * (b + trajectory.StillInterval(k + 1).first) - 1e-6 : b;
+    for (double t = from_t; t <= until_t; t += (until_t - from_t) / 9) {
+      EXPECT_EQ(conditions.At(t).payload_kg, conditions.PayloadAt(k)) << "stop " << k << " " << t;
+      EXPECT_EQ(conditions.ReportedPayload(t), conditions.PayloadAt(k)) << "stop " << k << " " << t;
+    }
+  }
+  EXPECT_EQ(held, (std::set<double>{0.0, 5.0, 10.0}));  // seeded: every payload drawn
+  // The blend: from the old payload to the new within the move's first half-second, monotone, its
+  // second derivative within the quintic's 10/√3 Δm/T²; reported as the new one from the start.
+  for (int k = 1; k < n; ++k) {
+    const double from = conditions.PayloadAt(k - 1), to = conditions.PayloadAt(k);
+    const double leave = trajectory.StillInterval(k - 1).second;
+    const double arrive = trajectory.StillInterval(k).first;
+    const double t0 = 0.5 * (leave + arrive);
+    const double T = std::min(0.5, 0.25 * (arrive - leave));
+    ASSERT_LT(t0 + T, arrive);
+    EXPECT_EQ(conditions.At(t0).payload_kg, from);
+    EXPECT_EQ(conditions.At(t0 + T).payload_kg, to);
+    EXPECT_EQ(conditions.ReportedPayload(t0 + 1e-9), to);
+    const double h = 1e-3;
+    double last = from;
+    for (double t = t0 + h; t < t0 + T; t += 0.01) {
+      const double m = conditions.At(t).payload_kg;
+      EXPECT_GE((m - last) * (to - from), 0.0) << "stop " << k << " at " << t;
+      last = m;
+      const double m2 =
+          (conditions.At(t + h).payload_kg - 2 * m + conditions.At(t - h).payload_kg) / (h * h);
+      EXPECT_LE(std::abs(m2), 5.78 * std::abs(to - from) / (T * T) + 1e-6) << "stop " << k;
+    }
+  }
+  // Joint compliance under the payload.
+  const std::vector<std::string> lines =
+      conditions.ApplyEffects({"joint_compliance:j2=2e-6"}, programme);
+  ASSERT_EQ(lines.size(), 1u);
+  EXPECT_NE(lines[0].find("give way under gravity and its payload"), std::string::npos);
+  const kinematics::KinematicModel& model = programme.cell.model;
+  const sim::EffectTruth arm =
+      sim::MakeEffectTruth(model, {sim::ParseEffectSpec("joint_compliance:j2=2e-6", model)});
+  kinematics::EffectContext empty = conditions.At(0.0);
+  double sag_loaded = 0, sag_empty = 0;
+  for (int k = 1; k < n; ++k) {
+    const auto [a, b] = trajectory.StillInterval(k);
+    const double t = 0.5 * (a + b);
+    const sim::ToolState s = programme.truth.At(t);
+    const kinematics::EffectContext c = conditions.At(t);
+    EXPECT_LT((s.p_WM_W - arm.model.Forward(s.q, c, programme.cell.x_true, arm.e).p_WM_W).norm(),
+              1e-12)
+        << "stop " << k;
+    empty.time_s = c.time_s;
+    empty.temperature_c = c.temperature_c;
+    empty.payload_kg = 0.0;
+    const double payload_sag =
+        (s.p_WM_W - arm.model.Forward(s.q, empty, programme.cell.x_true, arm.e).p_WM_W).norm();
+    double& sag = c.payload_kg > 0.0 ? sag_loaded : sag_empty;
+    sag = std::max(sag, payload_sag);
+  }
+  std::printf("the payload's sag at the stops: up to %.4f mm loaded, %.4f mm empty\n",
+              sag_loaded * 1e3, sag_empty * 1e3);
+  EXPECT_GT(sag_loaded, 5e-5);  // the demo cell's still windows: about 0.05 mm
+  EXPECT_EQ(sag_empty, 0.0);
+  double accel_change = 0;
+  for (double t = 0.0; t <= trajectory.duration(); t += 0.01)
+    accel_change =
+        std::max(accel_change, (programme.truth.At(t).a_WM_W - unloaded.At(t).a_WM_W).norm());
+  std::printf("largest change of the tool's acceleration against the unloaded arm: %.4f m/s^2\n",
+              accel_change);
+  EXPECT_LT(accel_change, 0.05);
+  // Refused: no payloads, a negative one, a NaN.
+  EXPECT_THROW(conditions.SetPayloads(trajectory, {}), std::invalid_argument);
+  EXPECT_THROW(conditions.SetPayloads(trajectory, {5.0, -1.0}), std::invalid_argument);
+  EXPECT_THROW(conditions.SetPayloads(trajectory, {std::nan("")}), std::invalid_argument);
 }
 
 // The panda's IMU has turned axes, the UR10 none: the simulator's mounting and the run's

@@ -222,9 +222,10 @@ TEST_F(Ros2Cell, TheDemoCellCalibratesThroughItsRos2Drivers) {
 
   // The arm warms with a time constant of 100 s (its controller's temperature driver).
   constexpr double kWarmup = 100.0;
-  const CellRun run = RunCell({"--poses", std::to_string(kCal), "--test-poses",
-                               std::to_string(kTest), "--sim-warmup", std::to_string(kWarmup)},
-                              true, read);
+  const CellRun run =
+      RunCell({"--poses", std::to_string(kCal), "--test-poses", std::to_string(kTest),
+               "--sim-warmup", std::to_string(kWarmup), "--sim-payloads", "0,5,10"},
+              true, read);
   read();
   ASSERT_TRUE(run.params && run.status && run.clocks && run.input_health);
   const int accepted = run.status->poses_accepted;
@@ -304,20 +305,38 @@ TEST_F(Ros2Cell, TheDemoCellCalibratesThroughItsRos2Drivers) {
               run.poses.front().temperature_c, run.poses.back().temperature_c, run.poses.size());
   EXPECT_GT(rise, 3.0);
   // The payload (geometry_msgs/InertiaStamped at 1 Hz with the temperature; the simulated arm
-  // carries none): on ARM_CONDITIONS beside the temperature, one stream in time order, every
-  // report with both once both have come.
+  // carries 0, 5 or 10 kg per stop, --sim-payloads): on ARM_CONDITIONS beside the temperature, one
+  // stream in time order, every report with both once both have come; every pose carries the
+  // payload its stop held (the simulator's schedule: the last stop the arm stood at before the
+  // pose's time on the arm's clock).
   ASSERT_GT(run.conditions.size(), 20u);
   int both = 0;
+  std::set<double> reported;
   for (size_t i = 0; i < run.conditions.size(); ++i) {
     const arm_conditions_t& c = run.conditions[i];
     if (i > 0) {
       EXPECT_GT(c.utime, run.conditions[i - 1].utime);
     }
     if (std::isnan(c.payload_kg) || std::isnan(c.temperature_c)) continue;
-    EXPECT_EQ(c.payload_kg, 0.0);
+    reported.insert(c.payload_kg);
     ++both;
   }
   EXPECT_GT(both, static_cast<int>(run.conditions.size()) - 3);
+  EXPECT_EQ(reported, (std::set<double>{0.0, 5.0, 10.0}));
+  const cell::CellSimSpec sim_spec = cell::LoadCellSimSpec(kSim);
+  const cell::SimProgramme programme =
+      cell::MakeSimProgramme(io::LoadCell(sim_spec.cell), sim_spec, kSeed, kCal, kTest);
+  cell::SimArmConditions payloads(kWarmup, 0, kSeed);
+  payloads.SetPayloads(programme.truth.trajectory(), {0.0, 5.0, 10.0});
+  const sim::JointTrajectory& trajectory = programme.truth.trajectory();
+  for (const pose_measurement_t& m : run.poses) {
+    const double t = static_cast<double>(m.utime - 1'000'000'000) * 1e-6;  // [s] sim time
+    int stop = -1;
+    for (int k = 0; k < trajectory.num_waypoints(); ++k)
+      if (trajectory.StillInterval(k).first < t) stop = k;
+    ASSERT_GE(stop, 1) << "pose " << m.pose_index << " at " << t << " s";
+    EXPECT_EQ(m.payload_kg, payloads.PayloadAt(stop)) << "pose " << m.pose_index << " at " << t;
+  }
 }
 
 // The ROS 2 twin of

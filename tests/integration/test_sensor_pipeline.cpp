@@ -81,6 +81,15 @@ class SensorPipeline : public ProcessFixture {
   // sensor_acquisition --source sim --level sensors --sim SIM --poses CAL --test-poses TEST
   // (then `more`, at 20x) → still_window → ekf_identifier (then `ekf_more`), both --cell CELL,
   // until CAL poses were judged; every process then stopped and its exit checked.
+  // A control run of the discrepancy watch: it looked, suspected nothing, switched nothing in.
+  static void ExpectNothingSuspected(const LiveRun& control) {
+    ASSERT_FALSE(control.discrepancies.empty());
+    EXPECT_EQ(control.discrepancies.front().num_suspects, 0)
+        << control.discrepancies.front().description[0];
+    ASSERT_TRUE(control.params.has_value());
+    EXPECT_EQ(control.params->num_effect_params, 0);
+  }
+
   LiveRun RunCell(const std::string& cell_file, const std::string& sim_file, int cal, int test,
                   const std::vector<std::string>& more = {},
                   const std::vector<std::string>& ekf_more = {}) {
@@ -531,12 +540,68 @@ TEST_F(SensorPipeline, TheControllersTemperatureReachesThePosesAndThermalGrowthI
   // Control: the same warming cell, the arm not growing: nothing suspected, nothing switched in
   // (a fresh identifier, not resumed from the first run's checkpoint).
   std::filesystem::remove(run.checkpoint);
-  const LiveRun control = RunCell(cell_file, sim_file, kWarmCal, 5, warming, watch);
-  ASSERT_FALSE(control.discrepancies.empty());
-  EXPECT_EQ(control.discrepancies.front().num_suspects, 0)
-      << control.discrepancies.front().description[0];
-  ASSERT_TRUE(control.params.has_value());
-  EXPECT_EQ(control.params->num_effect_params, 0);
+  ExpectNothingSuspected(RunCell(cell_file, sim_file, kWarmCal, 5, warming, watch));
+}
+
+// A sensor-level pick-and-place cell (issue 15, item 4: the payload at sensor level): the simulated
+// arm carries 0, 5 or 10 kg per stop (sensor_acquisition --sim-payloads), its controller reports
+// the payload on ARM_CONDITIONS, and joint 2 gives way under gravity and the payload
+// (joint_compliance, c = 2e-6 rad/(N·m)). Every pose carries the payload its stop held (truth: the
+// simulator's schedule); the identifier's discrepancy watch names joint 2's compliance, switches it
+// in and identifies c live. Control: the same payloads, a stiff arm: nothing suspected.
+TEST_F(SensorPipeline, ThePayloadReachesThePosesAndJointComplianceIsNamedLive) {
+  RCAL_IN_NAMESPACE("SensorPipeline.ThePayloadReachesThePosesAndJointComplianceIsNamedLive");
+  constexpr int kCal = 55;
+  constexpr double kCompliance = 2e-6;  // [rad/(N·m)]
+  const std::string cell_file = RCAL_SOURCE_DIR "/config/cells/grb3016.yaml";
+  const std::string sim_file = RCAL_SOURCE_DIR "/config/cells/grb3016.sim.yaml";
+  const std::vector<std::string> watch = {"--discrepancy-every", "50", "--discrepancy-switch"};
+  const std::vector<std::string> loaded = {"--seed", std::to_string(kSeed), "--sim-payloads",
+                                           "0,5,10"};
+  std::vector<std::string> compliant = loaded;
+  compliant.insert(compliant.end(),
+                   {"--sim-effect", "joint_compliance:j2=" + std::to_string(kCompliance)});
+  const LiveRun run = RunCell(cell_file, sim_file, kCal, 5, compliant, watch);
+  ASSERT_GE(run.poses.size(), 50u);
+  // The payload each stop held, from the simulator's own schedule: the pose's stop is the last one
+  // the arm stood at before the pose's time (a window's pose is stamped as the arm leaves; the
+  // next move takes seconds, the payload's report comes within one).
+  const io::BuiltCell& built = integration::DemoCell();
+  const cell::SimProgramme programme =
+      cell::MakeSimProgramme(built, cell::LoadCellSimSpec(sim_file), kSeed, kCal, 5);
+  cell::SimArmConditions conditions(sim::SessionSettings{}.warmup_time_constant_s, 0, kSeed);
+  conditions.SetPayloads(programme.truth.trajectory(), {0.0, 5.0, 10.0});
+  const sim::JointTrajectory& trajectory = programme.truth.trajectory();
+  std::set<double> seen;
+  for (const pose_measurement_t& m : run.poses) {
+    const double t = static_cast<double>(m.utime) * 1e-6;
+    int stop = -1;
+    for (int k = 0; k < trajectory.num_waypoints(); ++k)
+      if (trajectory.StillInterval(k).first < t) stop = k;
+    ASSERT_GE(stop, 1) << "pose " << m.pose_index << " at " << t << " s";
+    ASSERT_LT(t - trajectory.StillInterval(stop).second, 3.0) << "pose " << m.pose_index;
+    EXPECT_EQ(m.payload_kg, conditions.PayloadAt(stop))
+        << "pose " << m.pose_index << " at " << t << " s, stop " << stop;
+    seen.insert(m.payload_kg);
+  }
+  EXPECT_EQ(seen, (std::set<double>{0.0, 5.0, 10.0}));
+  ASSERT_FALSE(run.discrepancies.empty());
+  const model_discrepancy_t& first = run.discrepancies.front();
+  ASSERT_GE(first.num_suspects, 1);
+  EXPECT_EQ(first.description[0], "joint_compliance " + built.model.joints()[1].name);
+  EXPECT_EQ(first.switched_in, 1);
+  ASSERT_TRUE(run.params.has_value());
+  ASSERT_EQ(run.params->num_effect_params, 1);
+  EXPECT_NEAR(run.params->effect_values[0], kCompliance, 3 * run.params->effect_sigmas[0]);
+  EXPECT_LT(run.params->effect_sigmas[0], 0.2 * kCompliance);
+  std::printf(
+      "joint compliance named at %d poses (%s, z %.1f, χ²/dof %.2f), c %.4g ± %.2g rad/(N·m) "
+      "(truth %.4g)\n",
+      first.poses_used, first.description[0].c_str(), first.z[0], first.chi2 / first.chi2_dof,
+      run.params->effect_values[0], run.params->effect_sigmas[0], kCompliance);
+  // Control: the same payloads on a stiff arm (a fresh identifier).
+  std::filesystem::remove(run.checkpoint);
+  ExpectNothingSuspected(RunCell(cell_file, sim_file, kCal, 5, loaded, watch));
 }
 
 // The demo's cell following the identifier's advice (sensor_acquisition --follow-next-poses,

@@ -320,12 +320,56 @@ SimArmConditions::SimArmConditions(double warmup_s, int64_t start_utime, unsigne
   session_.payloads_kg = {0.0};
 }
 
+void SimArmConditions::SetPayloads(const sim::JointTrajectory& trajectory,
+                                   const std::vector<double>& payloads_kg) {
+  if (payloads_kg.empty())
+    throw std::invalid_argument("payloads: the list of payloads [kg] is empty");
+  for (double m : payloads_kg)
+    if (!(m >= 0.0 && m <= 1000.0))
+      throw std::invalid_argument("payloads: " + std::to_string(m) +
+                                  " kg is not a payload (finite, 0 to 1000 kg)");
+  sim::Rng rng(static_cast<uint64_t>(seed_) * 1000 + 13);
+  std::uniform_int_distribution<size_t> pick(0, payloads_kg.size() - 1);
+  waypoint_payloads_kg_.clear();
+  payload_changes_.clear();
+  for (int k = 0; k < trajectory.num_waypoints(); ++k) {
+    waypoint_payloads_kg_.push_back(payloads_kg[pick(rng)]);
+    if (k == 0) continue;
+    // Taken on halfway through the move from waypoint k − 1 (header comment).
+    const double leave = trajectory.StillInterval(k - 1).second;
+    const double arrive = trajectory.StillInterval(k).first;
+    const double mid = 0.5 * (leave + arrive);
+    const double from = waypoint_payloads_kg_[static_cast<size_t>(k - 1)];
+    const double to = waypoint_payloads_kg_.back();
+    if (from != to)
+      payload_changes_.push_back({mid, mid + std::min(0.5, 0.25 * (arrive - leave)), from, to});
+  }
+}
+
+double SimArmConditions::PayloadAt(int waypoint) const {
+  if (waypoint < 0 || static_cast<size_t>(waypoint) >= waypoint_payloads_kg_.size()) return 0.0;
+  return waypoint_payloads_kg_[static_cast<size_t>(waypoint)];
+}
+
 kinematics::EffectContext SimArmConditions::At(double t_sim) const {
   kinematics::EffectContext c;
   c.time_s = t0_s_ + t_sim;  // the clock still_window stamps its poses with
   c.temperature_c = sim::WarmedTo(session_, t_sim);
-  c.payload_kg = 0.0;
+  c.payload_kg = waypoint_payloads_kg_.empty() ? 0.0 : waypoint_payloads_kg_.front();
+  for (const PayloadChange& ch : payload_changes_) {
+    if (t_sim <= ch.t_start) break;
+    // Quintic smoothstep: value, slope and curvature continuous at both ends.
+    const double u = std::min(1.0, (t_sim - ch.t_start) / (ch.t_end - ch.t_start));
+    c.payload_kg = ch.from + (ch.to - ch.from) * u * u * u * (10.0 - 15.0 * u + 6.0 * u * u);
+  }
   return c;
+}
+
+double SimArmConditions::ReportedPayload(double t_sim) const {
+  double m = waypoint_payloads_kg_.empty() ? 0.0 : waypoint_payloads_kg_.front();
+  for (const PayloadChange& ch : payload_changes_)
+    if (t_sim >= ch.t_start) m = ch.to;
+  return m;
 }
 
 double SimArmConditions::Reported(double t_sim, int64_t tick) const {
@@ -347,10 +391,18 @@ std::vector<std::string> SimArmConditions::ApplyEffects(
   for (const std::string& text : texts) {
     effects.push_back(sim::ParseEffectSpec(text, truths.front()->model()));
     const kinematics::Effect& e = effects.back().effect;
+    if (e.cause == kinematics::EffectCause::kJointCompliance) {
+      lines.push_back("the simulated arm's joints give way under gravity and its payload (" + text +
+                      (payload_changes_.empty() && PayloadAt(0) == 0.0
+                           ? "; no payload: its own links' weight only)"
+                           : ")"));
+      continue;
+    }
     if (e.cause != kinematics::EffectCause::kThermal)
       throw std::runtime_error("--sim-effect " + text +
-                               ": at --level sensors only thermal growth (by temperature or "
-                               "time); a payload, approach or joint effect needs --level poses");
+                               ": at --level sensors thermal growth (by temperature or time) and "
+                               "joint compliance only; an approach (backlash) or other joint "
+                               "effect needs --level poses");
     lines.push_back("the simulated arm grows with its " +
                     std::string(e.thermal_source == kinematics::Effect::ThermalSource::kTime
                                     ? "time"

@@ -137,26 +137,43 @@ sim::JointOffsetStep OffsetStepInProgramme(const SimProgramme& programme,
                                            const sim::JointOffsetStepSpec& spec);
 
 /// The arm's conditions in a sensor-level programme, as its simulated controller reports them
-/// (sensor_acquisition's ARM_CONDITIONS, ros2_sim_drivers' sensor_msgs/Temperature): the arm warms
-/// as sim::SessionSettings says (+12 K from 20 °C) with time constant `warmup_s`, carries no
-/// payload, and the controller reports once per second of sensor time with its sensor's 0.3 K
-/// noise.
+/// (sensor_acquisition's ARM_CONDITIONS, ros2_sim_drivers' sensor_msgs/Temperature and
+/// geometry_msgs/InertiaStamped): the arm warms as sim::SessionSettings says (+12 K from 20 °C)
+/// with time constant `warmup_s`, carries no payload unless SetPayloads gives it one per stop, and
+/// the controller reports once per second of sensor time with its sensor's 0.3 K noise.
 class SimArmConditions {
  public:
   /// `start_utime` [µs]: the sensor clock at sim time 0; `seed`: the run's (each report's noise is
   /// drawn from its own generator, so a resumed run reports the same and the other streams are
   /// unchanged). Throws std::invalid_argument when warmup_s is not positive.
   SimArmConditions(double warmup_s, int64_t start_utime, unsigned seed);
+  /// A pick-and-place arm: at each waypoint k ≥ 1 of `trajectory` (the programme's calibration
+  /// stops) it holds a payload drawn uniformly from `payloads_kg` [kg] (mt19937_64(seed·1000 + 13);
+  /// the home pose too), taken on halfway through the move from the waypoint before (a pick or
+  /// place between the measurement stops, where no still window reaches: a window's end is
+  /// detected up to about a second into the next move): the true payload blends from the old to
+  /// the new over half a second (at most a quarter of the move) by a quintic smoothstep, so the
+  /// tool's motion, and what the IMU feels, stays twice differentiable; the controller reports the
+  /// new payload from the blend's start. Call before ApplyEffects (the
+  /// effects take the conditions as they are then). Throws std::invalid_argument on an empty list
+  /// or a payload that is not finite or outside [0, 1000] kg.
+  void SetPayloads(const sim::JointTrajectory& trajectory, const std::vector<double>& payloads_kg);
   /// The true conditions at sim time `t_sim` [s]: time_s on the sensor clock, the temperature
-  /// [°C], payload 0.
+  /// [°C], the payload [kg] (SetPayloads; 0 without).
   kinematics::EffectContext At(double t_sim) const;
   /// The temperature [°C] the controller reports at `t_sim`; `tick`: the report's key (the sample
   /// index at the sensors' rate: its noise's seed).
   double Reported(double t_sim, int64_t tick) const;
+  /// The payload [kg] the controller reports at `t_sim`: the one it was told to carry (a step
+  /// where the true payload starts to blend; At).
+  double ReportedPayload(double t_sim) const;
+  /// The payload [kg] held at waypoint k of SetPayloads' trajectory (0 without).
+  double PayloadAt(int waypoint) const;
   /// `--sim-effect` texts (sim::ParseEffectSpec) on the programme's truth: the arm grows with its
-  /// true temperature (or time). Other causes are refused with the reason (a payload or approach
-  /// the sensor-level arm does not have, jumps the IMU would feel). Returns one line per effect
-  /// for the log.
+  /// true temperature (or time), its joints give way under gravity and the payload
+  /// (joint_compliance). Other causes are refused with the reason (an approach direction the
+  /// sensor-level arm does not report, joint errors not yet simulated at sensor level). Returns
+  /// one line per effect for the log.
   std::vector<std::string> ApplyEffects(const std::vector<std::string>& texts,
                                         SimProgramme& programme) const;
   /// The same effects on each of `truths` (non-null), each the motion of its own marker (a
@@ -166,9 +183,15 @@ class SimArmConditions {
   const sim::SessionSettings& session() const { return session_; }
 
  private:
+  // One payload change: from `from` to `to` [kg], blending over [t_start, t_end] [s of sim time].
+  struct PayloadChange {
+    double t_start, t_end, from, to;
+  };
   sim::SessionSettings session_;
   double t0_s_;
   unsigned seed_;
+  std::vector<double> waypoint_payloads_kg_;    // SetPayloads: per waypoint
+  std::vector<PayloadChange> payload_changes_;  // ascending in time
 };
 
 }  // namespace rcal::cell
