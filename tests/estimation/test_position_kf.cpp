@@ -11,6 +11,7 @@
 
 #include "rcal/geometry/so3.hpp"
 #include "rcal/sim/draw.hpp"
+#include "swinging_tool.hpp"
 
 namespace rcal::estimation {
 namespace {
@@ -406,21 +407,9 @@ TEST(PositionKf, AdaptiveAccelerometerNoiseHoldsThroughBurstsTheModelDoesNotKnow
   EXPECT_LT(median(scale_after), 2.0);  // …and comes back after them
 }
 
-// A tool swinging on three sinusoids (up to 5 m/s²) while it turns: the marker's position p [m]
-// and acceleration a [m/s²] (earth = world) and the orientation R_EB at t [s].
-struct SwingState {
-  Eigen::Vector3d p, a;
-  Eigen::Matrix3d R_EB;
-};
-SwingState SwingingTool(double t) {
-  const Eigen::Vector3d amp(1.0, 1.0, 0.8), w(0.9, 1.7, 2.3), phase(0.3, 1.1, -0.4);
-  SwingState s;
-  for (int i = 0; i < 3; ++i) {
-    s.p(i) = amp(i) * std::sin(w(i) * t + phase(i));
-    s.a(i) = -w(i) * w(i) * s.p(i);
-  }
-  s.R_EB = geometry::FromRpy(0.3 * std::sin(0.5 * t), 0.2, 0.4 * t);
-  return s;
+// A tool swinging on three sinusoids (up to 5 m/s²) while it turns (swinging_tool.hpp).
+swing::SwingState SwingingTool(double t) {
+  return swing::SwingingTool(t, Eigen::Vector3d(1.0, 1.0, 0.8));
 }
 
 // The accelerometer's χ² gate (accel_gate_chi2): taps (one 100 Hz sample of 60 m/s² on one axis,
@@ -438,7 +427,6 @@ TEST(PositionKf, TheAccelerometerGateRefusesTapsTheMotionCannotHave) {
   open.accel_noise_adaptation_tau = 0.1;
   PositionKfSettings gated = open;
   gated.accel_gate_chi2 = 16.27;
-  const Eigen::Vector3d up = UpVector(EarthFrame::kEnu);
   double se_open = 0, se_gated = 0;
   int n = 0, taps = 0;
   std::int64_t refused = 0;
@@ -449,13 +437,10 @@ TEST(PositionKf, TheAccelerometerGateRefusesTapsTheMotionCannotHave) {
       PositionKf o(open), g(gated);
       for (int k = 0; k < 3000; ++k) {
         const double t = k * 0.01;
-        const auto [p, a, R_EB] = SwingingTool(t);
-        Eigen::Vector3d f_B = R_EB.transpose() * (a + kG * up) + 6e-3 * sim::Draw3(N, rng);
-        const bool tap = tapping && k % 200 == 137;
-        if (tap) {
-          f_B(k / 200 % 3) += 60.0;
-          if (t >= 5.0) ++taps;
-        }
+        const swing::SwingState s = SwingingTool(t);
+        const auto& [p, a, R_EB] = s;
+        const Eigen::Vector3d f_B = swing::Accelerometer(s, k, tapping, 6e-3, N, rng);
+        if (tapping && swing::IsTap(k) && t >= 5.0) ++taps;
         ASSERT_TRUE(o.UpdateAccel(t, f_B, R_EB).ok());
         ASSERT_TRUE(g.UpdateAccel(t, f_B, R_EB).ok());
         if (k % 5 == 0) {
@@ -506,7 +491,6 @@ TEST(PositionKf, MotionProportionalNoiseKeepsAScaledAccelerometerConsistent) {
   constant.initial_velocity_sigma = 2.0;  // it starts at up to 1.8 m/s
   PositionKfSettings relative = constant;
   relative.accel_relative_sigma = 0.1;
-  const Eigen::Vector3d up = UpVector(EarthFrame::kEnu);
   double se_c = 0, se_r = 0, nees_c = 0, nees_r = 0;
   int n = 0;
   for (std::uint64_t seed = 1; seed <= 3; ++seed) {
@@ -515,11 +499,11 @@ TEST(PositionKf, MotionProportionalNoiseKeepsAScaledAccelerometerConsistent) {
     PositionKf c(constant), r(relative);
     for (int k = 0; k < 3000; ++k) {
       const double t = k * 0.01;
-      const auto [p, a, R_EB] = SwingingTool(t);
+      const swing::SwingState s = SwingingTool(t);
+      const auto& [p, a, R_EB] = s;
       // 10 % scale error on the body's own acceleration (gravity read right: a static
       // calibration), plus navigation-grade noise.
-      const Eigen::Vector3d f_B =
-          R_EB.transpose() * (1.1 * a + kG * up) + 6e-3 * sim::Draw3(N, rng);
+      const Eigen::Vector3d f_B = swing::Accelerometer(s, k, false, 6e-3, N, rng, 1.1);
       EXPECT_TRUE(c.UpdateAccel(t, f_B, R_EB).ok());
       EXPECT_TRUE(r.UpdateAccel(t, f_B, R_EB).ok());
       if (k % 5 == 0) {

@@ -14,6 +14,7 @@
 
 #include "rcal/geometry/so3.hpp"
 #include "rcal/sim/draw.hpp"
+#include "swinging_tool.hpp"
 
 namespace rcal::estimation {
 namespace {
@@ -196,21 +197,9 @@ TEST(PositionKfBank, RefusesSettingsThatCannotWeigh) {
   EXPECT_EQ(PositionKfBank{s}.filters().size(), 2u);  // the default models
 }
 
-// A tool swaying smoothly (sinusoids, up to 1.2 m/s²) while it turns: the marker's position p [m]
-// and acceleration a [m/s²] (earth = world, ENU) and the orientation R_EB at t [s].
-struct SwayState {
-  Eigen::Vector3d p, a;
-  Eigen::Matrix3d R_EB;
-};
-SwayState SwayingTool(double t) {
-  const Eigen::Vector3d amp(0.3, 0.2, 0.15), w(0.9, 1.7, 2.3), phase(0.3, 1.1, -0.4);
-  SwayState s;
-  for (int i = 0; i < 3; ++i) {
-    s.p(i) = amp(i) * std::sin(w(i) * t + phase(i));
-    s.a(i) = -w(i) * w(i) * s.p(i);
-  }
-  s.R_EB = geometry::FromRpy(0.3 * std::sin(0.5 * t), 0.2, 0.4 * t);
-  return s;
+// A tool swaying smoothly (sinusoids, up to 1.2 m/s²) while it turns (swinging_tool.hpp).
+swing::SwingState SwayingTool(double t) {
+  return swing::SwingingTool(t, Eigen::Vector3d(0.3, 0.2, 0.15));
 }
 
 // The swaying tool under a wandering 7 mrad orientation error,
@@ -225,7 +214,6 @@ TEST(PositionKfBank, FollowsTheBetterModelAsTheAccelerometerChanges) {
   base.position_sigma = 5e-4;
   PositionKfBankSettings bs;
   bs.models = DefaultBankModels(base);
-  const Eigen::Vector3d up = UpVector(EarthFrame::kEnu);
   // [phase][0 bank, 1 paper, 2 driven] squared errors; phases: calm (10–20 s), bad (20–30 s),
   // calm again (35–45 s); the driven model's weight per phase.
   double se[3][3] = {}, weight[3] = {};
@@ -237,10 +225,11 @@ TEST(PositionKfBank, FollowsTheBetterModelAsTheAccelerometerChanges) {
     Eigen::Vector3d dtheta = 7e-3 * sim::Draw3(N, rng);
     for (int k = 0; k < 4500; ++k) {
       const double t = k * 0.01;
-      const auto [p, a, R_EB] = SwayingTool(t);
+      const swing::SwingState s = SwayingTool(t);
+      const auto& [p, a, R_EB] = s;
       const double phi = std::exp(-0.01 / 2.0);
       dtheta = phi * dtheta + 7e-3 * std::sqrt(1 - phi * phi) * sim::Draw3(N, rng);
-      Eigen::Vector3d f_B = R_EB.transpose() * (a + kG * up) + 6e-3 * sim::Draw3(N, rng);
+      Eigen::Vector3d f_B = swing::Accelerometer(s, k, false, 6e-3, N, rng);
       if (t >= 20.0 && t < 30.0) f_B += 3.0 * sim::Draw3(N, rng);
       ASSERT_TRUE(bank.UpdateAccel(t, f_B, geometry::Exp(dtheta) * R_EB).ok());
       if (k % 5 == 0) {
@@ -292,7 +281,6 @@ TEST(PositionKfBank, TheDefaultModelsRefuseTapsTheMotionCannotHave) {
   PositionKfBankSettings open = gated;
   for (PositionKfSettings& m : gated.models) EXPECT_EQ(m.accel_gate_chi2, kBankAccelGateChi2);
   for (PositionKfSettings& m : open.models) m.accel_gate_chi2 = 0.0;
-  const Eigen::Vector3d up = UpVector(EarthFrame::kEnu);
   double se_gated = 0, se_open = 0, se_tracker = 0;
   int n = 0, n_tracker = 0;
   std::int64_t taps = 0, refused[2] = {};
@@ -302,12 +290,10 @@ TEST(PositionKfBank, TheDefaultModelsRefuseTapsTheMotionCannotHave) {
     PositionKfBank g(gated), o(open);
     for (int k = 0; k < 3000; ++k) {
       const double t = k * 0.01;
-      const auto [p, a, R_EB] = SwayingTool(t);
-      Eigen::Vector3d f_B = R_EB.transpose() * (a + kG * up) + 6e-3 * sim::Draw3(N, rng);
-      if (k % 200 == 137) {
-        f_B(k / 200 % 3) += 60.0;
-        ++taps;
-      }
+      const swing::SwingState s = SwayingTool(t);
+      const auto& [p, a, R_EB] = s;
+      const Eigen::Vector3d f_B = swing::Accelerometer(s, k, true, 6e-3, N, rng);
+      taps += swing::IsTap(k);
       ASSERT_TRUE(g.UpdateAccel(t, f_B, R_EB).ok());
       ASSERT_TRUE(o.UpdateAccel(t, f_B, R_EB).ok());
       if (k % 5 == 0) {
