@@ -20,10 +20,12 @@
 // (config/cells/grb3016.sim.yaml) is the experiment's cell of seed 1. The programme
 // ends with the move to the first test stop, so the last calibration window closes exactly as
 // offline and no test window follows. Paced by --speed (0: as fast as possible). The simulated
-// controller also reports the arm's conditions (ARM_CONDITIONS, once per second of sensor time:
+// controller also reports the arm's conditions (ARM_CONDITIONS, once per second of sensor time
+// and as the payload changes:
 // the arm's temperature warming as sim::SessionSettings says, with --sim-warmup as the time
 // constant, plus its 0.3 K sensor noise; the payload it was told to carry: none, or with
-// --sim-payloads one per stop, taken on as the arm leaves the stop before), and with --sim-effect
+// --sim-payloads one per stop, taken on halfway through the move to it, or with
+// --sim-payload-at stop halfway through its still interval), and with --sim-effect
 // (thermal growth and joint compliance at this level: the arm grows with its temperature, or
 // with time; its joints give way under gravity and the payload) the tool moves as the extended
 // model says under the true, noise-free conditions.
@@ -265,8 +267,9 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
                  unsigned seed, int num_cal, int num_test,
                  const std::vector<std::string>& step_offsets,
                  const std::vector<std::string>& sim_effects,
-                 const std::vector<double>& payloads_kg, double warmup_s, bool follow, bool linger,
-                 int64_t start_utime, double speed, const Resume& resume,
+                 const std::vector<double>& payloads_kg,
+                 rcal::cell::SimArmConditions::PayloadChangeAt payload_at, double warmup_s,
+                 bool follow, bool linger, int64_t start_utime, double speed, const Resume& resume,
                  rcal::transport::LcmTransport& t) {
   using namespace rcal;
   // SimulateWindows' programme: the home pose, then the calibration and test stops.
@@ -282,10 +285,13 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
     if (follow)
       throw std::runtime_error(
           "--follow-next-poses and --sim-payloads: not both at --level sensors (a payload is "
-          "taken on as the arm leaves a programme's stop, which following moves)");
-    conditions.SetPayloads(truth.trajectory(), payloads_kg);
-    spdlog::info("the simulated arm carries a payload per stop, drawn from {} kg",
-                 fmt::join(payloads_kg, ", "));
+          "taken on in the move to a programme's stop, which following moves)");
+    conditions.SetPayloads(truth.trajectory(), payloads_kg, payload_at);
+    spdlog::info("the simulated arm carries a payload per stop, drawn from {} kg, taken on {}",
+                 fmt::join(payloads_kg, ", "),
+                 payload_at == cell::SimArmConditions::PayloadChangeAt::kAtStop
+                     ? "at the stop (its window is measured under two loads)"
+                     : "halfway through the move to it");
   }
   for (const std::string& line : conditions.ApplyEffects(sim_effects, sim_run))
     spdlog::info("{}", line);
@@ -385,11 +391,13 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
     if (services::StopRequested()) break;
     lease.Before(k++);
     count(t.Publish(channels.joints, transport::ToJointState(model, f->q, utime)));
+    // The controller's report, once per second and when the payload it was told to carry
+    // changes (a pick or place is reported as it is made; stateless, so a resumed run reports
+    // the same): the temperature as its sensor reads it (its noise drawn from the report's own
+    // seed) and the payload.
     if (const auto tick = std::llround(f->t * ss.rate_hz);
-        tick % std::max<int64_t>(1, std::llround(ss.rate_hz)) == 0) {
-      // The controller's report, once per second: the temperature as its sensor reads it (its
-      // noise drawn from the report's own seed, so a resumed run reports the same) and the
-      // payload it was told to carry.
+        tick % std::max<int64_t>(1, std::llround(ss.rate_hz)) == 0 ||
+        conditions.ReportedPayload(f->t) != conditions.ReportedPayload(f->t - 1.0 / ss.rate_hz)) {
       transport::ArmConditions c;
       c.utime = utime;
       c.temperature_c = conditions.Reported(f->t, tick);
@@ -539,10 +547,17 @@ int main(int argc, char** argv) {
   std::vector<double> payloads_kg;
   app.add_option("--sim-payloads", payloads_kg,
                  "sim sensors: the arm carries a payload per stop drawn from these [kg] (e.g. "
-                 "0,5,10), taken on as it leaves the stop before, reported on ARM_CONDITIONS; "
+                 "0,5,10), taken on halfway through the move to it, reported on ARM_CONDITIONS; "
                  "without: none")
       ->delimiter(',')
       ->check(CLI::Range(0.0, 1000.0));
+  std::string payload_at_text = "move";
+  app.add_option("--sim-payload-at", payload_at_text,
+                 "sim sensors, --sim-payloads: where the arm takes a new payload on: move (halfway "
+                 "through the move to the stop) or stop (halfway through the stop: a grasp at the "
+                 "measurement stop, whose still window still_window then refuses)")
+      ->check(CLI::IsMember({"move", "stop"}))
+      ->capture_default_str();
   double warmup_s = sim::SessionSettings{}.warmup_time_constant_s;
   app.add_option("--sim-warmup", warmup_s,
                  "sim sensors: the time constant [s] of the arm's warm-up (+12 K) that the "
@@ -560,6 +575,13 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
+  if (app.get_option("--sim-payload-at")->count() > 0 && payloads_kg.empty()) {
+    std::fprintf(stderr, "sensor_acquisition: --sim-payload-at needs --sim-payloads\n");
+    return 2;
+  }
+  const auto payload_at = payload_at_text == "stop"
+                              ? cell::SimArmConditions::PayloadChangeAt::kAtStop
+                              : cell::SimArmConditions::PayloadChangeAt::kMidMove;
   if (!payloads_kg.empty() && (source != "sim" || level != "sensors")) {
     // The pose-level simulator draws its own payload per stop (0, 5 or 10 kg); a replay has its
     // file's.
@@ -615,8 +637,8 @@ int main(int argc, char** argv) {
     if (app.get_option("--seed")->count() == 0) seed = sim_spec.seed;
     if (level == "sensors")
       return RunSensorSim(built, sim_spec, seed, poses > 0 ? poses : sim_spec.num_cal, test_poses,
-                          step_offsets, sim_effects, payloads_kg, warmup_s, follow, linger,
-                          start_utime, speed, resume, t);
+                          step_offsets, sim_effects, payloads_kg, payload_at, warmup_s, follow,
+                          linger, start_utime, speed, resume, t);
     // Pose level: the cell's model at the sim file's truth, measured as the cell's position sensor
     // measures (its largest σ per axis; orientation when it is a 6-DoF tracker), one pose per stop.
     const auto& model = built.model;

@@ -36,13 +36,16 @@
 // direction, the sign of each joint's move from the last still window to this one (none at the
 // first), its time (the window's end, s of sensor time), and the arm's temperature and payload
 // from ARM_CONDITIONS (the controller's reports, its own time gate; estimation::
-// ArmConditionsHistory): the newest report at or before the window's end, if at most
-// --conditions-max-age old. A cell that sends no ARM_CONDITIONS gets temperature unknown (NaN)
-// and payload 0, as before; once reports have come, a window with none standing (the controller
-// went quiet) goes out so too, and is counted in HEALTH gaps with the reason in last_error. A
-// report not measured (NaN) stays unknown; a payload not known (NaN) goes out as 0. A controller
-// that reports slowly: --conditions-max-age at least its period (the stream's time gate then
-// accepts reports that far apart, whatever --horizon says).
+// ArmConditionsHistory::ForWindow): the newest report at or before the window's middle, if at
+// most --conditions-max-age old (its detected end lies up to a second into the next move). A
+// window within which the reported payload changed (a grasp at the stop, or a pick reported as
+// the arm left) was measured under two loads: it is refused, named and counted in HEALTH. A cell
+// that sends no ARM_CONDITIONS gets temperature unknown (NaN) and payload 0, as before; once
+// reports have come, a window with none standing (the controller went quiet) goes out so too, and
+// is counted in HEALTH gaps with the reason in last_error. A report not measured (NaN) stays
+// unknown; a payload not known (NaN) goes out as 0. A controller that reports slowly:
+// --conditions-max-age at least its period (the stream's time gate then accepts reports that far
+// apart, whatever --horizon says).
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -220,23 +223,34 @@ class StillWindowNode {
     conditions_seen_ = true;
     conditions_.Add({Seconds(c->utime), c->temperature_c, c->payload_kg});
   }
-  // The arm's conditions standing at the window's end t_end [s] into `context` (file comment).
-  void TakeConditions(double t_end, kinematics::EffectContext& context) {
-    if (!conditions_seen_) return;
-    const auto c = conditions_.At(t_end);
-    if (!c) {
+  // The arm's conditions standing at the middle of the window [t_begin, t_end] [s] into `context`
+  // (file comment). False: the window is refused (the payload changed within it), counted.
+  bool TakeConditions(double t_begin, double t_end, kinematics::EffectContext& context) {
+    if (!conditions_seen_) return true;
+    const auto w = conditions_.ForWindow(t_begin, t_end);
+    if (w.payload_change) {
+      health_.Rejected(fmt::format(
+          "window {:.3f}–{:.3f} s refused: arm_conditions.payload_kg changed from {:.3f} to "
+          "{:.3f} kg at {:.3f} s within it (a pose measured under two loads)",
+          t_begin, t_end, w.payload_before_kg, w.payload_change->payload_kg, w.payload_change->t));
+      spdlog::warn("{}", health_.last_error());
+      return false;
+    }
+    if (!w.standing) {
       health_.Gap(1);
-      health_.Error("window ending " + std::to_string(t_end) +
-                    " s: no ARM_CONDITIONS report within " + std::to_string(conditions_.max_age()) +
-                    " s before it (temperature not known)");
+      health_.Error(fmt::format(
+          "window {:.3f}–{:.3f} s: no ARM_CONDITIONS report within {} s before its middle "
+          "(temperature not known)",
+          t_begin, t_end, conditions_.max_age()));
       if (!conditions_missing_) spdlog::warn("{}", health_.last_error());
       conditions_missing_ = true;
-      return;
+      return true;
     }
     if (conditions_missing_) spdlog::info("ARM_CONDITIONS stand for the windows again");
     conditions_missing_ = false;
-    context.temperature_c = c->temperature_c;
-    context.payload_kg = std::isnan(c->payload_kg) ? 0.0 : c->payload_kg;
+    context.temperature_c = w.standing->temperature_c;
+    context.payload_kg = std::isnan(w.standing->payload_kg) ? 0.0 : w.standing->payload_kg;
+    return true;
   }
   // Why a window of `length_s` may not be formed with the clocks as they are ("" when it may):
   // estimation::MayFormStillWindow for every source whose offset is estimated.
@@ -285,7 +299,7 @@ class StillWindowNode {
     kinematics::EffectContext context;
     context.time_s = p.t_end;
     context.dq_sign = approach;
-    TakeConditions(p.t_end, context);
+    if (!TakeConditions(p.t_begin, p.t_end, context)) return;
     if (t_.Publish(channels_.pose_measurement,
                    transport::ToMessage(z, utime, emitted_, marker_id_, context))) {
       health_.Published();
@@ -344,8 +358,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   double conditions_max_age = 10.0;
   app.add_option("--conditions-max-age", conditions_max_age,
-                 "ARM_CONDITIONS: how old [s] the newest report before a window's end may be and "
-                 "still give its pose the temperature and payload")
+                 "ARM_CONDITIONS: how old [s] the newest report before a window's middle may be "
+                 "and still give its pose the temperature and payload")
       ->check(CLI::Range(0.0, 3600.0))
       ->capture_default_str();
   CLI11_PARSE(app, argc, argv);

@@ -297,6 +297,35 @@ TEST(SimArmConditions, APayloadPerStopBlendsInHalfwayThroughTheMoveToIt) {
   EXPECT_THROW(conditions.SetPayloads(trajectory, {std::nan("")}), std::invalid_argument);
 }
 
+// A grasp at the measurement stop (PayloadChangeAt::kAtStop): the new payload blends in from the
+// middle of the stop's still interval, within it, and is reported from there; in the move to the
+// stop and in its first half the arm still holds the payload of the stop before.
+TEST(SimArmConditions, AGraspAtTheStopChangesThePayloadInsideItsStillInterval) {
+  Loaded d = Load("grb3016");
+  const SimProgramme programme = MakeSimProgramme(d.cell, d.sim, 1, 8, 1);
+  const sim::JointTrajectory& trajectory = programme.truth.trajectory();
+  SimArmConditions at_stop(100.0, 0, 1), mid_move(100.0, 0, 1);
+  at_stop.SetPayloads(trajectory, {0.0, 5.0, 10.0}, SimArmConditions::PayloadChangeAt::kAtStop);
+  mid_move.SetPayloads(trajectory, {0.0, 5.0, 10.0});
+  int changes = 0;
+  for (int k = 1; k < trajectory.num_waypoints(); ++k) {
+    EXPECT_EQ(at_stop.PayloadAt(k), mid_move.PayloadAt(k));  // the same draws
+    const double from = at_stop.PayloadAt(k - 1), to = at_stop.PayloadAt(k);
+    const auto [a, b] = trajectory.StillInterval(k);
+    const double t0 = 0.5 * (a + b), T = std::min(0.5, 0.25 * (b - a));
+    EXPECT_EQ(at_stop.At(a).payload_kg, from) << "stop " << k;
+    EXPECT_EQ(at_stop.ReportedPayload(t0 - 1e-9), from) << "stop " << k;
+    EXPECT_EQ(at_stop.ReportedPayload(t0 + 1e-9), to) << "stop " << k;
+    EXPECT_EQ(at_stop.At(t0 + T).payload_kg, to) << "stop " << k;
+    ASSERT_LT(t0 + T, b);
+    if (from != to) {
+      ++changes;
+      EXPECT_GT(std::abs(at_stop.At(t0 + 0.5 * T).payload_kg - from), 0.0);
+    }
+  }
+  EXPECT_GE(changes, 3);
+}
+
 // The panda's IMU has turned axes, the UR10 none: the simulator's mounting and the run's
 // orientation follow.
 TEST(CellSimYaml, ImuAxesAndPositionOnlyCells) {

@@ -50,6 +50,55 @@ TEST(ArmConditions, SameTimeReplacesOlderIsRefusedAndTheHistoryIsBounded) {
   EXPECT_THROW((ArmConditionsHistory{1.0, 0}), std::invalid_argument);
 }
 
+// A still window takes the report standing at its middle, not at its detected end (which lies in
+// the next move), and names a payload change inside it: the pose was measured under two loads.
+TEST(ArmConditions, AWindowTakesItsMiddlesReportAndNamesAPayloadChangeWithinIt) {
+  ArmConditionsHistory h(10.0);
+  for (int k = 0; k <= 20; ++k) {
+    // 1 Hz reports: warming by 0.1 K/s; 5 kg picked at 7 s (reported then), placed at 15.004 s;
+    // at 11 s the payload is not known (NaN); from 18 s a re-estimate 4 g off.
+    const double t = k == 15 ? 15.004 : k;
+    const double payload = k < 7 ? 0.0 : k < 15 ? (k == 11 ? kNaN : 5.0) : k < 18 ? 0.0 : 0.004;
+    h.Add({t, 20.0 + 0.1 * t, payload});
+  }
+  // A window over the stop [2, 5.5] s ending 1 s into the move: no change; the temperature at
+  // its middle (3.75 s: the 3 s report), not at its end (the 5 s report).
+  auto w = h.ForWindow(2.0, 5.5);
+  ASSERT_TRUE(w.standing);
+  EXPECT_EQ(w.standing->t, 3.0);
+  EXPECT_DOUBLE_EQ(w.standing->temperature_c, 20.3);
+  EXPECT_FALSE(w.payload_change);
+  // The pick reported at 7 s inside a window [5.2, 8] s: named, with the payload before it.
+  w = h.ForWindow(5.2, 8.0);
+  ASSERT_TRUE(w.payload_change);
+  EXPECT_EQ(w.payload_change->t, 7.0);
+  EXPECT_EQ(w.payload_change->payload_kg, 5.0);
+  EXPECT_EQ(w.payload_before_kg, 0.0);
+  // A report exactly at the window's start stands at its start: no change within it.
+  EXPECT_FALSE(h.ForWindow(7.0, 9.0).payload_change);
+  // Nor is the unknown payload at 11 s a change (5 → unknown → 5 kg).
+  EXPECT_FALSE(h.ForWindow(10.5, 13.0).payload_change);
+  // The place at 15.004 s: the window ending at 15.0 does not see it, the one ending at 15.004
+  // does.
+  EXPECT_FALSE(h.ForWindow(13.5, 15.0).payload_change);
+  w = h.ForWindow(13.5, 15.004);
+  ASSERT_TRUE(w.payload_change);
+  EXPECT_EQ(w.payload_before_kg, 5.0);
+  EXPECT_EQ(w.payload_change->payload_kg, 0.0);
+  // 4 g is the same payload at the default tolerance, a change at a 1 g one.
+  EXPECT_FALSE(h.ForWindow(16.5, 19.0).payload_change);
+  EXPECT_TRUE(h.ForWindow(16.5, 19.0, 0.001).payload_change);
+  // Before any report nothing stands and nothing changes; a window in a silence of the
+  // controller (reports older than max_age at its middle) has none standing.
+  EXPECT_FALSE(h.ForWindow(-3.0, -1.0).standing);
+  EXPECT_FALSE(h.ForWindow(-3.0, -1.0).payload_change);
+  EXPECT_FALSE(h.ForWindow(40.0, 42.0).standing);
+  // A window that begins before the first report: the first report is not a change.
+  ArmConditionsHistory late(10.0);
+  late.Add({3.0, 20.0, 5.0});
+  EXPECT_FALSE(late.ForWindow(1.0, 4.0).payload_change);
+}
+
 // A controller reporting every 30 s, with reports standing for 60 s: its gate accepts each
 // report (the sensors' 10 s horizon alone refuses nearly all of them), and still refuses one
 // beyond the widened horizon.

@@ -321,7 +321,7 @@ SimArmConditions::SimArmConditions(double warmup_s, int64_t start_utime, unsigne
 }
 
 void SimArmConditions::SetPayloads(const sim::JointTrajectory& trajectory,
-                                   const std::vector<double>& payloads_kg) {
+                                   const std::vector<double>& payloads_kg, PayloadChangeAt at) {
   if (payloads_kg.empty())
     throw std::invalid_argument("payloads: the list of payloads [kg] is empty");
   for (double m : payloads_kg)
@@ -335,14 +335,17 @@ void SimArmConditions::SetPayloads(const sim::JointTrajectory& trajectory,
   for (int k = 0; k < trajectory.num_waypoints(); ++k) {
     waypoint_payloads_kg_.push_back(payloads_kg[pick(rng)]);
     if (k == 0) continue;
-    // Taken on halfway through the move from waypoint k − 1 (header comment).
-    const double leave = trajectory.StillInterval(k - 1).second;
-    const double arrive = trajectory.StillInterval(k).first;
-    const double mid = 0.5 * (leave + arrive);
+    // Taken on halfway through the move from waypoint k − 1, or halfway through stop k's still
+    // interval (header comment).
+    const auto [a, b] =
+        at == PayloadChangeAt::kMidMove
+            ? std::pair(trajectory.StillInterval(k - 1).second, trajectory.StillInterval(k).first)
+            : trajectory.StillInterval(k);
+    const double mid = 0.5 * (a + b);
     const double from = waypoint_payloads_kg_[static_cast<size_t>(k - 1)];
     const double to = waypoint_payloads_kg_.back();
     if (from != to)
-      payload_changes_.push_back({mid, mid + std::min(0.5, 0.25 * (arrive - leave)), from, to});
+      payload_changes_.push_back({mid, mid + std::min(0.5, 0.25 * (b - a)), from, to});
   }
 }
 

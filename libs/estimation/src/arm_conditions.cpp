@@ -50,4 +50,26 @@ std::optional<ArmConditionsReport> ArmConditionsHistory::At(double t) const {
   return r;
 }
 
+ArmConditionsHistory::Window ArmConditionsHistory::ForWindow(double t_begin, double t_end,
+                                                             double payload_tolerance_kg) const {
+  Window w;
+  w.standing = At(0.5 * (t_begin + t_end));
+  // The payload as reported at the window's start, then each report inside it in time order.
+  double last = std::numeric_limits<double>::quiet_NaN();
+  if (const auto start = At(t_begin)) last = start->payload_kg;
+  const auto inside =
+      std::upper_bound(reports_.begin(), reports_.end(), t_begin,
+                       [](double time, const ArmConditionsReport& r) { return time < r.t; });
+  for (auto it = inside; it != reports_.end() && it->t <= t_end; ++it) {
+    if (std::isnan(it->payload_kg)) continue;
+    if (!std::isnan(last) && std::abs(it->payload_kg - last) > payload_tolerance_kg) {
+      w.payload_change = *it;
+      w.payload_before_kg = last;
+      break;
+    }
+    last = it->payload_kg;
+  }
+  return w;
+}
+
 }  // namespace rcal::estimation

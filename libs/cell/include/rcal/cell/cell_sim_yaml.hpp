@@ -147,17 +147,26 @@ class SimArmConditions {
   /// drawn from its own generator, so a resumed run reports the same and the other streams are
   /// unchanged). Throws std::invalid_argument when warmup_s is not positive.
   SimArmConditions(double warmup_s, int64_t start_utime, unsigned seed);
+  /// Where a pick-and-place arm takes on a new payload (SetPayloads).
+  enum class PayloadChangeAt {
+    /// Halfway through the move to the stop: a pick or place between the measurement stops, where
+    /// no still window reaches (a window's end is detected up to about a second into the next
+    /// move).
+    kMidMove,
+    /// At the middle of the stop's still interval: a grasp made at the measurement stop, so that
+    /// stop's window was measured under two loads (still_window refuses it).
+    kAtStop,
+  };
   /// A pick-and-place arm: at each waypoint k ≥ 1 of `trajectory` (the programme's calibration
   /// stops) it holds a payload drawn uniformly from `payloads_kg` [kg] (mt19937_64(seed·1000 + 13);
-  /// the home pose too), taken on halfway through the move from the waypoint before (a pick or
-  /// place between the measurement stops, where no still window reaches: a window's end is
-  /// detected up to about a second into the next move): the true payload blends from the old to
-  /// the new over half a second (at most a quarter of the move) by a quintic smoothstep, so the
-  /// tool's motion, and what the IMU feels, stays twice differentiable; the controller reports the
-  /// new payload from the blend's start. Call before ApplyEffects (the
+  /// the home pose too), taken on where `at` says: the true payload blends from the old to the new
+  /// over half a second (at most a quarter of the move, or of the still interval) by a quintic
+  /// smoothstep, so the tool's motion, and what the IMU feels, stays twice differentiable; the
+  /// controller reports the new payload from the blend's start. Call before ApplyEffects (the
   /// effects take the conditions as they are then). Throws std::invalid_argument on an empty list
   /// or a payload that is not finite or outside [0, 1000] kg.
-  void SetPayloads(const sim::JointTrajectory& trajectory, const std::vector<double>& payloads_kg);
+  void SetPayloads(const sim::JointTrajectory& trajectory, const std::vector<double>& payloads_kg,
+                   PayloadChangeAt at = PayloadChangeAt::kMidMove);
   /// The true conditions at sim time `t_sim` [s]: time_s on the sensor clock, the temperature
   /// [°C], the payload [kg] (SetPayloads; 0 without).
   kinematics::EffectContext At(double t_sim) const;
@@ -167,7 +176,8 @@ class SimArmConditions {
   /// The payload [kg] the controller reports at `t_sim`: the one it was told to carry (a step
   /// where the true payload starts to blend; At).
   double ReportedPayload(double t_sim) const;
-  /// The payload [kg] held at waypoint k of SetPayloads' trajectory (0 without).
+  /// The payload [kg] held at waypoint k of SetPayloads' trajectory (0 without); with kAtStop,
+  /// the one taken on at k (held from the middle of its still interval on).
   double PayloadAt(int waypoint) const;
   /// `--sim-effect` texts (sim::ParseEffectSpec) on the programme's truth: the arm grows with its
   /// true temperature (or time), its joints give way under gravity and the payload

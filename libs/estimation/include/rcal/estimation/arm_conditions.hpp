@@ -3,12 +3,17 @@
 // extended model online needs each pose's temperature and payload; a real cell's controller
 // reports them on their own stream, ARM_CONDITIONS, not inside the sensor samples).
 //
-// ArmConditionsHistory keeps the recent reports in sensor time and answers, for a window that
-// ended at t, the newest report at or before t, when it is at most `max_age` old: sample and hold,
-// as the controller's report stands until the next one. A report after t is not used for t (it
-// may describe a payload picked up after the stop). Reports must arrive in non-decreasing time
-// (the caller's time gate refuses the others); the history is bounded (`capacity`), the oldest
-// dropped first, so a flood of reports cannot grow it.
+// ArmConditionsHistory keeps the recent reports in sensor time and answers, for a time t, the
+// newest report at or before t, when it is at most `max_age` old: sample and hold, as the
+// controller's report stands until the next one. A still window [t_begin, t_end] takes the report
+// standing at its middle (ForWindow): a window's end is detected up to about a second into the
+// next move (the arm starts slowly, under the still threshold), so the report at the end may
+// already describe the next stop (a pick reported as the arm leaves), and a slowly changing
+// temperature is best represented at the middle of the samples averaged. A window within which
+// the reported payload changed (a grasp made at the stop, or reported as the arm left it) was
+// measured under two loads: ForWindow names the change and the caller refuses the window. Reports
+// must arrive in non-decreasing time (the caller's time gate refuses the others); the history is
+// bounded (`capacity`), the oldest dropped first, so a flood of reports cannot grow it.
 #pragma once
 
 #include <cstddef>
@@ -47,6 +52,22 @@ class ArmConditionsHistory {
   /// t − report.t ≤ max_age; nullopt when there is none (never reported, all after t, or the
   /// newest before t is too old).
   std::optional<ArmConditionsReport> At(double t) const;
+
+  /// What a still window over [t_begin, t_end] [s] takes of the reports (file comment).
+  struct Window {
+    /// The report standing at the window's middle, (t_begin + t_end) / 2 (At); nullopt: none.
+    std::optional<ArmConditionsReport> standing;
+    /// The first report within (t_begin, t_end] whose payload differs by more than the tolerance
+    /// from the payload reported before it (the one standing at t_begin, or the window's earlier
+    /// report); nullopt: the payload did not change. A payload not known (NaN) is no change.
+    std::optional<ArmConditionsReport> payload_change;
+    double payload_before_kg = std::numeric_limits<double>::quiet_NaN();  ///< before the change
+  };
+  /// A payload change below this [kg] is taken as the same payload (a controller re-estimating
+  /// its payload reports small changes; 10 g is far below what bends an arm measurably).
+  static constexpr double kPayloadTolerance = 0.01;
+  Window ForWindow(double t_begin, double t_end,
+                   double payload_tolerance_kg = kPayloadTolerance) const;
 
   /// Drops everything (the time base changed: a stream re-synchronised).
   void Clear() { reports_.clear(); }
