@@ -401,11 +401,24 @@ std::vector<std::string> SimArmConditions::ApplyEffects(
                            : ")"));
       continue;
     }
+    if (e.cause == kinematics::EffectCause::kJointPeriodic ||
+        e.cause == kinematics::EffectCause::kJointScale) {
+      // A function of the joint angle alone: smooth along the motion, so the IMU feels it as the
+      // tool moves, as the extended model says.
+      lines.push_back(
+          std::string(e.cause == kinematics::EffectCause::kJointPeriodic
+                          ? "the simulated arm's gear errs periodically with the joint angle ("
+                          : "the simulated arm's joint turns by a scale off its "
+                            "reading (") +
+          text + ")");
+      continue;
+    }
     if (e.cause != kinematics::EffectCause::kThermal)
-      throw std::runtime_error("--sim-effect " + text +
-                               ": at --level sensors thermal growth (by temperature or time) and "
-                               "joint compliance only; an approach (backlash) or other joint "
-                               "effect needs --level poses");
+      throw std::runtime_error(
+          "--sim-effect " + text +
+          ": at --level sensors thermal growth (by temperature or time), joint compliance, gear "
+          "(joint_periodic) and scale (joint_scale) errors only; backlash depends on the approach "
+          "direction, which the sensor-level truth does not carry: it needs --level poses");
     lines.push_back("the simulated arm grows with its " +
                     std::string(e.thermal_source == kinematics::Effect::ThermalSource::kTime
                                     ? "time"
