@@ -15,10 +15,10 @@
 //   payload   1 Hz with the temperature, when the cell names a topic: geometry_msgs/InertiaStamped
 //             of what the controller was told the arm carries (none: 0 kg; --sim-payloads: one per
 //             stop, as sensor_acquisition's)
-// --sim-effect thermal=κ (or thermal:time=ρ), joint_compliance:JOINT=c, joint_periodic and
-// joint_scale, as sensor_acquisition takes them, make the arm grow with its true temperature (or
-// time), its joints give way under gravity and the payload or turn off their readings: every
-// marker the tracker sees, and the IMU's motion.
+// --sim-effect thermal=κ (or thermal:time=ρ), joint_compliance:JOINT=c, joint_periodic,
+// joint_scale and backlash, as sensor_acquisition takes them, make the arm grow with its true
+// temperature (or time), its joints give way under gravity and the payload or stand off their
+// readings: every marker the tracker sees, and the IMU's motion.
 // every stamp but the joints' with Gaussian --jitter. Joint names are listed in a shuffled order
 // (--shuffle-seed; 0: chain order) with one extra joint of a gripper a driver might add.
 // --imu-restart-at T: at sim time T the IMU driver restarts, its clock starting again from
@@ -118,8 +118,8 @@ int main(int argc, char** argv) {
                  "sensors takes it: thermal growth with its temperature, thermal=KAPPA [1/K], or "
                  "with time, thermal:time=RHO [1/s]; joint compliance under gravity and the "
                  "payload, joint_compliance:JOINT=C [rad/(N·m)]; a gear error, "
-                 "joint_periodic:JOINT=A_SIN,A_COS [rad]; a scale error, joint_scale:JOINT=S "
-                 "(repeatable)");
+                 "joint_periodic:JOINT=A_SIN,A_COS [rad]; a scale error, joint_scale:JOINT=S; "
+                 "backlash, backlash:JOINT=B [rad] (repeatable)");
   std::vector<double> payloads_kg;
   app.add_option("--sim-payloads", payloads_kg,
                  "the arm carries a payload per stop drawn from these [kg] (e.g. 0,5,10), as "

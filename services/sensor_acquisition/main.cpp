@@ -26,10 +26,10 @@
 // constant, plus its 0.3 K sensor noise; the payload it was told to carry: none, or with
 // --sim-payloads one per stop, taken on halfway through the move to it, or with
 // --sim-payload-at stop halfway through its still interval), and with --sim-effect
-// (at this level thermal growth, joint compliance, gear and scale errors: the arm grows with its
-// temperature, or with time; its joints give way under gravity and the payload, turn by a
-// periodic gear error or a scale off their readings) the tool moves as the extended model says
-// under the true, noise-free conditions.
+// (the arm grows with its temperature, or with time; its joints give way under gravity and the
+// payload, turn by a periodic gear error or a scale off their readings, or stand off them by their
+// backlash in the direction they came in) the tool moves as the extended model says under the
+// true, noise-free conditions.
 //
 // Source `replay FILE`: a raw-stream CSV in the BROAD layout (sources.hpp) published as IMU (every
 // row) and POSITION (decimated to --position-rate), utime from the file; or a pose dataset
@@ -280,7 +280,7 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
   sim::ToolMotionTruth& truth = sim_run.truth;
   // The arm's conditions: a warming temperature (the session's curve, τ = warmup_s), a payload per
   // stop with --sim-payloads (none without); with --sim-effect the arm grows with the temperature,
-  // its joints give way under the payload or turn off their readings (gear, scale).
+  // its joints give way under the payload or stand off their readings (gear, scale, backlash).
   cell::SimArmConditions conditions(warmup_s, start_utime, seed);
   if (!payloads_kg.empty()) {
     if (follow)
@@ -538,8 +538,8 @@ int main(int argc, char** argv) {
   std::vector<std::string> sim_effects;
   app.add_option(
       "--sim-effect", sim_effects,
-      "sim: a non-geometric effect the simulated arm has (at --level sensors all but "
-      "backlash), CAUSE[:JOINT]=V[,V] as "
+      "sim: a non-geometric effect the simulated arm has (at either level), "
+      "CAUSE[:JOINT]=V[,V] as "
       "rcal simulate --effect takes it (joint_compliance:j2=2e-6, joint_periodic:j3=1e-4,"
       "5e-5, joint_scale:j4=2e-4, backlash:j5=5e-5, thermal=1.2e-5, thermal:time=3e-9; "
       "repeatable). Every stop's context is published with its pose either way: time since "

@@ -389,11 +389,24 @@ std::vector<std::string> SimArmConditions::ApplyEffects(const std::vector<std::s
 std::vector<std::string> SimArmConditions::ApplyEffects(
     const std::vector<std::string>& texts, const std::vector<sim::ToolMotionTruth*>& truths) const {
   if (truths.empty()) throw std::invalid_argument("SimArmConditions::ApplyEffects: no truth");
+  const kinematics::KinematicModel& arm = truths.front()->model();
   std::vector<sim::TruthEffect> effects;
   std::vector<std::string> lines;
+  Eigen::VectorXd backlash = Eigen::VectorXd::Zero(arm.num_joints());
   for (const std::string& text : texts) {
-    effects.push_back(sim::ParseEffectSpec(text, truths.front()->model()));
-    const kinematics::Effect& e = effects.back().effect;
+    sim::TruthEffect te = sim::ParseEffectSpec(text, arm);
+    const kinematics::Effect e = te.effect;  // a copy: te moves into effects below
+    if (e.cause == kinematics::EffectCause::kBacklash) {
+      // The joints stand off their readings by the approach direction; blended through the dead
+      // band as a move reverses (sim::ToolMotionTruth::set_backlash).
+      backlash(e.joint) += te.values(0);
+      lines.push_back(
+          "the simulated arm's joint stands off its reading by its backlash in the "
+          "direction it came in, crossing the dead band as a move reverses (" +
+          text + ")");
+      continue;
+    }
+    effects.push_back(std::move(te));
     if (e.cause == kinematics::EffectCause::kJointCompliance) {
       lines.push_back("the simulated arm's joints give way under gravity and its payload (" + text +
                       (payload_changes_.empty() && PayloadAt(0) == 0.0
@@ -405,20 +418,14 @@ std::vector<std::string> SimArmConditions::ApplyEffects(
         e.cause == kinematics::EffectCause::kJointScale) {
       // A function of the joint angle alone: smooth along the motion, so the IMU feels it as the
       // tool moves, as the extended model says.
-      lines.push_back(
-          std::string(e.cause == kinematics::EffectCause::kJointPeriodic
-                          ? "the simulated arm's gear errs periodically with the joint angle ("
-                          : "the simulated arm's joint turns by a scale off its "
-                            "reading (") +
-          text + ")");
+      lines.push_back(std::string(e.cause == kinematics::EffectCause::kJointPeriodic
+                                      ? "the simulated arm's gear errs periodically with the "
+                                        "joint angle ("
+                                      : "the simulated arm's joint turns by a scale off its "
+                                        "reading (") +
+                      text + ")");
       continue;
     }
-    if (e.cause != kinematics::EffectCause::kThermal)
-      throw std::runtime_error(
-          "--sim-effect " + text +
-          ": at --level sensors thermal growth (by temperature or time), joint compliance, gear "
-          "(joint_periodic) and scale (joint_scale) errors only; backlash depends on the approach "
-          "direction, which the sensor-level truth does not carry: it needs --level poses");
     lines.push_back("the simulated arm grows with its " +
                     std::string(e.thermal_source == kinematics::Effect::ThermalSource::kTime
                                     ? "time"
@@ -426,8 +433,9 @@ std::vector<std::string> SimArmConditions::ApplyEffects(
                     " (" + text + "), warming with τ " +
                     std::to_string(session_.warmup_time_constant_s) + " s");
   }
-  if (effects.empty()) return lines;
   for (sim::ToolMotionTruth* truth : truths) {
+    if (!backlash.isZero()) truth->set_backlash(backlash);
+    if (effects.empty()) continue;
     // Each marker's own chain with the arm's effects (their parameters are the arm's, not the
     // marker's).
     sim::EffectTruth et = sim::MakeEffectTruth(truth->model(), effects);

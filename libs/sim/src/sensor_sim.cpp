@@ -1,7 +1,9 @@
 #include "rcal/sim/sensor_sim.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 
 #include "rcal/geometry/so3.hpp"
 #include "rcal/sim/draw.hpp"
@@ -33,7 +35,46 @@ void ToolMotionTruth::set_effects(kinematics::ExtendedModel model, Eigen::Vector
       std::make_shared<const Effects>(Effects{std::move(model), std::move(e), std::move(context)});
 }
 
-kinematics::ToolPose ToolMotionTruth::Pose(const Eigen::VectorXd& q, double t) const {
+void ToolMotionTruth::set_backlash(Eigen::VectorXd b) {
+  if (b.size() != model_.num_joints() || !b.allFinite())
+    throw std::invalid_argument("ToolMotionTruth::set_backlash: " + std::to_string(b.size()) +
+                                " values for " + std::to_string(model_.num_joints()) +
+                                " joints, or one not finite");
+  backlash_ = std::move(b);
+}
+
+Eigen::VectorXd ToolMotionTruth::BacklashOffset(const Eigen::VectorXd& q, double t) const {
+  Eigen::VectorXd d = Eigen::VectorXd::Zero(q.size());
+  if (backlash_.size() == 0) return d;
+  // The stop the arm last arrived at, and the direction each joint came in from the stop before.
+  const int n = trajectory_.num_waypoints();
+  int a = 0;
+  while (a + 1 < n && trajectory_.StillInterval(a + 1).first <= t) ++a;
+  const auto sign = [](double v) { return static_cast<double>((v > 0) - (v < 0)); };
+  const auto direction = [&](int k, int j) {
+    return k < 1 ? 0.0 : sign(trajectory_.waypoint(k)(j) - trajectory_.waypoint(k - 1)(j));
+  };
+  const bool moving_on = a + 1 < n && t > trajectory_.StillInterval(a).second;
+  for (int j = 0; j < q.size(); ++j) {
+    const double b = backlash_(j), s_old = direction(a, j);
+    if (b == 0.0) continue;
+    double s = s_old;
+    if (moving_on) {
+      // Across the dead band over the motor's first 2|b| of travel (quintic smoothstep).
+      const double s_new = direction(a + 1, j);
+      const double u =
+          std::min(1.0, std::abs(q(j) - trajectory_.waypoint(a)(j)) / (2.0 * std::abs(b)));
+      s = s_old + (s_new - s_old) * u * u * u * (10.0 - 15.0 * u + 6.0 * u * u);
+    }
+    d(j) = b * s;
+  }
+  return d;
+}
+
+kinematics::ToolPose ToolMotionTruth::Pose(const Eigen::VectorXd& q_read, double t) const {
+  // The joints stand off their readings by the backlash (set_backlash).
+  const Eigen::VectorXd q =
+      backlash_.size() == 0 ? q_read : Eigen::VectorXd(q_read + BacklashOffset(q_read, t));
   if (!effects_) return model_.Forward(q, x_true_);
   return effects_->model.Forward(q, effects_->context(t), x_true_, effects_->e);
 }

@@ -181,9 +181,10 @@ class SimArmConditions {
   double PayloadAt(int waypoint) const;
   /// `--sim-effect` texts (sim::ParseEffectSpec) on the programme's truth: the arm grows with its
   /// true temperature (or time), its joints give way under gravity and the payload
-  /// (joint_compliance). Other causes are refused with the reason (an approach direction the
-  /// sensor-level arm does not report, joint errors not yet simulated at sensor level). Returns
-  /// one line per effect for the log.
+  /// (joint_compliance), turn off their readings periodically (joint_periodic: a gear error) or by
+  /// a scale (joint_scale), or stand off them by their backlash in the direction they came in
+  /// (sim::ToolMotionTruth::set_backlash). Throws std::invalid_argument for a text ParseEffectSpec
+  /// refuses. Returns one line per effect for the log.
   std::vector<std::string> ApplyEffects(const std::vector<std::string>& texts,
                                         SimProgramme& programme) const;
   /// The same effects on each of `truths` (non-null), each the motion of its own marker (a

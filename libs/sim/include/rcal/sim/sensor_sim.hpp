@@ -75,6 +75,19 @@ class ToolMotionTruth {
   /// parameters); throws std::invalid_argument otherwise or without a context.
   using ContextAt = std::function<kinematics::EffectContext(double t_s)>;
   void set_effects(kinematics::ExtendedModel model, Eigen::VectorXd e, ContextAt context);
+  /// Backlash of the truth arm's joints (b [rad | m] per joint, 0: none; empty: no backlash), as
+  /// kinematics::ExtendedModel defines it: at a stop each joint stands b_j·s_j off its reading,
+  /// s_j the sign of its net move from the stop before (what still_window publishes as the pose's
+  /// approach direction; 0 at the first stop and for a joint that did not move). Where a move
+  /// reverses a joint's direction, its gear crosses the dead band while the motor turns the first
+  /// 2|b_j| of the move: the offset blends from b_j·s_old to b_j·s_new over that travel by a
+  /// quintic smoothstep (the output nearly stands while the motor takes up the play), so the
+  /// tool's motion, and what the IMU feels, stays twice differentiable; the jolt is the
+  /// smoothstep's. Read from the trajectory as it is when evaluated (a retargeted stop too).
+  /// Throws std::invalid_argument for a size other than the joints' or a value not finite.
+  void set_backlash(Eigen::VectorXd b);
+  /// The backlash offset of the joints [rad | m] at sensor time t when they read q (zero without).
+  Eigen::VectorXd BacklashOffset(const Eigen::VectorXd& q, double t) const;
   /// Earth ← world rotation of the truth set-up (the model's earth segment at x_true).
   const Eigen::Matrix3d& R_EW() const { return R_EW_; }
   const JointTrajectory& trajectory() const { return trajectory_; }
@@ -98,6 +111,7 @@ class ToolMotionTruth {
     ContextAt context;
   };
   std::shared_ptr<const Effects> effects_;  // null: the geometry alone
+  Eigen::VectorXd backlash_;                // per joint [rad | m]; empty: none
   kinematics::ToolPose Pose(const Eigen::VectorXd& q, double t) const;
 };
 
