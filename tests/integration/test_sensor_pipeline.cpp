@@ -91,6 +91,36 @@ class SensorPipeline : public ProcessFixture {
     ASSERT_TRUE(control.params.has_value());
     EXPECT_EQ(control.params->num_effect_params, 0);
   }
+  // A run of the discrepancy watch on an arm with one hidden effect: its first look named
+  // `description` first and switched it in, and the effect's parameters are identified live within
+  // 3σ of `truth` [SI], each σ below a fifth of the largest |truth|, under `names` when given.
+  // Prints what it found.
+  static void ExpectNamedAndIdentified(const LiveRun& run, const std::string& description,
+                                       const std::vector<double>& truth,
+                                       const std::vector<std::string>& names = {}) {
+    ASSERT_FALSE(run.discrepancies.empty());
+    const model_discrepancy_t& first = run.discrepancies.front();
+    ASSERT_GE(first.num_suspects, 1);
+    EXPECT_EQ(first.description[0], description);
+    EXPECT_EQ(first.switched_in, 1);
+    ASSERT_TRUE(run.params.has_value());
+    ASSERT_EQ(run.params->num_effect_params, static_cast<int>(truth.size()));
+    double scale = 0;
+    for (double v : truth) scale = std::max(scale, std::abs(v));
+    std::printf("%s named at %d poses (z %.1f, χ²/dof %.2f):", first.description[0].c_str(),
+                first.poses_used, first.z[0], first.chi2 / first.chi2_dof);
+    for (size_t i = 0; i < truth.size(); ++i) {
+      if (!names.empty()) {
+        EXPECT_EQ(run.params->effect_names[i], names[i]);
+      }
+      EXPECT_NEAR(run.params->effect_values[i], truth[i], 3 * run.params->effect_sigmas[i])
+          << run.params->effect_names[i];
+      EXPECT_LT(run.params->effect_sigmas[i], 0.2 * scale) << run.params->effect_names[i];
+      std::printf(" %s %.4g ± %.2g (truth %.4g)", run.params->effect_names[i].c_str(),
+                  run.params->effect_values[i], run.params->effect_sigmas[i], truth[i]);
+    }
+    std::printf("\n");
+  }
 
   LiveRun RunCell(const std::string& cell_file, const std::string& sim_file, int cal, int test,
                   const std::vector<std::string>& more = {},
@@ -534,21 +564,8 @@ TEST_F(SensorPipeline, TheControllersTemperatureReachesThePosesAndThermalGrowthI
   }
   EXPECT_GT(rise, 8.0);  // the arm warmed through the run
   // Named by temperature at the first watch, switched in, κ within 3σ of the truth.
-  ASSERT_FALSE(run.discrepancies.empty());
-  const model_discrepancy_t& first = run.discrepancies.front();
-  ASSERT_GE(first.num_suspects, 1);
-  EXPECT_EQ(first.description[0], "thermal (temperature)");
-  EXPECT_EQ(first.switched_in, 1);
-  ASSERT_TRUE(run.params.has_value());
-  ASSERT_EQ(run.params->num_effect_params, 1);
-  EXPECT_EQ(run.params->effect_names[0], "thermal.temperature.kappa");
-  EXPECT_NEAR(run.params->effect_values[0], kKappa, 3 * run.params->effect_sigmas[0]);
-  EXPECT_LT(run.params->effect_sigmas[0], 0.2 * kKappa);
-  std::printf(
-      "thermal growth named by temperature at %d poses (z %.1f, χ²/dof %.2f), κ %.4g ± %.2g "
-      "1/K (truth %.4g); temperature rose %.1f K\n",
-      first.poses_used, first.z[0], first.chi2 / first.chi2_dof, run.params->effect_values[0],
-      run.params->effect_sigmas[0], kKappa, rise);
+  ExpectNamedAndIdentified(run, "thermal (temperature)", {kKappa}, {"thermal.temperature.kappa"});
+  std::printf("temperature rose %.1f K\n", rise);
   // Control: the same warming cell, the arm not growing: nothing suspected, nothing switched in
   // (a fresh identifier, not resumed from the first run's checkpoint).
   std::filesystem::remove(run.checkpoint);
@@ -606,20 +623,7 @@ TEST_F(SensorPipeline, ThePayloadReachesThePosesAndJointComplianceIsNamedLive) {
     seen.insert(m.payload_kg);
   }
   EXPECT_EQ(seen, (std::set<double>{0.0, 5.0, 10.0}));
-  ASSERT_FALSE(run.discrepancies.empty());
-  const model_discrepancy_t& first = run.discrepancies.front();
-  ASSERT_GE(first.num_suspects, 1);
-  EXPECT_EQ(first.description[0], "joint_compliance " + built.model.joints()[1].name);
-  EXPECT_EQ(first.switched_in, 1);
-  ASSERT_TRUE(run.params.has_value());
-  ASSERT_EQ(run.params->num_effect_params, 1);
-  EXPECT_NEAR(run.params->effect_values[0], kCompliance, 3 * run.params->effect_sigmas[0]);
-  EXPECT_LT(run.params->effect_sigmas[0], 0.2 * kCompliance);
-  std::printf(
-      "joint compliance named at %d poses (%s, z %.1f, χ²/dof %.2f), c %.4g ± %.2g rad/(N·m) "
-      "(truth %.4g)\n",
-      first.poses_used, first.description[0].c_str(), first.z[0], first.chi2 / first.chi2_dof,
-      run.params->effect_values[0], run.params->effect_sigmas[0], kCompliance);
+  ExpectNamedAndIdentified(run, "joint_compliance " + built.model.joints()[1].name, {kCompliance});
   // Control: the same payloads on a stiff arm (a fresh identifier).
   std::filesystem::remove(run.checkpoint);
   ExpectNothingSuspected(RunCell(cell_file, sim_file, kCal, 5, loaded, watch));
@@ -642,27 +646,9 @@ TEST_F(SensorPipeline, AGearErrorIsNamedAndIdentifiedLive) {
               {"--seed", std::to_string(kSeed), "--sim-effect", "joint_periodic:j3=3e-4,0"},
               {"--discrepancy-every", "50", "--discrepancy-switch"});
   ASSERT_GE(run.poses.size(), 50u);
-  ASSERT_FALSE(run.discrepancies.empty());
-  const model_discrepancy_t& first = run.discrepancies.front();
-  ASSERT_GE(first.num_suspects, 1);
-  const io::BuiltCell& built = integration::DemoCell();
-  EXPECT_EQ(first.description[0], "joint_periodic " + built.model.joints()[2].name + " h1");
-  EXPECT_EQ(first.switched_in, 1);
-  ASSERT_TRUE(run.params.has_value());
-  ASSERT_EQ(run.params->num_effect_params, 2);
-  const std::array<double, 2> truth = {kSin, kCos};
-  for (int i = 0; i < 2; ++i) {
-    EXPECT_NEAR(run.params->effect_values[i], truth[i], 3 * run.params->effect_sigmas[i])
-        << run.params->effect_names[i];
-    EXPECT_LT(run.params->effect_sigmas[i], 0.2 * kSin) << run.params->effect_names[i];
-  }
-  std::printf(
-      "gear error named at %d poses (%s, z %.1f, χ²/dof %.2f): %s %.4g ± %.2g, %s %.4g ± %.2g "
-      "rad (truth %.4g, %.4g)\n",
-      first.poses_used, first.description[0].c_str(), first.z[0], first.chi2 / first.chi2_dof,
-      run.params->effect_names[0].c_str(), run.params->effect_values[0],
-      run.params->effect_sigmas[0], run.params->effect_names[1].c_str(),
-      run.params->effect_values[1], run.params->effect_sigmas[1], kSin, kCos);
+  ExpectNamedAndIdentified(
+      run, "joint_periodic " + integration::DemoCell().model.joints()[2].name + " h1",
+      {kSin, kCos});
 }
 
 // Backlash at sensor level (sensor_acquisition --sim-effect backlash): joint 2 stands 1e-4 rad off
@@ -683,19 +669,7 @@ TEST_F(SensorPipeline, BacklashIsNamedFromTheApproachDirectionsAndIdentifiedLive
   for (const pose_measurement_t& m : run.poses)
     with_direction += std::any_of(m.dq_sign.begin(), m.dq_sign.end(), [](int8_t v) { return v; });
   EXPECT_GE(with_direction, static_cast<int>(run.poses.size()) - 1);  // all but the first
-  ASSERT_FALSE(run.discrepancies.empty());
-  const model_discrepancy_t& first = run.discrepancies.front();
-  ASSERT_GE(first.num_suspects, 1);
-  EXPECT_EQ(first.description[0], "backlash " + integration::DemoCell().model.joints()[1].name);
-  EXPECT_EQ(first.switched_in, 1);
-  ASSERT_TRUE(run.params.has_value());
-  ASSERT_EQ(run.params->num_effect_params, 1);
-  EXPECT_NEAR(run.params->effect_values[0], kB, 3 * run.params->effect_sigmas[0]);
-  EXPECT_LT(run.params->effect_sigmas[0], 0.2 * kB);
-  std::printf(
-      "backlash named at %d poses (%s, z %.1f, χ²/dof %.2f): b %.4g ± %.2g rad (truth %.4g)\n",
-      first.poses_used, first.description[0].c_str(), first.z[0], first.chi2 / first.chi2_dof,
-      run.params->effect_values[0], run.params->effect_sigmas[0], kB);
+  ExpectNamedAndIdentified(run, "backlash " + integration::DemoCell().model.joints()[1].name, {kB});
 }
 
 // A grasp made at the measurement stop (sensor_acquisition --sim-payload-at stop): the payload

@@ -7,9 +7,14 @@
 // marker offset) is measured at each strategy's stops and calibrated (identification::Calibrate,
 // noise unknown), and judged against the truth on held-out random poses. Writes DIR/report.md,
 // DIR/errors.png and DIR/report.json (SI).
+// With --sim FILE, instead: the same four strategies on a simulated cell of rcal's own (the demo's
+// config/cells/grb3016.sim.yaml), seeds 1..S as sensor_acquisition --seed draws its programme,
+// measured with the still windows' noise and identified by the live identifier's logic
+// (plan_poses.hpp CellStrategyErrors), judged at the programme's test stops.
 #include <spdlog/spdlog.h>
 
 #include <atomic>
+#include <functional>
 #include <future>
 #include <mutex>
 #include <nlohmann/json.hpp>
@@ -17,6 +22,7 @@
 #include "calibration_sweep.hpp"
 #include "command.hpp"
 #include "plan_poses.hpp"
+#include "rcal/cell/cell_sim_yaml.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/plot.hpp"
 #include "rcal/sim/random_arm.hpp"
@@ -38,6 +44,9 @@ struct Options {
   std::string criterion = "d-optimal";
   double stop_cost = identification::kDefaultStopCost;
   std::string out = "out/plan_poses_report";
+  std::string sim;                       // --sim: the cell mode
+  double orientation_sigma_mrad = 0.61;  // cell mode
+  bool position_sigma_given = false;
 };
 
 // Runs f(i) for i in [0, n) on `jobs` threads.
@@ -53,7 +62,141 @@ void Parallel(int n, int jobs, F f) {
   for (auto& p : pool) p.get();
 }
 
+// The four strategies' medians against stops as DIR/errors.png (its Markdown link appended to
+// `md` when written), and the JSON rows by count; `all_of(strategy, count index)`: every error
+// [m] of that strategy at that count.
+json PlotAndRows(const std::vector<int>& counts,
+                 const std::function<std::vector<double>(int, size_t)>& all_of, io::PlotSpec plot,
+                 const std::filesystem::path& dir, const std::string& alt, std::string& md) {
+  plot.xlabel = "stops measured";
+  plot.logy = true;
+  json rows = json::array();
+  for (size_t c = 0; c < counts.size(); ++c) rows.push_back({{"stops", counts[c]}});
+  for (int st = 0; st < 4; ++st) {
+    io::Series ser;
+    ser.title = kStrategyNames[st];
+    ser.style = "linespoints";
+    for (size_t c = 0; c < counts.size(); ++c) {
+      const std::vector<double> all = all_of(st, c);
+      const double median = SummarizeRatios(all).median;
+      ser.x.push_back(counts[c]);
+      ser.y.push_back(median * 1e6);
+      rows[c][kStrategyNames[st]] = {{"median_m", median}, {"all_m", all}};
+    }
+    plot.series.push_back(ser);
+  }
+  if (io::PlotPng(plot, dir / "errors.png")) md += "\n![" + alt + "](errors.png)\n";
+  return rows;
+}
+
+// The cell mode (--sim): the report for one simulated cell of rcal's own.
+int RunCell(const Options& o) {
+  if (o.seeds < 1) throw std::runtime_error("--seeds: at least 1");
+  if (o.counts.empty() || !std::is_sorted(o.counts.begin(), o.counts.end()) || o.counts[0] < 6)
+    throw std::runtime_error("--counts: ascending, each at least 6");
+  const cell::CellSimSpec spec = cell::LoadCellSimSpec(o.sim);
+  const io::BuiltCell built = io::LoadCell(spec.cell);
+  CellReportSettings s;
+  s.counts = o.counts;
+  s.settle_distance = o.stop_cost;
+  if (o.position_sigma_given) s.position_sigma_m = o.position_sigma_mm / kMm;
+  s.orientation_sigma_rad = o.orientation_sigma_mrad * 1e-3;
+  const CellPlans plans = PlanCell(built, s);
+  spdlog::info("{}: {} identifiable parameters; planned", built.spec.name, plans.identifiable);
+  std::vector<std::array<std::vector<double>, 4>> errors(static_cast<size_t>(o.seeds));
+  std::mutex log_mutex;
+  std::atomic<int> done{0};
+  Parallel(o.seeds, o.jobs, [&](int k) {
+    errors[static_cast<size_t>(k)] =
+        CellStrategyErrors(built, o.sim, plans, s, static_cast<unsigned>(k + 1));
+    std::lock_guard lock(log_mutex);
+    spdlog::info("{}/{} programmes done", ++done, o.seeds);
+  });
+  const size_t nc = o.counts.size();
+  const auto median_of = [&](int strategy, size_t c) {
+    std::vector<double> v;
+    for (const auto& e : errors) v.push_back(e[strategy][c]);
+    return SummarizeRatios(v).median;
+  };
+  const bool orientation = built.spec.measures_orientation();
+  std::string md = "# Choosing the stops on " + built.spec.name + "\n\n";
+  md += "The simulated cell of `" + o.sim + "` (its truth: arm errors and set-up frames), " +
+        std::to_string(o.seeds) + " programmes (seeds 1 … " + std::to_string(o.seeds) +
+        ", as `sensor_acquisition --seed` draws them), each pose measured with a still window's "
+        "noise (" +
+        Fmt(s.position_sigma_m * kMm, 3) + " mm" +
+        (orientation ? ", " + Fmt(s.orientation_sigma_rad * 1e3, 2) + " mrad" : std::string()) +
+        " per axis) and identified by the live identifier's logic (the set-up guess, then the "
+        "EKF); mean position error at the programme's " +
+        std::to_string(s.test_poses) +
+        " test stops against the truth, median over the programmes, µm. Random: the programme's "
+        "own stops; online next-best: the programme's stops until the identifier starts, then the "
+        "best suggestion of NEXT_POSES after each pose (a pose-level cell following it).\n\n";
+  std::vector<std::string> header = {"stops"};
+  for (const char* n : kStrategyNames) header.push_back(n);
+  std::vector<std::vector<std::string>> rows;
+  for (size_t c = 0; c < nc; ++c) {
+    std::vector<std::string> r = {std::to_string(o.counts[c])};
+    for (int st = 0; st < 4; ++st) r.push_back(Fmt(median_of(st, c) * 1e6, 1));
+    rows.push_back(r);
+  }
+  md += MdTable(header, rows);
+  const auto it50 = std::find(o.counts.begin(), o.counts.end(), 50);
+  std::string reach = "–";
+  if (it50 != o.counts.end()) {
+    const double r50 = median_of(kRandom, static_cast<size_t>(it50 - o.counts.begin()));
+    for (size_t c = 0; c < nc; ++c)
+      if (median_of(kNextBest, c) <= r50) {
+        reach = std::to_string(o.counts[c]);
+        break;
+      }
+    if (reach == "–") reach = "> " + std::to_string(o.counts.back());
+    md += "\nOnline next-best reaches the error of 50 random stops (" + Fmt(r50 * 1e6, 1) +
+          " µm) at " + reach + " stops.";
+  }
+  if (plans.bound20_rms_m > 0 && plans.random50_rms_m > 0)
+    md += " Linearised at the nominal over the workspace, no 20 stops from the " +
+          std::to_string(s.candidates) + " candidates predict below " +
+          Fmt(plans.bound20_rms_m * 1e6, 1) +
+          " µm RMS (certified: "
+          "`PlanningProblem::TaskMeanSquaredBound`), while 50 random ones predict " +
+          Fmt(plans.random50_rms_m * 1e6, 1) + " µm.";
+  md += "\n";
+  io::PlotSpec plot;
+  plot.title = "Test-stop position error against stops, " + built.spec.name;
+  plot.ylabel = "mean test-stop position error [µm]";
+  const std::filesystem::path dir(o.out);
+  const json jc = PlotAndRows(
+      o.counts,
+      [&](int st, size_t c) {
+        std::vector<double> all;
+        for (const auto& e : errors) all.push_back(e[st][c]);
+        return all;
+      },
+      plot, dir, "test-stop error against stops", md);
+  io::AtomicWriteFile(dir / "report.md", md);
+  io::AtomicWriteFile(dir / "report.json",
+                      json{{"sim", o.sim},
+                           {"cell", built.spec.name},
+                           {"seeds", o.seeds},
+                           {"candidates", s.candidates},
+                           {"identifiable", plans.identifiable},
+                           {"stop_cost_rad", o.stop_cost},
+                           {"position_noise_m", s.position_sigma_m},
+                           {"orientation_noise_rad", orientation ? s.orientation_sigma_rad : 0.0},
+                           {"test_poses", s.test_poses},
+                           {"next_best_stops_to_random50", reach},
+                           {"predicted_rms_any20_at_least_m", plans.bound20_rms_m},
+                           {"predicted_rms_random50_m", plans.random50_rms_m},
+                           {"by_count", jc}}
+                          .dump(2));
+  std::printf("%s", md.c_str());
+  std::printf("\nwrote %s\n", (dir / "report.md").c_str());
+  return 0;
+}
+
 int Run(const Options& o) {
+  if (!o.sim.empty()) return RunCell(o);
   if (o.arms < 1 || o.seeds < 1) throw std::runtime_error("--arms and --seeds: at least 1");
   if (o.counts.empty() || !std::is_sorted(o.counts.begin(), o.counts.end()) || o.counts[0] < 6)
     throw std::runtime_error("--counts: ascending, each at least 6");
@@ -184,35 +327,19 @@ int Run(const Options& o) {
 
   io::PlotSpec plot;
   plot.title = "Held-out position error against stops (median over arms and cells)";
-  plot.xlabel = "stops measured";
   plot.ylabel = "mean held-out position error [µm]";
-  plot.logy = true;
-  for (int st = 0; st < 4; ++st) {
-    io::Series ser;
-    ser.title = kStrategyNames[st];
-    ser.style = "linespoints";
-    for (size_t c = 0; c < nc; ++c) {
-      ser.x.push_back(o.counts[c]);
-      ser.y.push_back(median_of(st, c, -1) * 1e6);
-    }
-    plot.series.push_back(ser);
-  }
   const std::filesystem::path dir(o.out);
-  if (io::PlotPng(plot, dir / "errors.png"))
-    md += "\n![held-out error against stops](errors.png)\n";
+  const json jc = PlotAndRows(
+      o.counts,
+      [&](int st, size_t c) {
+        std::vector<double> all;
+        for (int a = 0; a < o.arms; ++a)
+          for (int sd = 0; sd < o.seeds; ++sd) all.push_back(errors[a][sd][st][c]);
+        return all;
+      },
+      plot, dir, "held-out error against stops", md);
   io::AtomicWriteFile(dir / "report.md", md);
 
-  json jc = json::array();
-  for (size_t c = 0; c < nc; ++c) {
-    json row = {{"stops", o.counts[c]}};
-    for (int st = 0; st < 4; ++st) {
-      std::vector<double> all;
-      for (int a = 0; a < o.arms; ++a)
-        for (int sd = 0; sd < o.seeds; ++sd) all.push_back(errors[a][sd][st][c]);
-      row[kStrategyNames[st]] = {{"median_m", median_of(st, c, -1)}, {"all_m", all}};
-    }
-    jc.push_back(row);
-  }
   io::AtomicWriteFile(dir / "report.json", json{{"arms", o.arms},
                                                 {"first_arm", o.first_arm},
                                                 {"seeds", o.seeds},
@@ -242,8 +369,18 @@ const RegisterCommand kPlanPosesReport(
           ->capture_default_str();
       sub.add_option("--candidates", o->candidates, "candidate configurations per arm")
           ->capture_default_str();
-      sub.add_option("--position-sigma-mm", o->position_sigma_mm, "position noise σ per axis")
-          ->capture_default_str();
+      sub.add_option("--position-sigma-mm", o->position_sigma_mm,
+                     "position noise σ per axis (--sim: default 0.051, a still window's)")
+          ->capture_default_str()
+          ->check(CLI::PositiveNumber)
+          ->each([o](const std::string&) { o->position_sigma_given = true; });
+      sub.add_option("--sim", o->sim,
+                     "instead of random arms: a simulated cell of rcal's own (a sim file, e.g. "
+                     "config/cells/grb3016.sim.yaml), identified as the live pipeline does");
+      sub.add_option("--orientation-sigma-mrad", o->orientation_sigma_mrad,
+                     "--sim: orientation noise σ per axis of a still window's pose")
+          ->capture_default_str()
+          ->check(CLI::PositiveNumber);
       sub.add_option("--jobs", o->jobs, "worker threads (the figures do not depend on it)")
           ->capture_default_str()
           ->check(CLI::Range(1, 64));

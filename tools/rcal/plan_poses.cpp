@@ -5,10 +5,14 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <numeric>
 #include <random>
 
 #include "calibration_sweep.hpp"
+#include "rcal/cell/cell_sim_yaml.hpp"
+#include "rcal/cell/next_poses.hpp"
+#include "rcal/cell/online_identification.hpp"
 #include "rcal/identification/calibration.hpp"
 #include "rcal/identification/metrics.hpp"
 #include "rcal/io/csv_table.hpp"
@@ -28,6 +32,22 @@ std::vector<Eigen::VectorXd> Pick(const std::vector<Eigen::VectorXd>& candidates
   std::vector<Eigen::VectorXd> out;
   for (int i : chosen) out.push_back(candidates[i]);
   return out;
+}
+
+// The median over 21 seeded draws of `count` random candidates of the predicted RMS position
+// error over the workspace [m] (PlanningProblem::Evaluate).
+double RandomPredictedRms(const identification::PlanningProblem& pp, int count,
+                          std::uint64_t seed) {
+  std::mt19937_64 draw(seed);
+  std::vector<int> idx(static_cast<size_t>(pp.size()));
+  std::iota(idx.begin(), idx.end(), 0);
+  std::vector<double> ms;
+  for (int t = 0; t < 21; ++t) {
+    std::shuffle(idx.begin(), idx.end(), draw);
+    ms.push_back(pp.Evaluate({idx.begin(), idx.begin() + count}).task_mean_squared_m2);
+  }
+  std::nth_element(ms.begin(), ms.begin() + 10, ms.end());
+  return std::sqrt(ms[10]);
 }
 
 }  // namespace
@@ -117,18 +137,8 @@ ArmPlans PlanArm(const kinematics::KinematicModel& model, const PlanningReportSe
   // The figure (20 planned stops against 40 random) against what any 20 stops can do.
   if (std::find(s.counts.begin(), s.counts.end(), 20) != s.counts.end())
     plans.bound20_rms_m = std::sqrt(pp.TaskMeanSquaredBound(20).lower_m2);
-  if (std::find(s.counts.begin(), s.counts.end(), 40) != s.counts.end()) {
-    std::mt19937_64 draw(seed ^ 0x40);
-    std::vector<int> idx(candidates.size());
-    std::iota(idx.begin(), idx.end(), 0);
-    std::vector<double> ms;
-    for (int t = 0; t < 21; ++t) {
-      std::shuffle(idx.begin(), idx.end(), draw);
-      ms.push_back(pp.Evaluate({idx.begin(), idx.begin() + 40}).task_mean_squared_m2);
-    }
-    std::nth_element(ms.begin(), ms.begin() + 10, ms.end());
-    plans.random40_rms_m = std::sqrt(ms[10]);
-  }
+  if (std::find(s.counts.begin(), s.counts.end(), 40) != s.counts.end())
+    plans.random40_rms_m = RandomPredictedRms(pp, 40, seed ^ 0x40);
   // Online next-best from the arm at the middle of its limits: the covariance after each stop
   // (the prior and the stops so far, linearised at the nominal) chooses the next.
   Eigen::VectorXd q_now(model.num_joints());
@@ -204,6 +214,109 @@ std::array<std::vector<double>, 4> StrategyErrors(const kinematics::KinematicMod
     e[kPlanned].push_back(error(plans.planned[c], 2000 + c));
     e[kNextBest].push_back(error(prefix(plans.next_best), 3000 + c));
     e[kIroc].push_back(error(prefix(plans.iroc), 4000 + c));
+  }
+  return e;
+}
+
+namespace {
+
+// The candidates a cell's planner and advisor choose from, and the workspace spread the predicted
+// error is averaged over (cell::NextPoseAdvisor's: the same draw).
+struct CellCandidates {
+  std::vector<Eigen::VectorXd> candidates, task;
+};
+CellCandidates CandidatesOf(const io::BuiltCell& cell, int count) {
+  const cell::NextPoseAdvisor advisor(cell, count, 1);
+  return {advisor.candidates(), advisor.task()};
+}
+
+identification::PlanningSettings CellPlanningSettings(const io::BuiltCell& cell,
+                                                      const CellReportSettings& s) {
+  identification::PlanningSettings ps = PlanningInputFromCell(cell, false).settings;
+  ps.position_sigma_m = s.position_sigma_m;
+  ps.orientation_sigma_rad = s.orientation_sigma_rad;
+  return ps;
+}
+
+}  // namespace
+
+CellPlans PlanCell(const io::BuiltCell& cell, const CellReportSettings& s) {
+  const CellCandidates c = CandidatesOf(cell, s.candidates);
+  const identification::PlanningProblem pp(cell.model, cell.model.Nominal(), c.candidates,
+                                           CellPlanningSettings(cell, s), c.task);
+  CellPlans plans;
+  plans.identifiable = static_cast<int>(pp.identifiable().size());
+  for (int n : s.counts) plans.planned.push_back(Pick(c.candidates, pp.Plan(n).chosen));
+  plans.iroc = Pick(c.candidates, pp.IrocGreedy(s.counts.back()).chosen);
+  if (std::find(s.counts.begin(), s.counts.end(), 20) != s.counts.end())
+    plans.bound20_rms_m = std::sqrt(pp.TaskMeanSquaredBound(20).lower_m2);
+  if (std::find(s.counts.begin(), s.counts.end(), 50) != s.counts.end())
+    plans.random50_rms_m = RandomPredictedRms(pp, 50, 0x50);
+  return plans;
+}
+
+std::array<std::vector<double>, 4> CellStrategyErrors(const io::BuiltCell& cell,
+                                                      const std::string& sim_file,
+                                                      const CellPlans& plans,
+                                                      const CellReportSettings& s, unsigned seed) {
+  const int max_count = s.counts.back();
+  const cell::SimProgramme programme =
+      cell::MakeSimProgramme(cell, cell::LoadCellSimSpec(sim_file), seed, max_count, s.test_poses);
+  const kinematics::KinematicModel& truth_model = programme.cell.model;
+  const Eigen::VectorXd& x_true = programme.cell.x_true;
+  const std::vector<Eigen::VectorXd> random(programme.stops.begin(),
+                                            programme.stops.begin() + max_count);
+  const std::vector<Eigen::VectorXd> test(programme.stops.begin() + max_count,
+                                          programme.stops.end());
+  sim::PoseNoise noise;
+  noise.orientation = cell.spec.measures_orientation();
+  noise.position_sigma = s.position_sigma_m;
+  noise.orientation_sigma = s.orientation_sigma_rad;
+  const auto test_error = [&](const cell::OnlineIdentification& id) {
+    if (!id.started()) return std::numeric_limits<double>::quiet_NaN();
+    return identification::ErrorsAgainstTruth(truth_model, id.ekf().x(), x_true, test)
+        .mean_position_m;
+  };
+  // The stops in order through the live identifier's logic; the error after each count.
+  const auto run = [&](const std::vector<Eigen::VectorXd>& stops, std::uint64_t stream,
+                       const std::vector<int>& at_counts) {
+    sim::Rng rng(seed * 1000003ull + stream);
+    cell::OnlineIdentification id(cell);
+    std::vector<double> e;
+    for (size_t k = 0; k < stops.size(); ++k) {
+      id.Add({sim::MeasurePose(truth_model, x_true, stops[k], noise, rng),
+              static_cast<int64_t>(k + 1) * 1'000'000,
+              static_cast<int64_t>(k),
+              {}});
+      if (std::find(at_counts.begin(), at_counts.end(), static_cast<int>(k + 1)) != at_counts.end())
+        e.push_back(test_error(id));
+    }
+    return e;
+  };
+  std::array<std::vector<double>, 4> e;
+  e[kRandom] = run(random, 1, s.counts);
+  e[kIroc] = run(plans.iroc, 4, s.counts);
+  for (size_t c = 0; c < s.counts.size(); ++c)
+    e[kPlanned].push_back(run(plans.planned[c], 200 + c, {s.counts[c]}).front());
+  // Online next-best: a pose-level cell that follows NEXT_POSES.
+  {
+    sim::Rng rng(seed * 1000003ull + 3);
+    cell::OnlineIdentification id(cell);
+    cell::NextPoseAdvisor advisor(cell, s.candidates, 1);
+    std::vector<Eigen::VectorXd> stood;
+    for (int k = 0; k < max_count; ++k) {
+      Eigen::VectorXd q = random[static_cast<size_t>(k)];
+      if (id.started() && !stood.empty()) {
+        const auto advice = advisor.Suggest(id.ekf(), stood.back(), 8, s.settle_distance);
+        if (const auto next = cell::NextStopToFollow(advice.q, stood)) q = *next;
+      }
+      const kinematics::PoseMeasurement z = sim::MeasurePose(truth_model, x_true, q, noise, rng);
+      advisor.Measured(z);
+      id.Add({z, static_cast<int64_t>(k + 1) * 1'000'000, k, {}});
+      stood.push_back(q);
+      if (std::find(s.counts.begin(), s.counts.end(), k + 1) != s.counts.end())
+        e[kNextBest].push_back(test_error(id));
+    }
   }
   return e;
 }

@@ -80,4 +80,40 @@ std::array<std::vector<double>, 4> StrategyErrors(const kinematics::KinematicMod
                                                   const PlanningReportSettings& s,
                                                   unsigned seed_index);
 
+/// The report's side for a cell of rcal's own (issue 16: "a report row for the demo cell"): the
+/// four strategies on the simulated cell of a sim file (its cell file, and the truth only the
+/// simulator knows), measured pose by pose with the still windows' noise and identified by the live
+/// identifier's logic (cell::OnlineIdentification: the poses held for the set-up guess, then the
+/// EKF), judged at the programme's test stops against the truth, as the live pipeline is.
+struct CellReportSettings {
+  std::vector<int> counts{15, 20, 25, 30, 40, 50};  ///< stops, ascending
+  int candidates = 2000;             ///< as ekf_identifier's NEXT_POSES advisor draws them (seed 1)
+  double position_sigma_m = 5.1e-5;  ///< a still window's pose, per axis [m]
+  double orientation_sigma_rad = 6.1e-4;  ///< per axis [rad] (cells that measure orientation)
+  int test_poses = 50;                    ///< the programme's test stops
+  double settle_distance = identification::kDefaultStopCost;  ///< a stop's cost [rad]
+};
+
+/// The cell's plans, made once at the nominal (a user plans before knowing the errors).
+struct CellPlans {
+  std::vector<std::vector<Eigen::VectorXd>> planned;  ///< one plan per count
+  std::vector<Eigen::VectorXd> iroc;                  ///< max(counts) stops; prefixes are used
+  int identifiable = 0;
+  /// Predicted RMS position error over the workspace [m] (linearised at the nominal): the least
+  /// any 20 stops from the candidates can give (certified), and the median of 21 draws of 50
+  /// random candidates (0 when the counts lack 20 / 50).
+  double bound20_rms_m = 0, random50_rms_m = 0;
+};
+CellPlans PlanCell(const io::BuiltCell& cell, const CellReportSettings& s);
+
+/// Test-stop mean position error [m] against the truth, per strategy and count, for the
+/// programme of `seed` (sensor_acquisition --seed): random = the programme's own stops; planned
+/// and IROC = CellPlans; online next-best = the programme's stops until the identifier has started
+/// (the set-up guess), then the best suggestion of cell::NextPoseAdvisor after each pose not
+/// stood at before (a pose-level cell following NEXT_POSES).
+std::array<std::vector<double>, 4> CellStrategyErrors(const io::BuiltCell& cell,
+                                                      const std::string& sim_file,
+                                                      const CellPlans& plans,
+                                                      const CellReportSettings& s, unsigned seed);
+
 }  // namespace rcal::tool
