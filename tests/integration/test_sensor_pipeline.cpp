@@ -716,6 +716,39 @@ TEST_F(SensorPipeline, AWindowMeasuredUnderTwoPayloadsIsRefusedAndCounted) {
               grasped.size(), kCal, run.poses.size());
 }
 
+// The simulated controller's payload options are refused and named where they cannot
+// apply: where to take a payload on without payloads, payloads outside the sensor-level
+// simulator, an unknown place, a negative payload. Nothing is published (refused before LCM).
+TEST_F(SensorPipeline, PayloadOptionsThatCannotApplyAreRefusedNamingThem) {
+  RCAL_IN_NAMESPACE("SensorPipeline.PayloadOptionsThatCannotApplyAreRefusedNamingThem");
+  struct Case {
+    std::vector<std::string> args;
+    std::string named;
+    int exit_code;  // 2: sensor_acquisition's own refusal; 105: CLI11's check of the value
+  };
+  const std::vector<Case> cases = {
+      {{"--level", "sensors", "--sim-payload-at", "stop"},
+       "--sim-payload-at needs --sim-payloads",
+       2},
+      {{"--level", "poses", "--sim-payloads", "5"},
+       "--sim-payloads is for --source sim --level sensors",
+       2},
+      {{"--level", "sensors", "--sim-payloads", "5", "--sim-payload-at", "later"},
+       "--sim-payload-at",
+       105},
+      {{"--level", "sensors", "--sim-payloads", "0,-1"}, "--sim-payloads", 105}};
+  for (size_t k = 0; k < cases.size(); ++k) {
+    std::vector<std::string> argv = {RCAL_SENSOR_ACQUISITION, "--lcm-url", kUrl, "--source", "sim"};
+    argv.insert(argv.end(), cases[k].args.begin(), cases[k].args.end());
+    const std::string log = "sensor_acquisition_" + std::to_string(k) + ".log";
+    const pid_t p = Start(argv, log);
+    EXPECT_EQ(integration::Wait(p), cases[k].exit_code) << cases[k].named;
+    Reaped(p);
+    const std::string out = io::ReadFile(dir_ / log);
+    EXPECT_NE(out.find(cases[k].named), std::string::npos) << out;
+  }
+}
+
 // The demo's cell following the identifier's advice (sensor_acquisition --follow-next-poses,
 // issue 16): once the identifier advises, every stop is one of the suggestions of an advice
 // published before the arm left the stop before (the arm follows one stop behind: a window's pose

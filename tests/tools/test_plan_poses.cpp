@@ -87,6 +87,19 @@ TEST(PlanPoses, BadInputIsRefusedNamingIt) {
   EXPECT_NE(far.exit_code, 0);
   EXPECT_NE(far.output.find("constraints.task_region"), std::string::npos) << far.output;
   EXPECT_FALSE(fs::exists(dir / "P.csv"));
+  // The report's cell mode: a sim file that is not there, no programmes, a negative noise.
+  const std::string report = "plan-poses-report --out " + (dir / "report").string();
+  const auto missing = RunRcal(report + " --sim " + (dir / "none.sim.yaml").string());
+  EXPECT_NE(missing.exit_code, 0);
+  EXPECT_NE(missing.output.find("none.sim.yaml"), std::string::npos) << missing.output;
+  const auto no_seeds = RunRcal(report + " --sim config/cells/grb3016.sim.yaml --seeds 0");
+  EXPECT_NE(no_seeds.exit_code, 0);
+  EXPECT_NE(no_seeds.output.find("--seeds"), std::string::npos) << no_seeds.output;
+  const auto negative =
+      RunRcal(report + " --sim config/cells/grb3016.sim.yaml --orientation-sigma-mrad -1");
+  EXPECT_NE(negative.exit_code, 0);
+  EXPECT_NE(negative.output.find("--orientation-sigma-mrad"), std::string::npos) << negative.output;
+  EXPECT_FALSE(fs::exists(dir / "report" / "report.json"));
 }
 
 // `rcal plan-poses-report --sim` on the demo's cell (issue 16's "online next-best reaches the

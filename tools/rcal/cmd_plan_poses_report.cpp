@@ -62,6 +62,20 @@ void Parallel(int n, int jobs, F f) {
   for (auto& p : pool) p.get();
 }
 
+void CheckCounts(const std::vector<int>& counts) {
+  if (counts.empty() || !std::is_sorted(counts.begin(), counts.end()) || counts[0] < 6)
+    throw std::runtime_error("--counts: ascending, each at least 6");
+}
+
+// The first count at which `next_best(c)` (the median error at count index c) is at or below
+// `target`, as text; "> max" when none is.
+std::string StopsToReach(const std::vector<int>& counts,
+                         const std::function<double(size_t)>& next_best, double target) {
+  for (size_t c = 0; c < counts.size(); ++c)
+    if (next_best(c) <= target) return std::to_string(counts[c]);
+  return "> " + std::to_string(counts.back());
+}
+
 // The four strategies' medians against stops as DIR/errors.png (its Markdown link appended to
 // `md` when written), and the JSON rows by count; `all_of(strategy, count index)`: every error
 // [m] of that strategy at that count.
@@ -92,8 +106,7 @@ json PlotAndRows(const std::vector<int>& counts,
 // The cell mode (--sim): the report for one simulated cell of rcal's own.
 int RunCell(const Options& o) {
   if (o.seeds < 1) throw std::runtime_error("--seeds: at least 1");
-  if (o.counts.empty() || !std::is_sorted(o.counts.begin(), o.counts.end()) || o.counts[0] < 6)
-    throw std::runtime_error("--counts: ascending, each at least 6");
+  CheckCounts(o.counts);
   const cell::CellSimSpec spec = cell::LoadCellSimSpec(o.sim);
   const io::BuiltCell built = io::LoadCell(spec.cell);
   CellReportSettings s;
@@ -108,15 +121,18 @@ int RunCell(const Options& o) {
   std::atomic<int> done{0};
   Parallel(o.seeds, o.jobs, [&](int k) {
     errors[static_cast<size_t>(k)] =
-        CellStrategyErrors(built, o.sim, plans, s, static_cast<unsigned>(k + 1));
+        CellStrategyErrors(built, spec, plans, s, static_cast<unsigned>(k + 1));
     std::lock_guard lock(log_mutex);
     spdlog::info("{}/{} programmes done", ++done, o.seeds);
   });
   const size_t nc = o.counts.size();
-  const auto median_of = [&](int strategy, size_t c) {
+  const auto all_of = [&](int strategy, size_t c) {
     std::vector<double> v;
     for (const auto& e : errors) v.push_back(e[strategy][c]);
-    return SummarizeRatios(v).median;
+    return v;
+  };
+  const auto median_of = [&](int strategy, size_t c) {
+    return SummarizeRatios(all_of(strategy, c)).median;
   };
   const bool orientation = built.spec.measures_orientation();
   std::string md = "# Choosing the stops on " + built.spec.name + "\n\n";
@@ -145,12 +161,8 @@ int RunCell(const Options& o) {
   std::string reach = "–";
   if (it50 != o.counts.end()) {
     const double r50 = median_of(kRandom, static_cast<size_t>(it50 - o.counts.begin()));
-    for (size_t c = 0; c < nc; ++c)
-      if (median_of(kNextBest, c) <= r50) {
-        reach = std::to_string(o.counts[c]);
-        break;
-      }
-    if (reach == "–") reach = "> " + std::to_string(o.counts.back());
+    reach = StopsToReach(
+        o.counts, [&](size_t c) { return median_of(kNextBest, c); }, r50);
     md += "\nOnline next-best reaches the error of 50 random stops (" + Fmt(r50 * 1e6, 1) +
           " µm) at " + reach + " stops.";
   }
@@ -166,14 +178,7 @@ int RunCell(const Options& o) {
   plot.title = "Test-stop position error against stops, " + built.spec.name;
   plot.ylabel = "mean test-stop position error [µm]";
   const std::filesystem::path dir(o.out);
-  const json jc = PlotAndRows(
-      o.counts,
-      [&](int st, size_t c) {
-        std::vector<double> all;
-        for (const auto& e : errors) all.push_back(e[st][c]);
-        return all;
-      },
-      plot, dir, "test-stop error against stops", md);
+  const json jc = PlotAndRows(o.counts, all_of, plot, dir, "test-stop error against stops", md);
   io::AtomicWriteFile(dir / "report.md", md);
   io::AtomicWriteFile(dir / "report.json",
                       json{{"sim", o.sim},
@@ -198,8 +203,7 @@ int RunCell(const Options& o) {
 int Run(const Options& o) {
   if (!o.sim.empty()) return RunCell(o);
   if (o.arms < 1 || o.seeds < 1) throw std::runtime_error("--arms and --seeds: at least 1");
-  if (o.counts.empty() || !std::is_sorted(o.counts.begin(), o.counts.end()) || o.counts[0] < 6)
-    throw std::runtime_error("--counts: ascending, each at least 6");
+  CheckCounts(o.counts);
   PlanningReportSettings s;
   s.counts = o.counts;
   s.candidates = o.candidates;
@@ -232,12 +236,15 @@ int Run(const Options& o) {
   });
 
   const size_t nc = o.counts.size();
-  const auto median_of = [&](int strategy, size_t c, int arm) {  // arm < 0: all arms
+  const auto all_of = [&](int strategy, size_t c, int arm) {  // arm < 0: all arms
     std::vector<double> v;
     for (int a = 0; a < o.arms; ++a)
       if (arm < 0 || arm == a)
         for (int sd = 0; sd < o.seeds; ++sd) v.push_back(errors[a][sd][strategy][c]);
-    return SummarizeRatios(v).median;
+    return v;
+  };
+  const auto median_of = [&](int strategy, size_t c, int arm) {
+    return SummarizeRatios(all_of(strategy, c, arm)).median;
   };
   std::string md = "# Choosing the stops: held-out error against the number of stops\n\n";
   md += std::to_string(o.arms) + " random D–H arms (random_dh_" + std::to_string(o.first_arm) +
@@ -276,16 +283,11 @@ int Run(const Options& o) {
     for (int a = 0; a < o.arms; ++a) {
       const double p20 = median_of(kPlanned, i20, a), r20 = median_of(kRandom, i20, a),
                    r40 = median_of(kRandom, i40, a), g20 = median_of(kIroc, i20, a);
-      std::string nb = "–";
-      if (i50 >= 0) {
-        const double r50 = median_of(kRandom, i50, a);
-        for (size_t c = 0; c < nc; ++c)
-          if (median_of(kNextBest, c, a) <= r50) {
-            nb = std::to_string(o.counts[c]);
-            break;
-          }
-        if (nb == "–") nb = "> " + std::to_string(o.counts.back());
-      }
+      const std::string nb =
+          i50 < 0 ? "–"
+                  : StopsToReach(
+                        o.counts, [&](size_t c) { return median_of(kNextBest, c, a); },
+                        median_of(kRandom, i50, a));
       const auto& path = plans[a].path20;
       arows.push_back(
           {arms[a].name(), std::to_string(plans[a].identifiable), Fmt(r20 * 1e6, 1),
@@ -330,14 +332,8 @@ int Run(const Options& o) {
   plot.ylabel = "mean held-out position error [µm]";
   const std::filesystem::path dir(o.out);
   const json jc = PlotAndRows(
-      o.counts,
-      [&](int st, size_t c) {
-        std::vector<double> all;
-        for (int a = 0; a < o.arms; ++a)
-          for (int sd = 0; sd < o.seeds; ++sd) all.push_back(errors[a][sd][st][c]);
-        return all;
-      },
-      plot, dir, "held-out error against stops", md);
+      o.counts, [&](int st, size_t c) { return all_of(st, c, -1); }, plot, dir,
+      "held-out error against stops", md);
   io::AtomicWriteFile(dir / "report.md", md);
 
   io::AtomicWriteFile(dir / "report.json", json{{"arms", o.arms},

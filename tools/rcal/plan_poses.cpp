@@ -10,8 +10,6 @@
 #include <random>
 
 #include "calibration_sweep.hpp"
-#include "rcal/cell/cell_sim_yaml.hpp"
-#include "rcal/cell/next_poses.hpp"
 #include "rcal/cell/online_identification.hpp"
 #include "rcal/identification/calibration.hpp"
 #include "rcal/identification/metrics.hpp"
@@ -218,36 +216,20 @@ std::array<std::vector<double>, 4> StrategyErrors(const kinematics::KinematicMod
   return e;
 }
 
-namespace {
-
-// The candidates a cell's planner and advisor choose from, and the workspace spread the predicted
-// error is averaged over (cell::NextPoseAdvisor's: the same draw).
-struct CellCandidates {
-  std::vector<Eigen::VectorXd> candidates, task;
-};
-CellCandidates CandidatesOf(const io::BuiltCell& cell, int count) {
-  const cell::NextPoseAdvisor advisor(cell, count, 1);
-  return {advisor.candidates(), advisor.task()};
-}
-
-identification::PlanningSettings CellPlanningSettings(const io::BuiltCell& cell,
-                                                      const CellReportSettings& s) {
+CellPlans PlanCell(const io::BuiltCell& cell, const CellReportSettings& s) {
+  // The planner chooses from the advisor's candidates and averages over its workspace spread:
+  // the same draw for every strategy.
+  CellPlans plans;
+  plans.advisor = std::make_shared<const cell::NextPoseAdvisor>(cell, s.candidates, 1);
+  const auto& candidates = plans.advisor->candidates();
   identification::PlanningSettings ps = PlanningInputFromCell(cell, false).settings;
   ps.position_sigma_m = s.position_sigma_m;
   ps.orientation_sigma_rad = s.orientation_sigma_rad;
-  return ps;
-}
-
-}  // namespace
-
-CellPlans PlanCell(const io::BuiltCell& cell, const CellReportSettings& s) {
-  const CellCandidates c = CandidatesOf(cell, s.candidates);
-  const identification::PlanningProblem pp(cell.model, cell.model.Nominal(), c.candidates,
-                                           CellPlanningSettings(cell, s), c.task);
-  CellPlans plans;
+  const identification::PlanningProblem pp(cell.model, cell.model.Nominal(), candidates, ps,
+                                           plans.advisor->task());
   plans.identifiable = static_cast<int>(pp.identifiable().size());
-  for (int n : s.counts) plans.planned.push_back(Pick(c.candidates, pp.Plan(n).chosen));
-  plans.iroc = Pick(c.candidates, pp.IrocGreedy(s.counts.back()).chosen);
+  for (int n : s.counts) plans.planned.push_back(Pick(candidates, pp.Plan(n).chosen));
+  plans.iroc = Pick(candidates, pp.IrocGreedy(s.counts.back()).chosen);
   if (std::find(s.counts.begin(), s.counts.end(), 20) != s.counts.end())
     plans.bound20_rms_m = std::sqrt(pp.TaskMeanSquaredBound(20).lower_m2);
   if (std::find(s.counts.begin(), s.counts.end(), 50) != s.counts.end())
@@ -256,12 +238,12 @@ CellPlans PlanCell(const io::BuiltCell& cell, const CellReportSettings& s) {
 }
 
 std::array<std::vector<double>, 4> CellStrategyErrors(const io::BuiltCell& cell,
-                                                      const std::string& sim_file,
+                                                      const cell::CellSimSpec& sim,
                                                       const CellPlans& plans,
                                                       const CellReportSettings& s, unsigned seed) {
   const int max_count = s.counts.back();
   const cell::SimProgramme programme =
-      cell::MakeSimProgramme(cell, cell::LoadCellSimSpec(sim_file), seed, max_count, s.test_poses);
+      cell::MakeSimProgramme(cell, sim, seed, max_count, s.test_poses);
   const kinematics::KinematicModel& truth_model = programme.cell.model;
   const Eigen::VectorXd& x_true = programme.cell.x_true;
   const std::vector<Eigen::VectorXd> random(programme.stops.begin(),
@@ -302,7 +284,7 @@ std::array<std::vector<double>, 4> CellStrategyErrors(const io::BuiltCell& cell,
   {
     sim::Rng rng(seed * 1000003ull + 3);
     cell::OnlineIdentification id(cell);
-    cell::NextPoseAdvisor advisor(cell, s.candidates, 1);
+    cell::NextPoseAdvisor advisor = *plans.advisor;  // a copy: it learns its poses' noise
     std::vector<Eigen::VectorXd> stood;
     for (int k = 0; k < max_count; ++k) {
       Eigen::VectorXd q = random[static_cast<size_t>(k)];

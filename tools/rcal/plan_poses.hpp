@@ -6,10 +6,13 @@
 #include <Eigen/Core>
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <string_view>
 #include <vector>
 
+#include "rcal/cell/cell_sim_yaml.hpp"
+#include "rcal/cell/next_poses.hpp"
 #include "rcal/identification/pose_planning.hpp"
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/kinematics/model.hpp"
@@ -96,6 +99,9 @@ struct CellReportSettings {
 
 /// The cell's plans, made once at the nominal (a user plans before knowing the errors).
 struct CellPlans {
+  /// ekf_identifier's NEXT_POSES advisor for the cell (its candidates, seed 1): the planner
+  /// chooses among its candidates, and each programme's online next-best follows a copy of it.
+  std::shared_ptr<const cell::NextPoseAdvisor> advisor;
   std::vector<std::vector<Eigen::VectorXd>> planned;  ///< one plan per count
   std::vector<Eigen::VectorXd> iroc;                  ///< max(counts) stops; prefixes are used
   int identifiable = 0;
@@ -112,7 +118,7 @@ CellPlans PlanCell(const io::BuiltCell& cell, const CellReportSettings& s);
 /// (the set-up guess), then the best suggestion of cell::NextPoseAdvisor after each pose not
 /// stood at before (a pose-level cell following NEXT_POSES).
 std::array<std::vector<double>, 4> CellStrategyErrors(const io::BuiltCell& cell,
-                                                      const std::string& sim_file,
+                                                      const cell::CellSimSpec& sim,
                                                       const CellPlans& plans,
                                                       const CellReportSettings& s, unsigned seed);
 

@@ -47,9 +47,16 @@ Eigen::VectorXd ToolMotionTruth::BacklashOffset(const Eigen::VectorXd& q, double
   Eigen::VectorXd d = Eigen::VectorXd::Zero(q.size());
   if (backlash_.size() == 0) return d;
   // The stop the arm last arrived at, and the direction each joint came in from the stop before.
+  // (Still intervals ascend: a binary search, as this runs three times per simulated tick.)
   const int n = trajectory_.num_waypoints();
   int a = 0;
-  while (a + 1 < n && trajectory_.StillInterval(a + 1).first <= t) ++a;
+  for (int hi = n - 1; a < hi;) {
+    const int mid = (a + hi + 1) / 2;
+    if (trajectory_.StillInterval(mid).first <= t)
+      a = mid;
+    else
+      hi = mid - 1;
+  }
   const auto sign = [](double v) { return static_cast<double>((v > 0) - (v < 0)); };
   const auto direction = [&](int k, int j) {
     return k < 1 ? 0.0 : sign(trajectory_.waypoint(k)(j) - trajectory_.waypoint(k - 1)(j));
