@@ -37,11 +37,12 @@
 // contexts. A context that cannot be true (temperature beyond [−60, 200] °C, a negative payload,
 // a dq_sign not −1, 0, +1) refuses its pose, naming the field, with or without effects.
 //
-// The discrepancy watch (issue 15 item 5, --discrepancy-every N, default 50): every N accepted
-// poses rcal analyze's tests run on the identifier's window (cell::WatchForDiscrepancy: χ² of the
-// geometric fit against the poses' noise, correlation with each candidate effect, selection by
-// nested cross-validation) on a worker thread, so poses keep flowing during its second or so;
-// MODEL_DISCREPANCY names the suspected causes with their z and the expected held-out gain.
+// The discrepancy watch (issue 15 item 5, --discrepancy-every N, default 50): every N poses the
+// EKF takes (accepted or refused by its gate) rcal analyze's tests run on the identifier's window
+// (cell::WatchForDiscrepancy: χ² of the geometric fit against the poses' noise, correlation with
+// each candidate effect, selection by nested cross-validation) on a worker thread, so poses keep
+// flowing during its second or so; MODEL_DISCREPANCY names the suspected causes with their z and
+// the expected held-out gain.
 // --discrepancy-switch: suspects the identifier lacks are switched in
 // (cell::OnlineIdentification::SwitchIn: identified from the window's poses on); the checkpoint
 // names the effects of its state (key `effects`), so a restart resumes with the extended model.
@@ -104,7 +105,7 @@ struct Options {
   // NEXT_POSES: a stop's cost as joint-space distance [rad | m]
   double stop_cost = identification::kDefaultStopCost;
   std::string effects;  // analysis.json: the effects identified with the geometry (empty: none)
-  int discrepancy_every = 50;       // MODEL_DISCREPANCY every this many accepted poses (0: never)
+  int discrepancy_every = 50;       // MODEL_DISCREPANCY every this many poses taken (0: never)
   bool discrepancy_switch = false;  // switch the suspected effects in
 };
 
@@ -369,7 +370,7 @@ class Identifier {
   // The discrepancy watch on a copy of the window, on a worker thread (one at a time).
   void StartWatch(const cell::OnlineIdentification::Update& u) {
     PollWatch();
-    if (!u.result.accepted || watch_.valid() || !cell::WatchDue(id_, watch_settings_)) return;
+    if (watch_.valid() || !cell::WatchDue(id_, watch_settings_)) return;
     watch_utime_ = u.utime;
     watch_ = std::async(std::launch::async,
                         [model = id_.model(), window = cell::WatchWindow(id_),
@@ -476,8 +477,8 @@ int main(int argc, char** argv) {
                  "non-geometric effects identified live with the geometry: the analysis.json of "
                  "rcal analyze (its `effects`), or the JSON of rcal calibrate --effects");
   app.add_option("--discrepancy-every", o.discrepancy_every,
-                 "MODEL_DISCREPANCY: rcal analyze's tests on the window every this many accepted "
-                 "poses (0: never)")
+                 "MODEL_DISCREPANCY: rcal analyze's tests on the window every this many poses the "
+                 "EKF takes, accepted or refused by its gate (0: never)")
       ->capture_default_str()
       ->check(CLI::Range(0, 1000000));
   app.add_flag("--discrepancy-switch", o.discrepancy_switch,

@@ -65,14 +65,14 @@ struct Options {
   int quiet_poses = 10000;
   std::vector<std::string> arms;
   std::string out = "out/track";
-  int discrepancy_every = 0;  // --cell: the watch every this many accepted poses (0: none)
+  int discrepancy_every = 0;  // --cell: the watch every this many poses taken (0: none)
   bool discrepancy_switch = false;
 };
 
 // One run of the discrepancy watch over the rows.
 struct WatchRun {
-  size_t row = 0;  // index of the row after which it ran
-  int accepted = 0;
+  size_t row = 0;               // index of the row after which it ran
+  int accepted = 0, taken = 0;  // poses the EKF accepted, and took (accepted or refused)
   cell::DiscrepancyReport report;
   std::vector<std::string> switched_in;
 };
@@ -118,8 +118,12 @@ std::vector<TrackRow> TrackCell(cell::OnlineIdentification& id,
         }
       }
       if (out.held) row.rejected = "held for the set-up guess";
-      if (row.accepted && cell::WatchDue(id, watch)) {
-        WatchRun w{k, id.ekf().accepted(), cell::WatchForDiscrepancy(id, watch), {}};
+      if (!std::isnan(row.nis) && cell::WatchDue(id, watch)) {  // after the row's EKF update
+        WatchRun w{k,
+                   id.ekf().accepted(),
+                   id.ekf().accepted() + id.ekf().rejected(),
+                   cell::WatchForDiscrepancy(id, watch),
+                   {}};
         if (o.discrepancy_switch)
           for (const auto& e : id.SwitchIn(w.report.NewEffects()))
             w.switched_in.push_back(discrepancy::Describe(id.model(), e));
@@ -288,14 +292,16 @@ int RunData(const Options& o) {
       jw.push_back(
           {{"row", data.samples[w.row].row},
            {"accepted", w.accepted},
+           {"taken", w.taken},
            {"window_poses", w.report.window_poses},
            {"chi2_per_dof", w.report.chi2_dof > 0 ? w.report.chi2 / w.report.chi2_dof : 0.0},
            {"suspects", suspects},
            {"heldout_rms_before_m", w.report.heldout_rms_before_m},
            {"heldout_rms_after_m", w.report.heldout_rms_after_m},
            {"switched_in", w.switched_in}});
-      std::printf("  discrepancy watch after row %d (%d accepted): %s%s\n", data.samples[w.row].row,
-                  w.accepted, suspects.empty() ? "nothing suspected" : suspects.dump().c_str(),
+      std::printf("  discrepancy watch after row %d (%d poses taken, %d accepted): %s%s\n",
+                  data.samples[w.row].row, w.taken, w.accepted,
+                  suspects.empty() ? "nothing suspected" : suspects.dump().c_str(),
                   w.switched_in.empty() ? "" : "; switched in");
     }
     j["discrepancy_watch"] = jw;
@@ -401,8 +407,9 @@ const RegisterCommand kTrack(
                      "orientation noise per axis")
           ->capture_default_str();
       sub.add_option("--discrepancy-every", o->discrepancy_every,
-                     "--cell: the process's discrepancy watch every this many accepted poses (0: "
-                     "none; ekf_identifier's default is 50)")
+                     "--cell: the process's discrepancy watch every this many poses the EKF "
+                     "takes, accepted or refused by its gate (0: none; ekf_identifier's default is "
+                     "50)")
           ->capture_default_str()
           ->check(CLI::Range(0, 1000000));
       sub.add_flag("--discrepancy-switch", o->discrepancy_switch,

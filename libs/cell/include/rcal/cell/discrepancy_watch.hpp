@@ -1,7 +1,8 @@
 // The discrepancy watch of the online identification (issue 15 item 5): what `rcal analyze` would
 // say about the poses the identifier is fitting now, asked while it runs.
 //
-// Every `every_poses` accepted poses the watch takes the identifier's window (the poses the EKF
+// Every `every_poses` poses the EKF takes (accepted or refused by its gate: a large unmodelled
+// effect shows first as refused poses) the watch takes the identifier's window (the poses the EKF
 // still holds, at most EkfSettings::window_poses, and those its gate refused between them: what
 // the model cannot explain is the evidence; each with its context) and runs
 // discrepancy::Analyze on it, as `rcal analyze` runs on a file:
@@ -37,7 +38,7 @@
 namespace rcal::cell {
 
 struct DiscrepancyWatchSettings {
-  int every_poses = 50;  ///< run after every this many accepted poses (0: never)
+  int every_poses = 50;  ///< run after every this many poses taken by the EKF (0: never)
   int min_poses = 40;    ///< accepted poses in the window before the first run
   /// rcal analyze's settings (noise, folds, α, candidates). The stated noise and the gravity
   /// model are filled from the window's poses and the identifier's model when left at 0 / default.
@@ -80,8 +81,9 @@ struct DiscrepancyReport {
   std::vector<kinematics::Effect> NewEffects() const;
 };
 
-/// True when the watch should run after this identification's latest accepted pose (a multiple of
-/// every_poses accepted poses, the window at least min_poses).
+/// True when the watch should run after this identification's latest EKF update (a multiple of
+/// every_poses poses taken by the EKF, accepted or refused by its gate; the window at least
+/// min_poses accepted ones).
 bool WatchDue(const OnlineIdentification& id, const DiscrepancyWatchSettings& s);
 
 /// The window of `id` (OnlineIdentification::Window: its poses and contexts), as
