@@ -12,9 +12,10 @@
 //   temperature  1 Hz on the controller's (joints') clock, when the cell names a topic: the arm
 //             warming with time constant --sim-warmup as sensor_acquisition's controller reports
 //             it (cell::SimArmConditions: the same readings for the same seed)
-//   payload   1 Hz with the temperature, when the cell names a topic: geometry_msgs/InertiaStamped
-//             of what the controller was told the arm carries (none: 0 kg; --sim-payloads: one per
-//             stop, as sensor_acquisition's)
+//   payload   1 Hz with the temperature, and as it changes, when the cell names a topic:
+//             geometry_msgs/InertiaStamped of what the controller was told the arm carries (none:
+//             0 kg; --sim-payloads: one per stop, as sensor_acquisition's, taken on where
+//             --sim-payload-at says: move or stop)
 // --sim-effect thermal=κ (or thermal:time=ρ), joint_compliance:JOINT=c, joint_periodic,
 // joint_scale and backlash, as sensor_acquisition takes them, make the arm grow with its true
 // temperature (or time), its joints give way under gravity and the payload or stand off their
@@ -126,9 +127,21 @@ int main(int argc, char** argv) {
                  "sensor_acquisition --sim-payloads; without: none")
       ->delimiter(',')
       ->check(CLI::Range(0.0, 1000.0));
+  std::string payload_at_text = "move";
+  app.add_option("--sim-payload-at", payload_at_text,
+                 "--sim-payloads: where the arm takes a new payload on, as sensor_acquisition "
+                 "--sim-payload-at: move (halfway through the move to the stop) or stop (halfway "
+                 "through the stop: a grasp at the measurement stop, whose still window "
+                 "still_window then refuses)")
+      ->check(CLI::IsMember({"move", "stop"}))
+      ->capture_default_str();
   app.add_option("--dds-domain", domain, "DDS domain (default: the cell's ros2.domain)");
   app.add_flag("--linger", linger, "stay up after the programme until SIGINT/SIGTERM");
   CLI11_PARSE(app, argc, argv);
+  if (app.get_option("--sim-payload-at")->count() > 0 && payloads_kg.empty()) {
+    std::fprintf(stderr, "ros2_sim_drivers: --sim-payload-at needs --sim-payloads\n");
+    return 2;
+  }
 
   try {
     services::InstallStopHandlers();
@@ -156,7 +169,11 @@ int main(int argc, char** argv) {
     // The controller's conditions (the temperature driver below), and with --sim-effect the arm
     // growing with them: the IMU's truth and every marker's.
     cell::SimArmConditions conditions(warmup_s, start_utime, seed);
-    if (!payloads_kg.empty()) conditions.SetPayloads(truth.trajectory(), payloads_kg);
+    if (!payloads_kg.empty())
+      conditions.SetPayloads(truth.trajectory(), payloads_kg,
+                             payload_at_text == "stop"
+                                 ? cell::SimArmConditions::PayloadChangeAt::kAtStop
+                                 : cell::SimArmConditions::PayloadChangeAt::kMidMove);
     std::vector<sim::ToolMotionTruth*> grown = {&programme.truth};
     for (sim::ToolMotionTruth& m : marker_truth) grown.push_back(&m);
     for (const std::string& line : conditions.ApplyEffects(sim_effects, grown))
@@ -273,24 +290,28 @@ int main(int argc, char** argv) {
       }
     }
     // The controller's temperature and payload, once per second of its clock (no jitter: the
-    // joints' clock).
+    // joints' clock), and the payload also as it changes (a pick or place is reported as it is
+    // made, as sensor_acquisition's controller does).
     const double variance = std::pow(conditions.session().temperature_noise_c, 2);
-    for (int64_t k = 0; (temperature_w || payload_w) && static_cast<double>(k) <= duration; ++k) {
-      const double t = static_cast<double>(k);
+    const auto report = [&](double t, bool temperature) {
       transport::ArmConditions c;
       c.utime = start_utime + std::llround(t * 1e6);
-      c.temperature_c = conditions.Reported(t, k * std::llround(ss.rate_hz));
+      c.temperature_c = conditions.Reported(t, std::llround(t * ss.rate_hz));
       c.payload_kg = conditions.ReportedPayload(t);
-      events.push_back({t, [&, c] {
+      events.push_back({t, [&, c, temperature] {
                           std::string error;
-                          if (temperature_w)
+                          if (temperature && temperature_w)
                             if (auto s = dds::ToRos(c, variance, "arm", &error))
                               write(temperature_w, &s->get());
                           if (payload_w)
                             if (auto s = dds::ToRosPayload(c, "tool0", &error))
                               write(payload_w, &s->get());
                         }});
-    }
+    };
+    for (int64_t k = 0; (temperature_w || payload_w) && static_cast<double>(k) <= duration; ++k)
+      report(static_cast<double>(k), true);
+    for (const double t : conditions.PayloadReportTimes())
+      if (payload_w && t <= duration) report(t, false);
     std::stable_sort(events.begin(), events.end(),
                      [](const Event& a, const Event& b) { return a.t < b.t; });
     spdlog::info(

@@ -401,6 +401,7 @@ TEST(SimArmConditions, AGraspAtTheStopChangesThePayloadInsideItsStillInterval) {
   at_stop.SetPayloads(trajectory, {0.0, 5.0, 10.0}, SimArmConditions::PayloadChangeAt::kAtStop);
   mid_move.SetPayloads(trajectory, {0.0, 5.0, 10.0});
   int changes = 0;
+  std::vector<double> steps;  // where the report steps: the drivers publish a change there
   for (int k = 1; k < trajectory.num_waypoints(); ++k) {
     EXPECT_EQ(at_stop.PayloadAt(k), mid_move.PayloadAt(k));  // the same draws
     const double from = at_stop.PayloadAt(k - 1), to = at_stop.PayloadAt(k);
@@ -413,10 +414,15 @@ TEST(SimArmConditions, AGraspAtTheStopChangesThePayloadInsideItsStillInterval) {
     ASSERT_LT(t0 + T, b);
     if (from != to) {
       ++changes;
+      steps.push_back(t0);
       EXPECT_GT(std::abs(at_stop.At(t0 + 0.5 * T).payload_kg - from), 0.0);
     }
   }
   EXPECT_GE(changes, 3);
+  const std::vector<double> reported = at_stop.PayloadReportTimes();
+  ASSERT_EQ(reported.size(), steps.size());
+  for (size_t i = 0; i < steps.size(); ++i) EXPECT_NEAR(reported[i], steps[i], 1e-12) << i;
+  EXPECT_TRUE(SimArmConditions(100.0, 0, 1).PayloadReportTimes().empty());  // no payloads
 }
 
 // The panda's IMU has turned axes, the UR10 none: the simulator's mounting and the run's

@@ -375,6 +375,12 @@ double SimArmConditions::ReportedPayload(double t_sim) const {
   return m;
 }
 
+std::vector<double> SimArmConditions::PayloadReportTimes() const {
+  std::vector<double> t;
+  for (const PayloadChange& ch : payload_changes_) t.push_back(ch.t_start);  // each a real change
+  return t;
+}
+
 double SimArmConditions::Reported(double t_sim, int64_t tick) const {
   sim::Rng rng(static_cast<uint64_t>(seed_) * 1000 + 11 + static_cast<uint64_t>(tick));
   std::normal_distribution<double> n(0.0, 1.0);

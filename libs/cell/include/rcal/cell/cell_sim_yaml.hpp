@@ -176,6 +176,9 @@ class SimArmConditions {
   /// The payload [kg] the controller reports at `t_sim`: the one it was told to carry (a step
   /// where the true payload starts to blend; At).
   double ReportedPayload(double t_sim) const;
+  /// The sim times [s] at which ReportedPayload steps (a pick or place reported as it is made),
+  /// ascending; none without SetPayloads.
+  std::vector<double> PayloadReportTimes() const;
   /// The payload [kg] held at waypoint k of SetPayloads' trajectory (0 without); with kAtStop,
   /// the one taken on at k (held from the middle of its still interval on).
   double PayloadAt(int waypoint) const;
