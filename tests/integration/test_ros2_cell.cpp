@@ -49,6 +49,7 @@
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/lcm_transport.hpp"
+#include "sim_schedule.hpp"
 
 namespace rcal {
 namespace {
@@ -335,9 +336,7 @@ TEST_F(Ros2Cell, TheDemoCellCalibratesThroughItsRos2Drivers) {
   const sim::JointTrajectory& trajectory = programme.truth.trajectory();
   for (const pose_measurement_t& m : run.poses) {
     const double t = static_cast<double>(m.utime - 1'000'000'000) * 1e-6;  // [s] sim time
-    int stop = -1;
-    for (int k = 0; k < trajectory.num_waypoints(); ++k)
-      if (trajectory.StillInterval(k).first < t) stop = k;
+    const int stop = integration::StopAt(trajectory, t);
     ASSERT_GE(stop, 1) << "pose " << m.pose_index << " at " << t << " s";
     EXPECT_EQ(m.payload_kg, payloads.PayloadAt(stop)) << "pose " << m.pose_index << " at " << t;
   }
@@ -393,9 +392,7 @@ TEST_F(Ros2Cell, AWindowMeasuredUnderTwoPayloadsIsRefusedThroughItsRos2Drivers) 
   cell::SimArmConditions payloads(sim::SessionSettings{}.warmup_time_constant_s, 0, kSeed);
   payloads.SetPayloads(programme.truth.trajectory(), {0.0, 10.0},
                        cell::SimArmConditions::PayloadChangeAt::kAtStop);
-  std::set<int> grasped;  // stops whose payload changed while the arm stood there
-  for (int k = 1; k <= kStops; ++k)
-    if (payloads.PayloadAt(k) != payloads.PayloadAt(k - 1)) grasped.insert(k);
+  const std::set<int> grasped = integration::GraspedStops(payloads, kStops);
   ASSERT_GE(grasped.size(), 4u);
   ASSERT_LE(grasped.size(), static_cast<size_t>(kStops - 4));
   const CellRun run = RunCell({"--poses", std::to_string(kStops), "--test-poses", "1",
@@ -405,9 +402,7 @@ TEST_F(Ros2Cell, AWindowMeasuredUnderTwoPayloadsIsRefusedThroughItsRos2Drivers) 
   const sim::JointTrajectory& trajectory = programme.truth.trajectory();
   for (const pose_measurement_t& m : run.poses) {
     const double t = static_cast<double>(m.utime - 1'000'000'000) * 1e-6;  // [s] sim time
-    int stop = -1;
-    for (int k = 0; k < trajectory.num_waypoints(); ++k)
-      if (trajectory.StillInterval(k).first < t) stop = k;
+    const int stop = integration::StopAt(trajectory, t);
     ASSERT_GE(stop, 1) << "pose " << m.pose_index << " at " << t << " s";
     EXPECT_FALSE(grasped.count(stop)) << "pose " << m.pose_index << ": stop " << stop;
     EXPECT_EQ(m.payload_kg, payloads.PayloadAt(stop)) << "pose " << m.pose_index;

@@ -48,6 +48,7 @@
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/filter_nodes.hpp"
 #include "rcal/transport/lcm_transport.hpp"
+#include "sim_schedule.hpp"
 
 namespace rcal {
 namespace {
@@ -573,16 +574,9 @@ TEST_F(SensorPipeline, TheControllersTemperatureReachesThePosesAndThermalGrowthI
   ExpectNothingSuspected(RunCell(cell_file, sim_file, kWarmCal, 5, warming, watch));
 }
 
-// The programme's stop whose still window a pose came from: the last stop the arm arrived at
-// before the pose's time (a window's pose is stamped as the arm leaves; the next move takes
-// seconds); -1 when the pose is not within 3 s of a stop's end.
+// The programme's stop whose still window a pose came from (sim time: the sensors' clock).
 int StopOfPose(const sim::JointTrajectory& trajectory, const pose_measurement_t& m) {
-  const double t = static_cast<double>(m.utime) * 1e-6;
-  int stop = -1;
-  for (int k = 0; k < trajectory.num_waypoints(); ++k)
-    if (trajectory.StillInterval(k).first < t) stop = k;
-  if (stop < 0 || t - trajectory.StillInterval(stop).second >= 3.0) return -1;
-  return stop;
+  return integration::StopAt(trajectory, static_cast<double>(m.utime) * 1e-6);
 }
 
 // A sensor-level pick-and-place cell (issue 15, item 4: the payload at sensor level): the simulated
@@ -696,9 +690,7 @@ TEST_F(SensorPipeline, AWindowMeasuredUnderTwoPayloadsIsRefusedAndCounted) {
   cell::SimArmConditions conditions(sim::SessionSettings{}.warmup_time_constant_s, 0, kSeed);
   conditions.SetPayloads(programme.truth.trajectory(), {0.0, 10.0},
                          cell::SimArmConditions::PayloadChangeAt::kAtStop);
-  std::set<int> grasped;  // stops whose payload changed while the arm stood there
-  for (int k = 1; k <= kCal; ++k)
-    if (conditions.PayloadAt(k) != conditions.PayloadAt(k - 1)) grasped.insert(k);
+  const std::set<int> grasped = integration::GraspedStops(conditions, kCal);
   ASSERT_GE(grasped.size(), 4u);
   ASSERT_LE(grasped.size(), static_cast<size_t>(kCal - 4));
   const int published = kCal - static_cast<int>(grasped.size());
