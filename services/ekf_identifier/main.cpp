@@ -182,6 +182,16 @@ class Identifier {
         const auto added = id_.SwitchIn(r.NewEffects());
         switched = !added.empty();
         if (switched) {
+          for (const cell::WithdrawnChange& w : id_.withdrawn()) {
+            std::string changed;
+            for (const std::string& n : w.names) changed += (changed.empty() ? "" : ", ") + n;
+            spdlog::warn(
+                "the change detected from pose {} ({}) withdrawn: the window is more likely "
+                "without it under the model with the switched-in effects (−2 ln Bayes factor "
+                "{:.1f})",
+                w.onset_pose_index + 1, changed.empty() ? "detected before a restart" : changed,
+                w.evidence_gain);
+          }
           SaveState();
           const auto& ekf = id_.ekf();
           const auto params = ekf.extended_model().EffectParameters();

@@ -200,6 +200,55 @@ TEST(EkfIdentifier, AWindowAtLeastAsLongAsTheRunIsTheUnboundedFilter) {
   EXPECT_EQ(b.window_size(), 60);
 }
 
+// WindowEvidence is the prediction-error decomposition of the window's likelihood: for the
+// measurement model linearised at the estimate it equals −2 ln of the joint Gaussian of all the
+// window's residuals at once, N(H (x0 − x̂), H P0 Hᵀ + R) stacked (up to the 2π constant). A
+// released-change inflation the poses do not need (an unchanged arm) makes the window less
+// likely: its Occam factor.
+TEST(EkfIdentifier, WindowEvidenceIsTheJointLikelihoodOfTheWindowsResiduals) {
+  const Scenario s = MakeScenario(Grb3016(), sim::PoseNoise{}, 43, 20);
+  EkfSettings settings;
+  settings.detect_changes = false;
+  const EkfIdentifier ekf = RunEkf(s, settings);
+  const EkfCheckpoint c = ekf.Checkpoint();
+  ASSERT_EQ(c.history.size(), s.cal.size());
+  const auto n = static_cast<Eigen::Index>(s.identified.size());
+  int rows = 0;
+  for (const auto& m : c.history) rows += m.dimension();
+  Eigen::VectorXd r_all(rows);
+  Eigen::MatrixXd H_all(rows, n), R_all = Eigen::MatrixXd::Zero(rows, rows);
+  int at = 0;
+  for (const auto& m : c.history) {
+    Eigen::VectorXd r;
+    Eigen::MatrixXd H;
+    kinematics::ResidualAndJacobian(s.model, m, ekf.x(), s.identified, r, H);
+    const auto d = static_cast<Eigen::Index>(r.size());
+    r_all.segment(at, d) = r;
+    H_all.middleRows(at, d) = H;
+    R_all.block(at, at, d, d) = m.covariance;
+    at += static_cast<int>(d);
+  }
+  const Eigen::VectorXd mean = H_all * (c.x0 - c.x);
+  const Eigen::MatrixXd Sigma = H_all * c.P0 * H_all.transpose() + R_all;
+  const Eigen::LLT<Eigen::MatrixXd> llt(Sigma);
+  const Eigen::VectorXd e = r_all - mean;
+  const double batch =
+      e.dot(llt.solve(e)) + 2 * llt.matrixL().toDenseMatrix().diagonal().array().log().sum();
+  EXPECT_NEAR(ekf.WindowEvidence(), batch, 1e-8 * std::abs(batch));
+  std::printf("−2 ln L of %zu poses: sequential %.9g, joint %.9g\n", c.history.size(),
+              ekf.WindowEvidence(), batch);
+  // An inflation of σ 0.01 (m or rad) on the first parameter at pose 10, which no step needs: a
+  // less likely window.
+  EkfCheckpoint inflated = c;
+  inflated.inflations.assign(c.history.size(), Eigen::MatrixXd());
+  inflated.inflations[10] = Eigen::MatrixXd::Zero(n, n);
+  inflated.inflations[10](0, 0) = 1e-4;
+  EkfIdentifier other(s.model, s.identified, settings);
+  other.Restore(inflated);
+  other.Refine(5);
+  EXPECT_GT(other.WindowEvidence(), ekf.WindowEvidence() + 5.0);
+}
+
 TEST(EkfIdentifier, FoldedPosesKeepTheirInformation) {
   // 150 poses through a window of 30: the estimate stays at the unbounded filter's (the batch
   // optimum) to a small fraction of σ, and its σ too; the window holds 30 poses.

@@ -145,78 +145,107 @@ TEST(Track, AnLcmLogRunsWithEachPosesOwnCovarianceAsTheIdentifierDoes) {
   fs::remove_all(dir);
 }
 
-// `rcal track LOG --cell CELL --discrepancy-every 50 --discrepancy-switch` on a log of the arm
-// whose joint 2 bends (each pose logged with its context): the watch names joint_compliance on
-// joint 2 after 50 accepted poses and switches it in; the JSON's watch and final effect are what
-// the library gives for the same poses run the same way.
-TEST(Track, TheDiscrepancyWatchRunsOverALogAsTheIdentifierRunsIt) {
-  const fs::path dir = fs::temp_directory_path() / "rcal_track_watch_test";
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  const std::string cell_file = std::string(RCAL_SOURCE_DIR) + "/config/cells/grb3016_poses.yaml";
-  const io::BuiltCell built = io::LoadCell(cell_file);
+// A log of 80 poses of the pose-level GRB3016 cell's arm with `effect` hidden (each pose logged
+// with its context) at dir/run.lcmlog; the poses as a reader of the log gets them back.
+std::vector<cell::TimedPose> WriteEffectLog(const fs::path& dir, const io::BuiltCell& built,
+                                            const std::string& effect) {
   const cell::CellSimSpec sim_spec =
       cell::LoadCellSimSpec(std::string(RCAL_SOURCE_DIR) + "/config/cells/grb3016_poses.sim.yaml");
   const Eigen::VectorXd x_true = cell::TrueErrors(built, sim_spec);
-  const sim::EffectTruth truth = sim::MakeEffectTruth(
-      built.model, {sim::ParseEffectSpec("joint_compliance:j2=2e-6", built.model)});
+  const sim::EffectTruth truth =
+      sim::MakeEffectTruth(built.model, {sim::ParseEffectSpec(effect, built.model)});
   sim::PoseNoise noise;
   noise.position_sigma = built.spec.position.sigma.maxCoeff();
   noise.orientation_sigma = built.spec.position.orientation_sigma;
   sim::Rng rng(97), context_rng(98);
   std::vector<cell::TimedPose> poses;
-  {
-    lcm::LogFile log((dir / "run.lcmlog").string(), "w");
-    ASSERT_TRUE(log.good());
-    Eigen::VectorXd q_before;
-    const auto qs = sim::SampleJoints(built.model, 80, rng);
-    for (int k = 0; k < 80; ++k) {
-      const auto c = sim::StopContext(10.0 * k, qs[k], q_before, {}, context_rng);
-      q_before = qs[k];
-      const auto z = sim::MeasurePoseWithEffects(truth, x_true, qs[k], c, noise, rng);
-      const pose_measurement_t m = transport::ToMessage(z, (k + 1) * 1'000'000, k, 0, c);
-      std::vector<unsigned char> buf(m.getEncodedSize());
-      m.encode(buf.data(), 0, static_cast<int>(buf.size()));
-      lcm::LogEvent e{k, (k + 1) * 1'000'000, transport::channels::kPoseMeasurement,
-                      static_cast<int32_t>(buf.size()), buf.data()};
-      ASSERT_EQ(log.writeEvent(&e), 0);
-      std::string error;  // what a reader of the log gets back
-      const auto back = transport::FromMessage(m, &error, &built.model);
-      ASSERT_TRUE(back) << error;
-      poses.push_back({*back, m.utime, k, *transport::ContextFromMessage(m, &error)});
+  lcm::LogFile log((dir / "run.lcmlog").string(), "w");
+  EXPECT_TRUE(log.good());
+  Eigen::VectorXd q_before;
+  const auto qs = sim::SampleJoints(built.model, 80, rng);
+  for (int k = 0; k < 80; ++k) {
+    const auto c = sim::StopContext(10.0 * k, qs[k], q_before, {}, context_rng);
+    q_before = qs[k];
+    const auto z = sim::MeasurePoseWithEffects(truth, x_true, qs[k], c, noise, rng);
+    const pose_measurement_t m = transport::ToMessage(z, (k + 1) * 1'000'000, k, 0, c);
+    std::vector<unsigned char> buf(m.getEncodedSize());
+    m.encode(buf.data(), 0, static_cast<int>(buf.size()));
+    lcm::LogEvent e{k, (k + 1) * 1'000'000, transport::channels::kPoseMeasurement,
+                    static_cast<int32_t>(buf.size()), buf.data()};
+    EXPECT_EQ(log.writeEvent(&e), 0);
+    std::string error;  // what a reader of the log gets back
+    const auto back = transport::FromMessage(m, &error, &built.model);
+    EXPECT_TRUE(back) << error;
+    if (back) poses.push_back({*back, m.utime, k, *transport::ContextFromMessage(m, &error)});
+  }
+  return poses;
+}
+
+// `rcal track LOG --cell CELL --discrepancy-every 50 --discrepancy-switch` on a log of an arm with
+// one hidden effect: the watch names it after 50 poses and switches it in; the JSON's watch, the
+// changes the switch withdrew and the final effect are what the library gives for the same poses
+// run the same way: joint 2 bending (2e-6 rad/(N·m)), and 4e-4 rad of backlash on joint 2, on which
+// the geometric identifier raises changes that the switch withdraws.
+TEST(Track, TheDiscrepancyWatchRunsOverALogAsTheIdentifierRunsIt) {
+  struct Case {
+    std::string effect, named;
+    double truth;
+    bool raises_changes;  // the geometric identifier raises changes on it, so some are withdrawn
+  };
+  for (const Case& k : {Case{"joint_compliance:j2=2e-6", "joint_compliance j2", 2e-6, false},
+                        Case{"backlash:j2=4e-4", "backlash j2", 4e-4, true}}) {
+    SCOPED_TRACE(k.effect);
+    const fs::path dir = fs::temp_directory_path() / "rcal_track_watch_test";
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    const std::string cell_file = std::string(RCAL_SOURCE_DIR) + "/config/cells/grb3016_poses.yaml";
+    const io::BuiltCell built = io::LoadCell(cell_file);
+    const std::vector<cell::TimedPose> poses = WriteEffectLog(dir, built, k.effect);
+    ASSERT_EQ(poses.size(), 80u);
+    const testing::Result r = testing::RunRcal(
+        "track " + (dir / "run.lcmlog").string() + " --cell " + cell_file +
+        " --discrepancy-every 50 --discrepancy-switch --json " + (dir / "track.json").string());
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    nlohmann::json j;
+    std::ifstream(dir / "track.json") >> j;
+    ASSERT_EQ(j["discrepancy_watch"].size(), 1u) << j.dump(1);
+    const auto& w = j["discrepancy_watch"][0];
+    EXPECT_EQ(w["taken"], 50);  // accepted or refused by the gate
+    EXPECT_LE(w["accepted"], 50);
+    ASSERT_GE(w["suspects"].size(), 1u);
+    EXPECT_EQ(w["suspects"][0]["effect"], k.named);
+    EXPECT_EQ(w["switched_in"], nlohmann::json::array({k.named}));
+    ASSERT_EQ(j["effects"].size(), 1u);
+    // The library, the same poses, the same way.
+    cell::OnlineIdentification id(built);
+    cell::DiscrepancyWatchSettings s;
+    std::vector<cell::WithdrawnChange> withdrawn;
+    for (const auto& p : poses) {
+      const auto out = id.Add(p);
+      if (!out.updates.empty() && cell::WatchDue(id, s)) {
+        id.SwitchIn(cell::WatchForDiscrepancy(id, s).NewEffects());
+        withdrawn = id.withdrawn();
+      }
     }
+    ASSERT_EQ(id.ekf().num_effect_params(), 1);
+    const double value = id.ekf().e()(0), sigma = id.ekf().sigma_e()(0);
+    const io::AnalysisEffects tracked = io::ParseAnalysisEffects(j, built.model);
+    ASSERT_EQ(tracked.values.size(), 1);
+    std::printf("rcal track: %s %.6g; library %.6g ± %.2g (truth %.3g); %zu changes withdrawn\n",
+                k.named.c_str(), tracked.values(0), value, sigma, k.truth, withdrawn.size());
+    EXPECT_NEAR(value, k.truth, 3 * sigma);
+    EXPECT_NEAR(tracked.values(0), value, 1e-9 * sigma);
+    if (k.raises_changes) {
+      EXPECT_FALSE(withdrawn.empty());
+    }
+    ASSERT_EQ(w["withdrawn_changes"].size(), withdrawn.size());
+    for (size_t i = 0; i < withdrawn.size(); ++i) {
+      EXPECT_EQ(w["withdrawn_changes"][i]["onset_row"], withdrawn[i].onset_pose_index + 1)
+          << "rows numbered from 1 for the first pose read";
+      EXPECT_EQ(w["withdrawn_changes"][i]["changed"], withdrawn[i].names);
+    }
+    fs::remove_all(dir);
   }
-  const testing::Result r = testing::RunRcal(
-      "track " + (dir / "run.lcmlog").string() + " --cell " + cell_file +
-      " --discrepancy-every 50 --discrepancy-switch --json " + (dir / "track.json").string());
-  ASSERT_EQ(r.exit_code, 0) << r.output;
-  nlohmann::json j;
-  std::ifstream(dir / "track.json") >> j;
-  ASSERT_EQ(j["discrepancy_watch"].size(), 1u) << j.dump(1);
-  const auto& w = j["discrepancy_watch"][0];
-  EXPECT_EQ(w["taken"], 50);  // accepted or refused by the gate
-  EXPECT_LE(w["accepted"], 50);
-  ASSERT_GE(w["suspects"].size(), 1u);
-  EXPECT_EQ(w["suspects"][0]["effect"], "joint_compliance j2");
-  EXPECT_EQ(w["switched_in"], nlohmann::json::array({"joint_compliance j2"}));
-  ASSERT_EQ(j["effects"].size(), 1u);
-  // The library, the same poses, the same way.
-  cell::OnlineIdentification id(built);
-  cell::DiscrepancyWatchSettings s;
-  for (const auto& p : poses) {
-    const auto out = id.Add(p);
-    if (!out.updates.empty() && cell::WatchDue(id, s))
-      id.SwitchIn(cell::WatchForDiscrepancy(id, s).NewEffects());
-  }
-  ASSERT_EQ(id.ekf().num_effect_params(), 1);
-  const double c = id.ekf().e()(0), sigma = id.ekf().sigma_e()(0);
-  const io::AnalysisEffects tracked = io::ParseAnalysisEffects(j, built.model);
-  ASSERT_EQ(tracked.values.size(), 1);
-  std::printf("rcal track: joint 2 compliance %.6g; library %.6g ± %.2g (truth 2e-6)\n",
-              tracked.values(0), c, sigma);
-  EXPECT_NEAR(c, 2e-6, 3 * sigma);
-  EXPECT_NEAR(tracked.values(0), c, 1e-9 * sigma);
-  fs::remove_all(dir);
 }
 
 }  // namespace

@@ -75,6 +75,7 @@ struct WatchRun {
   int accepted = 0, taken = 0;  // poses the EKF accepted, and took (accepted or refused)
   cell::DiscrepancyReport report;
   std::vector<std::string> switched_in;
+  std::vector<cell::WithdrawnChange> withdrawn;  // changes the switch withdrew
 };
 
 std::string Join(const std::vector<std::string>& v, const char* sep) {
@@ -123,10 +124,13 @@ std::vector<TrackRow> TrackCell(cell::OnlineIdentification& id,
                    id.ekf().accepted(),
                    id.ekf().accepted() + id.ekf().rejected(),
                    cell::WatchForDiscrepancy(id, watch),
+                   {},
                    {}};
-        if (o.discrepancy_switch)
+        if (o.discrepancy_switch) {
           for (const auto& e : id.SwitchIn(w.report.NewEffects()))
             w.switched_in.push_back(discrepancy::Describe(id.model(), e));
+          w.withdrawn = id.withdrawn();
+        }
         watches->push_back(std::move(w));
       }
     }
@@ -286,6 +290,14 @@ int RunData(const Options& o) {
   if (id) {
     json jw = json::array();
     for (const WatchRun& w : watches) {
+      json withdrawn = json::array();
+      for (const auto& c : w.withdrawn)
+        withdrawn.push_back(
+            {{"onset_row", c.onset_pose_index >= 0
+                               ? data.samples[static_cast<size_t>(c.onset_pose_index)].row
+                               : -1},
+             {"changed", c.names},
+             {"evidence_gain", c.evidence_gain}});
       json suspects = json::array();
       for (const auto& x : w.report.suspects)
         suspects.push_back({{"effect", x.description}, {"z", x.z}, {"in_model", x.in_model}});
@@ -298,7 +310,8 @@ int RunData(const Options& o) {
            {"suspects", suspects},
            {"heldout_rms_before_m", w.report.heldout_rms_before_m},
            {"heldout_rms_after_m", w.report.heldout_rms_after_m},
-           {"switched_in", w.switched_in}});
+           {"switched_in", w.switched_in},
+           {"withdrawn_changes", withdrawn}});
       std::printf("  discrepancy watch after row %d (%d poses taken, %d accepted): %s%s\n",
                   data.samples[w.row].row, w.taken, w.accepted,
                   suspects.empty() ? "nothing suspected" : suspects.dump().c_str(),

@@ -16,14 +16,15 @@ std::vector<kinematics::Effect> DiscrepancyReport::NewEffects() const {
 }
 
 bool WatchDue(const OnlineIdentification& id, const DiscrepancyWatchSettings& s) {
-  // Poses the EKF took, whether its gate accepted or refused them: a model that lacks a large
-  // effect has its gate refuse many of the poses that show it, so counting accepted poses only
-  // would look last, or never, where the evidence is strongest. (A change's release re-accepts
-  // refused poses: the sum stays.)
+  // Poses the EKF took, whether its gate accepted or refused them, and the window's poses as the
+  // watch analyses them (its refused poses too): a model that lacks a large effect has its gate
+  // refuse many of the poses that show it, so counting accepted poses only would look last, or
+  // never, where the evidence is strongest. (A change's release re-accepts refused poses: the sum
+  // stays.)
   const auto& ekf = id.ekf();
   const int taken = ekf.accepted() + ekf.rejected();
   return s.every_poses > 0 && taken > 0 && taken % s.every_poses == 0 &&
-         ekf.window_size() >= std::max(s.min_poses, 1);
+         id.WindowSize() >= std::max(s.min_poses, 1);
 }
 
 discrepancy::PoseData WatchWindow(const OnlineIdentification& id) {

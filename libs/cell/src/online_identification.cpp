@@ -10,6 +10,7 @@
 #include "rcal/identification/chi_square.hpp"
 #include "rcal/identification/extended_measurement.hpp"
 #include "rcal/identification/setup_guess.hpp"
+#include "rcal/identification/tracking.hpp"
 #include "rcal/io/effects_json.hpp"
 #include "rcal/kinematics/identifiability.hpp"
 
@@ -196,18 +197,27 @@ void OnlineIdentification::Restore(const identification::EkfCheckpoint& checkpoi
   if (ekf_->accepted() > 0 || guessed_.empty()) started_ = true;
 }
 
-std::vector<TimedPose> OnlineIdentification::Window() const {
+size_t OnlineIdentification::WindowStart() const {
   const auto& history = ekf_->history();
-  if (history.empty()) return {};
+  if (history.empty()) return seen_.size();
   for (size_t i = 0; i < seen_.size(); ++i)
-    if (SameMeasurement(seen_[i].z, history.front()))
-      return std::vector<TimedPose>(seen_.begin() + static_cast<std::ptrdiff_t>(i), seen_.end());
+    if (SameMeasurement(seen_[i].z, history.front())) return i;
   // The window's first poses were dropped from seen_ (its bound): the poses as they arrived since.
-  return std::vector<TimedPose>(seen_.begin(), seen_.end());
+  return 0;
+}
+
+std::vector<TimedPose> OnlineIdentification::Window() const {
+  return std::vector<TimedPose>(seen_.begin() + static_cast<std::ptrdiff_t>(WindowStart()),
+                                seen_.end());
+}
+
+int OnlineIdentification::WindowSize() const {
+  return static_cast<int>(seen_.size() - WindowStart());
 }
 
 std::vector<kinematics::Effect> OnlineIdentification::SwitchIn(
     const std::vector<kinematics::Effect>& effects) {
+  withdrawn_.clear();
   std::vector<kinematics::Effect> added, all = effects_;
   for (const auto& e : effects) {
     const auto same = [&](const kinematics::Effect& o) { return o.SameAs(e); };
@@ -321,12 +331,47 @@ std::vector<kinematics::Effect> OnlineIdentification::SwitchIn(
     }
     ekf->Restore(d);
     if (dropped) ekf->Refine(passes);
+    withdrawn_ = WithdrawExplainedChanges(*ekf, *ekf_, window, passes);
   } catch (...) {
     effects_ = kept;
     throw;
   }
   ekf_ = std::move(ekf);
   return added;
+}
+
+std::vector<WithdrawnChange> OnlineIdentification::WithdrawExplainedChanges(
+    identification::EkfIdentifier& ekf, const identification::EkfIdentifier& old,
+    const std::vector<TimedPose>& window, int passes) const {
+  // The old filter's changes whose release is still in the window, in order: the last ones it
+  // detected (each release puts one inflation on the window's pose at its onset).
+  const identification::EkfCheckpoint c = ekf.Checkpoint();
+  std::vector<size_t> released;
+  for (size_t k = 0; k < c.inflations.size(); ++k)
+    if (c.inflations[k].size() != 0) released.push_back(k);
+  const auto& changes = old.changes();
+  std::vector<WithdrawnChange> withdrawn;
+  // Newest first: a later release was fitted on top of the earlier ones.
+  for (size_t i = released.size(); i-- > 0;) {
+    const size_t k = released[i];
+    identification::EkfCheckpoint without = ekf.Checkpoint();
+    without.inflations[k] = Eigen::MatrixXd();
+    const std::unique_ptr<identification::EkfIdentifier> trial = MakeEkf(start_);
+    trial->Restore(without);
+    trial->Refine(passes);
+    const double with_release = ekf.WindowEvidence(), without_release = trial->WindowEvidence();
+    if (!(without_release <= with_release)) continue;  // the poses still need the step
+    WithdrawnChange w;
+    for (const TimedPose& p : window)
+      if (SameMeasurement(p.z, c.history[k])) w.onset_pose_index = p.pose_index;
+    const size_t from_end = released.size() - 1 - i;
+    if (from_end < changes.size())
+      w.names = identification::ChangeNames(cell_.model, changes[changes.size() - 1 - from_end]);
+    w.evidence_gain = with_release - without_release;
+    withdrawn.push_back(std::move(w));
+    ekf.Restore(trial->Checkpoint());
+  }
+  return withdrawn;
 }
 
 OnlineIdentification MakeOnlineIdentification(io::BuiltCell cell, const std::string& effects_path) {

@@ -284,6 +284,31 @@ int EkfIdentifier::Relinearize(int max_passes) {
   return passes;
 }
 
+double EkfIdentifier::WindowEvidence() const {
+  const int n = static_cast<int>(x_.size());
+  Eigen::VectorXd r;
+  Eigen::MatrixXd H;
+  Eigen::VectorXd x = x0_;
+  Eigen::MatrixXd P = P0_;
+  double minus_two_ln_l = 0;
+  for (size_t k = 0; k < history_.size(); ++k) {
+    const auto& m = history_[k];
+    P += Eigen::MatrixXd(q_diag_.asDiagonal());
+    if (inflations_[k].size()) P += inflations_[k];
+    Measure(m, contexts_[k], x_, r, H);
+    const Eigen::VectorXd innovation = r - H * (x - x_);  // linearised at the estimate
+    const Eigen::MatrixXd S = H * P * H.transpose() + m.covariance;
+    const Eigen::LLT<Eigen::MatrixXd> llt(S);
+    minus_two_ln_l += innovation.dot(llt.solve(innovation)) +
+                      2 * llt.matrixL().toDenseMatrix().diagonal().array().log().sum();
+    const Eigen::MatrixXd K = llt.solve(H * P).transpose();
+    x += K * innovation;
+    const Eigen::MatrixXd IKH = Eigen::MatrixXd::Identity(n, n) - K * H;
+    P = IKH * P * IKH.transpose() + K * m.covariance * K.transpose();
+  }
+  return minus_two_ln_l;
+}
+
 Eigen::VectorXd EkfIdentifier::x() const {
   Eigen::VectorXd full = x_fixed_;
   for (size_t i = 0; i < identified_.size(); ++i) full(identified_[i]) = x_(i);

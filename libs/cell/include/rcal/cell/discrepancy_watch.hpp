@@ -39,7 +39,7 @@ namespace rcal::cell {
 
 struct DiscrepancyWatchSettings {
   int every_poses = 50;  ///< run after every this many poses taken by the EKF (0: never)
-  int min_poses = 40;    ///< accepted poses in the window before the first run
+  int min_poses = 40;    ///< poses in the window (accepted or refused) before the first run
   /// rcal analyze's settings (noise, folds, α, candidates). The stated noise and the gravity
   /// model are filled from the window's poses and the identifier's model when left at 0 / default.
   discrepancy::AnalysisSettings analysis;
@@ -82,8 +82,8 @@ struct DiscrepancyReport {
 };
 
 /// True when the watch should run after this identification's latest EKF update (a multiple of
-/// every_poses poses taken by the EKF, accepted or refused by its gate; the window at least
-/// min_poses accepted ones).
+/// every_poses poses taken by the EKF, accepted or refused by its gate; the window,
+/// OnlineIdentification::WindowSize, at least min_poses).
 bool WatchDue(const OnlineIdentification& id, const DiscrepancyWatchSettings& s);
 
 /// The window of `id` (OnlineIdentification::Window: its poses and contexts), as

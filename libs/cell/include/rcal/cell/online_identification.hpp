@@ -56,6 +56,17 @@ struct TimedPose {
 /// set-up frames at a generic placement (file comment). Ascending.
 std::vector<int> CellBaseSet(const io::BuiltCell& cell);
 
+/// A change the geometric identification detected that a switched-in effect explains
+/// (OnlineIdentification::SwitchIn): its release withdrawn.
+struct WithdrawnChange {
+  int64_t onset_pose_index = -1;   ///< the pose its release began at
+  std::vector<std::string> names;  ///< identification::ChangeNames (empty: detected before a
+                                   ///< restart, so not known)
+  /// −2 ln of the Bayes factor for withdrawing it: the window's evidence with the release minus
+  /// without it (EkfIdentifier::WindowEvidence), ≥ 0.
+  double evidence_gain = 0;
+};
+
 class OnlineIdentification {
  public:
   /// What one pose did (a held-back pose that completes the guess applies all held poses: one
@@ -100,6 +111,8 @@ class OnlineIdentification {
   /// Restore the refused poses of the restored window are not known: its accepted poses (utime 0)
   /// and what arrives after them.
   std::vector<TimedPose> Window() const;
+  /// Window().size(), without the copy.
+  int WindowSize() const;
 
   /// Adds `effects` to those identified (issue 15 item 5, the discrepancy watch's switch): the
   /// identification is rebuilt on the extended model, the state of the geometric parameters and
@@ -111,7 +124,15 @@ class OnlineIdentification {
   /// Before anything is identified (the set-up guess still holding poses, or a restart about to
   /// Restore a checkpoint of the extended model) the EKF simply starts with them. Throws
   /// std::invalid_argument for an effect the model cannot have (nothing changed).
+  ///
+  /// A large effect the model lacks is first seen as steps (the change detector fires on it): each
+  /// change the old identification released within the window is tested again under the new
+  /// model, newest first, and withdrawn (its inflation dropped, the window relinearised) where the
+  /// window's poses are at least as likely without it (EkfIdentifier::WindowEvidence: a Bayes
+  /// factor, the release's Occam factor against what it explains). withdrawn() lists them.
   std::vector<kinematics::Effect> SwitchIn(const std::vector<kinematics::Effect>& effects);
+  /// The changes the last SwitchIn withdrew (newest first).
+  const std::vector<WithdrawnChange>& withdrawn() const { return withdrawn_; }
 
   const io::BuiltCell& cell() const { return cell_; }
   /// The non-geometric effects identified (none: the geometric identification).
@@ -129,6 +150,14 @@ class OnlineIdentification {
 
  private:
   Update Apply(const TimedPose& pose);
+  /// SwitchIn's second look at the old identification's releases (its comment), on `ekf` (the
+  /// new identification over `window`).
+  std::vector<WithdrawnChange> WithdrawExplainedChanges(identification::EkfIdentifier& ekf,
+                                                        const identification::EkfIdentifier& old,
+                                                        const std::vector<TimedPose>& window,
+                                                        int passes) const;
+  /// Where Window() starts in seen_ (seen_.size() when the EKF holds no pose).
+  size_t WindowStart() const;
   /// An EKF on the base set starting at x0 (full length) with the cell's prior σ.
   std::unique_ptr<identification::EkfIdentifier> MakeEkf(const Eigen::VectorXd& x0) const;
 
@@ -142,6 +171,7 @@ class OnlineIdentification {
   std::vector<TimedPose> held_;
   /// Poses applied to the EKF (accepted or refused by its gate) since its window began.
   std::deque<TimedPose> seen_;
+  std::vector<WithdrawnChange> withdrawn_;
   bool started_ = true;
   int64_t last_utime_ = std::numeric_limits<int64_t>::min();
   int64_t last_pose_index_ = -1;

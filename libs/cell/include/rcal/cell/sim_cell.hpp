@@ -1,8 +1,8 @@
 // The simulated calibration cell of the paper's experiments from raw sensor streams (issue 4): the
 // truth cell, its simulated sensor streams through the pose pipeline (still windows), the set-up
 // guess and the online EKF. One library so that `rcal experiment paper --sensors`, the live
-// processes (sensor_acquisition --source sim, `rcal experiment paper --sensors`) and the tests build
-// exactly the same cell, guess and base set.
+// processes (sensor_acquisition --source sim, `rcal experiment paper --sensors`) and the tests
+// build exactly the same cell, guess and base set.
 //
 // The cell. The arm of the robot file plus the set-up a real cell has, all unknown to the
 // identifier and identified with the arm:

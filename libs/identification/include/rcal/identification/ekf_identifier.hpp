@@ -221,6 +221,12 @@ class EkfIdentifier {
   /// than the threshold, at most `max_passes` (the paper's repeated EKF iterations over a batch).
   /// Returns the passes run.
   int Refine(int max_passes);
+  /// −2 ln of the likelihood of the window's poses given the window's prior (x0, P0), up to a
+  /// constant: the prediction-error decomposition Σ_k r_kᵀ S_k⁻¹ r_k + ln det S_k of one filter
+  /// pass over the window linearised at the estimate (each pose's drift and released-change
+  /// inflation included). Two models of the same poses compare by it (a Bayes factor: a released
+  /// change's inflation costs its Occam factor where the poses do not need it). 0 without poses.
+  double WindowEvidence() const;
   /// Relinearisation passes run so far.
   int relinearizations() const { return relinearizations_; }
   /// Accepted poses in the window (the others are folded into the prior).
