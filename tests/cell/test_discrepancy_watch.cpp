@@ -270,8 +270,12 @@ TEST(DiscrepancyWatch, ChangesAnUnmodelledEffectRaisedAreWithdrawnWhenItIsSwitch
     }
     for (const auto& w : run.withdrawn) {
       withdrawn.insert(w.onset_pose_index);
-      EXPECT_FALSE(w.names.empty());
       EXPECT_GE(w.evidence_gain, 0.0);
+      ASSERT_FALSE(w.names.empty());
+      for (const auto& c : run.changes)  // named as the change raised from that pose was
+        if (c.onset == w.onset_pose_index) {
+          EXPECT_EQ(w.names[0], c.name) << seed << ": from pose " << c.onset;
+        }
     }
     EXPECT_EQ(withdrawn, onsets) << seed;
     raised += static_cast<int>(run.changes.size());

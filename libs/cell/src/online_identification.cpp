@@ -166,6 +166,17 @@ OnlineIdentification::Update OnlineIdentification::Apply(const TimedPose& pose) 
       seen_.erase(seen_.begin() + static_cast<std::ptrdiff_t>(i));
     }
   }
+  if (u.result.change) {
+    // The release's onset: the window's entry onset_poses_ago before this pose (the history's
+    // tail is the poses the change test took, retaken from the onset on). Kept to name the
+    // change should SwitchIn withdraw it; at most as many as the window can hold releases.
+    const auto& history = ekf_->history();
+    const auto back = static_cast<size_t>(u.result.change->onset_poses_ago);
+    if (back < history.size())
+      releases_.push_back({history[history.size() - 1 - back],
+                           identification::ChangeNames(cell_.model, *u.result.change)});
+    while (releases_.size() > std::max<size_t>(history.size(), 1)) releases_.pop_front();
+  }
   if (!u.result.accepted) return u;
   last_utime_ = pose.utime;
   last_pose_index_ = pose.pose_index;
@@ -331,7 +342,7 @@ std::vector<kinematics::Effect> OnlineIdentification::SwitchIn(
     }
     ekf->Restore(d);
     if (dropped) ekf->Refine(passes);
-    withdrawn_ = WithdrawExplainedChanges(*ekf, *ekf_, window, passes);
+    withdrawn_ = WithdrawExplainedChanges(*ekf, window, passes);
   } catch (...) {
     effects_ = kept;
     throw;
@@ -341,15 +352,12 @@ std::vector<kinematics::Effect> OnlineIdentification::SwitchIn(
 }
 
 std::vector<WithdrawnChange> OnlineIdentification::WithdrawExplainedChanges(
-    identification::EkfIdentifier& ekf, const identification::EkfIdentifier& old,
-    const std::vector<TimedPose>& window, int passes) const {
-  // The old filter's changes whose release is still in the window, in order: the last ones it
-  // detected (each release puts one inflation on the window's pose at its onset).
+    identification::EkfIdentifier& ekf, const std::vector<TimedPose>& window, int passes) const {
+  // The releases still in the window: each put one inflation on the window's pose at its onset.
   const identification::EkfCheckpoint c = ekf.Checkpoint();
   std::vector<size_t> released;
   for (size_t k = 0; k < c.inflations.size(); ++k)
     if (c.inflations[k].size() != 0) released.push_back(k);
-  const auto& changes = old.changes();
   std::vector<WithdrawnChange> withdrawn;
   // Newest first: a later release was fitted on top of the earlier ones.
   for (size_t i = released.size(); i-- > 0;) {
@@ -364,9 +372,8 @@ std::vector<WithdrawnChange> OnlineIdentification::WithdrawExplainedChanges(
     WithdrawnChange w;
     for (const TimedPose& p : window)
       if (SameMeasurement(p.z, c.history[k])) w.onset_pose_index = p.pose_index;
-    const size_t from_end = released.size() - 1 - i;
-    if (from_end < changes.size())
-      w.names = identification::ChangeNames(cell_.model, changes[changes.size() - 1 - from_end]);
+    for (const Release& r : releases_)
+      if (SameMeasurement(r.onset, c.history[k])) w.names = r.names;
     w.evidence_gain = with_release - without_release;
     withdrawn.push_back(std::move(w));
     ekf.Restore(trial->Checkpoint());

@@ -153,7 +153,6 @@ class OnlineIdentification {
   /// SwitchIn's second look at the old identification's releases (its comment), on `ekf` (the
   /// new identification over `window`).
   std::vector<WithdrawnChange> WithdrawExplainedChanges(identification::EkfIdentifier& ekf,
-                                                        const identification::EkfIdentifier& old,
                                                         const std::vector<TimedPose>& window,
                                                         int passes) const;
   /// Where Window() starts in seen_ (seen_.size() when the EKF holds no pose).
@@ -172,6 +171,13 @@ class OnlineIdentification {
   /// Poses applied to the EKF (accepted or refused by its gate) since its window began.
   std::deque<TimedPose> seen_;
   std::vector<WithdrawnChange> withdrawn_;
+  /// The changes released, oldest first (the last as many as the window holds): the onset pose's
+  /// measurement and the names, what SwitchIn names a withdrawn one by (matched on the pose).
+  struct Release {
+    kinematics::PoseMeasurement onset;
+    std::vector<std::string> names;
+  };
+  std::deque<Release> releases_;
   bool started_ = true;
   int64_t last_utime_ = std::numeric_limits<int64_t>::min();
   int64_t last_pose_index_ = -1;
