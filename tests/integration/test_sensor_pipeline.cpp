@@ -652,7 +652,8 @@ TEST_F(SensorPipeline, AGearErrorIsNamedAndIdentifiedLive) {
 // discrepancy watch names the backlash at its first look, switches it in, and identifies b live
 // within 3σ. At 1e-4 rad (0.15 mm at the tool, three times a window's noise) and at 2e-4 rad, where
 // the geometric identifier's gate refuses about one pose in six and its change detector fires
-// falsely: the watch counts the poses the gate refused too, so it still looks at 50.
+// falsely: the watch counts the poses the gate refused too, so it still looks at 50, and its
+// MODEL_DISCREPANCY lists the false change as withdrawn once backlash is switched in.
 TEST_F(SensorPipeline, BacklashIsNamedFromTheApproachDirectionsAndIdentifiedLive) {
   RCAL_IN_NAMESPACE("SensorPipeline.BacklashIsNamedFromTheApproachDirectionsAndIdentifiedLive");
   constexpr int kCal = 55;
@@ -671,6 +672,15 @@ TEST_F(SensorPipeline, BacklashIsNamedFromTheApproachDirectionsAndIdentifiedLive
     EXPECT_GE(with_direction, static_cast<int>(run.poses.size()) - 1);  // all but the first
     ExpectNamedAndIdentified(run, "backlash " + integration::DemoCell().model.joints()[1].name,
                              {b});
+    ASSERT_FALSE(run.discrepancies.empty());
+    const model_discrepancy_t& first = run.discrepancies.front();
+    for (int i = 0; i < first.num_withdrawn; ++i)
+      std::printf("  withdrawn: the change from pose_index %lld (%s), −2 ln B %.1f\n",
+                  static_cast<long long>(first.withdrawn_onset_pose_index[i]),
+                  first.withdrawn_changed[i].c_str(), first.withdrawn_evidence[i]);
+    if (b >= 2e-4) {
+      EXPECT_GE(first.num_withdrawn, 1);
+    }
     std::filesystem::remove(run.checkpoint);  // the next amplitude starts a fresh identifier
   }
 }

@@ -647,7 +647,12 @@ TEST(ModelDiscrepancyAdapter, RoundTripAndRefusals) {
   r.scheme = "nested 5-fold";
   r.correlations.push_back({"gravity torque j2 [N*m]", 0.41, -12.5});
   r.correlations.push_back({"temperature [degC]", -0.05, -0.3});
-  const model_discrepancy_t m = ThroughLcm(ToModelDiscrepancy(r, 123, 100, true));
+  std::vector<cell::WithdrawnChange> withdrawn(2);
+  withdrawn[0].onset_pose_index = 43;
+  withdrawn[0].names = {"theta2", "d4"};
+  withdrawn[0].evidence_gain = 5.8;
+  withdrawn[1].evidence_gain = 0.0;  // raised before a restart: pose and names not known
+  const model_discrepancy_t m = ThroughLcm(ToModelDiscrepancy(r, 123, 100, true, withdrawn));
   std::string error;
   const auto d = ModelDiscrepancyFromMessage(m, &error);
   ASSERT_TRUE(d) << error;
@@ -671,6 +676,13 @@ TEST(ModelDiscrepancyAdapter, RoundTripAndRefusals) {
   EXPECT_EQ(d->correlations[0].regressor, "gravity torque j2 [N*m]");
   EXPECT_EQ(d->correlations[0].r, 0.41);
   EXPECT_EQ(d->correlations[1].log_p, -0.3);
+  ASSERT_EQ(d->withdrawn.size(), 2u);
+  EXPECT_EQ(d->withdrawn[0].onset_pose_index, 43);
+  EXPECT_EQ(d->withdrawn[0].changed, "theta2,d4");
+  EXPECT_EQ(d->withdrawn[0].evidence, 5.8);
+  EXPECT_EQ(d->withdrawn[1].onset_pose_index, -1);
+  EXPECT_EQ(d->withdrawn[1].changed, "");
+  EXPECT_EQ(ThroughLcm(ToModelDiscrepancy(r, 123, 100, false)).num_withdrawn, 0);
   // An infinite z (zero spread of the paired differences) and a log p that underflowed are valid.
   model_discrepancy_t extreme = m;
   extreme.z[0] = std::numeric_limits<double>::infinity();
@@ -704,6 +716,12 @@ TEST(ModelDiscrepancyAdapter, RoundTripAndRefusals) {
   refused([](auto& b) { b.correlation[1] = 1.5; }, "correlation[1]");
   refused([](auto& b) { b.correlation_log_p[0] = 0.1; }, "correlation_log_p[0]");
   refused([](auto& b) { b.regressor[0] = std::string(257, 'r'); }, "regressor[0]");
+  refused([](auto& b) { b.num_withdrawn = 3; }, "num_withdrawn");
+  refused([](auto& b) { b.num_withdrawn = 1 << 30; }, "num_withdrawn");
+  refused([](auto& b) { b.withdrawn_onset_pose_index[0] = -2; }, "withdrawn_onset_pose_index[0]");
+  refused([](auto& b) { b.withdrawn_changed[1] = std::string(257, 'c'); }, "withdrawn_changed[1]");
+  refused([&](auto& b) { b.withdrawn_evidence[0] = nan; }, "withdrawn_evidence[0]");
+  refused([](auto& b) { b.withdrawn_evidence[1] = -1; }, "withdrawn_evidence[1]");
 }
 
 }  // namespace

@@ -118,11 +118,17 @@ int Run(const Options& o) {
     if (!d->correlations.empty())
       strongest = "; residual vs " + d->correlations[0].regressor +
                   ": r = " + std::to_string(d->correlations[0].r).substr(0, 5);
-    std::printf("discrepancy over %d poses: chi2/dof %.2f; %s; held-out %.4f -> %.4f mm%s%s\n",
+    std::string withdrawn;  // poses numbered from 1, as the identifier's log numbers them
+    for (const auto& w : d->withdrawn)
+      withdrawn += "; change from pose " +
+                   (w.onset_pose_index >= 0 ? std::to_string(w.onset_pose_index + 1) : "?") +
+                   " (" + (w.changed.empty() ? "raised before a restart" : w.changed) +
+                   ") withdrawn";
+    std::printf("discrepancy over %d poses: chi2/dof %.2f; %s; held-out %.4f -> %.4f mm%s%s%s\n",
                 d->window_poses, d->chi2_dof > 0 ? d->chi2 / d->chi2_dof : 0.0,
                 suspects.empty() ? "nothing suspected" : ("suspected: " + suspects).c_str(),
                 d->heldout_rms_before_m * 1e3, d->heldout_rms_after_m * 1e3, strongest.c_str(),
-                d->switched_in ? "; switched in" : "");
+                d->switched_in ? "; switched in" : "", withdrawn.c_str());
     std::fflush(stdout);
   });
   t.Subscribe<calibration_status_t>(

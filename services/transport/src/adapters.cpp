@@ -559,7 +559,8 @@ std::optional<NextPoses> NextPosesFromMessage(const next_poses_t& m,
 }
 
 model_discrepancy_t ToModelDiscrepancy(const cell::DiscrepancyReport& r, int64_t utime,
-                                       int32_t poses_used, bool switched_in) {
+                                       int32_t poses_used, bool switched_in,
+                                       const std::vector<cell::WithdrawnChange>& withdrawn) {
   model_discrepancy_t m;
   m.utime = utime;
   m.poses_used = poses_used;
@@ -582,6 +583,14 @@ model_discrepancy_t ToModelDiscrepancy(const cell::DiscrepancyReport& r, int64_t
   m.expected_gain = r.expected_gain;
   m.scheme = r.scheme;
   m.switched_in = switched_in ? 1 : 0;
+  m.num_withdrawn = static_cast<int32_t>(withdrawn.size());
+  for (const auto& w : withdrawn) {
+    std::string names;
+    for (const auto& n : w.names) names += (names.empty() ? "" : ",") + n;
+    m.withdrawn_onset_pose_index.push_back(w.onset_pose_index);
+    m.withdrawn_changed.push_back(names);
+    m.withdrawn_evidence.push_back(w.evidence_gain);
+  }
   m.num_correlations = static_cast<int32_t>(r.correlations.size());
   for (const auto& c : r.correlations) {
     m.regressor.push_back(c.regressor);
@@ -657,6 +666,24 @@ std::optional<ModelDiscrepancy> ModelDiscrepancyFromMessage(const model_discrepa
   out.expected_gain = m.expected_gain;
   out.scheme = m.scheme;
   out.switched_in = m.switched_in == 1;
+  if (m.num_withdrawn < 0 || m.num_withdrawn > 64)
+    return fail("num_withdrawn: " + std::to_string(m.num_withdrawn) + " is not 0 to 64");
+  const auto nw = static_cast<size_t>(m.num_withdrawn);
+  if (m.withdrawn_onset_pose_index.size() != nw || m.withdrawn_changed.size() != nw ||
+      m.withdrawn_evidence.size() != nw)
+    return fail("num_withdrawn: " + std::to_string(nw) +
+                ", withdrawn_onset_pose_index, withdrawn_changed or withdrawn_evidence disagrees");
+  for (size_t i = 0; i < nw; ++i) {
+    const std::string at = "[" + std::to_string(i) + "]";
+    if (m.withdrawn_onset_pose_index[i] < -1)
+      return fail("withdrawn_onset_pose_index" + at + ": below −1");
+    if (m.withdrawn_changed[i].size() > kMaxText)
+      return fail("withdrawn_changed" + at + ": longer than 256 bytes");
+    if (!finite_nonneg(m.withdrawn_evidence[i]))
+      return fail("withdrawn_evidence" + at + ": not a finite value ≥ 0");
+    out.withdrawn.push_back(
+        {m.withdrawn_onset_pose_index[i], m.withdrawn_changed[i], m.withdrawn_evidence[i]});
+  }
   return out;
 }
 

@@ -212,9 +212,11 @@ std::optional<NextPoses> NextPosesFromMessage(const next_poses_t& msg,
 // ---- model discrepancy (issue 15 item 5) ---------------------------------------------------
 
 /// The discrepancy watch's report → MODEL_DISCREPANCY. `utime` [µs]: the window's last pose;
-/// `poses_used`: poses accepted so far; `switched_in`: the new suspects are now identified.
+/// `poses_used`: poses accepted so far; `switched_in`: the new suspects are now identified;
+/// `withdrawn`: the changes the switch withdrew (cell::OnlineIdentification::withdrawn).
 model_discrepancy_t ToModelDiscrepancy(const cell::DiscrepancyReport& report, int64_t utime,
-                                       int32_t poses_used, bool switched_in);
+                                       int32_t poses_used, bool switched_in,
+                                       const std::vector<cell::WithdrawnChange>& withdrawn = {});
 
 /// MODEL_DISCREPANCY as a listener reads it.
 struct ModelDiscrepancy {
@@ -231,13 +233,20 @@ struct ModelDiscrepancy {
   double heldout_rms_before_m = 0, heldout_rms_after_m = 0, expected_gain = 0;
   std::string scheme;
   bool switched_in = false;
+  struct Withdrawn {
+    int64_t onset_pose_index = -1;  ///< −1: a pose from before a restart
+    std::string changed;  ///< names, comma-separated ("": raised before a restart)
+    double evidence = 0;  ///< −2 ln Bayes factor for withdrawing it
+  };
+  std::vector<Withdrawn> withdrawn;  ///< newest first
 };
 
 /// MODEL_DISCREPANCY → its content. Checks: 0 ≤ window_poses, 0 ≤ num_suspects ≤ 64 and every
 /// array that long, each cause in the vocabulary, strings ≤ 256 bytes, chi2 and dof finite ≥ 0,
 /// chi2_log_p ≤ 0 (−inf allowed), z not NaN, in_model and switched_in 0 or 1, held-out RMS
 /// finite ≥ 0, expected_gain finite ≤ 1, 0 ≤ num_correlations ≤ 64 and its arrays that long,
-/// |correlation| ≤ 1, correlation_log_p ≤ 0; the reason names the field.
+/// |correlation| ≤ 1, correlation_log_p ≤ 0, 0 ≤ num_withdrawn ≤ 64 and its arrays that long,
+/// each onset pose_index ≥ −1 (−1: not known) and evidence finite ≥ 0; the reason names the field.
 std::optional<ModelDiscrepancy> ModelDiscrepancyFromMessage(const model_discrepancy_t& msg,
                                                             std::string* error);
 
