@@ -208,9 +208,9 @@ class Identifier {
       }
     }
     if (t_.Publish(channels_.model_discrepancy,
-                   transport::ToModelDiscrepancy(r, watch_utime_, id_.ekf().accepted(), switched,
-                                                 switched ? id_.withdrawn()
-                                                          : std::vector<cell::WithdrawnChange>{})))
+                   transport::ToModelDiscrepancy(
+                       r, watch_utime_, id_.ekf().accepted(), switched,
+                       switched ? id_.withdrawn() : std::vector<cell::WithdrawnChange>{})))
       health_.Published();
     // The state now holds every pose up to the last one: published at its time (a listener that
     // orders KINEMATIC_PARAMS by utime must not see it go back).

@@ -121,9 +121,8 @@ int Run(const Options& o) {
     std::string withdrawn;  // poses numbered from 1, as the identifier's log numbers them
     for (const auto& w : d->withdrawn)
       withdrawn += "; change from pose " +
-                   (w.onset_pose_index >= 0 ? std::to_string(w.onset_pose_index + 1) : "?") +
-                   " (" + (w.changed.empty() ? "raised before a restart" : w.changed) +
-                   ") withdrawn";
+                   (w.onset_pose_index >= 0 ? std::to_string(w.onset_pose_index + 1) : "?") + " (" +
+                   (w.changed.empty() ? "raised before a restart" : w.changed) + ") withdrawn";
     std::printf("discrepancy over %d poses: chi2/dof %.2f; %s; held-out %.4f -> %.4f mm%s%s%s\n",
                 d->window_poses, d->chi2_dof > 0 ? d->chi2 / d->chi2_dof : 0.0,
                 suspects.empty() ? "nothing suspected" : ("suspected: " + suspects).c_str(),

@@ -235,8 +235,8 @@ struct ModelDiscrepancy {
   bool switched_in = false;
   struct Withdrawn {
     int64_t onset_pose_index = -1;  ///< −1: a pose from before a restart
-    std::string changed;  ///< names, comma-separated ("": raised before a restart)
-    double evidence = 0;  ///< −2 ln Bayes factor for withdrawing it
+    std::string changed;            ///< names, comma-separated ("": raised before a restart)
+    double evidence = 0;            ///< −2 ln Bayes factor for withdrawing it
   };
   std::vector<Withdrawn> withdrawn;  ///< newest first
 };
