@@ -359,6 +359,7 @@ std::vector<WithdrawnChange> OnlineIdentification::WithdrawExplainedChanges(
   for (size_t k = 0; k < c.inflations.size(); ++k)
     if (c.inflations[k].size() != 0) released.push_back(k);
   std::vector<WithdrawnChange> withdrawn;
+  double with_release = ekf.WindowEvidence();  // of `ekf` as it stands
   // Newest first: a later release was fitted on top of the earlier ones.
   for (size_t i = released.size(); i-- > 0;) {
     const size_t k = released[i];
@@ -367,7 +368,7 @@ std::vector<WithdrawnChange> OnlineIdentification::WithdrawExplainedChanges(
     const std::unique_ptr<identification::EkfIdentifier> trial = MakeEkf(start_);
     trial->Restore(without);
     trial->Refine(passes);
-    const double with_release = ekf.WindowEvidence(), without_release = trial->WindowEvidence();
+    const double without_release = trial->WindowEvidence();
     if (!(without_release <= with_release)) continue;  // the poses still need the step
     WithdrawnChange w;
     for (const TimedPose& p : window)
@@ -377,6 +378,7 @@ std::vector<WithdrawnChange> OnlineIdentification::WithdrawExplainedChanges(
     w.evidence_gain = with_release - without_release;
     withdrawn.push_back(std::move(w));
     ekf.Restore(trial->Checkpoint());
+    with_release = without_release;
   }
   return withdrawn;
 }

@@ -300,7 +300,7 @@ double EkfIdentifier::WindowEvidence() const {
     const Eigen::MatrixXd S = H * P * H.transpose() + m.covariance;
     const Eigen::LLT<Eigen::MatrixXd> llt(S);
     minus_two_ln_l += innovation.dot(llt.solve(innovation)) +
-                      2 * llt.matrixL().toDenseMatrix().diagonal().array().log().sum();
+                      2 * llt.matrixLLT().diagonal().array().log().sum();  // ln det S
     const Eigen::MatrixXd K = llt.solve(H * P).transpose();
     x += K * innovation;
     const Eigen::MatrixXd IKH = Eigen::MatrixXd::Identity(n, n) - K * H;
