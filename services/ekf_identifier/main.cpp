@@ -41,8 +41,9 @@
 // EKF takes (accepted or refused by its gate) rcal analyze's tests run on the identifier's window
 // (cell::WatchForDiscrepancy: χ² of the geometric fit against the poses' noise, correlation with
 // each candidate effect, selection by nested cross-validation) on a worker thread, so poses keep
-// flowing during its second or so; MODEL_DISCREPANCY names the suspected causes with their z and
-// the expected held-out gain.
+// flowing during its second or so; the changes released inside the window are fitted as geometry
+// steps (a piecewise geometry, OnlineIdentification::WindowSteps). MODEL_DISCREPANCY names the
+// suspected causes with their z and the expected held-out gain.
 // --discrepancy-switch: suspects the identifier lacks are switched in
 // (cell::OnlineIdentification::SwitchIn: identified from the window's poses on); the checkpoint
 // names the effects of its state (key `effects`), so a restart resumes with the extended model.
@@ -169,9 +170,13 @@ class Identifier {
       names += fmt::format("{}{} (z {:.1f}{})", names.empty() ? "suspected: " : ", ", s.description,
                            s.z, s.in_model ? ", in the model" : "");
     spdlog::info(
-        "discrepancy watch over {} poses: chi2/dof {:.2f}; {}; held-out position RMS {:.4f} -> "
+        "discrepancy watch over {} poses{}: chi2/dof {:.2f}; {}; held-out position RMS {:.4f} -> "
         "{:.4f} mm{}",
-        r.window_poses, r.chi2_dof > 0 ? r.chi2 / r.chi2_dof : 0.0,
+        r.window_poses,
+        r.window_steps > 0
+            ? fmt::format(" (the {} change(s) released inside it fitted as steps)", r.window_steps)
+            : std::string(),
+        r.chi2_dof > 0 ? r.chi2 / r.chi2_dof : 0.0,
         names.empty() ? std::string("nothing suspected") : names, r.heldout_rms_before_m * 1e3,
         r.heldout_rms_after_m * 1e3,
         r.correlations.empty() ? std::string()

@@ -11,12 +11,15 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/QR>
 #include <limits>
+#include <optional>
 
 #include "rcal/cell/cell_sim_yaml.hpp"
 #include "rcal/cell/sim_cell.hpp"
 #include "rcal/identification/batch_lm.hpp"
 #include "rcal/identification/metrics.hpp"
+#include "rcal/identification/tracking.hpp"
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/sim/effects.hpp"
 #include "rcal/sim/pose_sim.hpp"
@@ -194,6 +197,53 @@ TEST(OnlineIdentification, TheRefusedPosesKeptForTheWindowAreBounded) {
   EXPECT_TRUE(out.updates.at(0).result.accepted);
   EXPECT_EQ(id.Window().back().pose_index, 340);
   EXPECT_LE(id.Window().size(), 41u + 100u);
+}
+
+// A change released inside the window is a step of its geometry (what the discrepancy watch fits
+// around): joint 2 of the pose-level cell reads 1 mrad off from pose 30 on (an encoder swapped).
+// Before the detection the window has no step; at it, one, at the onset's place in Window(), along
+// the direction the identifier released (DetectedChange::directions, in the full parameter
+// vector).
+TEST(OnlineIdentification, AReleasedChangeIsAStepOfTheWindow) {
+  OnlineIdentification id(io::LoadCell(RCAL_SOURCE_DIR "/config/cells/grb3016_poses.yaml"));
+  sim::Rng rng(12);
+  const auto& m = id.model();
+  auto ms = sim::MeasurePoses(m, sim::Table3Errors(m), sim::SampleJoints(m, 60, rng), {}, rng);
+  for (size_t k = 30; k < ms.size(); ++k) ms[k].q(1) += 1e-3;
+  std::optional<identification::DetectedChange> change;
+  int detected_at = -1;
+  for (int k = 0; k < 60 && !change; ++k) {
+    for (const auto& u : id.Add(At(ms[k], k)).updates)
+      if (u.result.change) {
+        change = u.result.change;
+        detected_at = k;
+      }
+    if (!change) {
+      EXPECT_TRUE(id.WindowSteps().empty()) << k;
+    }
+  }
+  ASSERT_TRUE(change.has_value());
+  const auto steps = id.WindowSteps();
+  ASSERT_EQ(steps.size(), 1u);
+  const auto window = id.Window();
+  ASSERT_LT(steps[0].first_pose, static_cast<int>(window.size()));
+  const int64_t onset = window[steps[0].first_pose].pose_index;
+  EXPECT_EQ(onset, detected_at - change->onset_poses_ago);
+  EXPECT_GE(onset, 30);
+  EXPECT_LE(onset, 32);
+  // The same span: each released direction (geometric rows, full length) lies in the step's.
+  const auto& identified = id.ekf().identified();
+  const Eigen::MatrixXd& D = steps[0].directions;
+  ASSERT_EQ(D.cols(), change->directions.cols());
+  const Eigen::MatrixXd Q =
+      D.householderQr().householderQ() * Eigen::MatrixXd::Identity(D.rows(), D.cols());
+  for (int c = 0; c < change->directions.cols(); ++c) {
+    Eigen::VectorXd u = Eigen::VectorXd::Zero(m.num_params());
+    for (size_t r = 0; r < identified.size(); ++r) u(identified[r]) = change->directions(r, c);
+    EXPECT_LT((u - Q * (Q.transpose() * u)).norm(), 1e-9 * u.norm()) << c;
+  }
+  std::printf("detected at pose %d, a step from pose %lld along %s\n", detected_at,
+              static_cast<long long>(onset), identification::ChangeNames(m, *change)[0].c_str());
 }
 
 // The pose-level cell (a 6-DoF tracker on the GRB3016, nothing to guess) whose joint 2 bends by

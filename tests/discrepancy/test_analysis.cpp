@@ -387,8 +387,68 @@ TEST(Discrepancy, NoiseTests) {
   EXPECT_LT(a.noise_tests[0].p_value, 1e-6);
 }
 
+// A step of the geometry inside the data (the elbow's link 0.5 mm longer from pose 40 on, ten
+// times the noise), on an arm that bends at the shoulder (3σ RMS). Told of the step
+// (PoseData::steps), the analysis fits a piecewise geometry: it names the compliance, gives the
+// step's amplitude back, and the noise test sees what the step leaves (the compliance), not the
+// step. Not told, one geometry cannot fit both halves and the step's residual hides the effect.
+TEST(Discrepancy, AKnownGeometryStepIsPartOfTheGeometry) {
+  const Effect bends{EffectCause::kJointCompliance, 1};
+  for (unsigned seed : {31u, 32u, 33u}) {
+    Case c = MakeCaseWith(seed, {{bends, 3.0}}, 80);
+    identification::GeometryStep step{40, Eigen::MatrixXd::Zero(c.model.num_params(), 1)};
+    int elbow_dx = -1;
+    for (int i = 0; i < c.model.num_params(); ++i)
+      if (c.model.parameters()[i].name == "elbow_dx") elbow_dx = i;
+    ASSERT_GE(elbow_dx, 0);
+    step.directions(elbow_dx, 0) = 1.0;
+    const double a_true = 5e-4;
+    // The noise-free displacement the step makes, added to each later measurement.
+    for (size_t i = 40; i < c.data.measurements.size(); ++i) {
+      auto& m = c.data.measurements[i];
+      const Eigen::VectorXd x0 = Eigen::VectorXd::Zero(c.model.num_params());
+      Eigen::VectorXd x1 = x0;
+      x1(elbow_dx) = a_true;
+      m.p_WM_W += c.model.Forward(m.q, x1).p_WM_W - c.model.Forward(m.q, x0).p_WM_W;
+    }
+    AnalysisSettings s;
+    s.stated_position_sigma_m = 5e-5;
+    const Analysis without = Analyze(c.model, c.data, s);
+    c.data.steps = {step};
+    const Analysis with = Analyze(c.model, c.data, s);
+    std::printf(
+        "seed %u: told of the step: %s (chi2/dof %.2f), step %.4f +- %.4f mm; not told: %s "
+        "(chi2/dof %.2f)\n",
+        seed, Found(c, with).c_str(), with.noise_tests[0].chi2 / with.noise_tests[0].dof,
+        with.step_amplitudes[0](0) * 1e3, with.step_sigma[0](0) * 1e3, Found(c, without).c_str(),
+        without.noise_tests[0].chi2 / without.noise_tests[0].dof);
+    EXPECT_EQ(Found(c, with), Describe(c.model, bends) + "; ") << seed;
+    EXPECT_NE(Found(c, without), Describe(c.model, bends) + "; ") << seed;
+    ASSERT_EQ(with.step_amplitudes.size(), 1u);
+    EXPECT_NEAR(with.step_amplitudes[0](0), a_true, 4 * with.step_sigma[0](0)) << seed;
+    EXPECT_LT(with.noise_tests[0].chi2, 0.5 * without.noise_tests[0].chi2) << seed;
+  }
+}
+
 TEST(Discrepancy, RejectsInconsistentInput) {
   Case c = MakeCase(25, std::nullopt, 0, 20);
+  const auto message = [&](const PoseData& d) -> std::string {
+    try {
+      Analyze(c.model, d);
+    } catch (const std::invalid_argument& e) {
+      return e.what();
+    }
+    return "<no error>";
+  };
+  const int nx = c.model.num_params();
+  for (const int first : {0, 20}) {  // no pose before it; no pose from it
+    PoseData d = c.data;
+    d.steps = {{first, Eigen::MatrixXd::Identity(nx, 1)}};
+    EXPECT_NE(message(d).find("steps[0].first_pose"), std::string::npos) << first;
+  }
+  PoseData d = c.data;
+  d.steps = {{10, Eigen::MatrixXd::Identity(nx - 1, 1)}};
+  EXPECT_NE(message(d).find("steps[0].directions"), std::string::npos);
   c.data.contexts.pop_back();
   EXPECT_THROW(Analyze(c.model, c.data), std::invalid_argument);
 }

@@ -220,13 +220,18 @@ TEST(Track, TheDiscrepancyWatchRunsOverALogAsTheIdentifierRunsIt) {
     cell::OnlineIdentification id(built);
     cell::DiscrepancyWatchSettings s;
     std::vector<cell::WithdrawnChange> withdrawn;
+    int window_steps = -1;
     for (const auto& p : poses) {
       const auto out = id.Add(p);
       if (!out.updates.empty() && cell::WatchDue(id, s)) {
-        id.SwitchIn(cell::WatchForDiscrepancy(id, s).NewEffects());
+        const cell::DiscrepancyReport report = cell::WatchForDiscrepancy(id, s);
+        window_steps = report.window_steps;
+        id.SwitchIn(report.NewEffects());
         withdrawn = id.withdrawn();
       }
     }
+    // The changes released inside the window, fitted as steps by the watch.
+    EXPECT_EQ(w["window_steps"], window_steps);
     ASSERT_EQ(id.ekf().num_effect_params(), 1);
     const double value = id.ekf().e()(0), sigma = id.ekf().sigma_e()(0);
     const io::AnalysisEffects tracked = io::ParseAnalysisEffects(j, built.model);
@@ -237,6 +242,7 @@ TEST(Track, TheDiscrepancyWatchRunsOverALogAsTheIdentifierRunsIt) {
     EXPECT_NEAR(tracked.values(0), value, 1e-9 * sigma);
     if (k.raises_changes) {
       EXPECT_FALSE(withdrawn.empty());
+      EXPECT_GT(window_steps, 0);
     }
     ASSERT_EQ(w["withdrawn_changes"].size(), withdrawn.size());
     for (size_t i = 0; i < withdrawn.size(); ++i) {

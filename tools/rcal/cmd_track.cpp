@@ -306,6 +306,7 @@ int RunData(const Options& o) {
            {"accepted", w.accepted},
            {"taken", w.taken},
            {"window_poses", w.report.window_poses},
+           {"window_steps", w.report.window_steps},
            {"chi2_per_dof", w.report.chi2_dof > 0 ? w.report.chi2 / w.report.chi2_dof : 0.0},
            {"suspects", suspects},
            {"heldout_rms_before_m", w.report.heldout_rms_before_m},

@@ -33,6 +33,7 @@ discrepancy::PoseData WatchWindow(const OnlineIdentification& id) {
     data.measurements.push_back(p.z);
     data.contexts.push_back(p.context);
   }
+  data.steps = id.WindowSteps();
   return data;
 }
 
@@ -61,6 +62,7 @@ DiscrepancyReport WatchForDiscrepancy(const kinematics::KinematicModel& model,
   const discrepancy::Analysis a = discrepancy::Analyze(model, window, as);
   DiscrepancyReport r;
   r.window_poses = static_cast<int>(window.measurements.size());
+  r.window_steps = static_cast<int>(window.steps.size());
   r.gravity = gravity;
   for (const auto& t : a.noise_tests)
     if (t.against == "stated noise") {

@@ -1,5 +1,7 @@
 #include "rcal/cell/online_identification.hpp"
 
+#include <Eigen/Eigenvalues>
+
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -224,6 +226,38 @@ std::vector<TimedPose> OnlineIdentification::Window() const {
 
 int OnlineIdentification::WindowSize() const {
   return static_cast<int>(seen_.size() - WindowStart());
+}
+
+std::vector<identification::GeometryStep> OnlineIdentification::WindowSteps() const {
+  std::vector<identification::GeometryStep> steps;
+  const auto& history = ekf_->history();
+  const auto& inflations = ekf_->inflations();
+  const auto& identified = ekf_->identified();
+  const int ng = static_cast<int>(identified.size());
+  const size_t start = WindowStart();
+  for (size_t k = 0; k < history.size() && k < inflations.size(); ++k) {
+    if (inflations[k].size() == 0) continue;
+    int first = -1;
+    for (size_t i = start; i < seen_.size() && first < 0; ++i)
+      if (SameMeasurement(seen_[i].z, history[k])) first = static_cast<int>(i - start);
+    if (first < 1) continue;
+    // The released directions: the range of the inflation's geometric block (a sum of rank-one
+    // terms, one per released direction).
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(inflations[k].topLeftCorner(ng, ng));
+    const Eigen::VectorXd& lambda = eig.eigenvalues();
+    const double top = lambda.size() ? lambda.maxCoeff() : 0.0;
+    if (!(top > 0)) continue;
+    std::vector<int> kept;
+    for (int c = 0; c < lambda.size(); ++c)
+      if (lambda(c) > 1e-9 * top) kept.push_back(c);
+    identification::GeometryStep st;
+    st.first_pose = first;
+    st.directions = Eigen::MatrixXd::Zero(cell_.model.num_params(), kept.size());
+    for (size_t c = 0; c < kept.size(); ++c)
+      for (int r = 0; r < ng; ++r) st.directions(identified[r], c) = eig.eigenvectors()(r, kept[c]);
+    steps.push_back(std::move(st));
+  }
+  return steps;
 }
 
 std::vector<kinematics::Effect> OnlineIdentification::SwitchIn(

@@ -271,7 +271,83 @@ struct Prepared {
   std::vector<kinematics::PoseMeasurement> ms;  // weighted with the noise used
   Linearized lin;
   std::vector<std::string> skipped;
+  // Geometry steps (PoseData::steps): indexed into the fit poses, their amplitudes in the
+  // piecewise base fit, and the geometry each pose (all poses) is linearised at.
+  std::vector<identification::GeometryStep> fit_steps;
+  std::vector<Eigen::VectorXd> step_amplitudes;
+  std::vector<Eigen::VectorXd> x_pose;
+  int num_step_params = 0;
 };
+
+// The geometry steps of `data` indexed into its fit poses (`fit`: indices into the poses). Throws
+// std::invalid_argument naming the step when it has no fit pose on one side, or does not fit the
+// model.
+std::vector<identification::GeometryStep> FitSteps(const kinematics::KinematicModel& model,
+                                                   const PoseData& data,
+                                                   const std::vector<int>& fit) {
+  std::vector<identification::GeometryStep> out;
+  for (size_t k = 0; k < data.steps.size(); ++k) {
+    const auto& st = data.steps[k];
+    const std::string name = "discrepancy: steps[" + std::to_string(k) + "]";
+    if (st.directions.rows() != model.num_params() || st.directions.cols() < 1 ||
+        !st.directions.allFinite())
+      throw std::invalid_argument(name + ".directions: " + std::to_string(model.num_params()) +
+                                  " finite rows and at least one column expected");
+    const int before = static_cast<int>(
+        std::count_if(fit.begin(), fit.end(), [&](int i) { return i < st.first_pose; }));
+    if (before < 1 || before >= static_cast<int>(fit.size()))
+      throw std::invalid_argument(name + ".first_pose " + std::to_string(st.first_pose) +
+                                  ": no fit pose " + (before < 1 ? "before" : "from") + " it");
+    out.push_back({before, st.directions});
+  }
+  return out;
+}
+
+// The piecewise geometric fit (the file comment's steps): the identified parameters and the
+// steps' amplitudes from the base fit, the noise re-estimated from its residuals as Calibrate
+// does (variance components, corrected for the parameters). Updates p.base_fit's x and noise,
+// p.ms's weights and p.step_amplitudes.
+void FitPiecewise(const kinematics::KinematicModel& model, const PoseData& data,
+                  const AnalysisSettings& s, Prepared& p) {
+  const kinematics::ExtendedModel geometric(model, {}, s.gravity);
+  std::vector<kinematics::PoseMeasurement> fit_ms;
+  std::vector<kinematics::EffectContext> fit_ctx;
+  for (int i : p.lin.fit) {
+    fit_ms.push_back(p.ms[i]);
+    fit_ctx.push_back(data.contexts[i]);
+  }
+  const int rounds = s.estimate_noise ? 3 : 1;
+  for (int it = 0; it < rounds; ++it) {
+    if (s.estimate_noise)
+      identification::SetNoise(fit_ms, p.base_fit.position_sigma_m,
+                               p.base_fit.orientation_sigma_rad);
+    const identification::ExtendedFit f =
+        identification::FitExtended(geometric, p.base_fit.identified, fit_ms, fit_ctx, p.base_fit.x,
+                                    geometric.NoEffects(), false, p.fit_steps);
+    p.base_fit.x = f.x;
+    p.step_amplitudes = f.step_amplitudes;
+    if (!s.estimate_noise) break;
+    double ss_p = 0, ss_o = 0;
+    int n_p = 0, n_o = 0;
+    for (size_t k = 0; k < fit_ms.size(); ++k) {
+      const Eigen::VectorXd x_k =
+          identification::GeometryAt(f.x, p.fit_steps, f.step_amplitudes, static_cast<int>(k));
+      const Eigen::VectorXd r = kinematics::Residual(model, fit_ms[k], x_k);
+      ss_p += r.head<3>().squaredNorm();
+      n_p += 3;
+      if (r.size() == 6) {
+        ss_o += r.tail<3>().squaredNorm();
+        n_o += 3;
+      }
+    }
+    const double params = static_cast<double>(p.base_fit.identified.size() + p.num_step_params);
+    const double redundancy = std::max(0.05, 1.0 - params / (n_p + n_o));
+    p.base_fit.position_sigma_m = std::sqrt(ss_p / (n_p * redundancy));
+    if (n_o > 0) p.base_fit.orientation_sigma_rad = std::sqrt(ss_o / (n_o * redundancy));
+  }
+  if (s.estimate_noise)
+    identification::SetNoise(p.ms, p.base_fit.position_sigma_m, p.base_fit.orientation_sigma_rad);
+}
 
 Prepared Prepare(const kinematics::KinematicModel& model, const PoseData& data,
                  const AnalysisSettings& s, const std::vector<Effect>* only) {
@@ -295,26 +371,41 @@ Prepared Prepare(const kinematics::KinematicModel& model, const PoseData& data,
   cs.estimate_noise = s.estimate_noise;
   p.base_fit = identification::Calibrate(model, fit_ms, cs);
   p.ms = data.measurements;
+  p.fit_steps = FitSteps(model, data, p.lin.fit);
+  for (const auto& st : p.fit_steps) p.num_step_params += st.directions.cols();
   if (s.estimate_noise)
     identification::SetNoise(p.ms, p.base_fit.position_sigma_m, p.base_fit.orientation_sigma_rad);
+  if (!p.fit_steps.empty()) FitPiecewise(model, data, s, p);
+  for (size_t i = 0; i < n; ++i)
+    p.x_pose.push_back(identification::GeometryAt(p.base_fit.x, data.steps, p.step_amplitudes,
+                                                  static_cast<int>(i)));
 
   const std::vector<Effect> effects =
       only ? *only : EligibleEffects(model, data, p.lin.fit, s, p.skipped);
   Linearized& L = p.lin;
   L.ext = kinematics::ExtendedModel(model, effects, s.gravity);
   L.identified = p.base_fit.identified;
-  L.num_geo = static_cast<int>(L.identified.size());
+  // The geometry's columns: the identified parameters, then each step's directions (zero before
+  // the step), so every fit below treats a known step as part of the geometry.
+  const int num_identified = static_cast<int>(L.identified.size());
+  L.num_geo = num_identified + p.num_step_params;
   const Eigen::VectorXd e0 = L.ext.NoEffects();
   const int cols = L.num_geo + L.ext.num_effect_params();
   for (size_t i = 0; i < n; ++i) {
     const auto& m = p.ms[i];
     Eigen::MatrixXd Jx, Je;
-    L.ext.ForMarker(m.marker).Jacobians(m.q, data.contexts[i], p.base_fit.x, e0, &Jx, &Je);
+    L.ext.ForMarker(m.marker).Jacobians(m.q, data.contexts[i], p.x_pose[i], e0, &Jx, &Je);
     const int d = m.dimension();
-    Eigen::MatrixXd Jfull(d, cols);
-    for (int c = 0; c < L.num_geo; ++c) Jfull.col(c) = Jx.col(L.identified[c]).head(d);
+    Eigen::MatrixXd Jfull = Eigen::MatrixXd::Zero(d, cols);
+    for (int c = 0; c < num_identified; ++c) Jfull.col(c) = Jx.col(L.identified[c]).head(d);
+    for (size_t k = 0, c = num_identified; k < data.steps.size(); ++k) {
+      const auto& D = data.steps[k].directions;
+      if (data.steps[k].first_pose <= static_cast<int>(i))
+        Jfull.middleCols(c, D.cols()) = (Jx * D).topRows(d);
+      c += D.cols();
+    }
     if (Je.cols() > 0) Jfull.rightCols(Je.cols()) = Je.topRows(d);
-    const Eigen::VectorXd r = kinematics::Residual(model, m, p.base_fit.x);
+    const Eigen::VectorXd r = kinematics::Residual(model, m, p.x_pose[i]);
     const Eigen::LLT<Eigen::MatrixXd> llt(m.covariance);
     L.r.push_back(llt.matrixL().solve(r));
     L.J.push_back(llt.matrixL().solve(Jfull));
@@ -528,7 +619,7 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
     double ssp = 0, sso = 0;
     int np = 0, no = 0;
     for (int i : L.fit) {
-      const Eigen::VectorXd r = kinematics::Residual(model, p.ms[i], p.base_fit.x);
+      const Eigen::VectorXd r = kinematics::Residual(model, p.ms[i], p.x_pose[i]);
       ssp += r.head<3>().squaredNorm();
       np += 3;
       if (r.size() == 6) {
@@ -536,7 +627,8 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
         no += 3;
       }
     }
-    const double dof = np + no - static_cast<double>(p.base_fit.identified.size());
+    const double dof =
+        np + no - static_cast<double>(p.base_fit.identified.size() + p.num_step_params);
     const auto test = [&](const std::string& against, double sp, double so) {
       NoiseTest t;
       t.against = against;
@@ -550,12 +642,14 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
     };
     if (s.stated_position_sigma_m > 0)
       test("stated noise", s.stated_position_sigma_m, s.stated_orientation_sigma_rad);
-    // Repeated poses: the same joints measured again (pooled within-group variance).
+    // Repeated poses: the same joints measured again (pooled within-group variance), within one
+    // geometry (the poses either side of a step are not repeats of each other).
     std::vector<std::vector<int>> groups;
     for (int i : L.fit) {
       bool placed = false;
       for (auto& g : groups)
-        if ((data.measurements[g[0]].q - data.measurements[i].q).lpNorm<Eigen::Infinity>() < 1e-6) {
+        if ((data.measurements[g[0]].q - data.measurements[i].q).lpNorm<Eigen::Infinity>() < 1e-6 &&
+            p.x_pose[g[0]] == p.x_pose[i]) {
           g.push_back(i);
           placed = true;
           break;
@@ -720,9 +814,11 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
     e0 = delta.tail(e0.size());
   }
   const identification::ExtendedFit ff = identification::FitExtended(
-      final_model, L.identified, fit_ms, fit_ctx, p.base_fit.x, e0, s.estimate_noise);
+      final_model, L.identified, fit_ms, fit_ctx, p.base_fit.x, e0, s.estimate_noise, p.fit_steps);
   a.x = ff.x;
   a.e = ff.e;
+  a.step_amplitudes = ff.step_amplitudes;
+  a.step_sigma = ff.step_sigma;
   a.position_sigma_after_m = ff.position_sigma_m;
   const auto params = final_model.EffectParameters();
   for (size_t k = 0; k < chosen.size(); ++k) {
@@ -787,12 +883,12 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
             unit_ctx.temperature_c = f.reference + 1.0;
           const kinematics::ExtendedModel one(model, {f}, s.gravity);
           Eigen::MatrixXd Je;
-          one.ForMarker(m.marker).Jacobians(m.q, unit_ctx, p.base_fit.x, one.NoEffects(), nullptr,
+          one.ForMarker(m.marker).Jacobians(m.q, unit_ctx, p.x_pose[i], one.NoEffects(), nullptr,
                                             &Je);
           dir = Je.col(0).head<3>();
           g = kinematics::ThermalRegressor(f, ctx);
         } else {
-          dir = model.ForMarker(m.marker).JointJacobian(m.q, p.base_fit.x).col(j).head<3>();
+          dir = model.ForMarker(m.marker).JointJacobian(m.q, p.x_pose[i]).col(j).head<3>();
           const Eigen::Vector3d jc = L.Jp[i].col(col);
           g = dir.squaredNorm() > 0 ? jc.dot(dir) / dir.squaredNorm() : 0.0;
         }
@@ -800,8 +896,10 @@ Analysis Analyze(const kinematics::KinematicModel& model, const PoseData& data,
         const Eigen::Vector3d u = nd > 0 ? Eigen::Vector3d(dir / nd) : Eigen::Vector3d::Zero();
         rc.values.push_back(g);
         rc.residual_before_m.push_back(u.dot(L.rp[i]));
-        rc.residual_after_m.push_back(
-            u.dot(m.p_WM_W - final_model.ForMarker(m.marker).Forward(m.q, ctx, a.x, a.e).p_WM_W));
+        const Eigen::VectorXd x_after =
+            identification::GeometryAt(a.x, data.steps, a.step_amplitudes, static_cast<int>(i));
+        rc.residual_after_m.push_back(u.dot(
+            m.p_WM_W - final_model.ForMarker(m.marker).Forward(m.q, ctx, x_after, a.e).p_WM_W));
       }
       rc.correlation = Correlation(rc.values, rc.residual_before_m);
       rc.log_p = LogFisherP(rc.correlation, rc.values.size());

@@ -13,6 +13,10 @@
 //   - greedy forward selection of the candidates by cross-validated held-out gain, judged by
 //     nested cross-validation (an effect is suspected only if it gains on poses its selection
 //     did not fit, so an arm that has no such effect raises nothing with probability ≳ 1 − α).
+// The changes the identifier released inside the window (OnlineIdentification::WindowSteps) go to
+// the analysis as known geometry steps (discrepancy::PoseData::steps): it fits a piecewise
+// geometry, so a real step (an encoder swapped) inside the window is neither taken for an effect
+// nor hides one, and a change an effect raised costs the analysis only the columns it adds.
 // The suspects are the effects Analyze reports, each with its selection z; the expected gain is
 // the held-out position RMS of the geometric model against the selected one. An effect the
 // identifier already identifies (its --effects) is reported too, marked in the model: the watch
@@ -67,6 +71,7 @@ struct WatchedCorrelation {
 /// One run of the watch.
 struct DiscrepancyReport {
   int window_poses = 0;
+  int window_steps = 0;       ///< released changes inside the window, fitted as geometry steps
   std::string noise_against;  ///< "stated noise" (the poses' covariances)
   double chi2 = 0, chi2_dof = 0;
   double chi2_log_p = 0;                  ///< ln P(χ² ≥ chi2) if the geometric model were right
@@ -86,8 +91,8 @@ struct DiscrepancyReport {
 /// OnlineIdentification::WindowSize, at least min_poses).
 bool WatchDue(const OnlineIdentification& id, const DiscrepancyWatchSettings& s);
 
-/// The window of `id` (OnlineIdentification::Window: its poses and contexts), as
-/// discrepancy::Analyze takes it.
+/// The window of `id` (OnlineIdentification::Window: its poses and contexts, and the changes
+/// released inside it as geometry steps), as discrepancy::Analyze takes it.
 discrepancy::PoseData WatchWindow(const OnlineIdentification& id);
 
 /// Runs the analysis on a window taken by WatchWindow (file comment); `model` the identification's

@@ -38,6 +38,7 @@
 #include <vector>
 
 #include "rcal/identification/ekf_identifier.hpp"
+#include "rcal/identification/extended_lm.hpp"
 #include "rcal/io/cell_yaml.hpp"
 
 namespace rcal::cell {
@@ -113,6 +114,10 @@ class OnlineIdentification {
   std::vector<TimedPose> Window() const;
   /// Window().size(), without the copy.
   int WindowSize() const;
+  /// The changes released inside Window() as geometry steps (first_pose: index into Window(),
+  /// ≥ 1; directions: the released directions of the geometric parameters, full length), oldest
+  /// first. A release at the window's first pose is left out: nothing before it to step from.
+  std::vector<identification::GeometryStep> WindowSteps() const;
 
   /// Adds `effects` to those identified (issue 15 item 5, the discrepancy watch's switch): the
   /// identification is rebuilt on the extended model, the state of the geometric parameters and

@@ -28,6 +28,13 @@
 //    recomputed after the rejections, which were decided on those same held-out poses.
 // 6. The reported effects are refitted (nonlinear, batch: identification::FitExtended) on all
 //    calibration poses: values with σ.
+// Known geometry steps (PoseData::steps: the changes an online identifier released) make the
+// geometry piecewise: after the base fit the steps' amplitudes are fitted with the identified
+// parameters (FitExtended, noise re-estimated from that fit's residuals), every pose is
+// linearised at its own segment's geometry, and the steps' columns join the geometry's in every
+// fit above, so the tests judge what the piecewise geometry leaves. The base fit's x and noise
+// are then the piecewise fit's (x: the first pose's geometry); its other figures are those of the
+// single geometry.
 // p-values and z beyond what a double holds: significance.hpp.
 #pragma once
 
@@ -48,6 +55,12 @@ struct PoseData {
   std::vector<kinematics::PoseMeasurement> measurements;  ///< covariances: the starting noise
   std::vector<kinematics::EffectContext> contexts;        ///< one per measurement
   std::vector<bool> is_test;  ///< `set` = test; empty or all false: k-fold on everything
+  /// Known changes of the geometry inside the data (first_pose: index into measurements, with
+  /// fit poses before and after it): the geometric model is piecewise, one geometry up to each
+  /// step, its amplitudes fitted with the geometry everywhere (the base fit, every fold, the
+  /// final fit), so a step is not taken for an effect, nor hides one. What the online watch
+  /// passes for the changes its identifier released inside the window.
+  std::vector<identification::GeometryStep> steps;
 };
 
 struct AnalysisSettings {
@@ -153,9 +166,12 @@ struct Analysis {
   std::vector<SelectionRound> rounds;
   std::vector<FoundEffect> effects;      ///< empty: geometry suffices
   std::vector<RejectedEffect> rejected;  ///< selected on the fit poses, lost on held-out poses
-  Eigen::VectorXd x;                     ///< geometric errors of the final fit [m|rad]
+  Eigen::VectorXd x;                     ///< geometric errors of the final fit [m|rad] (with
+                                         ///< steps: the geometry of the first pose)
   Eigen::VectorXd e;                     ///< effect parameters of the final fit [SI]
-  double position_sigma_after_m = 0;     ///< noise re-estimated with the effects
+  /// Per PoseData::steps entry: its amplitudes in the final fit [per unit direction] and 1σ.
+  std::vector<Eigen::VectorXd> step_amplitudes, step_sigma;
+  double position_sigma_after_m = 0;  ///< noise re-estimated with the effects
   Gain gain;
   int num_fit_poses = 0, num_test_poses = 0;
 };

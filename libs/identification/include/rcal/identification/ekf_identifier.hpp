@@ -233,6 +233,9 @@ class EkfIdentifier {
   int window_size() const { return static_cast<int>(history_.size()); }
   /// The window's accepted poses, oldest first (their contexts: Checkpoint().contexts).
   const std::vector<kinematics::PoseMeasurement>& history() const { return history_; }
+  /// Covariance added to the state before each history() entry beyond the drift (a released
+  /// change: its directions span the change) [m² | rad²]; an empty entry adds nothing.
+  const std::vector<Eigen::MatrixXd>& inflations() const { return inflations_; }
   const EkfSettings& settings() const { return settings_; }
   TrackingStatus status() const { return status_; }
   /// Changes detected so far, oldest first.
