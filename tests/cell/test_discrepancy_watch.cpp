@@ -245,6 +245,29 @@ WatchedRun RunWatchedChanges(OnlineIdentification& id, const std::vector<TimedPo
   return run;
 }
 
+// The changes of `run` naming joint `j` (0-based: theta<j+1> or "offset of joint j<j+1>") raised
+// with an onset in [from, to]: how many, and how many of those were never withdrawn. `names`
+// lists every change raised.
+struct StepChanges {
+  int raised = 0, kept = 0;
+  std::string names;
+};
+StepChanges ChangesOfJoint(const WatchedRun& run, int j, int64_t from, int64_t to) {
+  std::set<int64_t> withdrawn;
+  for (const auto& w : run.withdrawn) withdrawn.insert(w.onset_pose_index);
+  const std::string n = std::to_string(j + 1);
+  StepChanges out;
+  for (const auto& c : run.changes) {
+    out.names += " " + c.name + " from " + std::to_string(c.onset);
+    if ((c.name == "theta" + n || c.name == "offset of joint j" + n) && c.onset >= from &&
+        c.onset <= to) {
+      ++out.raised;
+      out.kept += !withdrawn.count(c.onset);
+    }
+  }
+  return out;
+}
+
 // A large effect the model lacks is first seen as changes: with 4e-4 rad of backlash on joint 2
 // (0.6 mm at the tool, twelve times the noise) the geometric identifier's change detector fires
 // again and again on an arm that never changed (12 changes over the first 50 stops of four seeds),
@@ -292,18 +315,9 @@ TEST(DiscrepancyWatch, ChangesAnUnmodelledEffectRaisedAreWithdrawnWhenItIsSwitch
     OnlineIdentification id(PoseCell());
     const WatchedRun run = RunWatchedChanges(id, stops);
     ASSERT_FALSE(run.switched_at.empty()) << seed;
-    std::set<int64_t> withdrawn;
-    for (const auto& w : run.withdrawn) withdrawn.insert(w.onset_pose_index);
-    int kept = 0;
-    std::string names;
-    for (const auto& c : run.changes) {
-      names += " " + c.name + " from " + std::to_string(c.onset);
-      if ((c.name == "theta1" || c.name == "offset of joint j1") && c.onset >= 25) {
-        EXPECT_FALSE(withdrawn.count(c.onset)) << seed << ": the step at " << c.onset;
-        ++kept;
-      }
-    }
-    EXPECT_GE(kept, 1) << seed << ":" << names;
+    const StepChanges step = ChangesOfJoint(run, 0, 25, 149);
+    EXPECT_GE(step.raised, 1) << seed << ":" << step.names;
+    EXPECT_EQ(step.kept, step.raised) << seed << ": a change of joint 1 withdrawn:" << step.names;
     std::printf("seed %u: the step of joint 1 raised and kept (%zu changes, %zu withdrawn)\n", seed,
                 run.changes.size(), run.withdrawn.size());
   }
@@ -348,22 +362,14 @@ TEST(DiscrepancyWatch, AStepInsideTheWindowNeitherHidesAnEffectNorIsTakenForOne)
     EXPECT_LE(run.switched_at[0], 99) << seed;
     ASSERT_EQ(id.effects().size(), 1u);
     EXPECT_EQ(discrepancy::Describe(id.model(), id.effects()[0]), "backlash j2");
-    std::set<int64_t> withdrawn;
-    for (const auto& w : run.withdrawn) withdrawn.insert(w.onset_pose_index);
-    int kept = 0;
-    std::string names;
-    for (const auto& c : run.changes) {
-      names += " " + c.name + " from " + std::to_string(c.onset);
-      if ((c.name == "theta" + std::to_string(j + 1) || c.name == "offset of joint " + jn) &&
-          c.onset >= 25 && c.onset <= 30)
-        kept += !withdrawn.count(c.onset);
-    }
-    EXPECT_EQ(kept, 1) << seed << ": the step of " << jn << ", raised from stop 25, kept:" << names;
+    const StepChanges step = ChangesOfJoint(run, j, 25, 30);
+    EXPECT_EQ(step.kept, 1) << seed << ": the step of " << jn
+                            << ", raised from stop 25, kept:" << step.names;
     const double b = id.ekf().e()(0), sb = id.ekf().sigma_e()(0);
     std::printf(
         "  backlash j2 switched in at %d poses: %.3g +- %.2g rad after 100 (truth 2e-4); "
         "changes:%s; %zu withdrawn\n",
-        static_cast<int>(run.switched_at[0] + 1), b, sb, names.c_str(), run.withdrawn.size());
+        static_cast<int>(run.switched_at[0] + 1), b, sb, step.names.c_str(), run.withdrawn.size());
     EXPECT_NEAR(b, 2e-4, 4 * sb) << seed;
   }
   // A detected onset one pose late leaves that pose's step in the residual (seed 105: detected
