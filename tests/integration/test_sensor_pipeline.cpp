@@ -69,6 +69,7 @@ struct LiveRun {
   std::vector<model_discrepancy_t> discrepancies;  // every MODEL_DISCREPANCY
   std::optional<health_t> still_window_health;     // its last HEALTH (the final one on its stop)
   std::filesystem::path checkpoint;
+  std::vector<calibration_status_t> changes;  // each CALIBRATION_STATUS reporting a new change
 };
 
 class SensorPipeline : public ProcessFixture {
@@ -134,8 +135,12 @@ class SensorPipeline : public ProcessFixture {
                                     [&](const pose_measurement_t& m) { run.poses.push_back(m); });
     t.Subscribe<kinematic_params_t>(transport::channels::kKinematicParams,
                                     [&](const kinematic_params_t& m) { run.params = m; });
-    t.Subscribe<calibration_status_t>(transport::channels::kCalibrationStatus,
-                                      [&](const calibration_status_t& s) { run.status = s; });
+    t.Subscribe<calibration_status_t>(
+        transport::channels::kCalibrationStatus, [&](const calibration_status_t& s) {
+          if (s.changes_detected > (run.status ? run.status->changes_detected : 0))
+            run.changes.push_back(s);
+          run.status = s;
+        });
     t.Subscribe<next_poses_t>(transport::channels::kNextPoses,
                               [&](const next_poses_t& m) { run.next.push_back(m); });
     t.Subscribe<model_discrepancy_t>(
@@ -233,7 +238,8 @@ TEST_F(SensorPipeline, CalibratesToTheOfflineFigure) {
   const LiveRun run = RunCell(RCAL_SOURCE_DIR "/config/cells/grb3016.yaml",
                               RCAL_SOURCE_DIR "/config/cells/grb3016.sim.yaml", kCal, kTest,
                               {"--seed", std::to_string(kSeed)});
-  const auto& [poses, params, status, next, discrepancies, window_health, checkpoint] = run;
+  const auto& [poses, params, status, next, discrepancies, window_health, checkpoint, changes] =
+      run;
 
   ASSERT_TRUE(status.has_value());
   ASSERT_TRUE(params.has_value());
@@ -685,6 +691,50 @@ TEST_F(SensorPipeline, BacklashIsNamedFromTheApproachDirectionsAndIdentifiedLive
   }
 }
 
+// A real step and an effect in one window, live: joint 2 has 2e-4 rad of backlash and joint 3
+// reads 1 mrad off from calibration stop 25 on (sensor_acquisition --step-offset j3=1e-3@25). The
+// identifier detects and releases the step; its discrepancy watch fits the released changes as
+// steps of the window's geometry, so at its first look (50 poses) it still names the backlash,
+// switches it in and identifies b within 3σ, and the step of joint 3 is not among the changes it
+// withdraws. (Fitting one geometry to the window, nothing was named at 50 poses.)
+TEST_F(SensorPipeline, AStepAndBacklashInOneWindowAreBothFollowedLive) {
+  RCAL_IN_NAMESPACE("SensorPipeline.AStepAndBacklashInOneWindowAreBothFollowedLive");
+  constexpr int kCal = 55;
+  constexpr double kB = 2e-4;  // [rad]
+  const LiveRun run = RunCell(RCAL_SOURCE_DIR "/config/cells/grb3016.yaml",
+                              RCAL_SOURCE_DIR "/config/cells/grb3016.sim.yaml", kCal, 5,
+                              {"--seed", std::to_string(kSeed), "--sim-effect", "backlash:j2=2e-4",
+                               "--step-offset", "j3=1e-3@25"},
+                              {"--discrepancy-every", "50", "--discrepancy-switch"});
+  ASSERT_GE(run.poses.size(), 50u);
+  const std::string j3 = integration::DemoCell().model.joints()[2].name;
+  std::string changes;
+  int step_seen_at = -1;  // poses taken when the change naming joint 3 was reported
+  for (const calibration_status_t& s : run.changes) {
+    const int taken = s.poses_accepted + s.poses_rejected;
+    changes += " [" + std::to_string(taken) + ":";
+    for (int i = 0; i < s.num_changed; ++i) {
+      changes += " " + s.changed[i];
+      if (step_seen_at < 0 && (s.changed[i] == "offset of joint " + j3 || s.changed[i] == "theta3"))
+        step_seen_at = taken;
+    }
+    changes += "]";
+  }
+  std::printf("changes detected (poses taken: names):%s\n", changes.c_str());
+  EXPECT_GE(step_seen_at, 25) << "the step of " << j3 << " was not detected:" << changes;
+  EXPECT_LT(step_seen_at, 50) << changes;
+  ExpectNamedAndIdentified(run, "backlash " + integration::DemoCell().model.joints()[1].name, {kB});
+  ASSERT_FALSE(run.discrepancies.empty());
+  const model_discrepancy_t& first = run.discrepancies.front();
+  for (int i = 0; i < first.num_withdrawn; ++i) {
+    std::printf("  withdrawn: the change from pose_index %lld (%s), −2 ln B %.1f\n",
+                static_cast<long long>(first.withdrawn_onset_pose_index[i]),
+                first.withdrawn_changed[i].c_str(), first.withdrawn_evidence[i]);
+    EXPECT_EQ(first.withdrawn_changed[i].find(j3), std::string::npos);
+    EXPECT_EQ(first.withdrawn_changed[i].find("theta3"), std::string::npos);
+  }
+}
+
 // A grasp made at the measurement stop (sensor_acquisition --sim-payload-at stop): the payload
 // changes halfway through the stop's still interval, so that stop's window was measured under two
 // loads. still_window refuses exactly those windows, naming the change, and counts them in HEALTH;
@@ -845,7 +895,8 @@ TEST_F(SensorPipeline, ThePandaCellCalibratesLiveAndItsLogGivesTheSameOffline) {
   const std::vector<Eigen::VectorXd> test_q(stops.begin() + kPandaCal, stops.end());
 
   const LiveRun run = RunCell(cell_file, sim_file, kPandaCal, kPandaTest);
-  const auto& [poses, params, status, next, discrepancies, window_health, checkpoint] = run;
+  const auto& [poses, params, status, next, discrepancies, window_health, checkpoint, changes] =
+      run;
   ASSERT_TRUE(params.has_value());
   ASSERT_TRUE(status.has_value());
   EXPECT_EQ(status->poses_accepted, kPandaCal);
