@@ -371,6 +371,15 @@ class Identifier {
         spdlog::warn("pose {}: change detected: {} by {:.6g} [m | rad], released", u.pose_index + 1,
                      names[i], u.result.change->step(i));
     }
+    if (u.result.reattributed) {  // the second look: the window renamed the last change
+      const auto names = identification::ChangeNames(id_.model(), *u.result.reattributed);
+      for (size_t i = 0; i < names.size(); ++i)
+        spdlog::warn(
+            "pose {}: the change from {} poses back renamed by its second look: {} by "
+            "{:.6g} [m | rad], released instead",
+            u.pose_index + 1, u.result.reattributed->onset_poses_ago, names[i],
+            u.result.reattributed->step(i));
+    }
     // Poses are numbered from 1 as `rcal watch` numbers them (pose_index counts from 0); the
     // effect parameters (--effects) with their σ.
     std::string effects;

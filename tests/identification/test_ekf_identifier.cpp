@@ -327,6 +327,123 @@ TEST(EkfIdentifier, DetectsNamesAndFollowsALinkLengthStep) {
   ExpectStepDetected(Grb3016(), -1, "a2", 5e-4, kinematics::MeasurementKind::kFullPose, 53);
 }
 
+// The second look at a change (EkfSettings::change_second_look). A 0.5 mm step of d5 of the
+// GRB3016, positions only: d5 and α5 move a marker near the wrist almost alike over the two to
+// four poses a detection sees, and the detection names α5 in 4 of 20 seeds. Thirty poses after
+// the onset the whole window chooses again with the onset known (the likelihood of each
+// direction, the geometry refitted): two of the four are renamed d5, and the mean test error
+// falls (0.0147 → 0.0141 mm). Near-twins stay near-twins: one seed named right at detection is
+// renamed α5 (−2 ln Λ 2.2 in its favour), one named wrong stays wrong; the filter without the
+// second look keeps every first name. A rename is reported on the pose that completes
+// change_window poses since the onset.
+TEST(EkfIdentifier, TheSecondLookRenamesAChangeTheFirstPosesNamedWrong) {
+  const kinematics::KinematicModel model = Grb3016();
+  int wrong_at_detection = 0, right_after = 0, runs = 0;
+  double error_with = 0, error_without = 0;
+  for (unsigned seed = 60; seed < 80; ++seed) {
+    std::string names[2];
+    for (const bool second_look : {false, true}) {
+      sim::Rng rng(seed);
+      Tracked t = MakeTracked(model, rng, kinematics::MeasurementKind::kPositionOnly);
+      sim::PoseNoise noise;
+      noise.orientation = false;
+      EkfSettings settings;
+      settings.change_second_look = second_look;
+      EkfIdentifier ekf(t.model, t.identified, settings);
+      const Eigen::VectorXd dq = Eigen::VectorXd::Zero(t.model.num_joints());
+      const auto pose = [&] {
+        return sim::MeasurePose(t.model, t.x_true, sim::SampleJoints(t.model, 1, rng)[0], noise,
+                                rng);
+      };
+      for (int k = 0; k < 300; ++k) ekf.Update(pose());
+      ASSERT_TRUE(ekf.changes().empty()) << seed;
+      const int d5 = t.model.FindParameter("d5");
+      t.x_true(d5) += 5e-4;
+      std::string at_detection, renamed;
+      int reattributed_at = -1, detected_at = -1, onset = -1;
+      for (int k = 0; k < 40; ++k) {
+        const EkfUpdateResult r = ekf.Update(pose());
+        if (r.change && detected_at < 0) {
+          detected_at = k;
+          onset = k - r.change->onset_poses_ago;
+          at_detection = t.model.parameters()[r.change->parameters[0]].name;
+        }
+        if (r.reattributed) {
+          EXPECT_EQ(k - r.reattributed->onset_poses_ago, onset) << seed;
+          reattributed_at = k;
+          renamed = r.reattributed->parameters[0] >= 0
+                        ? t.model.parameters()[r.reattributed->parameters[0]].name
+                        : "joint";
+        }
+      }
+      ASSERT_GE(detected_at, 0) << seed;
+      ASSERT_GE(ekf.changes().size(), 1u) << seed;
+      const std::string final_name = t.model.parameters()[ekf.changes()[0].parameters[0]].name;
+      names[second_look] = at_detection + " -> " + final_name;
+      (second_look ? error_with : error_without) += MeanTestError(t, ekf.x(), dq);
+      if (second_look) {
+        ++runs;
+        wrong_at_detection += at_detection != "d5";
+        right_after += final_name == "d5";
+        if (reattributed_at >= 0 && ekf.changes().size() == 1) {
+          // On the pose that completes change_window poses since the onset, and the change's
+          // name is the new one.
+          EXPECT_EQ(reattributed_at, onset + settings.change_window - 1) << seed;
+          EXPECT_EQ(renamed, final_name) << seed;
+          EXPECT_NE(renamed, at_detection) << seed;
+        }
+        std::printf("seed %u: detected at %d as %s; second look at %d: %s; %zu changes\n", seed,
+                    detected_at, at_detection.c_str(), reattributed_at, renamed.c_str(),
+                    ekf.changes().size());
+      } else {
+        EXPECT_EQ(final_name, at_detection) << seed;
+      }
+    }
+  }
+  std::printf(
+      "named d5: at detection %d of %d, after the second look %d; mean test error %.4f "
+      "mm with it, %.4f mm without\n",
+      runs - wrong_at_detection, runs, right_after, error_with / runs * 1e3,
+      error_without / runs * 1e3);
+  EXPECT_GE(wrong_at_detection, 3);  // the case exists at detection
+  EXPECT_GT(right_after, runs - wrong_at_detection);
+  EXPECT_LT(error_with, error_without);
+}
+
+// A restart between a change and its second look (the checkpoint keeps the pending look) ends as
+// the uninterrupted run: the same rename on the same pose, the same estimate. Seed 61 of the test
+// above (its detection names α5, its second look d5).
+TEST(EkfIdentifier, ARestartBeforeTheSecondLookEndsAsAnUninterruptedRun) {
+  sim::Rng rng(61);
+  Tracked t = MakeTracked(Grb3016(), rng, kinematics::MeasurementKind::kPositionOnly);
+  sim::PoseNoise noise;
+  noise.orientation = false;
+  std::vector<kinematics::PoseMeasurement> poses;
+  for (int k = 0; k < 340; ++k) {
+    if (k == 300) t.x_true(t.model.FindParameter("d5")) += 5e-4;
+    poses.push_back(
+        sim::MeasurePose(t.model, t.x_true, sim::SampleJoints(t.model, 1, rng)[0], noise, rng));
+  }
+  EkfIdentifier a(t.model, t.identified), b(t.model, t.identified);
+  int renamed_a = -1, renamed_b = -1;
+  for (int k = 0; k < 340; ++k) {
+    if (a.Update(poses[k]).reattributed) renamed_a = k;
+    if (k == 310) {  // after the detection (pose 302), before the look (329)
+      ASSERT_EQ(a.changes().size(), 1u);
+      const EkfCheckpoint c = a.Checkpoint();
+      ASSERT_GE(c.second_look_onset, 0);
+      b.Restore(c);
+    }
+    if (k > 310 && b.Update(poses[k]).reattributed) renamed_b = k;
+  }
+  EXPECT_GE(renamed_a, 0);
+  EXPECT_EQ(renamed_b, renamed_a);
+  EXPECT_EQ(a.x(), b.x());
+  ASSERT_EQ(b.changes().size(), 1u);  // after the restart: the renamed change
+  EXPECT_EQ(b.changes()[0].parameters, a.changes()[0].parameters);
+  EXPECT_EQ(a.Checkpoint().second_look_onset, -1);  // looked at: nothing pending
+}
+
 // The arm changes before the filter has settled (joint 2 reads 1 mrad less from the 15th pose,
 // status still converging). Before, the test waited for "converged", which the gate's refusals
 // then never let come: every later pose refused, nothing said. Now two refusals in a row let the

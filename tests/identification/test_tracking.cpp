@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 
 #include "identification_fixture.hpp"
 
@@ -69,6 +70,45 @@ TEST(Tracking, TestRowsAreNeverFittedAndShowTheStepAndTheRecovery) {
   }
   EXPECT_EQ(detections, 1);
   EXPECT_THROW(Track(ekf, poses, std::vector<bool>(3)), std::invalid_argument);
+}
+
+// The second look's rename is on its row (TrackRow::renamed): d5 of a GRB3016 (positions only)
+// grows by 0.5 mm at pose 300; the detection names α5, and the row that completes 30 poses since
+// the onset renames it d5 (the case of EkfIdentifier.ARestartBeforeTheSecondLookEndsAsAn
+// UninterruptedRun).
+TEST(Tracking, TheSecondLooksRenameIsOnItsRow) {
+  const auto model = Grb3016();
+  sim::Rng rng(61);
+  testing::BaseSetTruth truth =
+      testing::MakeBaseSetTruth(model, rng, kinematics::MeasurementKind::kPositionOnly);
+  sim::SampleJoints(model, 50, rng);  // the test joints of that test's arm, not used here
+  sim::PoseNoise noise;
+  noise.orientation = false;
+  std::vector<kinematics::PoseMeasurement> poses;
+  for (int k = 0; k < 340; ++k) {
+    if (k == 300) truth.x_true(model.FindParameter("d5")) += 5e-4;
+    poses.push_back(
+        sim::MeasurePose(model, truth.x_true, sim::SampleJoints(model, 1, rng)[0], noise, rng));
+  }
+  EkfIdentifier ekf(model, truth.identified);
+  const std::vector<TrackRow> rows = Track(ekf, poses);
+  int detected = -1, renamed = -1;
+  for (size_t k = 0; k < rows.size(); ++k) {
+    if (!rows[k].changed.empty() && detected < 0) detected = static_cast<int>(k);
+    if (!rows[k].renamed.empty()) {
+      EXPECT_LT(renamed, 0) << "renamed twice";
+      renamed = static_cast<int>(k);
+    }
+  }
+  ASSERT_GE(detected, 300);
+  ASSERT_GE(renamed, 0);
+  std::printf("detected at row %d as %s, renamed at row %d: %s\n", detected,
+              rows[detected].changed[0].c_str(), renamed, rows[renamed].renamed[0].c_str());
+  EXPECT_EQ(rows[detected].changed[0], "alpha5");
+  EXPECT_EQ(rows[renamed].renamed[0], "d5");
+  EXPECT_NEAR(rows[renamed].renamed_steps[0], 5e-4, 1e-4);
+  EXPECT_EQ(renamed, 300 + 29);  // the onset (pose 300) and 29 poses after it
+  EXPECT_EQ(ekf.changes().back().parameters[0], model.FindParameter("d5"));
 }
 
 }  // namespace

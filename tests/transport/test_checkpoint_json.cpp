@@ -58,9 +58,11 @@ TEST(Checkpoint, TrackingStateRoundTrips) {
   f.checkpoint.inflations[4](0, 1) = f.checkpoint.inflations[4](1, 0) = 2.5e-7;
   f.checkpoint.status = identification::TrackingStatus::kReconverging;
   f.checkpoint.small_steps = 3;
+  f.checkpoint.second_look_onset = 4;  // that release's second look is pending
   const CheckpointFile back = ParseCheckpoint(CheckpointText(f));
   EXPECT_EQ(back.checkpoint.status, identification::TrackingStatus::kReconverging);
   EXPECT_EQ(back.checkpoint.small_steps, 3);
+  EXPECT_EQ(back.checkpoint.second_look_onset, 4);
   ASSERT_EQ(back.checkpoint.inflations.size(), f.checkpoint.inflations.size());
   EXPECT_EQ(back.checkpoint.inflations[4], f.checkpoint.inflations[4]);
   EXPECT_EQ(back.checkpoint.inflations[3].size(), 0);
@@ -70,6 +72,18 @@ TEST(Checkpoint, TrackingStateRoundTrips) {
   EXPECT_EQ(b.status(), identification::TrackingStatus::kReconverging);
   EXPECT_EQ(a.Refine(3), b.Refine(3));
   EXPECT_EQ(a.x(), b.x());  // the inflation is used by the passes, identically
+  EXPECT_EQ(b.Checkpoint().second_look_onset, 4);
+  // A pending look at a pose without a release (or beyond the history) is refused, named.
+  for (const int bad : {3, 12, -2}) {
+    identification::EkfCheckpoint c = back.checkpoint;
+    c.second_look_onset = bad;
+    try {
+      b.Restore(c);
+      FAIL() << "no exception for " << bad;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("second_look_onset"), std::string::npos) << e.what();
+    }
+  }
   std::string text = CheckpointText(f);
   text.replace(text.find("reconverging"), 12, "wandering");
   try {

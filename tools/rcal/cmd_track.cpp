@@ -117,6 +117,11 @@ std::vector<TrackRow> TrackCell(cell::OnlineIdentification& id,
           const auto& st = u.result.change->step;
           row.steps.assign(st.data(), st.data() + st.size());
         }
+        if (u.result.reattributed) {
+          row.renamed = identification::ChangeNames(id.model(), *u.result.reattributed);
+          const auto& st = u.result.reattributed->step;
+          row.renamed_steps.assign(st.data(), st.data() + st.size());
+        }
       }
       if (out.held) row.rejected = "held for the set-up guess";
       if (!std::isnan(row.nis) && cell::WatchDue(id, watch)) {  // after the row's EKF update
@@ -256,6 +261,15 @@ int RunData(const Options& o) {
       if (!rows[j].changed.empty()) break;
     }
     json c = {{"row", data.samples[k].row}, {"changed", steps}};
+    // Its second look, when it renamed the change (before the next change).
+    for (size_t j = k + 1; j < rows.size(); ++j) {
+      if (!rows[j].changed.empty()) break;
+      if (rows[j].renamed.empty()) continue;
+      json renamed = json::array();
+      for (size_t i = 0; i < rows[j].renamed.size(); ++i)
+        renamed.push_back({{"name", rows[j].renamed[i]}, {"step", rows[j].renamed_steps[i]}});
+      c["second_look"] = {{"row", data.samples[j].row}, {"changed", renamed}};
+    }
     if (std::isfinite(data.samples[k].time)) c["time_s"] = data.samples[k].time;
     if (reconverged > 0) c["reconverged_after_poses"] = reconverged;
     changes.push_back(c);
@@ -385,6 +399,9 @@ int RunSweep(const Options& o) {
                         {"steady_ratio", r.steady_ratio},
                         {"stepped", r.stepped},
                         {"seed_delay", r.seed_delay},
+                        {"named", r.named},
+                        {"named_at_detection", r.named_at_detection},
+                        {"named_right_at_detection", r.named_right_at_detection},
                         {"detected_within_5", r.detected_within_oracle_poses},
                         {"oracle_power_5", r.oracle_power},
                         {"oracle_power_30", r.oracle_power_after},

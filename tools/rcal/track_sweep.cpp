@@ -118,7 +118,8 @@ std::vector<TrackSweepResult> RunTrackSweep(const TrackSweepArm& arm, const Trac
       }
       ++r.seeds;
       int delay = -1;
-      bool right = false;
+      bool right = false, right_at_detection = false;
+      std::string named, named_at_detection;
       // The oracle's noncentrality: the step's whitened signature over the poses since it.
       Eigen::VectorXd x_before = run.x_true;
       if (param_stepped >= 0) x_before(param_stepped) -= s.length_step_m;
@@ -131,23 +132,33 @@ std::vector<TrackSweepResult> RunTrackSweep(const TrackSweepArm& arm, const Trac
         if (k + 1 == s.oracle_poses)
           r.oracle_power.push_back(OraclePower(lambda, s.oracle_false_alarm));
         const identification::EkfUpdateResult u = ekf.Update(m);
-        if (u.change && delay < 0) {
-          delay = k + 1;
-          const auto& c = *u.change;
+        // Named at the detection, and again by the second look at it (EkfSettings::
+        // change_second_look) if that comes within the poses run.
+        const bool first = u.change && delay < 0;
+        if (first) delay = k + 1;
+        if (first || (delay > 0 && u.reattributed && ekf.changes().size() == changes_before + 1)) {
+          const auto& c = first ? *u.change : *u.reattributed;
           right = kind == 0 ? (!c.joints.empty() && c.joints[0] == joint_stepped)
                             : (!c.parameters.empty() && c.parameters[0] == param_stepped);
+          if (first) right_at_detection = right;
+          named.clear();
+          for (const std::string& n : identification::ChangeNames(run.model, c))
+            named += (named.empty() ? "" : ",") + n;
+          if (first) named_at_detection = named;
         }
       }
-      (void)changes_before;
       r.stepped.push_back(kind == 0 ? run.model.joints()[joint_stepped].name
                                     : run.model.parameters()[param_stepped].name);
       r.seed_delay.push_back(delay);
+      r.named.push_back(named);
+      r.named_at_detection.push_back(named_at_detection);
       r.oracle_power_after.push_back(OraclePower(lambda, s.oracle_false_alarm));
       if (delay > 0 && delay <= s.oracle_poses) ++r.detected_within_oracle_poses;
       if (delay > 0) {
         ++r.detected;
         r.delays.push_back(delay);
         r.named_right += right;
+        r.named_right_at_detection += right_at_detection;
       }
       const double after = run.TestError(ekf.x());
       r.error_before_m.push_back(before);

@@ -43,10 +43,11 @@ struct TrackSweepResult {
   bool full_pose = true;
   std::string kind;  ///< "joint offset" or "link length"
   int seeds = 0;
-  int detected = 0;              ///< steps detected within after_poses
-  std::vector<int> delays;       ///< poses from the step to its detection (1: the first)
-  int named_right = 0;           ///< detected and the right joint / length named first
-  std::vector<double> recovery;  ///< error 30 poses after / error before the step
+  int detected = 0;         ///< steps detected within after_poses
+  std::vector<int> delays;  ///< poses from the step to its detection (1: the first)
+  int named_right = 0;      ///< detected and the right joint / length named (after the second look)
+  int named_right_at_detection = 0;  ///< the same as named by the detection
+  std::vector<double> recovery;      ///< error 30 poses after / error before the step
   std::vector<double> error_before_m, error_after_m;
   int false_alarms = 0;              ///< unchanged-arm runs: changes raised
   long quiet_poses = 0;              ///< unchanged-arm poses run
@@ -54,6 +55,9 @@ struct TrackSweepResult {
   /// Per seed: the joint or parameter stepped, and the delay (−1: not detected within 30).
   std::vector<std::string> stepped;
   std::vector<int> seed_delay;
+  /// Per seed: what the first change detected named after the second look at it, and at its
+  /// detection (identification::ChangeNames, joined by ","; empty: not detected).
+  std::vector<std::string> named, named_at_detection;
   /// Per seed: the probability that the best possible test detects the step within
   /// oracle_poses (and within after_poses) poses: OraclePower of the step's own signature, see
   /// StepNoncentrality. No detector at that false-alarm rate does better in expectation, so the

@@ -179,6 +179,9 @@ OnlineIdentification::Update OnlineIdentification::Apply(const TimedPose& pose) 
                            identification::ChangeNames(cell_.model, *u.result.change)});
     while (releases_.size() > std::max<size_t>(history.size(), 1)) releases_.pop_front();
   }
+  if (u.result.reattributed && !releases_.empty()) {  // the second look renamed the latest
+    releases_.back().names = identification::ChangeNames(cell_.model, *u.result.reattributed);
+  }
   if (!u.result.accepted) return u;
   last_utime_ = pose.utime;
   last_pose_index_ = pose.pose_index;
@@ -324,6 +327,9 @@ std::vector<kinematics::Effect> OnlineIdentification::SwitchIn(
         for (Eigen::Index j = 0; j < m; ++j)
           if (from[i] >= 0 && from[j] >= 0) w(i, j) = old.inflations[h](from[i], from[j]);
     }
+    // The release awaiting its second look stays pending at its pose.
+    if (in_history && static_cast<int>(h) == old.second_look_onset)
+      c.second_look_onset = static_cast<int>(c.history.size());
     if (in_history) ++h;
     c.history.push_back(p.z);
     c.contexts.push_back(p.context);
@@ -348,6 +354,7 @@ std::vector<kinematics::Effect> OnlineIdentification::SwitchIn(
     d.history.clear();
     d.contexts.clear();
     d.inflations.clear();
+    d.second_look_onset = -1;  // set again below, at its pose among those kept
     int taken = 0;
     for (size_t k = 0; k < c.history.size(); ++k) {
       if (was_refused[k] && p_gate < 1.0) {
@@ -361,6 +368,8 @@ std::vector<kinematics::Effect> OnlineIdentification::SwitchIn(
           continue;
       }
       taken += was_refused[k] ? 1 : 0;
+      if (static_cast<int>(k) == c.second_look_onset)
+        d.second_look_onset = static_cast<int>(d.history.size());
       d.history.push_back(c.history[k]);
       d.contexts.push_back(c.contexts[k]);
       d.inflations.push_back(c.inflations[k]);
@@ -399,6 +408,7 @@ std::vector<WithdrawnChange> OnlineIdentification::WithdrawExplainedChanges(
     const size_t k = released[i];
     identification::EkfCheckpoint without = ekf.Checkpoint();
     without.inflations[k] = Eigen::MatrixXd();
+    if (without.second_look_onset == static_cast<int>(k)) without.second_look_onset = -1;
     const std::unique_ptr<identification::EkfIdentifier> trial = MakeEkf(start_);
     trial->Restore(without);
     trial->Refine(passes);

@@ -1,8 +1,11 @@
 #include "rcal/identification/ekf_identifier.hpp"
 
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <stdexcept>
 
 #include "rcal/identification/change_detection.hpp"
@@ -115,6 +118,7 @@ void EkfIdentifier::Reset() {
   inflations_.clear();
   seqs_.clear();
   recent_.clear();
+  second_look_seq_ = -1;
   seq_ = 0;
   status_ = TrackingStatus::kConverging;
   small_steps_ = 0;
@@ -142,6 +146,7 @@ void EkfIdentifier::SetState(const Eigen::VectorXd& state, const Eigen::MatrixXd
   inflations_.clear();
   seqs_.clear();
   recent_.clear();
+  second_look_seq_ = -1;
   status_ = TrackingStatus::kConverging;
   small_steps_ = 0;
 }
@@ -164,6 +169,10 @@ EkfCheckpoint EkfIdentifier::Checkpoint() const {
     c.inflations = inflations_;
   c.status = status_;
   c.small_steps = small_steps_;
+  if (second_look_seq_ >= 0) {
+    const auto at = std::find(seqs_.begin(), seqs_.end(), second_look_seq_);
+    if (at != seqs_.end()) c.second_look_onset = static_cast<int>(at - seqs_.begin());
+  }
   return c;
 }
 
@@ -207,6 +216,11 @@ void EkfIdentifier::Restore(const EkfCheckpoint& c) {
       throw std::invalid_argument("inflations[" + std::to_string(k) +
                                   "]: wrong size, not finite or negative");
   }
+  if (c.second_look_onset != -1 &&
+      (c.second_look_onset < 0 || c.second_look_onset >= static_cast<int>(c.inflations.size()) ||
+       c.inflations[c.second_look_onset].size() == 0))
+    throw std::invalid_argument("second_look_onset: " + std::to_string(c.second_look_onset) +
+                                " is not a history entry with a release (or −1)");
   if (c.x_fixed.size() != 0) x_fixed_ = c.x_fixed;
   x0_ = c.x0;
   x_ = c.x;
@@ -222,6 +236,7 @@ void EkfIdentifier::Restore(const EkfCheckpoint& c) {
   for (size_t k = 0; k < seqs_.size(); ++k) seqs_[k] = static_cast<long>(k);
   seq_ = static_cast<long>(seqs_.size());
   recent_.clear();  // the change test starts afresh (EkfCheckpoint)
+  second_look_seq_ = c.second_look_onset >= 0 ? seqs_[c.second_look_onset] : -1;
   status_ = c.status;
   small_steps_ = c.small_steps;
   accepted_ = c.accepted;
@@ -393,6 +408,26 @@ int EkfIdentifier::Absorb(const kinematics::PoseMeasurement& z,
   return iterations;
 }
 
+namespace {
+
+// A parameter direction that is a joint's offset (θ_j of a D–H arm) names that joint too: the two
+// columns agree over the poses (|cos| > 0.99). `columns`: per direction of `c`, its candidate
+// column (< ng: an identified parameter; ng + j: joint j's offset); dot(a, b): the columns' inner
+// product over the poses.
+void NameJointOffsets(DetectedChange& c, const std::vector<int>& columns, int ng, int nq,
+                      const std::function<double(int, int)>& dot) {
+  for (size_t i = 0; i < columns.size(); ++i) {
+    if (c.joints[i] >= 0) continue;
+    for (int j = 0; j < nq; ++j) {
+      const double ab = dot(columns[i], ng + j), aa = dot(columns[i], columns[i]),
+                   bb = dot(ng + j, ng + j);
+      if (aa > 0 && bb > 0 && std::abs(ab) > 0.99 * std::sqrt(aa * bb)) c.joints[i] = j;
+    }
+  }
+}
+
+}  // namespace
+
 std::optional<DetectedChange> EkfIdentifier::TestForChange(bool stuck) {
   if (!settings_.detect_changes || (status_ == TrackingStatus::kConverging && !stuck))
     return std::nullopt;
@@ -452,20 +487,11 @@ std::optional<DetectedChange> EkfIdentifier::TestForChange(bool stuck) {
     c.joints.push_back(col < ng ? -1 : col - ng);
     c.directions.col(static_cast<int>(i)) = U.col(col);
   }
-  // A parameter direction that is a joint's offset (θ_j of a D–H arm) names that joint too: the
-  // two columns agree over the window (|cos| > 0.99).
-  for (size_t i = 0; i < t.columns.size(); ++i) {
-    if (c.joints[i] >= 0) continue;
-    for (int j = 0; j < nq; ++j) {
-      double ab = 0, aa = 0, bb = 0;
-      for (const Eigen::MatrixXd& Ak : A) {
-        ab += Ak.col(t.columns[i]).dot(Ak.col(ng + j));
-        aa += Ak.col(t.columns[i]).squaredNorm();
-        bb += Ak.col(ng + j).squaredNorm();
-      }
-      if (aa > 0 && bb > 0 && std::abs(ab) > 0.99 * std::sqrt(aa * bb)) c.joints[i] = j;
-    }
-  }
+  NameJointOffsets(c, t.columns, ng, nq, [&](int a, int b) {
+    double ab = 0;
+    for (const Eigen::MatrixXd& Ak : A) ab += Ak.col(a).dot(Ak.col(b));
+    return ab;
+  });
   Release(c, static_cast<size_t>(t.onset));
   return c;
 }
@@ -506,6 +532,184 @@ void EkfIdentifier::Release(const DetectedChange& change, size_t onset) {
   small_steps_ = 0;
   status_ = TrackingStatus::kChangeDetected;
   changes_.push_back(change);
+  second_look_seq_ = settings_.change_second_look ? onset_seq : -1;
+}
+
+std::optional<DetectedChange> EkfIdentifier::SecondLook(size_t k0) {
+  const int n = static_cast<int>(x_.size()), ng = static_cast<int>(identified_.size());
+  const int nq = model().num_joints(), nc = ng + nq;
+  // The released directions: the range of the onset's inflation (a sum of rank-one terms).
+  Eigen::MatrixXd released;
+  {
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(inflations_[k0]);
+    const double top = eig.eigenvalues().maxCoeff();
+    for (int e = 0; e < n; ++e)
+      if (eig.eigenvalues()(e) > 1e-9 * top) {
+        released.conservativeResize(n, released.cols() + 1);
+        released.col(released.cols() - 1) = eig.eigenvectors().col(e);
+      }
+  }
+  const int m = static_cast<int>(released.cols());
+  if (m == 0) return std::nullopt;
+  // The window as one linear problem around the estimate: rows of the poses (whitened by their
+  // covariance) and of the window's prior; G the state's columns, C the candidates' (zero before
+  // the onset), Cq every pose's joint-offset signature (for the joints' state directions).
+  int rows = n;
+  for (const auto& z : history_) rows += z.dimension();
+  Eigen::MatrixXd G = Eigen::MatrixXd::Zero(rows, n), C = Eigen::MatrixXd::Zero(rows, nc),
+                  Cq(rows, nq);
+  Eigen::VectorXd b = Eigen::VectorXd::Zero(rows);
+  Cq.setZero();
+  {
+    const Eigen::LLT<Eigen::MatrixXd> llt0(P0_);
+    if (llt0.info() != Eigen::Success) return std::nullopt;
+    G.topRows(n) = llt0.matrixL().solve(Eigen::MatrixXd::Identity(n, n));
+    b.head(n) = llt0.matrixL().solve(x0_ - x_);
+  }
+  Eigen::VectorXd r, r_plus, r_minus;
+  Eigen::MatrixXd H, H_unused;
+  for (size_t k = 0, row = n; k < history_.size(); ++k) {
+    const kinematics::PoseMeasurement& z = history_[k];
+    const int d = z.dimension();
+    Measure(z, contexts_[k], x_, r, H);
+    Eigen::MatrixXd Hq(d, nq);
+    for (int j = 0; j < nq; ++j) {  // central differences, as the change test's
+      const double h = 1e-6;
+      kinematics::PoseMeasurement zq = z;
+      zq.q(j) += h;
+      Measure(zq, contexts_[k], x_, r_plus, H_unused);
+      zq.q(j) -= 2 * h;
+      Measure(zq, contexts_[k], x_, r_minus, H_unused);
+      Hq.col(j) = (r_minus - r_plus) / (2 * h);
+    }
+    const Eigen::LLT<Eigen::MatrixXd> llt(z.covariance);
+    G.middleRows(row, d) = llt.matrixL().solve(H);
+    b.segment(row, d) = llt.matrixL().solve(r);
+    Cq.middleRows(row, d) = llt.matrixL().solve(Hq);
+    if (k >= k0) {
+      C.block(row, 0, d, ng) = G.block(row, 0, d, ng);
+      C.block(row, ng, d, nq) = Cq.middleRows(row, d);
+    }
+    row += d;
+  }
+  // Each joint's offset as a state direction: the state change that reproduces it best over the
+  // window (θ_j on a D–H arm).
+  const Eigen::MatrixXd D_joint =
+      G.bottomRows(rows - n).leftCols(ng).completeOrthogonalDecomposition().solve(
+          Cq.bottomRows(rows - n));
+  // The window's other releases are part of its geometry: a step along their released
+  // directions from their onsets on (the range of each inflation).
+  Eigen::MatrixXd G_steps = G;
+  for (size_t j = 0; j < inflations_.size(); ++j) {
+    if (j == k0 || inflations_[j].size() == 0) continue;
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(inflations_[j]);
+    const double top = eig.eigenvalues().maxCoeff();
+    for (int e = 0; e < n; ++e) {
+      if (!(eig.eigenvalues()(e) > 1e-9 * top)) continue;
+      Eigen::VectorXd col = Eigen::VectorXd::Zero(rows);
+      for (size_t k = 0, row = n; k < history_.size(); ++k) {
+        const int d = history_[k].dimension();
+        if (k >= j) col.segment(row, d) = G.middleRows(row, d) * eig.eigenvectors().col(e);
+        row += d;
+      }
+      G_steps.conservativeResize(Eigen::NoChange, G_steps.cols() + 1);
+      G_steps.col(G_steps.cols() - 1) = col;
+    }
+  }
+  // Project the geometry out (the state refitted with every candidate).
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(G_steps);
+  qr.setThreshold(1e-10);
+  const Eigen::MatrixXd Q = qr.householderQ() * Eigen::MatrixXd::Identity(rows, qr.rank());
+  const Eigen::VectorXd b_perp = b - Q * (Q.transpose() * b);
+  const Eigen::MatrixXd C_perp = C - Q * (Q.transpose() * C);
+  // What a set of columns (beyond the geometry) explains: |projection of b⊥ on their span|².
+  const auto explained = [&](const Eigen::MatrixXd& cols) {
+    Eigen::ColPivHouseholderQR<Eigen::MatrixXd> q(cols);
+    q.setThreshold(1e-10);
+    if (q.rank() == 0) return 0.0;
+    const Eigen::MatrixXd Qc = q.householderQ() * Eigen::MatrixXd::Identity(cols.rows(), q.rank());
+    return (Qc.transpose() * b_perp).squaredNorm();
+  };
+  // The released directions as columns: each pose's Jacobian along them, from the onset on.
+  Eigen::MatrixXd released_cols = Eigen::MatrixXd::Zero(rows, m);
+  for (size_t k = 0, row = n; k < history_.size(); ++k) {
+    const int d = history_[k].dimension();
+    if (k >= k0) released_cols.middleRows(row, d) = G.middleRows(row, d) * released;
+    row += d;
+  }
+  const double gain_released = explained(released_cols - Q * (Q.transpose() * released_cols));
+  // Forward selection of as many directions among the candidates.
+  std::vector<int> chosen;
+  Eigen::MatrixXd chosen_cols(rows, 0);
+  double gain = 0;
+  for (int step = 0; step < m; ++step) {
+    int best = -1;
+    double best_gain = -1;
+    for (int c = 0; c < nc; ++c) {
+      if (std::find(chosen.begin(), chosen.end(), c) != chosen.end()) continue;
+      if (C_perp.col(c).squaredNorm() <= 0) continue;
+      Eigen::MatrixXd trial(rows, chosen_cols.cols() + 1);
+      trial << chosen_cols, C_perp.col(c);
+      const double g = explained(trial);
+      if (g > best_gain) {
+        best_gain = g;
+        best = c;
+      }
+    }
+    if (best < 0) return std::nullopt;
+    chosen.push_back(best);
+    chosen_cols.conservativeResize(Eigen::NoChange, chosen_cols.cols() + 1);
+    chosen_cols.col(chosen_cols.cols() - 1) = C_perp.col(best);
+    gain = best_gain;
+  }
+  // Equal numbers of parameters: the likelihood decides. Ties (the same directions, or columns
+  // the window cannot tell apart) keep the release.
+  if (!(gain > gain_released * (1 + 1e-9) + 1e-12)) return std::nullopt;
+  DetectedChange c;
+  c.threshold = changes_.empty() ? 0.0 : changes_.back().threshold;
+  c.glr = gain;
+  c.onset_poses_ago = static_cast<int>(history_.size()) - 1 - static_cast<int>(k0);
+  c.directions = Eigen::MatrixXd::Zero(n, m);
+  for (int i = 0; i < m; ++i) {
+    const int col = chosen[i];
+    c.parameters.push_back(col < ng ? identified_[col] : -1);
+    c.joints.push_back(col < ng ? -1 : col - ng);
+    if (col < ng)
+      c.directions(col, i) = 1.0;
+    else
+      c.directions.col(i).head(ng) = D_joint.col(col - ng);
+  }
+  NameJointOffsets(c, chosen, ng, nq, [&](int a, int bcol) {
+    const auto column = [&](int k) -> Eigen::VectorXd {  // over the poses (not the prior rows)
+      return k < ng ? Eigen::VectorXd(G.col(k).tail(rows - n))
+                    : Eigen::VectorXd(Cq.col(k - ng).tail(rows - n));
+    };
+    return column(a).dot(column(bcol));
+  });
+  // The step along the chosen columns with the geometry refitted, and its 1σ (whitened: unit
+  // noise).
+  const Eigen::MatrixXd N = chosen_cols.transpose() * chosen_cols;
+  const Eigen::MatrixXd N_inv = N.completeOrthogonalDecomposition().pseudoInverse();
+  c.step = N_inv * (chosen_cols.transpose() * b_perp);
+  c.step_sigma = N_inv.diagonal().cwiseMax(0.0).cwiseSqrt();
+  // Move the release: the onset's inflation along the new directions, sized as Release sizes it.
+  Eigen::MatrixXd inflation = Eigen::MatrixXd::Zero(n, n);
+  for (int i = 0; i < m; ++i) {
+    const Eigen::VectorXd u = c.directions.col(i);
+    inflation +=
+        (4 * c.step(i) * c.step(i) + 9 * c.step_sigma(i) * c.step_sigma(i)) * u * u.transpose();
+  }
+  inflations_[k0] = inflation;
+  Relinearize(std::max(settings_.max_relinearize_passes, 1));
+  small_steps_ = 0;
+  status_ = TrackingStatus::kReconverging;
+  // The release looked at is the latest (a later one replaces the pending look); after a
+  // restart the changes before it are not known.
+  if (changes_.empty())
+    changes_.push_back(c);
+  else
+    changes_.back() = c;
+  return c;
 }
 
 void EkfIdentifier::UpdateStatus(double max_step_sigma) {
@@ -614,6 +818,15 @@ EkfUpdateResult EkfIdentifier::Update(const kinematics::PoseMeasurement& z,
     max_step =
         std::max(max_step, std::abs(x_(i) - x_before(i)) / std::sqrt(std::max(P_(i, i), 1e-300)));
   UpdateStatus(max_step);
+  if (second_look_seq_ >= 0) {
+    const auto at = std::find(seqs_.begin(), seqs_.end(), second_look_seq_);
+    if (at == seqs_.end()) {
+      second_look_seq_ = -1;  // its onset left the window: nothing to look at
+    } else if (static_cast<int>(seqs_.end() - at) >= std::max(settings_.change_window, 1)) {
+      second_look_seq_ = -1;
+      result.reattributed = SecondLook(static_cast<size_t>(at - seqs_.begin()));
+    }
+  }
   result.status = status_;
   return result;
 }

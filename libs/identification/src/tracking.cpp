@@ -54,6 +54,11 @@ std::vector<TrackRow> Track(EkfIdentifier& ekf,
         row.changed = ChangeNames(ekf.model(), *r.change);
         row.steps.assign(r.change->step.data(), r.change->step.data() + r.change->step.size());
       }
+      if (r.reattributed) {
+        row.renamed = ChangeNames(ekf.model(), *r.reattributed);
+        const Eigen::VectorXd& st = r.reattributed->step;
+        row.renamed_steps.assign(st.data(), st.data() + st.size());
+      }
     }
     rows.push_back(std::move(row));
   }

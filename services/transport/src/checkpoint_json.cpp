@@ -135,6 +135,8 @@ std::string CheckpointText(const CheckpointFile& f) {
             {"x_fixed", Vec(c.x_fixed)},
             {"status", identification::TrackingStatusName(c.status)},
             {"small_steps", c.small_steps}};
+  // The release awaiting its second look (additive key; none: no look pending).
+  if (c.second_look_onset >= 0) j["second_look_onset"] = c.second_look_onset;
   // The effects of the state's model (additive key; none: geometric).
   if (!f.effects_json.empty()) j["effects"] = json::parse(f.effects_json);
   // A released change's covariance before its pose (additive key; none: no change released).
@@ -195,6 +197,8 @@ CheckpointFile ParseCheckpoint(const std::string& text) {
       if (!known) throw std::runtime_error("checkpoint: status: unknown value '" + status + "'");
     }
     if (j.contains("small_steps")) c.small_steps = At(j, "small_steps", "").get<int>();
+    if (j.contains("second_look_onset"))
+      c.second_look_onset = At(j, "second_look_onset", "").get<int>();
     if (j.contains("inflations")) {
       const json& inflations = At(j, "inflations", "");
       if (!inflations.is_array()) throw std::runtime_error("checkpoint: inflations: not an array");

@@ -34,6 +34,17 @@
 //   converging, converged, change_detected (the update that named it) or reconverging. The test
 //   runs once converged, and while converging only when the gate has refused change_min_poses
 //   of the poses in its window (a filter stuck behind a change it met before it settled).
+// - the second look at a change: a change is named from the few poses since its onset (3 or 4
+//   at detection), where a wrist parameter and its neighbour (d5, α5) can move the marker
+//   almost alike. Once change_window poses have come in since the onset, the whole window
+//   chooses again with the onset known: the batch generalised likelihood ratio of a step from
+//   the onset on, the geometry (all of the state, with the window's prior) refitted, each
+//   candidate direction (an identified parameter or a joint's offset) as a column that is zero
+//   before the onset; forward selection of as many directions as were released. Where the
+//   chosen directions explain the window better than the released ones (the same number of
+//   parameters: a likelihood comparison, no threshold), the release is moved to them (its
+//   inflation replaced, the window relinearised), changes().back() renamed, and the update
+//   reports it (EkfUpdateResult::reattributed).
 // - innovation gate: a pose whose normalised innovation squared ỹᵀ S⁻¹ ỹ exceeds the χ² quantile
 //   `gate_probability` is rejected and counted, not absorbed.
 // - invalid input (wrong joint count, NaN, bad covariance) is rejected with a reason naming the
@@ -89,6 +100,10 @@ struct EkfSettings {
   /// diluted and more parameters needed) moves on at the next pose; a real one stays.
   int change_confirmations = 2;
   int change_max_params = 3;  ///< parameters a change may name (forward selection)
+  /// The second look at a released change (file comment): once change_window poses have come in
+  /// since its onset, the window's poses choose the change's directions again, and the release
+  /// is moved to them where they explain the poses better than the ones named at detection.
+  bool change_second_look = true;
   /// The step's fit must explain the window: post-fit χ² below this quantile (else more
   /// parameters are tried; an outlier pose explains nothing and raises no change).
   double change_fit_probability = 0.9999;
@@ -139,6 +154,9 @@ struct EkfUpdateResult {
   /// Set on the update that detected a change (status kChangeDetected); the update's pose is
   /// then taken (accepted) with the poses since the onset.
   std::optional<DetectedChange> change;
+  /// Set on the update whose second look (file comment) moved the last change's release to
+  /// other directions: the change as renamed (onset_poses_ago counted from this update).
+  std::optional<DetectedChange> reattributed;
 };
 
 /// Everything needed to resume an identifier exactly where it stopped (a restarted process
@@ -162,6 +180,9 @@ struct EkfCheckpoint {
   /// innovations are not kept: a restored identifier starts its test afresh.
   TrackingStatus status = TrackingStatus::kConverging;
   int small_steps = 0;
+  /// The history entry whose release awaits its second look (EkfSettings::change_second_look;
+  /// its inflation non-empty), or −1: none.
+  int second_look_onset = -1;
 };
 
 class EkfIdentifier {
@@ -263,6 +284,9 @@ class EkfIdentifier {
   /// replaced by the recent poses (gated ones included), the first with the inflation, and the
   /// window is relinearised.
   void Release(const DetectedChange& change, size_t onset);
+  /// The second look (file comment) at the release whose onset is history entry k0: returns the
+  /// change as renamed when its release was moved, else nothing.
+  std::optional<DetectedChange> SecondLook(size_t k0);
   void UpdateStatus(double max_step_sigma);
 
   struct Recent {  // a pose the change test looks at
@@ -295,6 +319,7 @@ class EkfIdentifier {
   TrackingStatus status_ = TrackingStatus::kConverging;
   int small_steps_ = 0;
   std::vector<DetectedChange> changes_;
+  long second_look_seq_ = -1;  // onset (seq) of the release awaiting its second look; −1: none
   // The last test's step (onset pose and parameters) and how many consecutive tests found it.
   long candidate_onset_ = -1;
   std::vector<int> candidate_params_;

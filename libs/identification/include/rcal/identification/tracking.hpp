@@ -21,9 +21,13 @@ struct TrackRow {
   TrackingStatus status = TrackingStatus::kConverging;  ///< after this row
   std::vector<std::string> changed;  ///< the change named at this row (parameters or "joint q")
   std::vector<double> steps;         ///< its size per name [m | rad]
-  double nis = 0;                    ///< fitted rows: normalised innovation squared; NaN otherwise
-  bool accepted = false;             ///< fitted rows: taken by the filter
-  std::string rejected;              ///< why a fitted row was refused (gate, invalid input)
+  /// The last change as its second look renamed it at this row (EkfSettings::
+  /// change_second_look; empty: no rename here), and its steps [m | rad].
+  std::vector<std::string> renamed;
+  std::vector<double> renamed_steps;
+  double nis = 0;         ///< fitted rows: normalised innovation squared; NaN otherwise
+  bool accepted = false;  ///< fitted rows: taken by the filter
+  std::string rejected;   ///< why a fitted row was refused (gate, invalid input)
 };
 
 /// Names a detected change's directions: the parameter's name, or "offset of joint NAME".
