@@ -244,20 +244,14 @@ std::vector<identification::GeometryStep> OnlineIdentification::WindowSteps() co
     for (size_t i = start; i < seen_.size() && first < 0; ++i)
       if (SameMeasurement(seen_[i].z, history[k])) first = static_cast<int>(i - start);
     if (first < 1) continue;
-    // The released directions: the range of the inflation's geometric block (a sum of rank-one
-    // terms, one per released direction).
-    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(inflations[k].topLeftCorner(ng, ng));
-    const Eigen::VectorXd& lambda = eig.eigenvalues();
-    const double top = lambda.size() ? lambda.maxCoeff() : 0.0;
-    if (!(top > 0)) continue;
-    std::vector<int> kept;
-    for (int c = 0; c < lambda.size(); ++c)
-      if (lambda(c) > 1e-9 * top) kept.push_back(c);
+    // The released directions, in the geometric parameters.
+    const Eigen::MatrixXd U =
+        identification::InflationDirections(Eigen::MatrixXd(inflations[k].topLeftCorner(ng, ng)));
+    if (U.cols() == 0) continue;
     identification::GeometryStep st;
     st.first_pose = first;
-    st.directions = Eigen::MatrixXd::Zero(cell_.model.num_params(), kept.size());
-    for (size_t c = 0; c < kept.size(); ++c)
-      for (int r = 0; r < ng; ++r) st.directions(identified[r], c) = eig.eigenvectors()(r, kept[c]);
+    st.directions = Eigen::MatrixXd::Zero(cell_.model.num_params(), U.cols());
+    for (int r = 0; r < ng; ++r) st.directions.row(identified[r]) = U.row(r);
     steps.push_back(std::move(st));
   }
   return steps;

@@ -408,6 +408,19 @@ int EkfIdentifier::Absorb(const kinematics::PoseMeasurement& z,
   return iterations;
 }
 
+Eigen::MatrixXd InflationDirections(const Eigen::MatrixXd& inflation) {
+  if (inflation.size() == 0) return Eigen::MatrixXd(inflation.rows(), 0);
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(inflation);
+  const Eigen::VectorXd& lambda = eig.eigenvalues();
+  const double top = lambda.maxCoeff();
+  std::vector<int> kept;
+  for (int c = 0; c < lambda.size(); ++c)
+    if (top > 0 && lambda(c) > 1e-9 * top) kept.push_back(c);
+  Eigen::MatrixXd U(inflation.rows(), static_cast<Eigen::Index>(kept.size()));
+  for (size_t c = 0; c < kept.size(); ++c) U.col(c) = eig.eigenvectors().col(kept[c]);
+  return U;
+}
+
 namespace {
 
 // A parameter direction that is a joint's offset (θ_j of a D–H arm) names that joint too: the two
@@ -538,17 +551,7 @@ void EkfIdentifier::Release(const DetectedChange& change, size_t onset) {
 std::optional<DetectedChange> EkfIdentifier::SecondLook(size_t k0) {
   const int n = static_cast<int>(x_.size()), ng = static_cast<int>(identified_.size());
   const int nq = model().num_joints(), nc = ng + nq;
-  // The released directions: the range of the onset's inflation (a sum of rank-one terms).
-  Eigen::MatrixXd released;
-  {
-    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(inflations_[k0]);
-    const double top = eig.eigenvalues().maxCoeff();
-    for (int e = 0; e < n; ++e)
-      if (eig.eigenvalues()(e) > 1e-9 * top) {
-        released.conservativeResize(n, released.cols() + 1);
-        released.col(released.cols() - 1) = eig.eigenvectors().col(e);
-      }
-  }
+  const Eigen::MatrixXd released = InflationDirections(inflations_[k0]);
   const int m = static_cast<int>(released.cols());
   if (m == 0) return std::nullopt;
   // The window as one linear problem around the estimate: rows of the poses (whitened by their
@@ -602,14 +605,12 @@ std::optional<DetectedChange> EkfIdentifier::SecondLook(size_t k0) {
   Eigen::MatrixXd G_steps = G;
   for (size_t j = 0; j < inflations_.size(); ++j) {
     if (j == k0 || inflations_[j].size() == 0) continue;
-    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(inflations_[j]);
-    const double top = eig.eigenvalues().maxCoeff();
-    for (int e = 0; e < n; ++e) {
-      if (!(eig.eigenvalues()(e) > 1e-9 * top)) continue;
+    const Eigen::MatrixXd U = InflationDirections(inflations_[j]);
+    for (int e = 0; e < U.cols(); ++e) {
       Eigen::VectorXd col = Eigen::VectorXd::Zero(rows);
       for (size_t k = 0, row = n; k < history_.size(); ++k) {
         const int d = history_[k].dimension();
-        if (k >= j) col.segment(row, d) = G.middleRows(row, d) * eig.eigenvectors().col(e);
+        if (k >= j) col.segment(row, d) = G.middleRows(row, d) * U.col(e);
         row += d;
       }
       G_steps.conservativeResize(Eigen::NoChange, G_steps.cols() + 1);

@@ -124,6 +124,11 @@ struct EkfSettings {
 /// industrial arms, so the data, not the prior, sets the estimate.
 Eigen::VectorXd DefaultEffectPriorSigma(const kinematics::ExtendedModel& model);
 
+/// The directions a release's inflation spans (a sum of rank-one terms, one per released
+/// direction): its eigenvectors whose eigenvalue exceeds 1e-9 of the largest, one per column,
+/// unit length. None for an empty or zero inflation.
+Eigen::MatrixXd InflationDirections(const Eigen::MatrixXd& inflation);
+
 /// Where the identification stands (the CALIBRATION_STATUS states).
 enum class TrackingStatus { kConverging, kConverged, kChangeDetected, kReconverging };
 /// "converging", "converged", "change_detected", "reconverging".
