@@ -327,23 +327,18 @@ void FitPiecewise(const kinematics::KinematicModel& model, const PoseData& data,
     p.base_fit.x = f.x;
     p.step_amplitudes = f.step_amplitudes;
     if (!s.estimate_noise) break;
-    double ss_p = 0, ss_o = 0;
-    int n_p = 0, n_o = 0;
-    for (size_t k = 0; k < fit_ms.size(); ++k) {
-      const Eigen::VectorXd x_k =
-          identification::GeometryAt(f.x, p.fit_steps, f.step_amplitudes, static_cast<int>(k));
-      const Eigen::VectorXd r = kinematics::Residual(model, fit_ms[k], x_k);
-      ss_p += r.head<3>().squaredNorm();
-      n_p += 3;
-      if (r.size() == 6) {
-        ss_o += r.tail<3>().squaredNorm();
-        n_o += 3;
-      }
-    }
+    // Variance components as Calibrate estimates them, at each pose's own geometry.
+    const identification::ResidualSums sums =
+        identification::SumResiduals(model, fit_ms, [&](size_t k) {
+          return identification::GeometryAt(f.x, p.fit_steps, f.step_amplitudes,
+                                            static_cast<int>(k));
+        });
+    const int n_p = sums.position_values, n_o = sums.orientation_values;
     const double params = static_cast<double>(p.base_fit.identified.size() + p.num_step_params);
     const double redundancy = std::max(0.05, 1.0 - params / (n_p + n_o));
-    p.base_fit.position_sigma_m = std::sqrt(ss_p / (n_p * redundancy));
-    if (n_o > 0) p.base_fit.orientation_sigma_rad = std::sqrt(ss_o / (n_o * redundancy));
+    p.base_fit.position_sigma_m = std::sqrt(sums.position_m2 / (n_p * redundancy));
+    if (n_o > 0)
+      p.base_fit.orientation_sigma_rad = std::sqrt(sums.orientation_rad2 / (n_o * redundancy));
   }
   if (s.estimate_noise)
     identification::SetNoise(p.ms, p.base_fit.position_sigma_m, p.base_fit.orientation_sigma_rad);

@@ -115,6 +115,22 @@ std::vector<int> PreferredBaseSet(const kinematics::KinematicModel& model,
   return chosen;
 }
 
+ResidualSums SumResiduals(const kinematics::KinematicModel& model,
+                          const std::vector<kinematics::PoseMeasurement>& ms,
+                          const std::function<Eigen::VectorXd(size_t)>& x_at) {
+  ResidualSums s;
+  for (size_t k = 0; k < ms.size(); ++k) {
+    const Eigen::VectorXd r = kinematics::Residual(model, ms[k], x_at(k));
+    s.position_m2 += r.head<3>().squaredNorm();
+    s.position_values += 3;
+    if (ms[k].has_orientation) {
+      s.orientation_rad2 += r.tail<3>().squaredNorm();
+      s.orientation_values += 3;
+    }
+  }
+  return s;
+}
+
 void SetNoise(std::vector<kinematics::PoseMeasurement>& ms, double sp, double so) {
   for (auto& m : ms) {
     const int d = m.dimension();
@@ -198,17 +214,9 @@ CalibrationFit Calibrate(const kinematics::KinematicModel& model,
     fit.iterations = full.iterations;
     if (!settings.estimate_noise) break;
     // Variance components: each block's mean squared residual, corrected for the parameters.
-    double ss_p = 0, ss_o = 0;
-    int n_p = 0, n_o = 0;
-    for (const auto& m : ms) {
-      const Eigen::VectorXd r = kinematics::Residual(model, m, fit.x);
-      ss_p += r.head<3>().squaredNorm();
-      n_p += 3;
-      if (m.has_orientation) {
-        ss_o += r.tail<3>().squaredNorm();
-        n_o += 3;
-      }
-    }
+    const ResidualSums sums = SumResiduals(model, ms, [&](size_t) { return fit.x; });
+    const double ss_p = sums.position_m2, ss_o = sums.orientation_rad2;
+    const int n_p = sums.position_values, n_o = sums.orientation_values;
     const double redundancy = 1.0 - static_cast<double>(fit.identified.size()) / (n_p + n_o);
     // As many parameters as measured values: the fit passes through every pose and leaves no
     // residual to estimate the noise from (it was 0/0, a NaN covariance, an obscure error).

@@ -257,6 +257,24 @@ void EkfIdentifier::Measure(const kinematics::PoseMeasurement& z,
                                 identified_, r, &H);
 }
 
+Eigen::MatrixXd EkfIdentifier::JointSignature(const kinematics::PoseMeasurement& z,
+                                              const kinematics::EffectContext& context,
+                                              const Eigen::VectorXd& state) const {
+  const int nq = model().num_joints();
+  Eigen::MatrixXd Hq(z.dimension(), nq), H_unused;
+  Eigen::VectorXd r_plus, r_minus;
+  for (int j = 0; j < nq; ++j) {
+    const double h = 1e-6;  // [rad or m]
+    kinematics::PoseMeasurement zq = z;
+    zq.q(j) += h;
+    Measure(zq, context, state, r_plus, H_unused);
+    zq.q(j) -= 2 * h;
+    Measure(zq, context, state, r_minus, H_unused);
+    Hq.col(j) = (r_minus - r_plus) / (2 * h);  // r = z − h
+  }
+  return Hq;
+}
+
 void EkfIdentifier::Reject(EkfUpdateResult& result, std::string reason) {
   result.reason = std::move(reason);
   ++rejected_;
@@ -569,22 +587,13 @@ std::optional<DetectedChange> EkfIdentifier::SecondLook(size_t k0) {
     G.topRows(n) = llt0.matrixL().solve(Eigen::MatrixXd::Identity(n, n));
     b.head(n) = llt0.matrixL().solve(x0_ - x_);
   }
-  Eigen::VectorXd r, r_plus, r_minus;
-  Eigen::MatrixXd H, H_unused;
+  Eigen::VectorXd r;
+  Eigen::MatrixXd H;
   for (size_t k = 0, row = n; k < history_.size(); ++k) {
     const kinematics::PoseMeasurement& z = history_[k];
     const int d = z.dimension();
     Measure(z, contexts_[k], x_, r, H);
-    Eigen::MatrixXd Hq(d, nq);
-    for (int j = 0; j < nq; ++j) {  // central differences, as the change test's
-      const double h = 1e-6;
-      kinematics::PoseMeasurement zq = z;
-      zq.q(j) += h;
-      Measure(zq, contexts_[k], x_, r_plus, H_unused);
-      zq.q(j) -= 2 * h;
-      Measure(zq, contexts_[k], x_, r_minus, H_unused);
-      Hq.col(j) = (r_minus - r_plus) / (2 * h);
-    }
+    const Eigen::MatrixXd Hq = JointSignature(z, contexts_[k], x_);
     const Eigen::LLT<Eigen::MatrixXd> llt(z.covariance);
     G.middleRows(row, d) = llt.matrixL().solve(H);
     b.segment(row, d) = llt.matrixL().solve(r);
@@ -600,22 +609,25 @@ std::optional<DetectedChange> EkfIdentifier::SecondLook(size_t k0) {
   const Eigen::MatrixXd D_joint =
       G.bottomRows(rows - n).leftCols(ng).completeOrthogonalDecomposition().solve(
           Cq.bottomRows(rows - n));
+  // A step along state directions U from history entry `onset` on, as columns: each pose's
+  // Jacobian along them, zero before the onset and in the prior rows.
+  const auto step_columns = [&](size_t onset, const Eigen::MatrixXd& U) {
+    Eigen::MatrixXd cols = Eigen::MatrixXd::Zero(rows, U.cols());
+    for (size_t k = 0, row = n; k < history_.size(); ++k) {
+      const int d = history_[k].dimension();
+      if (k >= onset) cols.middleRows(row, d) = G.middleRows(row, d) * U;
+      row += d;
+    }
+    return cols;
+  };
   // The window's other releases are part of its geometry: a step along their released
   // directions from their onsets on (the range of each inflation).
   Eigen::MatrixXd G_steps = G;
   for (size_t j = 0; j < inflations_.size(); ++j) {
     if (j == k0 || inflations_[j].size() == 0) continue;
-    const Eigen::MatrixXd U = InflationDirections(inflations_[j]);
-    for (int e = 0; e < U.cols(); ++e) {
-      Eigen::VectorXd col = Eigen::VectorXd::Zero(rows);
-      for (size_t k = 0, row = n; k < history_.size(); ++k) {
-        const int d = history_[k].dimension();
-        if (k >= j) col.segment(row, d) = G.middleRows(row, d) * U.col(e);
-        row += d;
-      }
-      G_steps.conservativeResize(Eigen::NoChange, G_steps.cols() + 1);
-      G_steps.col(G_steps.cols() - 1) = col;
-    }
+    const Eigen::MatrixXd cols = step_columns(j, InflationDirections(inflations_[j]));
+    G_steps.conservativeResize(Eigen::NoChange, G_steps.cols() + cols.cols());
+    G_steps.rightCols(cols.cols()) = cols;
   }
   // Project the geometry out (the state refitted with every candidate).
   Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(G_steps);
@@ -631,13 +643,7 @@ std::optional<DetectedChange> EkfIdentifier::SecondLook(size_t k0) {
     const Eigen::MatrixXd Qc = q.householderQ() * Eigen::MatrixXd::Identity(cols.rows(), q.rank());
     return (Qc.transpose() * b_perp).squaredNorm();
   };
-  // The released directions as columns: each pose's Jacobian along them, from the onset on.
-  Eigen::MatrixXd released_cols = Eigen::MatrixXd::Zero(rows, m);
-  for (size_t k = 0, row = n; k < history_.size(); ++k) {
-    const int d = history_[k].dimension();
-    if (k >= k0) released_cols.middleRows(row, d) = G.middleRows(row, d) * released;
-    row += d;
-  }
+  const Eigen::MatrixXd released_cols = step_columns(k0, released);
   const double gain_released = explained(released_cols - Q * (Q.transpose() * released_cols));
   // Forward selection of as many directions among the candidates.
   std::vector<int> chosen;
@@ -765,19 +771,7 @@ EkfUpdateResult EkfIdentifier::Update(const kinematics::PoseMeasurement& z,
   // was refused to the end, with nothing said), and only the test can tell a change from
   // outliers.
   if (settings_.detect_changes && std::isfinite(result.nis)) {
-    // ∂h/∂q by central differences: a joint offset's signature (no analytic ∂h/∂q needed).
-    const int nq = model().num_joints();
-    Eigen::MatrixXd Hq(r.size(), nq), H_unused;
-    Eigen::VectorXd r_plus, r_minus;
-    for (int j = 0; j < nq; ++j) {
-      const double h = 1e-6;  // [rad or m]
-      kinematics::PoseMeasurement zq = z;
-      zq.q(j) += h;
-      Measure(zq, context, x_, r_plus, H_unused);
-      zq.q(j) -= 2 * h;
-      Measure(zq, context, x_, r_minus, H_unused);
-      Hq.col(j) = (r_minus - r_plus) / (2 * h);  // r = z − h
-    }
+    const Eigen::MatrixXd Hq = JointSignature(z, context, x_);
     // Marked refused only once the gate has counted it (a release retakes it uncounted).
     recent_.push_back({z, context, seq_, true, llt.matrixL().solve(r), llt.matrixL().solve(H),
                        llt.matrixL().solve(Hq)});

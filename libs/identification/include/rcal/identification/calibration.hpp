@@ -15,6 +15,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -153,6 +154,17 @@ ExtendedHeldOutErrors HeldOutExtended(const kinematics::ExtendedModel& model,
                                       const std::vector<bool>& is_test, const CalibrationFit& fit,
                                       const Eigen::VectorXd& e0,
                                       const CalibrationSettings& settings = {});
+
+/// The residuals of poses as variance components: the sums of squared position and orientation
+/// residuals [m², rad²] and how many values each holds.
+struct ResidualSums {
+  double position_m2 = 0, orientation_rad2 = 0;
+  int position_values = 0, orientation_values = 0;
+};
+/// ResidualSums of `ms` against the model at the geometry x_at(k) of each pose k [m | rad].
+ResidualSums SumResiduals(const kinematics::KinematicModel& model,
+                          const std::vector<kinematics::PoseMeasurement>& ms,
+                          const std::function<Eigen::VectorXd(size_t)>& x_at);
 
 /// Sets every measurement's covariance to diag(σ_p², σ_p², σ_p², σ_o², σ_o², σ_o²).
 void SetNoise(std::vector<kinematics::PoseMeasurement>& ms, double position_sigma_m,

@@ -272,6 +272,11 @@ class EkfIdentifier {
   /// The measurement function: r = z − h and H = ∂h/∂state at `state`.
   void Measure(const kinematics::PoseMeasurement& z, const kinematics::EffectContext& context,
                const Eigen::VectorXd& state, Eigen::VectorXd& r, Eigen::MatrixXd& H) const;
+  /// ∂h/∂q at `state` by central differences: a joint offset's signature (no analytic ∂h/∂q
+  /// needed), as the residual r = z − h moves.
+  Eigen::MatrixXd JointSignature(const kinematics::PoseMeasurement& z,
+                                 const kinematics::EffectContext& context,
+                                 const Eigen::VectorXd& state) const;
   void Reject(EkfUpdateResult& result, std::string reason);
   /// Folds the oldest window pose into the prior (x0, P0), linearised at the current estimate.
   void FoldOldest();
