@@ -96,6 +96,13 @@ estimation::TimeGateSettings PoseTimeGate() {
   return s;
 }
 
+// ", one of the alternatives, probability 0.63" for a change the poses could not pin on one
+// direction (DetectedChange::probability); "" for a step along all its directions.
+std::string Alternative(const identification::DetectedChange& c, size_t i) {
+  if (i >= c.probability.size()) return "";
+  return fmt::format(", one of the alternatives, probability {:.2f}", c.probability[i]);
+}
+
 struct Options {
   std::string cell = "config/cells/grb3016.yaml";
   std::string checkpoint;  // empty: no checkpoint
@@ -368,17 +375,18 @@ class Identifier {
     if (u.result.change) {  // issue 15: named, released, re-converging (CALIBRATION_STATUS too)
       const auto names = identification::ChangeNames(id_.model(), *u.result.change);
       for (size_t i = 0; i < names.size(); ++i)
-        spdlog::warn("pose {}: change detected: {} by {:.6g} [m | rad], released", u.pose_index + 1,
-                     names[i], u.result.change->step(i));
+        spdlog::warn("pose {}: change detected: {} by {:.6g} [m | rad]{}, released",
+                     u.pose_index + 1, names[i], u.result.change->step(i),
+                     Alternative(*u.result.change, i));
     }
     if (u.result.reattributed) {  // the second look: the window renamed the last change
       const auto names = identification::ChangeNames(id_.model(), *u.result.reattributed);
       for (size_t i = 0; i < names.size(); ++i)
         spdlog::warn(
             "pose {}: the change from {} poses back renamed by its second look: {} by "
-            "{:.6g} [m | rad], released instead",
+            "{:.6g} [m | rad]{}, released instead",
             u.pose_index + 1, u.result.reattributed->onset_poses_ago, names[i],
-            u.result.reattributed->step(i));
+            u.result.reattributed->step(i), Alternative(*u.result.reattributed, i));
     }
     // Poses are numbered from 1 as `rcal watch` numbers them (pose_index counts from 0); the
     // effect parameters (--effects) with their σ.

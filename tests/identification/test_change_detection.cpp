@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <random>
 
 #include "rcal/identification/chi_square.hpp"
@@ -79,6 +80,88 @@ TEST(ChangeDetection, TwoParametersAreNamedWhenOneDoesNotExplainTheStep) {
   ASSERT_EQ(r.columns.size(), 2u);
   EXPECT_EQ(std::min(r.columns[0], r.columns[1]), 3);
   EXPECT_EQ(std::max(r.columns[0], r.columns[1]), 11);
+}
+
+TEST(ChangeDetection, AlternativesAreTheLikeliestColumnsUpToTheProbability) {
+  // Closed form: unit N, so g_j = b_j² and p_j = exp(g_j/2) / Σ exp(g_i/2). Column 4 repeats
+  // column 0 (one hypothesis, counted once).
+  Eigen::MatrixXd N = Eigen::MatrixXd::Identity(5, 5);
+  N(0, 4) = N(4, 0) = 1;
+  const Eigen::VectorXd b = (Eigen::VectorXd(5) << 3.0, 2.8, 0.0, 1.0, 3.0).finished();
+  const double w[4] = {std::exp(4.5), std::exp(3.92), 1.0, std::exp(0.5)},
+               sum = w[0] + w[1] + w[2] + w[3];
+  std::vector<double> p;
+  Eigen::VectorXd step, sigma;
+  // p_0 = 0.629, p_1 = 0.352, p_3 = 0.0115, p_2 = 0.0070.
+  EXPECT_EQ(StepAlternatives(N, b, {}, 0.99, 3, &p, &step, &sigma), (std::vector<int>{0, 1, 3}));
+  ASSERT_EQ(p.size(), 3u);
+  EXPECT_NEAR(p[0], w[0] / sum, 1e-12);
+  EXPECT_NEAR(p[1], w[1] / sum, 1e-12);
+  EXPECT_NEAR(p[2], w[3] / sum, 1e-12);
+  EXPECT_NEAR(step(1), 2.8, 1e-12);
+  EXPECT_NEAR(sigma(1), 1.0, 1e-12);
+  EXPECT_EQ(StepAlternatives(N, b, {}, 0.95, 3), (std::vector<int>{0, 1}));  // 0.981 ≥ 0.95
+  EXPECT_EQ(StepAlternatives(N, b, {}, 0.99, 2), (std::vector<int>{0, 1}));  // at most 2
+  EXPECT_EQ(StepAlternatives(N, b, {}, 0.5, 3), (std::vector<int>{0}));
+  // Scaled columns: g_j = b_j² / N_jj, the step b_j / N_jj, its σ 1/√N_jj.
+  N(1, 1) = 4;
+  EXPECT_EQ(StepAlternatives(N, 2 * b, {}, 0.5, 3, &p, &step, &sigma), (std::vector<int>{0}));
+  EXPECT_NEAR(p[0], std::exp(18) / (std::exp(18) + std::exp(3.92) + 1 + std::exp(2)), 1e-12);
+  EXPECT_THROW(StepAlternatives(N, b.head(3), {}, 0.9, 3), std::invalid_argument);
+  EXPECT_THROW(StepAlternatives(N, b, {0, 1}, 0.9, 3), std::invalid_argument);
+  // One change under two names (labelled alike): columns 0 and 1 count once; 0 and 4, exactly
+  // parallel only in N above, are two here (equal g, p 0.493 each).
+  EXPECT_EQ(StepAlternatives(Eigen::MatrixXd::Identity(5, 5), b, {7, 7, -1, -1, -1}, 0.95, 3),
+            (std::vector<int>{0, 4}));
+}
+
+TEST(ChangeDetection, NearTwinColumnsAreAlternativesThatHoldTheStepAtTheirProbability) {
+  // Columns 0 and 1 move the poses almost alike (cos 0.99 per pose); the step is along one of
+  // them (every other seed). Three poses after it, the most likely column alone is the one in
+  // too few seeds; the alternatives hold it in about `naming_probability` of them.
+  StepTestSettings set;
+  set.naming_probability = 0.95;
+  int detected = 0, top_right = 0, held = 0, alternatives = 0;
+  for (unsigned seed = 0; seed < 400; ++seed) {
+    const int column = static_cast<int>(seed % 2);
+    Synthetic s = Make(8, 6, 12, 7000 + seed, 5, column, 0.0);
+    std::mt19937_64 rng(9000 + seed);
+    std::normal_distribution<double> g(0, 1);
+    for (size_t k = 0; k < s.A.size(); ++k) {
+      for (int i = 0; i < s.A[k].rows(); ++i)
+        s.A[k](i, 1) = 0.99 * s.A[k](i, 0) + std::sqrt(1 - 0.99 * 0.99) * g(rng);
+      if (k >= 5) s.e[k] += s.A[k].col(column) * 3.5;
+    }
+    const StepTestResult r = TestForStep(s.e, s.A, set);
+    if (!r.detected || r.columns.size() != 1) continue;
+    // Labelled one change under two names, the twins are never alternatives of each other.
+    StepTestSettings labelled = set;
+    labelled.same_change.assign(12, -1);
+    labelled.same_change[0] = labelled.same_change[1] = 3;
+    const StepTestResult l = TestForStep(s.e, s.A, labelled);
+    EXPECT_FALSE(std::count(l.alternatives.begin(), l.alternatives.end(), 0) &&
+                 std::count(l.alternatives.begin(), l.alternatives.end(), 1))
+        << seed;
+    ++detected;
+    top_right += r.columns[0] == column;
+    if (r.alternatives.empty()) {
+      held += r.columns[0] == column;
+      continue;
+    }
+    ++alternatives;
+    EXPECT_EQ(r.alternatives[0], r.columns[0]);
+    double mass = 0;
+    for (double p : r.alternative_probability) mass += p;
+    EXPECT_GE(mass, 0.95 - 1e-12);
+    EXPECT_LT(mass - r.alternative_probability.back(), 0.95);  // the fewest
+    held += std::find(r.alternatives.begin(), r.alternatives.end(), column) != r.alternatives.end();
+  }
+  std::printf("detected %d; the likeliest column right %d; alternatives %d; the step held %d\n",
+              detected, top_right, alternatives, held);
+  ASSERT_GE(detected, 300);
+  EXPECT_LT(top_right, 0.9 * detected);
+  EXPECT_GE(held, 0.93 * detected);
+  EXPECT_GT(alternatives, detected / 10);
 }
 
 TEST(ChangeDetection, MismatchedSizesAreRefusedNamingThem) {

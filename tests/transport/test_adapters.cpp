@@ -396,6 +396,9 @@ TEST(CalibrationStatusAdapter, CarriesTheTrackingStateAndTheChange) {
   EXPECT_TRUE(status.changed[0] == "theta2" || status.changed[0] == "offset of joint j2")
       << status.changed[0];
   EXPECT_NEAR(status.changed_step[0], 1e-3, 2e-4);
+  // One step along the named direction, not alternatives (DetectedChange::probability empty).
+  ASSERT_TRUE(ekf.changes().back().probability.empty());
+  EXPECT_EQ(status.changed_probability, std::vector<double>{1.0});
   std::vector<uint8_t> bytes(status.getEncodedSize());
   ASSERT_EQ(status.encode(bytes.data(), 0, static_cast<int>(bytes.size())),
             static_cast<int>(bytes.size()));
@@ -404,6 +407,7 @@ TEST(CalibrationStatusAdapter, CarriesTheTrackingStateAndTheChange) {
             static_cast<int>(bytes.size()));
   EXPECT_EQ(back.changed, status.changed);
   EXPECT_EQ(back.changed_step, status.changed_step);
+  EXPECT_EQ(back.changed_probability, status.changed_probability);
   EXPECT_EQ(back.tracking_status, status.tracking_status);
 }
 

@@ -58,11 +58,13 @@ TEST(Checkpoint, TrackingStateRoundTrips) {
   f.checkpoint.inflations[4](0, 1) = f.checkpoint.inflations[4](1, 0) = 2.5e-7;
   f.checkpoint.status = identification::TrackingStatus::kReconverging;
   f.checkpoint.small_steps = 3;
-  f.checkpoint.second_look_onset = 4;  // that release's second look is pending
+  f.checkpoint.second_look_onset = 4;            // that release's second look is pending
+  f.checkpoint.second_look_alternatives = true;  // its directions are alternatives
   const CheckpointFile back = ParseCheckpoint(CheckpointText(f));
   EXPECT_EQ(back.checkpoint.status, identification::TrackingStatus::kReconverging);
   EXPECT_EQ(back.checkpoint.small_steps, 3);
   EXPECT_EQ(back.checkpoint.second_look_onset, 4);
+  EXPECT_TRUE(back.checkpoint.second_look_alternatives);
   ASSERT_EQ(back.checkpoint.inflations.size(), f.checkpoint.inflations.size());
   EXPECT_EQ(back.checkpoint.inflations[4], f.checkpoint.inflations[4]);
   EXPECT_EQ(back.checkpoint.inflations[3].size(), 0);
@@ -73,6 +75,7 @@ TEST(Checkpoint, TrackingStateRoundTrips) {
   EXPECT_EQ(a.Refine(3), b.Refine(3));
   EXPECT_EQ(a.x(), b.x());  // the inflation is used by the passes, identically
   EXPECT_EQ(b.Checkpoint().second_look_onset, 4);
+  EXPECT_TRUE(b.Checkpoint().second_look_alternatives);
   // A pending look at a pose without a release (or beyond the history) is refused, named.
   for (const int bad : {3, 12, -2}) {
     identification::EkfCheckpoint c = back.checkpoint;
@@ -85,6 +88,17 @@ TEST(Checkpoint, TrackingStateRoundTrips) {
     }
   }
   std::string text = CheckpointText(f);
+  {  // not a boolean: refused, named
+    std::string t = text;
+    t.replace(t.find("\"second_look_alternatives\":true"), 31, "\"second_look_alternatives\":2");
+    try {
+      ParseCheckpoint(t);
+      FAIL() << "no exception";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find("second_look_alternatives"), std::string::npos)
+          << e.what();
+    }
+  }
   text.replace(text.find("reconverging"), 12, "wandering");
   try {
     ParseCheckpoint(text);

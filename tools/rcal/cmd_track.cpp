@@ -112,16 +112,7 @@ std::vector<TrackRow> TrackCell(cell::OnlineIdentification& id,
         row.nis = u.result.nis;
         row.accepted = u.result.accepted;
         if (!u.result.accepted) row.rejected = u.result.reason;
-        if (u.result.change) {
-          row.changed = identification::ChangeNames(id.model(), *u.result.change);
-          const auto& st = u.result.change->step;
-          row.steps.assign(st.data(), st.data() + st.size());
-        }
-        if (u.result.reattributed) {
-          row.renamed = identification::ChangeNames(id.model(), *u.result.reattributed);
-          const auto& st = u.result.reattributed->step;
-          row.renamed_steps.assign(st.data(), st.data() + st.size());
-        }
+        identification::RecordChanges(id.model(), u.result, row);
       }
       if (out.held) row.rejected = "held for the set-up guess";
       if (!std::isnan(row.nis) && cell::WatchDue(id, watch)) {  // after the row's EKF update
@@ -250,9 +241,18 @@ int RunData(const Options& o) {
   for (size_t k = 0; k < rows.size(); ++k) {
     if (rows[k].changed.empty()) continue;
     change_rows.push_back(k);
-    json steps = json::array();
-    for (size_t i = 0; i < rows[k].changed.size(); ++i)
-      steps.push_back({{"name", rows[k].changed[i]}, {"step", rows[k].steps[i]}});
+    // Each name with its step [m | rad], and its probability when the names are alternatives.
+    const auto named = [](const std::vector<std::string>& names, const std::vector<double>& step,
+                          const std::vector<double>& probability) {
+      json out = json::array();
+      for (size_t i = 0; i < names.size(); ++i) {
+        json e = {{"name", names[i]}, {"step", step[i]}};
+        if (i < probability.size()) e["probability"] = probability[i];
+        out.push_back(e);
+      }
+      return out;
+    };
+    const json steps = named(rows[k].changed, rows[k].steps, rows[k].probability);
     int reconverged = -1, poses = 0;
     for (size_t j = k + 1; j < rows.size() && reconverged < 0; ++j) {
       if (rows[j].test) continue;
@@ -265,10 +265,9 @@ int RunData(const Options& o) {
     for (size_t j = k + 1; j < rows.size(); ++j) {
       if (!rows[j].changed.empty()) break;
       if (rows[j].renamed.empty()) continue;
-      json renamed = json::array();
-      for (size_t i = 0; i < rows[j].renamed.size(); ++i)
-        renamed.push_back({{"name", rows[j].renamed[i]}, {"step", rows[j].renamed_steps[i]}});
-      c["second_look"] = {{"row", data.samples[j].row}, {"changed", renamed}};
+      c["second_look"] = {
+          {"row", data.samples[j].row},
+          {"changed", named(rows[j].renamed, rows[j].renamed_steps, rows[j].renamed_probability)}};
     }
     if (std::isfinite(data.samples[k].time)) c["time_s"] = data.samples[k].time;
     if (reconverged > 0) c["reconverged_after_poses"] = reconverged;
@@ -402,6 +401,8 @@ int RunSweep(const Options& o) {
                         {"named", r.named},
                         {"named_at_detection", r.named_at_detection},
                         {"named_right_at_detection", r.named_right_at_detection},
+                        {"alternatives_at_detection", r.alternatives_at_detection},
+                        {"right_among_alternatives", r.right_among_alternatives},
                         {"detected_within_5", r.detected_within_oracle_poses},
                         {"oracle_power_5", r.oracle_power},
                         {"oracle_power_30", r.oracle_power_after},

@@ -200,6 +200,12 @@ int Run(const Options& o) {
             std::snprintf(b, sizeof b, " %s %+.3f %s", name.c_str(), s.changed_step[i] * 1e3,
                           angle ? "mrad" : "mm");
             status += b;
+            // Alternatives (the poses could not tell which stepped): each with its probability.
+            if (static_cast<size_t>(i) < s.changed_probability.size() &&
+                s.changed_probability[i] < 1) {
+              std::snprintf(b, sizeof b, " (p %.2f)", s.changed_probability[i]);
+              status += b;
+            }
           }
         }
         // The effect parameters identified live (ekf_identifier --effects), SI with their units.

@@ -141,6 +141,14 @@ std::vector<TrackSweepResult> RunTrackSweep(const TrackSweepArm& arm, const Trac
           right = kind == 0 ? (!c.joints.empty() && c.joints[0] == joint_stepped)
                             : (!c.parameters.empty() && c.parameters[0] == param_stepped);
           if (first) right_at_detection = right;
+          if (first && !c.probability.empty()) {
+            ++r.alternatives_at_detection;
+            for (size_t i = 0; i < c.joints.size(); ++i)
+              if (kind == 0 ? c.joints[i] == joint_stepped : c.parameters[i] == param_stepped) {
+                ++r.right_among_alternatives;
+                break;
+              }
+          }
           named.clear();
           for (const std::string& n : identification::ChangeNames(run.model, c))
             named += (named.empty() ? "" : ",") + n;

@@ -47,7 +47,10 @@ struct TrackSweepResult {
   std::vector<int> delays;  ///< poses from the step to its detection (1: the first)
   int named_right = 0;      ///< detected and the right joint / length named (after the second look)
   int named_right_at_detection = 0;  ///< the same as named by the detection
-  std::vector<double> recovery;      ///< error 30 poses after / error before the step
+  /// Detections that named alternatives (DetectedChange::probability), and of those, the ones
+  /// whose alternatives held the right joint / length.
+  int alternatives_at_detection = 0, right_among_alternatives = 0;
+  std::vector<double> recovery;  ///< error 30 poses after / error before the step
   std::vector<double> error_before_m, error_after_m;
   int false_alarms = 0;              ///< unchanged-arm runs: changes raised
   long quiet_poses = 0;              ///< unchanged-arm poses run

@@ -322,8 +322,10 @@ std::vector<kinematics::Effect> OnlineIdentification::SwitchIn(
           if (from[i] >= 0 && from[j] >= 0) w(i, j) = old.inflations[h](from[i], from[j]);
     }
     // The release awaiting its second look stays pending at its pose.
-    if (in_history && static_cast<int>(h) == old.second_look_onset)
+    if (in_history && static_cast<int>(h) == old.second_look_onset) {
       c.second_look_onset = static_cast<int>(c.history.size());
+      c.second_look_alternatives = old.second_look_alternatives;
+    }
     if (in_history) ++h;
     c.history.push_back(p.z);
     c.contexts.push_back(p.context);

@@ -50,6 +50,64 @@ double Glr(const Eigen::MatrixXd& N, const Eigen::VectorXd& b, const std::vector
 
 }  // namespace
 
+std::vector<int> StepAlternatives(const Eigen::MatrixXd& N, const Eigen::VectorXd& b,
+                                  const std::vector<int>& same_change, double probability,
+                                  int max_columns, std::vector<double>* column_probability,
+                                  Eigen::VectorXd* step, Eigen::VectorXd* sigma) {
+  const int n = static_cast<int>(N.cols());
+  if (N.rows() != n || b.size() != n)
+    throw std::invalid_argument("StepAlternatives: N is " + std::to_string(N.rows()) + "×" +
+                                std::to_string(n) + ", b has " + std::to_string(b.size()));
+  if (!same_change.empty() && static_cast<int>(same_change.size()) != n)
+    throw std::invalid_argument("StepAlternatives: same_change has " +
+                                std::to_string(same_change.size()) + " labels for " +
+                                std::to_string(n) + " columns");
+  const double tiny = 1e-12 * std::max(N.trace(), 0.0);
+  std::vector<int> order;
+  std::vector<double> g(n, 0.0);
+  for (int j = 0; j < n; ++j)
+    if (N(j, j) > tiny && N(j, j) > 0) {
+      g[j] = b(j) * b(j) / N(j, j);
+      order.push_back(j);
+    }
+  std::stable_sort(order.begin(), order.end(), [&](int i, int j) { return g[i] > g[j]; });
+  // One hypothesis per change: a column that is another one's change under another name, or
+  // exactly parallel to it, counts once.
+  std::vector<int> distinct;
+  for (int j : order) {
+    bool twin = false;
+    for (int i : distinct)
+      twin = twin ||
+             (!same_change.empty() && same_change[i] >= 0 && same_change[i] == same_change[j]) ||
+             std::abs(N(i, j)) > (1 - 1e-9) * std::sqrt(N(i, i) * N(j, j));
+    if (!twin) distinct.push_back(j);
+  }
+  std::vector<int> out;
+  if (distinct.empty()) return out;
+  // p_j = exp(g_j/2) / Σ exp(g_i/2), summed from the largest (log-sum-exp).
+  double log_sum = 0;
+  for (int j : distinct) log_sum += std::exp(0.5 * (g[j] - g[distinct[0]]));
+  log_sum = 0.5 * g[distinct[0]] + std::log(log_sum);
+  std::vector<double> p;
+  double mass = 0;
+  for (int j : distinct) {
+    if (static_cast<int>(out.size()) >= std::max(1, max_columns)) break;
+    if (!out.empty() && mass >= probability) break;
+    out.push_back(j);
+    p.push_back(std::exp(0.5 * g[j] - log_sum));
+    mass += p.back();
+  }
+  if (column_probability) *column_probability = p;
+  const int m = static_cast<int>(out.size());
+  if (step) step->resize(m);
+  if (sigma) sigma->resize(m);
+  for (int i = 0; i < m; ++i) {
+    if (step) (*step)(i) = b(out[i]) / N(out[i], out[i]);
+    if (sigma) (*sigma)(i) = 1 / std::sqrt(N(out[i], out[i]));
+  }
+  return out;
+}
+
 StepTestResult TestForStep(const std::vector<Eigen::VectorXd>& e,
                            const std::vector<Eigen::MatrixXd>& A, const StepTestSettings& s) {
   if (e.size() != A.size())
@@ -63,6 +121,10 @@ StepTestResult TestForStep(const std::vector<Eigen::VectorXd>& e,
     if (A[k].rows() != e[k].size() || A[k].cols() != n)
       throw std::invalid_argument("TestForStep: pose " + std::to_string(k) +
                                   ": Jacobian size does not match");
+  if (!s.same_change.empty() && static_cast<int>(s.same_change.size()) != n)
+    throw std::invalid_argument("TestForStep: same_change has " +
+                                std::to_string(s.same_change.size()) + " labels for " +
+                                std::to_string(n) + " columns");
   const int onsets = L - std::max(1, s.min_poses) + 1;
   const int max_k = std::min(s.max_params, n);
   std::vector<double> threshold(max_k + 1);
@@ -76,6 +138,8 @@ StepTestResult TestForStep(const std::vector<Eigen::VectorXd>& e,
   int dims = 0;
   double best_margin = -std::numeric_limits<double>::infinity();
   int best_k = max_k + 1;
+  Eigen::MatrixXd best_N;  // N and b at the claimed single-parameter step's onset
+  Eigen::VectorXd best_b;
   // Onsets from the newest back, accumulating the poses since each.
   for (int tau = L - 1; tau >= 0; --tau) {
     N.noalias() += A[tau].transpose() * A[tau];
@@ -114,8 +178,21 @@ StepTestResult TestForStep(const std::vector<Eigen::VectorXd>& e,
         best.post_fit_chi2 = post;
         best_margin = margin;
         if (detected) best_k = k;
+        if (detected && k == 1) best_N = N, best_b = b;
       }
       if (detected) break;  // no need for more parameters at this onset
+    }
+  }
+  if (best.detected && best.columns.size() == 1 && s.naming_probability > 0) {
+    std::vector<double> p;
+    Eigen::VectorXd step, sigma;
+    const std::vector<int> alt = StepAlternatives(best_N, best_b, s.same_change,
+                                                  s.naming_probability, max_k, &p, &step, &sigma);
+    if (alt.size() > 1 && alt[0] == best.columns[0]) {
+      best.alternatives = alt;
+      best.alternative_probability = p;
+      best.alternative_step = step;
+      best.alternative_sigma = sigma;
     }
   }
   return best;

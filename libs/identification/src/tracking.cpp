@@ -25,6 +25,22 @@ double PositionError(const kinematics::KinematicModel& model, const kinematics::
   return kinematics::Residual(model, z, x).head<3>().norm();
 }
 
+void RecordChanges(const kinematics::KinematicModel& model, const EkfUpdateResult& result,
+                   TrackRow& row) {
+  if (result.change) {
+    row.changed = ChangeNames(model, *result.change);
+    row.steps.assign(result.change->step.data(),
+                     result.change->step.data() + result.change->step.size());
+    row.probability = result.change->probability;
+  }
+  if (result.reattributed) {
+    row.renamed = ChangeNames(model, *result.reattributed);
+    const Eigen::VectorXd& st = result.reattributed->step;
+    row.renamed_steps.assign(st.data(), st.data() + st.size());
+    row.renamed_probability = result.reattributed->probability;
+  }
+}
+
 std::vector<TrackRow> Track(EkfIdentifier& ekf,
                             const std::vector<kinematics::PoseMeasurement>& poses,
                             const std::vector<bool>& is_test) {
@@ -50,15 +66,7 @@ std::vector<TrackRow> Track(EkfIdentifier& ekf,
       row.accepted = r.accepted;
       row.rejected = r.reason;
       row.status = r.status;
-      if (r.change) {
-        row.changed = ChangeNames(ekf.model(), *r.change);
-        row.steps.assign(r.change->step.data(), r.change->step.data() + r.change->step.size());
-      }
-      if (r.reattributed) {
-        row.renamed = ChangeNames(ekf.model(), *r.reattributed);
-        const Eigen::VectorXd& st = r.reattributed->step;
-        row.renamed_steps.assign(st.data(), st.data() + st.size());
-      }
+      RecordChanges(ekf.model(), r, row);
     }
     rows.push_back(std::move(row));
   }

@@ -350,6 +350,8 @@ calibration_status_t ToCalibrationStatus(const identification::EkfIdentifier& ek
     const identification::DetectedChange& c = ekf.changes().back();
     msg.changed = identification::ChangeNames(ekf.model(), c);
     msg.changed_step.assign(c.step.data(), c.step.data() + c.step.size());
+    msg.changed_probability =
+        c.probability.empty() ? std::vector<double>(msg.changed.size(), 1.0) : c.probability;
     msg.num_changed = static_cast<int32_t>(msg.changed.size());
   }
   return msg;

@@ -137,6 +137,8 @@ std::string CheckpointText(const CheckpointFile& f) {
             {"small_steps", c.small_steps}};
   // The release awaiting its second look (additive key; none: no look pending).
   if (c.second_look_onset >= 0) j["second_look_onset"] = c.second_look_onset;
+  // Its directions are alternatives (additive key; none: one step along all of them).
+  if (c.second_look_onset >= 0 && c.second_look_alternatives) j["second_look_alternatives"] = true;
   // The effects of the state's model (additive key; none: geometric).
   if (!f.effects_json.empty()) j["effects"] = json::parse(f.effects_json);
   // A released change's covariance before its pose (additive key; none: no change released).
@@ -199,6 +201,12 @@ CheckpointFile ParseCheckpoint(const std::string& text) {
     if (j.contains("small_steps")) c.small_steps = At(j, "small_steps", "").get<int>();
     if (j.contains("second_look_onset"))
       c.second_look_onset = At(j, "second_look_onset", "").get<int>();
+    if (j.contains("second_look_alternatives")) {
+      const json& v = At(j, "second_look_alternatives", "");
+      if (!v.is_boolean())
+        throw std::runtime_error("checkpoint: second_look_alternatives: not true or false");
+      c.second_look_alternatives = v.get<bool>();
+    }
     if (j.contains("inflations")) {
       const json& inflations = At(j, "inflations", "");
       if (!inflations.is_array()) throw std::runtime_error("checkpoint: inflations: not an array");

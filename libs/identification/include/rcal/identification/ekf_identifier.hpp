@@ -100,6 +100,10 @@ struct EkfSettings {
   /// diluted and more parameters needed) moves on at the next pose; a real one stays.
   int change_confirmations = 2;
   int change_max_params = 3;  ///< parameters a change may name (forward selection)
+  /// A single-parameter change the poses since its onset cannot pin on one direction is released
+  /// along the fewest directions whose probability of being the one adds up to this
+  /// (change_detection.hpp, DetectedChange::probability); 0: the most likely alone.
+  double change_naming_probability = 0.95;
   /// The second look at a released change (file comment): once change_window poses have come in
   /// since its onset, the window's poses choose the change's directions again, and the release
   /// is moved to them where they explain the poses better than the ones named at detection.
@@ -147,6 +151,10 @@ struct DetectedChange {
   double glr = 0;               ///< the likelihood-ratio statistic (2 ln Λ)
   double threshold = 0;         ///< what it was compared with
   int onset_poses_ago = 0;      ///< the first changed pose, counted back from this one (0: this)
+  /// Empty: one step along all the directions. Otherwise the directions are alternatives the
+  /// poses could not tell apart (change_detection.hpp): one of them stepped, each with this
+  /// probability (most probable first), and the release covers each.
+  std::vector<double> probability;
 };
 
 struct EkfUpdateResult {
@@ -188,6 +196,9 @@ struct EkfCheckpoint {
   /// The history entry whose release awaits its second look (EkfSettings::change_second_look;
   /// its inflation non-empty), or −1: none.
   int second_look_onset = -1;
+  /// That release's directions are alternatives (DetectedChange::probability), not one step
+  /// along all of them.
+  bool second_look_alternatives = false;
 };
 
 class EkfIdentifier {
@@ -330,6 +341,7 @@ class EkfIdentifier {
   int small_steps_ = 0;
   std::vector<DetectedChange> changes_;
   long second_look_seq_ = -1;  // onset (seq) of the release awaiting its second look; −1: none
+  bool second_look_alternatives_ = false;  // that release's directions are alternatives
   // The last test's step (onset pose and parameters) and how many consecutive tests found it.
   long candidate_onset_ = -1;
   std::vector<int> candidate_params_;

@@ -21,10 +21,13 @@ struct TrackRow {
   TrackingStatus status = TrackingStatus::kConverging;  ///< after this row
   std::vector<std::string> changed;  ///< the change named at this row (parameters or "joint q")
   std::vector<double> steps;         ///< its size per name [m | rad]
+  /// Per name, the probability it is the one that stepped when the names are alternatives
+  /// (DetectedChange::probability); empty: one step along all of them.
+  std::vector<double> probability;
   /// The last change as its second look renamed it at this row (EkfSettings::
-  /// change_second_look; empty: no rename here), and its steps [m | rad].
+  /// change_second_look; empty: no rename here), its steps [m | rad] and probabilities.
   std::vector<std::string> renamed;
-  std::vector<double> renamed_steps;
+  std::vector<double> renamed_steps, renamed_probability;
   double nis = 0;         ///< fitted rows: normalised innovation squared; NaN otherwise
   bool accepted = false;  ///< fitted rows: taken by the filter
   std::string rejected;   ///< why a fitted row was refused (gate, invalid input)
@@ -33,6 +36,10 @@ struct TrackRow {
 /// Names a detected change's directions: the parameter's name, or "offset of joint NAME".
 std::vector<std::string> ChangeNames(const kinematics::KinematicModel& model,
                                      const DetectedChange& change);
+
+/// Fills the row's change and rename from an update's result (nothing when it has neither).
+void RecordChanges(const kinematics::KinematicModel& model, const EkfUpdateResult& result,
+                   TrackRow& row);
 
 /// Runs `ekf` over `poses` in order; is_test[k] marks poses never fitted (empty: none).
 /// Throws std::invalid_argument when is_test has the wrong size.

@@ -6,11 +6,11 @@
 // parameters outside the identified set: the set-up guess the EKF started from) and each
 // measurement's `marker` slot. Files of schema 2 (no x_fixed: the identifier's own) and 1 (no
 // `held` either) still load. Additive keys (no schema change): the tracking `status`,
-// `small_steps`, `inflations` and `second_look_onset`, and for an extended identifier
-// (ekf_identifier --effects) the `contexts` of its poses and each held pose's `context`
-// (temperature_c, payload_kg, time_s: null when unknown; dq_sign), and `effects`: the effects of
-// the model the state belongs to, as analysis.json entries (an identifier whose discrepancy watch
-// switched effects in resumes with them; absent: the geometric model).
+// `small_steps`, `inflations`, `second_look_onset` and `second_look_alternatives`, and for an
+// extended identifier (ekf_identifier --effects) the `contexts` of its poses and each held pose's
+// `context` (temperature_c, payload_kg, time_s: null when unknown; dq_sign), and `effects`: the
+// effects of the model the state belongs to, as analysis.json entries (an identifier whose
+// discrepancy watch switched effects in resumes with them; absent: the geometric model).
 #pragma once
 
 #include <cstdint>
