@@ -356,21 +356,25 @@ class Identifier {
 
   // After each EKF update (also each held pose applied when the guess completes).
   void Applied(const cell::OnlineIdentification::Update& u) {
-    const auto& ekf = id_.ekf();
+    // Not held across StartWatch: a finished watch it collects may switch effects in, which
+    // replaces the identifier (a reference kept from before it dangled: ekf_identifier crashed
+    // on the pose after a live switch-in whose watch had finished by then).
+    const identification::EkfIdentifier* ekf = &id_.ekf();
     if (!u.result.accepted)
       Reject("pose " + std::to_string(u.pose_index) + ": " + u.result.reason);
     else
       SaveState();
-    health_.Activity(identification::TrackingStatusName(ekf.status()));  // HEALTH says it too
+    health_.Activity(identification::TrackingStatusName(ekf->status()));  // HEALTH says it too
     transport::StatusFigures fig;
     fig.last_nis = u.result.nis;
     // Converged: enough equations for the unknowns, and the last pose moved no parameter by more
     // than a tenth of its σ.
-    fig.converged = ekf.accepted() * u.dimension >= 2 * static_cast<int>(id_.base().size()) &&
+    fig.converged = ekf->accepted() * u.dimension >= 2 * static_cast<int>(id_.base().size()) &&
                     u.max_step_sigma < 0.1;
     Publish(u.utime, fig);
     PublishNextPoses(u.utime);
     StartWatch(u);
+    ekf = &id_.ekf();  // the watch may have switched effects in: the identifier now
     health_.Tick(u.utime, t_);
     if (u.result.change) {  // issue 15: named, released, re-converging (CALIBRATION_STATUS too)
       const auto names = identification::ChangeNames(id_.model(), *u.result.change);
@@ -391,14 +395,14 @@ class Identifier {
     // Poses are numbered from 1 as `rcal watch` numbers them (pose_index counts from 0); the
     // effect parameters (--effects) with their σ.
     std::string effects;
-    const auto params = ekf.extended_model().EffectParameters();
+    const auto params = ekf->extended_model().EffectParameters();
     for (size_t k = 0; k < params.size(); ++k)
       effects += fmt::format("; {} {:.4g} ± {:.2g} {}", params[k].name,
-                             ekf.e()(static_cast<Eigen::Index>(k)),
-                             ekf.sigma_e()(static_cast<Eigen::Index>(k)), params[k].unit);
+                             ekf->e()(static_cast<Eigen::Index>(k)),
+                             ekf->sigma_e()(static_cast<Eigen::Index>(k)), params[k].unit);
     spdlog::info("pose {} (pose_index {}): {} (accepted {}, rejected {}, NIS {:.2f}){}",
                  u.pose_index + 1, u.pose_index, u.result.accepted ? "accepted" : "rejected",
-                 ekf.accepted(), ekf.rejected(), u.result.nis, effects);
+                 ekf->accepted(), ekf->rejected(), u.result.nis, effects);
   }
 
   // The discrepancy watch on a copy of the window, on a worker thread (one at a time).
