@@ -64,6 +64,23 @@ TEST(BatchLm, RecoversFromPositionsOnly) {
   }
 }
 
+// Nothing to identify (the set-up fit of a cell without set-up frames, which the discrepancy
+// watch runs live): the start is the solution and the cost is the start's, Σ rᵀR⁻¹r.
+TEST(BatchLm, NoParametersLeaveTheStartAndItsCost) {
+  const Scenario s = MakeScenario(Grb3016(), sim::PoseNoise{}, 9);
+  const LmResult r = BatchLm(s.model, {}).Solve(s.cal, s.model.Nominal());
+  EXPECT_EQ(r.x, s.model.Nominal());
+  double cost = 0;
+  for (const auto& m : s.cal) {
+    const Eigen::VectorXd res = kinematics::Residual(s.model, m, s.model.Nominal());
+    cost += res.dot(m.covariance.llt().solve(res));
+  }
+  EXPECT_GT(cost, 0);
+  EXPECT_NEAR(r.cost, cost, 1e-9 * cost);
+  EXPECT_NEAR(r.initial_cost, cost, 1e-9 * cost);
+  EXPECT_EQ(r.sigma, Eigen::VectorXd::Zero(s.model.num_params()));
+}
+
 TEST(BatchLm, RejectsInvalidMeasurementNamingIt) {
   const auto model = Grb3016();
   Scenario s = MakeScenario(model, sim::PoseNoise{}, 5, 10);

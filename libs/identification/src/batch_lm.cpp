@@ -22,7 +22,9 @@ void Stack(const kinematics::KinematicModel& model, const std::vector<int>& iden
     const int d = m.dimension();
     Eigen::LLT<Eigen::MatrixXd> llt(m.covariance);
     const Eigen::MatrixXd L = llt.matrixL();
-    if (J_w) {
+    // No parameters (a set-up fit of a cell without set-up frames): no Jacobian to whiten (a
+    // zero-column block has no data; solving into it bound a reference to null, UBSan).
+    if (J_w && !identified.empty()) {
       kinematics::ResidualAndJacobian(model, m, x, identified, r, H);
       J_w->middleRows(row, d) = L.triangularView<Eigen::Lower>().solve(H);
     } else {
