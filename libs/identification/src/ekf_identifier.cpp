@@ -5,7 +5,6 @@
 #include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
-#include <functional>
 #include <stdexcept>
 
 #include "rcal/identification/change_detection.hpp"
@@ -447,14 +446,14 @@ namespace {
 
 // Per candidate column (< ng: an identified parameter; ng + j: joint j's offset), the joint whose
 // offset it is: joint j for its own column, and for a parameter the joint whose column it agrees
-// with over the window's poses (|cos| > 0.99: θ_j on a D–H arm); −1 otherwise. dot(a, b): the
-// columns' inner product over the poses.
-std::vector<int> JointOfColumns(int ng, int nq, const std::function<double(int, int)>& dot) {
+// with over the window's poses (|cos| > 0.99: θ_j on a D–H arm); −1 otherwise. W: the columns'
+// inner products over the poses (ng + nq square).
+std::vector<int> JointOfColumns(int ng, int nq, const Eigen::MatrixXd& W) {
   std::vector<int> joint(ng + nq, -1);
   for (int j = 0; j < nq; ++j) joint[ng + j] = j;
   for (int a = 0; a < ng; ++a)
     for (int j = 0; j < nq; ++j) {
-      const double ab = dot(a, ng + j), aa = dot(a, a), bb = dot(ng + j, ng + j);
+      const double ab = W(a, ng + j), aa = W(a, a), bb = W(ng + j, ng + j);
       if (aa > 0 && bb > 0 && std::abs(ab) > 0.99 * std::sqrt(aa * bb)) joint[a] = j;
     }
   return joint;
@@ -503,11 +502,9 @@ std::optional<DetectedChange> EkfIdentifier::TestForChange(bool stuck) {
   ts.fit_probability = settings_.change_fit_probability;
   ts.naming_probability = settings_.change_naming_probability;
   // A joint's offset and the parameter that is it are one change under two names.
-  const std::vector<int> joint_of = JointOfColumns(ng, nq, [&](int a, int b) {
-    double ab = 0;
-    for (const Eigen::MatrixXd& Ak : A) ab += Ak.col(a).dot(Ak.col(b));
-    return ab;
-  });
+  Eigen::MatrixXd W = Eigen::MatrixXd::Zero(ng + nq, ng + nq);
+  for (const Eigen::MatrixXd& Ak : A) W.noalias() += Ak.transpose() * Ak;
+  const std::vector<int> joint_of = JointOfColumns(ng, nq, W);
   ts.same_change = joint_of;
   const StepTestResult t = TestForStep(e, A, ts);
   if (!t.detected) {
@@ -662,19 +659,14 @@ std::optional<DetectedChange> EkfIdentifier::SecondLook(size_t k0) {
     const Eigen::MatrixXd Qc = q.householderQ() * Eigen::MatrixXd::Identity(cols.rows(), q.rank());
     return (Qc.transpose() * b_perp).squaredNorm();
   };
-  // A candidate's column over the window's poses (not the prior rows), and the joint each
-  // candidate is the offset of over them.
-  const auto pose_column = [&](int k) -> Eigen::VectorXd {
-    return k < ng ? Eigen::VectorXd(G.col(k).tail(rows - n))
-                  : Eigen::VectorXd(Cq.col(k - ng).tail(rows - n));
-  };
-  const std::vector<int> joint_of = JointOfColumns(
-      ng, nq, [&](int a, int bcol) { return pose_column(a).dot(pose_column(bcol)); });
+  // The joint each candidate is the offset of, over the window's poses (not the prior rows).
+  Eigen::MatrixXd pose_columns(rows - n, nc);
+  pose_columns << G.bottomRows(rows - n).leftCols(ng), Cq.bottomRows(rows - n);
+  const std::vector<int> joint_of = JointOfColumns(ng, nq, pose_columns.transpose() * pose_columns);
   DetectedChange c;
   c.threshold = changes_.empty() ? 0.0 : changes_.back().threshold;
   c.onset_poses_ago = static_cast<int>(history_.size()) - 1 - static_cast<int>(k0);
   std::vector<int> chosen;
-  Eigen::MatrixXd chosen_cols(rows, 0);
   const auto direction = [&](int col) {  // a candidate's state direction
     Eigen::VectorXd u = Eigen::VectorXd::Zero(n);
     if (col < ng)
@@ -704,9 +696,10 @@ std::optional<DetectedChange> EkfIdentifier::SecondLook(size_t k0) {
     if (chosen.size() == 1) c.probability.clear();  // one step along it
     c.step = step;
     c.step_sigma = sigma;
-    c.glr = step.size() > 0 ? step(0) * step(0) / (sigma(0) * sigma(0)) : 0.0;
+    c.glr = step(0) * step(0) / (sigma(0) * sigma(0));  // the likeliest's 2 ln Λ
     c.directions = U;
   } else {
+    Eigen::MatrixXd chosen_cols(rows, 0);
     const Eigen::MatrixXd released_cols = step_columns(k0, released);
     const double gain_released = explained(released_cols - Q * (Q.transpose() * released_cols));
     // Forward selection of as many directions among the candidates.
