@@ -30,6 +30,38 @@ namespace {
 
 namespace fs = std::filesystem;
 
+// `rcal track --sweep --random-arms N` runs the sweep on arms nothing was tuned on: each random
+// D–H arm as full poses (with an IMU frame to identify) and as positions only, the arm named in
+// the JSON; --arm with --random-arms, and seeds past 999, are refused naming the option.
+TEST(Track, TheSweepRunsOnRandomArmsAndFurtherSeeds) {
+  const fs::path dir = fs::temp_directory_path() / "rcal_track_sweep_random";
+  fs::remove_all(dir);
+  const auto r = testing::RunRcal(
+      "track --sweep --random-arms 1 --first-arm 7 --seeds 1 "
+      "--first-seed 3 --quiet-poses 0 --jobs 2 --out " +
+      dir.string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const auto j = nlohmann::json::parse(io::ReadFile(dir / "track_sweep.json"));
+  ASSERT_EQ(j["results"].size(), 4u);  // full pose, positions × joint offset, link length
+  for (size_t i = 0; i < 4; ++i) {
+    const auto& res = j["results"][i];
+    EXPECT_EQ(res["arm"], "random_dh_7");
+    EXPECT_EQ(res["full_pose"], i < 2);
+    EXPECT_EQ(res["first_seed"], 3);
+    EXPECT_EQ(res["seeds"], 1);
+  }
+  // Seed 3 steps joint 3 % 6 of the arm.
+  EXPECT_EQ(j["results"][0]["stepped"][0], "j4");
+  const auto both = testing::RunRcal(
+      "track --sweep --random-arms 1 --arm config/robots/ur10.urdf --out " + dir.string());
+  EXPECT_NE(both.exit_code, 0);
+  EXPECT_NE(both.output.find("--random-arms"), std::string::npos) << both.output;
+  const auto late =
+      testing::RunRcal("track --sweep --first-seed 995 --seeds 10 --out " + dir.string());
+  EXPECT_NE(late.exit_code, 0);
+  EXPECT_NE(late.output.find("--first-seed"), std::string::npos) << late.output;
+}
+
 TEST(Track, TraceAndJsonOfAStepInTimeOrder) {
   const fs::path dir = fs::temp_directory_path() / "rcal_track_test";
   fs::remove_all(dir);

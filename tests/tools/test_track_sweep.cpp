@@ -93,5 +93,38 @@ TEST(TrackSweep, TheIdentifierNeverDetectsMoreOftenThanTheBestPossibleTest) {
   EXPECT_GT(results[1].oracle_power[0], 0.999);
 }
 
+// --first-seed runs further seeds of the same experiment: seeds 2 and 3 run from first_seed 2 are
+// exactly seeds 2 and 3 of a run from 0 (the held-out figures are the same runs, continued), and
+// seeds outside 0 … 999, where the per-kind seed ranges would meet, are refused.
+TEST(TrackSweep, TheFirstSeedContinuesTheSameRuns) {
+  TrackSweepArm arm{"grb3016", Grb3016(), false};
+  TrackSweepSettings all, later;
+  all.seeds = 4;
+  all.quiet_poses = later.quiet_poses = 0;
+  later.seeds = 2;
+  later.first_seed = 2;
+  const auto a = RunTrackSweep(arm, all), b = RunTrackSweep(arm, later);
+  ASSERT_EQ(a.size(), 2u);
+  ASSERT_EQ(b.size(), 2u);
+  for (int kind = 0; kind < 2; ++kind) {
+    ASSERT_EQ(a[kind].seeds, 4);
+    ASSERT_EQ(b[kind].seeds, 2);
+    for (int k = 0; k < 2; ++k) {
+      EXPECT_EQ(b[kind].stepped[k], a[kind].stepped[k + 2]);
+      EXPECT_EQ(b[kind].seed_delay[k], a[kind].seed_delay[k + 2]);
+      EXPECT_EQ(b[kind].named[k], a[kind].named[k + 2]);
+      EXPECT_EQ(b[kind].recovery[k], a[kind].recovery[k + 2]);
+    }
+    // Another seed, another run: the stepped joints differ from seeds 0 and 1.
+    EXPECT_NE(b[kind].stepped[0], a[kind].stepped[0]);
+  }
+  TrackSweepSettings bad;
+  bad.quiet_poses = 0;
+  bad.first_seed = 990;  // 990 … 1009
+  EXPECT_THROW(RunTrackSweep(arm, bad), std::invalid_argument);
+  bad.first_seed = -1;
+  EXPECT_THROW(RunTrackSweep(arm, bad), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace rcal::tool

@@ -15,12 +15,12 @@
 
 #include <atomic>
 #include <functional>
-#include <future>
 #include <mutex>
 #include <nlohmann/json.hpp>
 
 #include "calibration_sweep.hpp"
 #include "command.hpp"
+#include "parallel.hpp"
 #include "plan_poses.hpp"
 #include "rcal/cell/cell_sim_yaml.hpp"
 #include "rcal/io/atomic_file.hpp"
@@ -48,19 +48,6 @@ struct Options {
   double orientation_sigma_mrad = 0.61;  // cell mode
   bool position_sigma_given = false;
 };
-
-// Runs f(i) for i in [0, n) on `jobs` threads.
-template <class F>
-void Parallel(int n, int jobs, F f) {
-  std::atomic<int> next{0};
-  const auto worker = [&] {
-    for (int i = next++; i < n; i = next++) f(i);
-  };
-  std::vector<std::future<void>> pool;
-  for (int k = 1; k < jobs; ++k) pool.push_back(std::async(std::launch::async, worker));
-  worker();
-  for (auto& p : pool) p.get();
-}
 
 void CheckCounts(const std::vector<int>& counts) {
   if (counts.empty() || !std::is_sorted(counts.begin(), counts.end()) || counts[0] < 6)

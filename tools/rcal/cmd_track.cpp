@@ -17,9 +17,10 @@
 // log's logged one, a CSV's temperature, payload, time and approach columns). The JSON lists every
 // watch (`discrepancy_watch`) and the effects identified at the end (`effects`).
 //
-// rcal track --sweep [--seeds N] [--quiet-poses N] [--out DIR]: the seeded tracking experiment
-// (track_sweep.hpp) on the shipped arms, full poses and positions only; prints the table and
-// writes DIR/track_sweep.json.
+// rcal track --sweep [--seeds N] [--first-seed S] [--quiet-poses N] [--arm FILE… | --random-arms N
+// [--first-arm A]] [--jobs J] [--out DIR]: the seeded tracking experiment (track_sweep.hpp) on the
+// shipped arms (or random D–H arms), full poses and positions only; prints the table and writes
+// DIR/track_sweep.json.
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -32,6 +33,7 @@
 #include <sstream>
 
 #include "command.hpp"
+#include "parallel.hpp"
 #include "pose_log.hpp"
 #include "rcal/cell/discrepancy_watch.hpp"
 #include "rcal/cell/online_identification.hpp"
@@ -43,6 +45,7 @@
 #include "rcal/io/pose_dataset.hpp"
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/kinematics/identifiability.hpp"
+#include "rcal/sim/random_arm.hpp"
 #include "rcal/transport/channels.hpp"
 #include "report.hpp"
 #include "robot_setup.hpp"
@@ -62,8 +65,12 @@ struct Options {
   double orientation_sigma_deg = 0.1;
   bool sweep = false;
   int seeds = 20;
+  int first_seed = 0;
   int quiet_poses = 10000;
   std::vector<std::string> arms;
+  int random_arms = 0;       // sweep: random D–H arms instead of robot files
+  unsigned first_arm = 201;  // sweep: seed of the first random arm
+  int jobs = 1;              // sweep: worker threads
   std::string out = "out/track";
   int discrepancy_every = 0;  // --cell: the watch every this many poses taken (0: none)
   bool discrepancy_switch = false;
@@ -345,69 +352,96 @@ int RunData(const Options& o) {
 }
 
 int RunSweep(const Options& o) {
-  std::vector<std::string> arms = o.arms;
-  if (arms.empty())
-    arms = {"config/robots/grb3016.yaml", "config/robots/ur10.urdf",
-            "tests/data/arms/panda_like.urdf", "tests/data/arms/kr6_like.urdf"};
+  if (o.random_arms > 0 && !o.arms.empty())
+    throw std::runtime_error("rcal track --sweep: --arm or --random-arms, not both");
+  if (o.first_seed + o.seeds > 1000)
+    throw std::runtime_error(
+        "rcal track --sweep: --first-seed + --seeds past 1000 (seeds 0 … 999)");
+  // The arms, each measured as full poses and as positions only: one task each.
+  std::vector<TrackSweepArm> tasks;
+  if (o.random_arms > 0) {
+    sim::RandomArmSettings with_imu;
+    with_imu.imu_frame = true;
+    for (int a = 0; a < o.random_arms; ++a) {
+      const unsigned seed = o.first_arm + static_cast<unsigned>(a);
+      const kinematics::KinematicModel arm = sim::RandomDhArm(seed, with_imu);
+      tasks.push_back({arm.name(), arm, true});
+      tasks.push_back({arm.name(), sim::RandomDhArm(seed), false});
+    }
+  } else {
+    std::vector<std::string> arms = o.arms;
+    if (arms.empty())
+      arms = {"config/robots/grb3016.yaml", "config/robots/ur10.urdf",
+              "tests/data/arms/panda_like.urdf", "tests/data/arms/kr6_like.urdf"};
+    for (const std::string& path : arms)
+      for (bool full : {true, false}) {
+        io::LoadedRobot robot = LoadRobotForCell(path, "", "", "auto");
+        if (full) AddOrientationFrame(robot);
+        tasks.push_back({fs::path(path).stem().string(), robot.model, full});
+      }
+  }
   TrackSweepSettings s;
   s.seeds = o.seeds;
+  s.first_seed = o.first_seed;
   s.quiet_poses = o.quiet_poses;
+  std::vector<std::vector<TrackSweepResult>> results(tasks.size());
+  Parallel(static_cast<int>(tasks.size()), o.jobs, [&](int i) {
+    results[i] = RunTrackSweep(tasks[i], s);
+    spdlog::info("{} ({}): done", tasks[i].name, tasks[i].full_pose ? "full pose" : "positions");
+  });
   json jres = json::array();
   std::printf(
       "| arm | measured | step | detected | delay median (max) [poses] | right joint/link named "
       "| detected within 5 poses: rcal / best possible | best possible within 30 "
       "| error after 30 / before, median | false alarms / poses | steady state / former filter, "
       "median |\n|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
-  for (const std::string& path : arms) {
-    for (bool full : {true, false}) {
-      io::LoadedRobot robot = LoadRobotForCell(path, "", "", "auto");
-      if (full) AddOrientationFrame(robot);
-      const TrackSweepArm arm{fs::path(path).stem().string(), robot.model, full};
-      for (const TrackSweepResult& r : RunTrackSweep(arm, s)) {
-        std::vector<double> d(r.delays.begin(), r.delays.end());
-        const double max_delay = d.empty() ? 0 : *std::max_element(d.begin(), d.end());
-        const bool quiet = r.quiet_poses > 0;
-        auto mean = [](const std::vector<double>& v) {
-          double sum = 0;
-          for (double x : v) sum += x;
-          return v.empty() ? 0.0 : sum / static_cast<double>(v.size());
-        };
-        const double pct = r.seeds ? 100.0 / r.seeds : 0.0;
-        std::printf(
-            "| %s | %s | %s | %d/%d | %.0f (%.0f) | %.0f %% | %.0f %% / %.0f %% | %.0f %% | %.2f | "
-            "%s | %s |\n",
-            r.arm.c_str(), full ? "full pose" : "positions", r.kind.c_str(), r.detected, r.seeds,
-            Median(d), max_delay, pct * r.named_right, pct * r.detected_within_oracle_poses,
-            100.0 * mean(r.oracle_power), 100.0 * mean(r.oracle_power_after), Median(r.recovery),
-            quiet ? (std::to_string(r.false_alarms) + " / " + std::to_string(r.quiet_poses)).c_str()
-                  : "",
-            quiet ? (std::to_string(Median(r.steady_ratio)).substr(0, 5)).c_str() : "");
-        std::fflush(stdout);
-        jres.push_back({{"arm", r.arm},
-                        {"full_pose", full},
-                        {"step", r.kind},
-                        {"seeds", r.seeds},
-                        {"detected", r.detected},
-                        {"delays_poses", r.delays},
-                        {"named_right", r.named_right},
-                        {"recovery_ratio", r.recovery},
-                        {"error_before_m", r.error_before_m},
-                        {"error_after_m", r.error_after_m},
-                        {"false_alarms", r.false_alarms},
-                        {"quiet_poses", r.quiet_poses},
-                        {"steady_ratio", r.steady_ratio},
-                        {"stepped", r.stepped},
-                        {"seed_delay", r.seed_delay},
-                        {"named", r.named},
-                        {"named_at_detection", r.named_at_detection},
-                        {"named_right_at_detection", r.named_right_at_detection},
-                        {"alternatives_at_detection", r.alternatives_at_detection},
-                        {"right_among_alternatives", r.right_among_alternatives},
-                        {"detected_within_5", r.detected_within_oracle_poses},
-                        {"oracle_power_5", r.oracle_power},
-                        {"oracle_power_30", r.oracle_power_after},
-                        {"oracle_false_alarm", s.oracle_false_alarm}});
-      }
+  for (size_t i = 0; i < tasks.size(); ++i) {
+    const bool full = tasks[i].full_pose;
+    for (const TrackSweepResult& r : results[i]) {
+      std::vector<double> d(r.delays.begin(), r.delays.end());
+      const double max_delay = d.empty() ? 0 : *std::max_element(d.begin(), d.end());
+      const bool quiet = r.quiet_poses > 0;
+      auto mean = [](const std::vector<double>& v) {
+        double sum = 0;
+        for (double x : v) sum += x;
+        return v.empty() ? 0.0 : sum / static_cast<double>(v.size());
+      };
+      const double pct = r.seeds ? 100.0 / r.seeds : 0.0;
+      std::printf(
+          "| %s | %s | %s | %d/%d | %.0f (%.0f) | %.0f %% | %.0f %% / %.0f %% | %.0f %% | %.2f | "
+          "%s | %s |\n",
+          r.arm.c_str(), full ? "full pose" : "positions", r.kind.c_str(), r.detected, r.seeds,
+          Median(d), max_delay, pct * r.named_right, pct * r.detected_within_oracle_poses,
+          100.0 * mean(r.oracle_power), 100.0 * mean(r.oracle_power_after), Median(r.recovery),
+          quiet ? (std::to_string(r.false_alarms) + " / " + std::to_string(r.quiet_poses)).c_str()
+                : "",
+          quiet ? (std::to_string(Median(r.steady_ratio)).substr(0, 5)).c_str() : "");
+      std::fflush(stdout);
+      jres.push_back({{"arm", r.arm},
+                      {"full_pose", full},
+                      {"step", r.kind},
+                      {"seeds", r.seeds},
+                      {"detected", r.detected},
+                      {"delays_poses", r.delays},
+                      {"named_right", r.named_right},
+                      {"recovery_ratio", r.recovery},
+                      {"error_before_m", r.error_before_m},
+                      {"error_after_m", r.error_after_m},
+                      {"false_alarms", r.false_alarms},
+                      {"quiet_poses", r.quiet_poses},
+                      {"steady_ratio", r.steady_ratio},
+                      {"stepped", r.stepped},
+                      {"seed_delay", r.seed_delay},
+                      {"named", r.named},
+                      {"named_at_detection", r.named_at_detection},
+                      {"named_right_at_detection", r.named_right_at_detection},
+                      {"alternatives_at_detection", r.alternatives_at_detection},
+                      {"right_among_alternatives", r.right_among_alternatives},
+                      {"detected_within_5", r.detected_within_oracle_poses},
+                      {"oracle_power_5", r.oracle_power},
+                      {"oracle_power_30", r.oracle_power_after},
+                      {"oracle_false_alarm", s.oracle_false_alarm},
+                      {"first_seed", s.first_seed}});
     }
   }
   io::AtomicWriteFile(fs::path(o.out) / "track_sweep.json", json{{"results", jres}}.dump(1) + "\n");
@@ -448,11 +482,26 @@ const RegisterCommand kTrack(
                    "--cell: switch what the watch suspects in (ekf_identifier "
                    "--discrepancy-switch)");
       sub.add_flag("--sweep", o->sweep, "run the seeded tracking sweep instead (no DATA)");
-      sub.add_option("--seeds", o->seeds, "sweep: seeds per arm and step")->capture_default_str();
+      sub.add_option("--seeds", o->seeds, "sweep: seeds per arm and step")
+          ->capture_default_str()
+          ->check(CLI::Range(1, 1000));
+      sub.add_option("--first-seed", o->first_seed,
+                     "sweep: the first seed (the README's table: 0; another range gives figures on "
+                     "runs nothing was chosen on)")
+          ->capture_default_str()
+          ->check(CLI::Range(0, 999));
       sub.add_option("--quiet-poses", o->quiet_poses,
                      "sweep: poses of the unchanged arm per seed (false alarms)")
           ->capture_default_str();
       sub.add_option("--arm", o->arms, "sweep: robot files (default: four shipped arms)");
+      sub.add_option("--random-arms", o->random_arms,
+                     "sweep: this many random D–H arms (sim/random_arm.hpp) instead of robot files")
+          ->check(CLI::Range(0, 1000));
+      sub.add_option("--first-arm", o->first_arm, "sweep: seed of the first random arm")
+          ->capture_default_str();
+      sub.add_option("--jobs", o->jobs, "sweep: worker threads (the figures do not depend on it)")
+          ->capture_default_str()
+          ->check(CLI::Range(1, 256));
       sub.add_option("--out", o->out, "sweep: output folder")->capture_default_str();
       return [o]() {
         if (o->sweep) return RunSweep(*o);

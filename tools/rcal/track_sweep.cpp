@@ -3,6 +3,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 
 #include "rcal/identification/change_detection.hpp"
 #include "rcal/identification/tracking.hpp"
@@ -98,7 +99,9 @@ std::vector<TrackSweepResult> RunTrackSweep(const TrackSweepArm& arm, const Trac
   joint.kind = "joint offset";
   length.kind = "link length";
   const int nq = arm.model.num_joints();
-  for (int seed = 0; seed < s.seeds; ++seed) {
+  if (s.first_seed < 0 || s.seeds < 0 || s.first_seed + s.seeds > 1000)
+    throw std::invalid_argument("track sweep: seeds must lie in 0 … 999");
+  for (int seed = s.first_seed; seed < s.first_seed + s.seeds; ++seed) {
     for (int kind = 0; kind < 2; ++kind) {
       TrackSweepResult& r = kind == 0 ? joint : length;
       Run run(arm, 1000u * static_cast<unsigned>(kind + 1) + static_cast<unsigned>(seed));

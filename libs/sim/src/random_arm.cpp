@@ -28,6 +28,7 @@ kinematics::KinematicModel RandomDhArm(std::uint64_t seed, const RandomArmSettin
     b.DhLink(a, alpha, hayati ? 0.0 : d, 0.0, joint, hayati);
   }
   b.MarkerOffset(Eigen::Vector3d(0.05, 0.0, 0.1));
+  if (s.imu_frame) b.ImuMounting(Eigen::Vector3d::Zero());
   return b.Build();
 }
 

@@ -16,6 +16,9 @@ struct RandomArmSettings {
   double min_range = 2.0;  ///< joint limits ±U(min_range, max_range) [rad]
   double max_range = 3.0;
   double parallel_share = 0.25;  ///< chance that a twist α is 0 (axes i, i+1 parallel)
+  /// A flange → IMU rotation to identify (zero nominal), for full-pose measurements. Drawing
+  /// the arm does not depend on it: the same seed gives the same geometry either way.
+  bool imu_frame = false;
 };
 
 /// A revolute D–H arm "random_dh_SEED": twists α ∈ {−π/2, π/2} (or 0 with parallel_share; never
