@@ -10,9 +10,10 @@
 // DefaultBankModels; --bank-evidence-tau): the paper's white-jerk filter and the
 // accelerometer-driven one (the accelerometer drives the acceleration state, a world-frame
 // acceleration bias takes the orientation's error), both with an accelerometer noise that adapts
-// to the position innovations, and an accelerometer χ² gate that refuses taps (--accel-gate).
-// rcal position-kf-sweep chose it: closer than the paper's filter on every one of 96 simulated
-// and real cases (README). --motion-model white-jerk (the paper's
+// to the position innovations, an accelerometer χ² gate that refuses taps (--accel-gate), and
+// each taking back the accelerometer a position sample shows wrong (a tap or shock the gate let
+// in; --accel-rollback-span). rcal position-kf-sweep chose it: closer than the paper's filter on
+// every one of 96 simulated and real cases (README). --motion-model white-jerk (the paper's
 // filter alone) or accelerometer-driven run one model, with the noise options.
 // The filter works in the position sensor's frame W: accelerations are turned from the IMU's earth
 // frame by R_WE, the cell's earth_from_world (given as a prior or fixed) until the identifier's
@@ -106,6 +107,11 @@ int main(int argc, char** argv) {
                  "positions'); 0 = off; default: the bank's 16.27 (rcal position-kf-sweep), off "
                  "for one motion model")
       ->check(CLI::Range(0.0, 1e6));
+  app.add_option("--accel-rollback-span", settings.accel_rollback_span,
+                 "how far back a position sample may take back the accelerometer it shows wrong "
+                 "(a tap or shock the gate let in) [s]; 0 = off")
+      ->check(CLI::Range(0.0, 10.0))
+      ->capture_default_str();
   app.add_option("--orientation-wait", orientation_wait,
                  "IMU sensor time a position sample waits for a stopped orientation stream [s]")
       ->check(CLI::Range(0.0, 3600.0))
@@ -265,8 +271,11 @@ int main(int argc, char** argv) {
           filters.size() > 1
               ? fmt::format("model {} (weight {:.3f}): ", i + 1, node.bank().probabilities()[i])
               : std::string();
-      spdlog::info("{}position samples refused by the χ² gate {}, accelerometer samples {}", which,
-                   f.counters().position_rejected, f.counters().accel_rejected);
+      spdlog::info(
+          "{}position samples refused by the χ² gate {}, accelerometer samples {}; accelerometer "
+          "taken back {} times ({} samples)",
+          which, f.counters().position_rejected, f.counters().accel_rejected,
+          f.counters().accel_rollbacks, f.counters().accel_rolled_back);
       if (bank.models[i].accel_bias_walk > 0.0) {
         const Eigen::Vector3d b_W = f.accel_bias_W();
         spdlog::info(

@@ -877,14 +877,17 @@ TEST(RcalCli, DetectionSweepImuRunsEveryCell) {
 }
 
 // position_kf's settings from their sweep, small: the demo cell (8 simulated cases, one seed)
-// and BROAD's fast-translation trial 16 (real IMU, optical truth). On the simulated cases the
-// minimax is the accelerometer-driven filter with a bias state and a constant noise, better than
-// the paper's filter on every case, and it runs off on the real trial; with the real trial in,
-// the accelerometer-driven filter's own minimax takes the adaptive accelerometer noise
-// (position_kf.hpp), and the overall minimax is the bank of both models (position_kf_bank.hpp),
-// better than the paper's filter on every case, the real one included (seen: 0.70×), and better
-// than the accelerometer-driven filter alone (0.85×).
-TEST(RcalCli, PositionKfSweepChoosesTheBankOnceRealDataRunsTheConstantNoiseOff) {
+// and BROAD's fast-translation trial 16 and tapping trial 24 (real IMU, optical truth). On the
+// simulated cases the minimax is the accelerometer-driven filter with a bias state and a constant
+// noise, better than the paper's filter on every case, and it runs off on the real trials; with
+// them in, the accelerometer-driven filter's own minimax takes the adaptive accelerometer noise
+// (position_kf.hpp), and both it and the bank of both models (position_kf_bank.hpp) are better
+// than the paper's filter on every case, the real ones included. (Which of the two is the
+// minimax here depends on the rollback: before it the bank, 0.70×; with it the
+// accelerometer-driven filter, 0.858× against the bank's 0.890×, whose gate this sweep then
+// prefers off, 0.890 against 0.938 at 16.27. The full sweep, 96 cases, still chooses the bank:
+// README.)
+TEST(RcalCli, PositionKfSweepTakesTheAdaptiveNoiseOnceRealDataRunsTheConstantNoiseOff) {
   const fs::path d = TempDir("pkf_sweep");
   const Result r = RunRcal(
       "position-kf-sweep --seeds 1 --cell grb3016 --broad-trial "
@@ -901,14 +904,8 @@ TEST(RcalCli, PositionKfSweepChoosesTheBankOnceRealDataRunsTheConstantNoiseOff) 
   const json& driven = j.at("chosen_accelerometer_driven");
   EXPECT_GT(driven.at("accel_noise_adaptation_tau_s").get<double>(), 0.0) << r.output;
   EXPECT_LT(driven.at("worst_ratio").get<double>(), 1.0) << r.output;
-  EXPECT_TRUE(j.at("chosen").at("bank").get<bool>()) << r.output;
-  // With the tapping trial (24) in, the bank's accelerometer gate is the shipped one
-  // (estimation::kBankAccelGateChi2, the 0.999 quantile of χ²(3): 16.27; seen: the
-  // geometric mean ratio 0.489 gated at 16.27 against 0.521 ungated, 0.491 at 11.34 and 0.497 at
-  // 21.11; the worst ratio is the same for all four).
-  EXPECT_EQ(j.at("chosen").at("accel_gate_chi2").get<double>(), 16.27) << r.output;
-  EXPECT_EQ(j.at("bank").at("accel_gate_chi2").get<double>(), 16.27);
-  EXPECT_LT(j.at("chosen").at("worst_ratio").get<double>(), driven.at("worst_ratio").get<double>())
+  EXPECT_LT(j.at("bank").at("worst_ratio").get<double>(), 1.0) << r.output;
+  EXPECT_LE(j.at("chosen").at("worst_ratio").get<double>(), driven.at("worst_ratio").get<double>())
       << r.output;
   ASSERT_EQ(j.at("groups").size(), 5u);  // two IMU classes × 20 and 100 Hz on the demo cell, BROAD
   for (int g = 0; g < 4; ++g)
@@ -978,6 +975,77 @@ TEST(RcalCli, FuseReproducesTheBroadTableOnEveryTrial) {
     ++trials;
   }
   EXPECT_EQ(trials, golden.size()) << "a trial of the golden file is missing from the data";
+}
+
+// rcal fuse --trace: one row per fused sample with the estimates and their errors, from which the
+// JSON's scores follow: the RMSE of the trace's errors over the movement rows is the JSON's total,
+// heading, inclination and position RMSE; each quaternion is a unit one (w x y z); the position's
+// error is |p_WM_W − p_truth| with the file's truth.
+TEST(RcalCli, FuseTraceIsEverySampleTheScoresComeFrom) {
+  const fs::path d = TempDir("fuse_trace");
+  const std::string trial = "../shared/data/broad/broad_05_100hz.csv";
+  const Result r = RunRcal("fuse " + trial + " --json " + (d / "f.json").string() + " --trace " +
+                           (d / "trace.csv").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json j = ReadJson(d / "f.json");
+  std::ifstream in(d / "trace.csv");
+  std::string line;
+  ASSERT_TRUE(std::getline(in, line));
+  std::vector<std::string> header;
+  {
+    std::stringstream ss(line);
+    for (std::string c; std::getline(ss, c, ',');) header.push_back(c);
+  }
+  ASSERT_EQ(header.size(), 19u);
+  EXPECT_EQ(header[0], "t_s");
+  EXPECT_EQ(header[2], "q_EB_w");
+  EXPECT_EQ(header[12], "position_error_m");
+  // The file's rows: t_s and pos_x, pos_y, pos_z (columns 0 and 14–16; "nan" where occluded).
+  std::vector<std::array<double, 4>> truth;
+  {
+    std::ifstream f(fs::path(RCAL_SOURCE_DIR) / trial);
+    std::string row;
+    std::getline(f, row);
+    while (std::getline(f, row)) {
+      std::vector<double> v;
+      std::stringstream ss(row);
+      for (std::string c; std::getline(ss, c, ',');) v.push_back(std::stod(c));
+      ASSERT_EQ(v.size(), 18u);
+      truth.push_back({v[0], v[14], v[15], v[16]});
+    }
+  }
+  double se[4] = {};
+  int n[4] = {}, rows = 0;
+  while (std::getline(in, line)) {
+    std::vector<std::string> c;
+    std::stringstream ss(line);
+    for (std::string v; std::getline(ss, v, ',');) c.push_back(v);
+    c.resize(header.size());  // trailing empty cells
+    const auto at = [&](int k) { return c[k].empty() ? std::nan("") : std::stod(c[k]); };
+    ASSERT_LT(rows, static_cast<int>(truth.size()));
+    const auto& [t, px, py, pz] = truth[rows];
+    ASSERT_NEAR(t, at(0), 1e-9) << "row " << rows;  // no sample refused here
+    EXPECT_NEAR(std::sqrt(at(2) * at(2) + at(3) * at(3) + at(4) * at(4) + at(5) * at(5)), 1.0,
+                1e-8);
+    const double e =
+        std::sqrt(std::pow(at(9) - px, 2) + std::pow(at(10) - py, 2) + std::pow(at(11) - pz, 2));
+    if (std::isfinite(e)) {
+      EXPECT_NEAR(e, at(12), 1e-8);
+    }
+    if (at(1) == 1) {
+      for (int k = 0; k < 4; ++k) {
+        const double err = at(k < 3 ? 6 + k : 12);
+        if (std::isfinite(err)) se[k] += err * err, ++n[k];
+      }
+    }
+    ++rows;
+  }
+  EXPECT_EQ(rows, static_cast<int>(truth.size()));
+  const json& o = j.at("orientation_kf");
+  const double want[4] = {o.at("total_rmse_rad"), o.at("heading_rmse_rad"),
+                          o.at("inclination_rmse_rad"), j.at("position_rmse_movement_m")};
+  for (int k = 0; k < 4; ++k) EXPECT_NEAR(std::sqrt(se[k] / n[k]), want[k], 1e-6 * want[k]) << k;
+  EXPECT_EQ(n[0], o.at("samples").get<int>());
 }
 
 // rcal fuse --set NAME=VALUE: the whole value must be one finite number (std::stod took "0.1abc"

@@ -4,7 +4,8 @@
 //   inclination = 2 acos √(e_w² + e_z²); RMSE over the samples with movement = 1 and finite truth.
 // The position sensor is simulated from the truth position: decimated to --pos-rate Hz with
 // --pos-noise m of white noise per axis (seeded). Figures in files are SI (rad, m); the
-// Markdown table printed for people is in degrees and millimetres.
+// Markdown table printed for people is in degrees and millimetres; --trace writes every sample's
+// estimates and errors.
 #include <spdlog/spdlog.h>
 
 #include <Eigen/Core>
@@ -45,11 +46,23 @@ struct FuseOptions {
   std::string trial;
   std::string out_dir;
   std::string json;
+  std::string trace;  // per-sample estimates and errors (CSV)
   std::uint64_t seed = 1;
   double pos_rate_hz = 20.0;
   double pos_noise_m = 1e-3;
   std::vector<std::string> overrides;  // NAME=VALUE for the settings below
 };
+
+// --trace: per fused sample, the orientation estimate q_EB (IMU → ENU, w x y z), its BROAD errors
+// [rad], the bank's marker position in the tracker's frame W (here ENU) [m] and its error [m],
+// each bank filter's error alone [m], the accelerometer-driven filter's weight and its λ (the
+// adaptive accelerometer-noise factor), and whether the orientation KF used this sample's
+// accelerometer and magnetometer.
+constexpr const char* kTraceHeader =
+    "t_s,movement,q_EB_w,q_EB_x,q_EB_y,q_EB_z,total_error_rad,heading_error_rad,"
+    "inclination_error_rad,p_WM_W_x_m,p_WM_W_y_m,p_WM_W_z_m,position_error_m,"
+    "paper_model_error_m,accelerometer_driven_error_m,accelerometer_driven_weight,"
+    "accelerometer_driven_noise_scale,accel_used,mag_used\n";
 
 // BROAD scoring (discrepancy/imu_scoring.hpp, shared with `rcal analyze` on IMU streams).
 using discrepancy::AngleErrors;
@@ -116,6 +129,14 @@ int RunFuse(const FuseOptions& opt) {
   double driven_weight = 0.0;  // Σ μ_driven over the scored rows
   long refused = 0, fqa_failed = 0, pos_samples = 0, non_finite = 0;
   std::vector<double> plot_t, e_tot, e_head, e_incl, e_fqa, plot_pt, e_pos;
+  // The trace: one row per fused sample; empty cells where there is no estimate or no truth.
+  std::ostringstream trace;
+  trace.precision(9);
+  trace << kTraceHeader;
+  const auto cell = [&trace](double v) {
+    trace << ',';
+    if (std::isfinite(v)) trace << v;
+  };
   for (int k = 0; k < n; ++k) {
     const Eigen::Vector3d &gyro = trial.gyro[k], &f_B = trial.accel[k], &m_B = trial.mag_uT[k];
     const double t_k = trial.t[k];
@@ -179,6 +200,21 @@ int RunFuse(const FuseOptions& opt) {
       plot_pt.push_back(t_k);
       e_pos.push_back(err * 1e3);
     }
+    if (opt.trace.empty()) continue;
+    constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
+    trace << t_k << ',' << trial.movement[k];
+    for (int i = 0; i < 4; ++i) cell(okf.q_EB()(i));
+    const bool has_q = q_truth.allFinite(), has_p = bank.initialized();
+    const AngleErrors e = has_q ? BroadErrors(okf.q_EB(), q_truth) : AngleErrors{kNan, kNan, kNan};
+    for (double v : {e.total, e.heading, e.inclination}) cell(v);
+    const Eigen::Vector3d p = has_p ? bank.p_WM_W() : Eigen::Vector3d::Constant(kNan);
+    for (int i = 0; i < 3; ++i) cell(p(i));
+    cell((p - p_truth).norm());
+    for (const est::PositionKf* f : {&pkf, &driven})
+      cell(f->initialized() ? (f->p_WM_W() - p_truth).norm() : kNan);
+    cell(has_p ? bank.probabilities()[1] : kNan);
+    cell(driven.initialized() ? driven.accel_noise_scale() : kNan);
+    trace << ',' << okf.last_accel_used() << ',' << okf.last_mag_used() << '\n';
   }
 
   const auto& oc = okf.counters();
@@ -255,6 +291,7 @@ int RunFuse(const FuseOptions& opt) {
   j["lever_arm_B_m"] = {pkf.lever_arm_B().x(), pkf.lever_arm_B().y(), pkf.lever_arm_B().z()};
   j["mag_reference"] = {{"norm_uT", okf.mag_ref_norm()}, {"dip_rad", okf.mag_ref_dip()}};
   if (!opt.json.empty()) io::AtomicWriteFile(opt.json, j.dump(2) + "\n");
+  if (!opt.trace.empty()) io::AtomicWriteFile(opt.trace, trace.str());
 
   if (!opt.out_dir.empty()) {
     const std::filesystem::path dir(opt.out_dir);
@@ -296,6 +333,9 @@ const RegisterCommand kRegisterFuse(
           ->required();
       sub.add_option("--out", opt->out_dir, "directory for the report, JSON and plots");
       sub.add_option("--json", opt->json, "write the figures as JSON (SI units) to this file");
+      sub.add_option("--trace", opt->trace,
+                     "write the per-sample estimates and errors as CSV (q_EB: IMU → ENU, w x y z; "
+                     "p_WM_W [m]; errors [rad] and [m])");
       sub.add_option("--seed", opt->seed, "seed of the simulated position-sensor noise");
       sub.add_option("--pos-rate", opt->pos_rate_hz, "position sensor rate [Hz]");
       sub.add_option("--pos-noise", opt->pos_noise_m, "position sensor noise per axis [m]");

@@ -54,7 +54,8 @@ std::vector<Field> PositionFields(est::PositionKfSettings& s) {
           {"pos.accel_gate_chi2", "", &s.accel_gate_chi2},
           {"pos.accel_relative_sigma", "fraction", &s.accel_relative_sigma},
           {"pos.accel_noise_adaptation_tau", "s", &s.accel_noise_adaptation_tau},
-          {"pos.lever_arm_sigma", "m", &s.lever_arm_sigma}};
+          {"pos.lever_arm_sigma", "m", &s.lever_arm_sigma},
+          {"pos.accel_rollback_span", "s", &s.accel_rollback_span}};
 }
 
 // The whole of `text` as one finite number (no spaces, no trailing characters, no hex), else an
@@ -121,7 +122,8 @@ est::PositionKfSettings BroadPositionSettings(double pos_noise_m) {
   // trial (24) at any σ.
   s.accel_sigma = 0.3;
   s.accel_noise_adaptation_tau = 0.1;
-  // The bank's accelerometer gate (rcal position-kf-sweep): the tapping trial's taps are refused.
+  // The bank's accelerometer gate (rcal position-kf-sweep): the tapping trial's taps are refused;
+  // what rings past it is taken back (accel_rollback_span).
   s.accel_gate_chi2 = est::kBankAccelGateChi2;
   s.estimate_lever_arm = true;
   return s;

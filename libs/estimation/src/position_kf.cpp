@@ -75,6 +75,7 @@ void PositionKf::Reset() {
   last_position_t_ = 0.0;
   has_last_omega_ = false;
   last_omega_B_.setZero();
+  rollback_.clear();
 }
 
 Eigen::Vector3d PositionKf::p_WM_W() const {
@@ -150,7 +151,10 @@ Status PositionKf::Check(double t, const Eigen::Vector3d& v, const char* name) {
 void PositionKf::PredictTo(double t) {
   const double dt = t - t_;
   t_ = t;
-  if (dt <= 0.0) return;
+  if (dt > 0.0) Predict(x_, P_, dt);
+}
+
+void PositionKf::Predict(VecN& x, MatN& P, double dt) const {
   Eigen::Matrix3d Phi_axis;
   Phi_axis << 1, dt, dt * dt / 2, 0, 1, dt, 0, 0, 1;
   const double qj = settings_.jerk_noise * settings_.jerk_noise;
@@ -169,9 +173,104 @@ void PositionKf::PredictTo(double t) {
   Q.block<3, 3>(kBias, kBias)
       .diagonal()
       .setConstant(settings_.accel_bias_walk * settings_.accel_bias_walk * dt);
-  x_ = Phi * x_;
-  P_ = Phi * P_ * Phi.transpose() + Q;
-  P_ = 0.5 * (P_ + P_.transpose());
+  x = Phi * x;
+  P = Phi * P * Phi.transpose() + Q;
+  P = 0.5 * (P + P.transpose());
+}
+
+PositionKf::PositionInnovation PositionKf::Innovation(const VecN& x, const MatN& P,
+                                                      const Eigen::Vector3d& p) const {
+  PositionInnovation in;
+  in.y = p - Eigen::Vector3d(x(IP(0)), x(IP(1)), x(IP(2)));
+  Eigen::Matrix3d S;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) S(i, j) = P(IP(i), IP(j));
+  S.diagonal().array() += settings_.position_sigma * settings_.position_sigma;
+  in.S_inv = S.inverse();
+  in.nis = in.y.dot(in.S_inv * in.y);
+  // ln N(y; 0, S) = −½ (NIS + ln det S + 3 ln 2π): the sample's evidence for this filter's model.
+  in.log_likelihood =
+      -0.5 * (in.nis + std::log(S.determinant()) + 3.0 * std::log(2.0 * std::numbers::pi));
+  return in;
+}
+
+void PositionKf::ApplyPosition(VecN& x, MatN& P, const PositionInnovation& in) const {
+  // H selects p; K = P Hᵀ S⁻¹; Joseph form with R = σ_p² I.
+  Eigen::Matrix<double, 3, kN> H = Eigen::Matrix<double, 3, kN>::Zero();
+  for (int i = 0; i < 3; ++i) H(i, IP(i)) = 1.0;
+  const Eigen::Matrix<double, kN, 3> K = P * H.transpose() * in.S_inv;
+  x += K * in.y;
+  const MatN IKH = MatN::Identity() - K * H;
+  P = IKH * P * IKH.transpose() +
+      settings_.position_sigma * settings_.position_sigma * K * K.transpose();
+  P = 0.5 * (P + P.transpose());
+}
+
+double PositionKf::RollbackReach() const {
+  // A sample exactly one span back is within it whatever the rounding of its time stamp.
+  return settings_.accel_rollback_span * (1.0 + 1e-9) + 1e-9;
+}
+
+void PositionKf::KeepRollbackPoint(const Eigen::Vector3d& p) {
+  if (!(settings_.accel_rollback_span > 0.0)) return;
+  rollback_.push_back({t_, p, x_, P_, 0});
+  // Points older than the span can start no hypothesis once a newer one is there.
+  while (rollback_.size() > 1 && (static_cast<int>(rollback_.size()) > kMaxRollbackPoints ||
+                                  t_ - rollback_.front().t > RollbackReach()))
+    rollback_.erase(rollback_.begin());
+}
+
+void PositionKf::RollBackAccelerometer(double t, const Eigen::Vector3d& p, PositionInnovation& in) {
+  if (!(settings_.position_gate_chi2 > 0.0)) return;
+  // A hypothesis must make this sample likelier by e^{gate/2}; none can make it likelier than
+  // N(0; 0, R) (NIS 0, S = R), so while that bound is within the margin, none is tried.
+  const double r = settings_.position_sigma * settings_.position_sigma;
+  const double ll_bound = -1.5 * std::log(2.0 * std::numbers::pi * r);
+  double best_ll = in.log_likelihood + 0.5 * settings_.position_gate_chi2;
+  if (best_ll >= ll_bound) return;
+  const int points = static_cast<int>(rollback_.size());
+  int best = -1, taken_back = 0;
+  std::vector<RollbackPoint> best_run;
+  int accel = 0;  // accelerometer samples after point i
+  for (int i = points - 1; i >= 0; --i) {
+    if (i < points - 1 && t - rollback_[i].t > RollbackReach()) break;
+    accel += rollback_[i].accel_after;
+    if (accel == 0) continue;  // nothing to take back
+    // From point i on, the motion model alone; the later samples re-applied behind the gate.
+    std::vector<RollbackPoint> run(rollback_.begin() + i, rollback_.end());
+    VecN x = run[0].x;
+    MatN P = run[0].P;
+    double t_x = run[0].t;
+    for (size_t m = 1; m < run.size(); ++m) {
+      if (run[m].t > t_x) Predict(x, P, run[m].t - t_x);
+      t_x = run[m].t;
+      const PositionInnovation im = Innovation(x, P, run[m].p_WM_W);
+      if (!(settings_.position_gate_chi2 > 0.0 && im.nis > settings_.position_gate_chi2))
+        ApplyPosition(x, P, im);
+      run[m].x = x;
+      run[m].P = P;
+      run[m].accel_after = 0;
+    }
+    if (t > t_x) Predict(x, P, t - t_x);
+    const PositionInnovation alt = Innovation(x, P, p);
+    if (alt.log_likelihood > best_ll) {
+      best_ll = alt.log_likelihood;
+      best = i;
+      taken_back = accel;
+      in = alt;
+      x_ = x;  // the re-run's state, kept if no longer hypothesis is likelier
+      P_ = P;
+      run[0].accel_after = 0;
+      best_run = std::move(run);
+    }
+  }
+  if (best < 0) return;
+  // The kept points are the re-run's: a later rollback starts from states without the
+  // accelerometer taken back.
+  rollback_.resize(best);
+  rollback_.insert(rollback_.end(), best_run.begin(), best_run.end());
+  ++counters_.accel_rollbacks;
+  counters_.accel_rolled_back += taken_back;
 }
 
 void PositionKf::Initialise(double t, const Eigen::Vector3d& p) {
@@ -254,6 +353,7 @@ Status PositionKf::UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen
   const MatN IKH = MatN::Identity() - K * H;
   P_ = IKH * P_ * IKH.transpose() + K * R * K.transpose();
   ++counters_.accel_samples;
+  if (!rollback_.empty()) ++rollback_.back().accel_after;
   return GuardState(t);
 }
 
@@ -286,29 +386,25 @@ Status PositionKf::UpdatePosition(double t, const Eigen::Vector3d& p_WM_W) {
   if (auto s = Check(t, p_WM_W, "position p_WM_W"); !s) return s;
   if (!initialized_) {
     Initialise(t, p_WM_W);
+    rollback_.clear();  // no hypothesis reaches back past a (re-)initialisation
     last_position_t_ = t;
     last_position_log_likelihood_ = 0.0;
     ++counters_.position_samples;
     last_position_accepted_ = true;
     last_position_nis_ = 0.0;
+    KeepRollbackPoint(p_WM_W);
     return Status::Ok();
   }
   PredictTo(t);
-  Eigen::Matrix<double, 3, kN> H = Eigen::Matrix<double, 3, kN>::Zero();
-  for (int i = 0; i < 3; ++i) H(i, IP(i)) = 1.0;
-  const Eigen::Matrix3d R =
-      settings_.position_sigma * settings_.position_sigma * Eigen::Matrix3d::Identity();
-  const Eigen::Vector3d y = p_WM_W - H * x_;
-  const Eigen::Matrix3d S = H * P_ * H.transpose() + R;
-  const Eigen::Matrix3d S_inv = S.inverse();
-  last_position_nis_ = y.dot(S_inv * y);
-  // ln N(y; 0, S) = −½ (NIS + ln det S + 3 ln 2π): the sample's evidence for this filter's model.
-  last_position_log_likelihood_ = -0.5 * (last_position_nis_ + std::log(S.determinant()) +
-                                          3.0 * std::log(2.0 * std::numbers::pi));
+  PositionInnovation in = Innovation(x_, P_, p_WM_W);
+  if (settings_.accel_rollback_span > 0.0) RollBackAccelerometer(t, p_WM_W, in);
+  last_position_nis_ = in.nis;
+  last_position_log_likelihood_ = in.log_likelihood;
   AdaptAccelNoise(t);
   if (settings_.position_gate_chi2 > 0.0 && last_position_nis_ > settings_.position_gate_chi2) {
     ++counters_.position_rejected;
     last_position_accepted_ = false;
+    KeepRollbackPoint(p_WM_W);
     if (settings_.max_consecutive_rejections > 0 &&
         ++consecutive_rejections_ >= settings_.max_consecutive_rejections) {
       // The sensor keeps disagreeing: trust it again from the next sample on.
@@ -318,13 +414,10 @@ Status PositionKf::UpdatePosition(double t, const Eigen::Vector3d& p_WM_W) {
     return Status::Ok();
   }
   consecutive_rejections_ = 0;
-  const Eigen::Matrix<double, kN, 3> K = P_ * H.transpose() * S_inv;
-  x_ += K * y;
-  const MatN IKH = MatN::Identity() - K * H;
-  P_ = IKH * P_ * IKH.transpose() + K * R * K.transpose();
-  P_ = 0.5 * (P_ + P_.transpose());
+  ApplyPosition(x_, P_, in);
   ++counters_.position_samples;
   last_position_accepted_ = true;
+  KeepRollbackPoint(p_WM_W);
   return GuardState(t);
 }
 

@@ -16,6 +16,7 @@ std::vector<PositionKfSettings> DefaultBankModels(const PositionKfSettings& base
     s->gravity = base.gravity;
     s->position_sigma = base.position_sigma;
     s->position_gate_chi2 = base.position_gate_chi2;
+    s->accel_rollback_span = base.accel_rollback_span;
     s->accel_gate_chi2 = kBankAccelGateChi2;
     s->lever_arm_B = base.lever_arm_B;
     s->estimate_lever_arm = base.estimate_lever_arm;

@@ -83,10 +83,32 @@
 // refused with a Status; the state is unchanged. A state that goes non-finite anyway is never kept:
 // the filter resets (Counters::resets) and the update returns an Error saying so; the next position
 // sample initialises it again.
+// Taking back a bad stretch of the accelerometer (beyond the paper; accel_rollback_intervals): a
+// tap or a shock rings the accelerometer at tens of m/s² for tens of milliseconds while the tool
+// hardly moves (BROAD's tapping trial: 30–70 m/s² over 80 ms). Once λ has grown, the per-sample
+// gate lets such samples in, and their integral puts metres per second into V: the position ran
+// 210 mm off before a position sample could stop it. A position sample that comes in the middle
+// of a tap may still pass, and V, which one position sample cannot fix, then carries the error
+// on until the next sample is refused for it. So at each position sample the filter as it
+// stands (every accelerometer sample right) is compared with the hypotheses that the
+// accelerometer was wrong over the last j intervals (those that began within accel_rollback_span
+// of now, at least the last one): the state
+// after the position sample j back, run to now by the motion model alone with the position
+// samples since re-applied (each behind the gate). The likeliest hypothesis for this sample is
+// taken when 2 ln Λ = NIS₀ − NIS_j + ln(det S₀ / det S_j) in its favour exceeds
+// position_gate_chi2 (the gate's χ² quantile, here as a likelihood-ratio test). Its intervals'
+// accelerometer samples are counted as taken back (Counters), the states kept for later
+// rollbacks are the re-run's, and the sample, its NIS, the adaptation and the bank's evidence are
+// those of the state kept. A position outlier is no reason to roll back: without the
+// accelerometer the prediction explains it no better. Cost: nothing while the sample is as likely
+// as the best any hypothesis could make it (NIS 0 and S = the sensor's R bound the likelihood;
+// below that bound by less than the test's margin, no rollback can pass), which is every sample
+// of a calm run; else up to kMaxRollbackPoints re-runs of a few predictions and 3×3 solves.
 #pragma once
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <vector>
 
 #include "rcal/estimation/fqa.hpp"
 #include "rcal/estimation/result.hpp"
@@ -99,6 +121,10 @@ namespace rcal::estimation {
 Eigen::Matrix<double, 9, 9> PaperPhiPos(const Eigen::Matrix3d& M, double t);
 /// Γ_pos u (Eq. 29): gravity g [m/s²] removed along z as the paper writes it (z up).
 Eigen::Matrix<double, 9, 1> PaperGammaPos(double g, double t);
+
+/// Most intervals between position samples whose accelerometer one sample can take back (the
+/// bound on accel_rollback_span's cost at high position rates).
+inline constexpr int kMaxRollbackPoints = 8;
 
 /// How the white-jerk noise enters the state (header comment).
 enum class MotionModel {
@@ -148,6 +174,11 @@ struct PositionKfSettings {
   /// predicted one, under its predicted covariance); 0 = off. A sample beyond it (a tap, a
   /// shock the 100 Hz samples alias) is skipped and counted in accel_rejected.
   double accel_gate_chi2 = 0.0;
+  /// How far back the accelerometer may be taken back when a position sample shows it wrong
+  /// (see the header comment: a shock or tap the per-sample gate let in) [s]: the intervals
+  /// between position samples that began within this span (always the last one; at most
+  /// kMaxRollbackPoints). 0 = off. Needs the position gate (its χ² quantile is the test's).
+  double accel_rollback_span = 0.3;
 };
 
 /// The accelerometer-driven filter's settings (position_kf --motion-model accelerometer-driven;
@@ -169,6 +200,8 @@ class PositionKf {
     std::int64_t accel_rejected = 0;     ///< accelerometer samples rejected by its χ² gate
     std::int64_t input_rejected = 0;     ///< refused calls (bad input, time order)
     std::int64_t reinitialised = 0;      ///< re-initialisations after a run of rejections
+    std::int64_t accel_rollbacks = 0;    ///< intervals whose accelerometer was taken back
+    std::int64_t accel_rolled_back = 0;  ///< accelerometer samples taken back in them
     std::int64_t resets = 0;             ///< state went non-finite: reset (kept by Reset)
   };
 
@@ -245,6 +278,24 @@ class PositionKf {
   using MatN = Eigen::Matrix<double, kN, kN>;
   using VecN = Eigen::Matrix<double, kN, 1>;
   void PredictTo(double t);
+  // The motion model's prediction of (x, P) over dt [s] (λ included).
+  void Predict(VecN& x, MatN& P, double dt) const;
+  // ln N(y; 0, S) and the NIS of a position sample p against the prediction (x, P).
+  struct PositionInnovation {
+    Eigen::Vector3d y;
+    Eigen::Matrix3d S_inv;
+    double nis = 0.0, log_likelihood = 0.0;
+  };
+  PositionInnovation Innovation(const VecN& x, const MatN& P, const Eigen::Vector3d& p) const;
+  // accel_rollback_span, with room for the rounding of time stamps [s].
+  double RollbackReach() const;
+  // The position sample's update of (x, P), Joseph form.
+  void ApplyPosition(VecN& x, MatN& P, const PositionInnovation& in) const;
+  // After a position sample p at t_: the state the next ones may roll back to.
+  void KeepRollbackPoint(const Eigen::Vector3d& p);
+  // The accelerometer of the last intervals taken back when the position sample p at t shows it
+  // wrong (header comment); `in` is the sample's innovation, replaced when rolled back.
+  void RollBackAccelerometer(double t, const Eigen::Vector3d& p, PositionInnovation& in);
   Status Check(double t, const Eigen::Vector3d& v, const char* name);
   // After an update: Ok, or the state went non-finite and the filter was reset (an Error).
   Status GuardState(double t);
@@ -269,6 +320,16 @@ class PositionKf {
   bool has_last_omega_ = false;     // for α_B by differencing
   double last_omega_t_ = 0.0;
   Eigen::Vector3d last_omega_B_ = Eigen::Vector3d::Zero();
+  // The states right after the last position samples, newest last, with the sample each took
+  // and the accelerometer samples applied after it (accel_rollback_intervals).
+  struct RollbackPoint {
+    double t = 0.0;
+    Eigen::Vector3d p_WM_W = Eigen::Vector3d::Zero();
+    VecN x = VecN::Zero();
+    MatN P = MatN::Identity();
+    int accel_after = 0;
+  };
+  std::vector<RollbackPoint> rollback_;
 };
 
 }  // namespace rcal::estimation

@@ -39,13 +39,19 @@ struct PositionKfBankSettings {
 /// χ²(3), as for the positions. rcal position-kf-sweep chose it among off, 11.34, 16.27 and 21.11
 /// (the 0.99–0.9999 quantiles) over 96 simulated and real cases, and so did every
 /// leave-one-group-out fold that keeps real data: a tap (one 50–144 m/s² sample) is refused, the
-/// cases without taps are unchanged or closer (README).
+/// cases without taps are unchanged or closer (README). Since each model also takes back the
+/// accelerometer the positions show wrong (accel_rollback_span) the sweep prefers it off (worst
+/// ratio 0.910 against 0.938: its only taps are the tapping trial's, which ring for 80 ms, and
+/// there the rollback alone is closer, 2.91 against 3.09 mm); it stays on because a tap of one
+/// sample is refused at once, where the rollback can act only at the next position sample
+/// (PositionKfBank.TheDefaultModelsTakeBackTapsTheMotionCannotHave: 0.86 against 1.07 mm).
 inline constexpr double kBankAccelGateChi2 = 16.27;
 
 /// The two motion models the bank weighs by default, with `base`'s frame, gravity, position σ and
-/// gate, and lever arm: the paper's white jerk (σ 0.3 m/s²) and AccelerometerDrivenSettings(), both
-/// with the adaptive accelerometer noise (τ 0.1 s) and the accelerometer gate kBankAccelGateChi2
-/// (the motion models' own settings, as σ and τ; set each model's accel_gate_chi2 to change it).
+/// gate, accelerometer rollback span, and lever arm: the paper's white jerk (σ 0.3 m/s²) and
+/// AccelerometerDrivenSettings(), both with the adaptive accelerometer noise (τ 0.1 s) and the
+/// accelerometer gate kBankAccelGateChi2 (off; the motion models' own settings, as σ and τ; set
+/// each model's accel_gate_chi2 to change it).
 std::vector<PositionKfSettings> DefaultBankModels(const PositionKfSettings& base);
 
 class PositionKfBank {
