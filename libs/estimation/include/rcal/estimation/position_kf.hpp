@@ -83,27 +83,26 @@
 // refused with a Status; the state is unchanged. A state that goes non-finite anyway is never kept:
 // the filter resets (Counters::resets) and the update returns an Error saying so; the next position
 // sample initialises it again.
-// Taking back a bad stretch of the accelerometer (beyond the paper; accel_rollback_intervals): a
-// tap or a shock rings the accelerometer at tens of m/s² for tens of milliseconds while the tool
-// hardly moves (BROAD's tapping trial: 30–70 m/s² over 80 ms). Once λ has grown, the per-sample
-// gate lets such samples in, and their integral puts metres per second into V: the position ran
-// 210 mm off before a position sample could stop it. A position sample that comes in the middle
-// of a tap may still pass, and V, which one position sample cannot fix, then carries the error
-// on until the next sample is refused for it. So at each position sample the filter as it
-// stands (every accelerometer sample right) is compared with the hypotheses that the
-// accelerometer was wrong over the last j intervals (those that began within accel_rollback_span
-// of now, at least the last one): the state
-// after the position sample j back, run to now by the motion model alone with the position
-// samples since re-applied (each behind the gate). The likeliest hypothesis for this sample is
-// taken when 2 ln Λ = NIS₀ − NIS_j + ln(det S₀ / det S_j) in its favour exceeds
+// Taking back a bad stretch of the accelerometer (beyond the paper; accel_rollback_span): a tap or
+// a shock rings the accelerometer at tens of m/s² for tens of milliseconds while the tool hardly
+// moves (BROAD's tapping trial: 30–70 m/s² over 80 ms). Once λ has grown, the per-sample gate lets
+// such samples in, and their integral puts metres per second into V: the position ran 210 mm off
+// before a position sample could stop it. A position sample that comes in the middle of a tap may
+// still pass, and V, which one position sample cannot fix, then carries the error on until the
+// next sample is refused for it. So at each position sample the filter as it stands (every
+// accelerometer sample right) is compared with the hypotheses that the accelerometer was wrong
+// over the last j intervals (those that began within accel_rollback_span of now, at least the
+// last one): the state after the position sample j back, run to now by the motion model alone
+// with the position samples since re-applied (each behind the gate). The likeliest hypothesis for
+// this sample is taken when 2 ln Λ = NIS₀ − NIS_j + ln(det S₀ / det S_j) in its favour exceeds
 // position_gate_chi2 (the gate's χ² quantile, here as a likelihood-ratio test). Its intervals'
 // accelerometer samples are counted as taken back (Counters), the states kept for later
 // rollbacks are the re-run's, and the sample, its NIS, the adaptation and the bank's evidence are
 // those of the state kept. A position outlier is no reason to roll back: without the
-// accelerometer the prediction explains it no better. Cost: nothing while the sample is as likely
-// as the best any hypothesis could make it (NIS 0 and S = the sensor's R bound the likelihood;
-// below that bound by less than the test's margin, no rollback can pass), which is every sample
-// of a calm run; else up to kMaxRollbackPoints re-runs of a few predictions and 3×3 solves.
+// accelerometer the prediction explains it no better. Cost: no hypothesis can make a sample
+// likelier than N(0; 0, R) (NIS 0, S = R), so while the sample is within the test's margin of
+// that bound, none is tried: every sample of a calm run. Otherwise up to kMaxRollbackPoints
+// re-runs of a few predictions and 3×3 solves.
 #pragma once
 
 #include <Eigen/Core>
