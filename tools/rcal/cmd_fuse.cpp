@@ -17,6 +17,7 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <numbers>
+#include <optional>
 #include <random>
 #include <sstream>
 #include <string>
@@ -163,56 +164,57 @@ int RunFuse(const FuseOptions& opt) {
       (void)bank.UpdatePosition(t_k, p_truth + noise);
       ++pos_samples;
     }
+    // This sample's errors against the truth, once for the scores, the plots and the trace (NaN
+    // where there is no truth or no estimate).
+    constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
     const Eigen::Vector4d& q_truth = trial.q_truth[k];
-    const bool moving = trial.movement[k] == 1;
-    if (q_truth.allFinite()) {
-      const AngleErrors e = BroadErrors(okf.q_EB(), q_truth);
+    const bool moving = trial.movement[k] == 1, has_q = q_truth.allFinite();
+    const AngleErrors e = has_q ? BroadErrors(okf.q_EB(), q_truth) : AngleErrors{kNan, kNan, kNan};
+    if (has_q) {
+      const std::optional<AngleErrors> e_fqa_k =
+          q_fqa ? std::optional(BroadErrors(*q_fqa, q_truth)) : std::nullopt;
       if (moving) {
         kf_score.Add(e);
-        if (q_fqa) fqa_score.Add(BroadErrors(*q_fqa, q_truth));
+        if (e_fqa_k) fqa_score.Add(*e_fqa_k);
       }
       plot_t.push_back(t_k);
       e_tot.push_back(e.total * kRadToDeg);
       e_head.push_back(e.heading * kRadToDeg);
       e_incl.push_back(e.inclination * kRadToDeg);
-      e_fqa.push_back(q_fqa ? BroadErrors(*q_fqa, q_truth).total * kRadToDeg
-                            : std::numeric_limits<double>::quiet_NaN());
+      e_fqa.push_back(e_fqa_k ? e_fqa_k->total * kRadToDeg : kNan);
     }
-    for (auto [f, all, mov] : {std::tuple{&pkf, &paper_all, &paper_moving},
-                               std::tuple{&driven, &driven_all, &driven_moving}}) {
-      if (!f->initialized() || !p_truth.allFinite()) continue;
-      const double err = (f->p_WM_W() - p_truth).norm();
+    const auto error_of = [&](const auto& f) {
+      return f.initialized() && p_truth.allFinite() ? (f.p_WM_W() - p_truth).norm() : kNan;
+    };
+    const double filter_err[2] = {error_of(pkf), error_of(driven)};
+    for (auto [err, all, mov] : {std::tuple{filter_err[0], &paper_all, &paper_moving},
+                                 std::tuple{filter_err[1], &driven_all, &driven_moving}}) {
       if (!std::isfinite(err)) continue;  // the bank's own estimate is checked below
       all->Add(err);
       if (moving) mov->Add(err);
     }
+    const double bank_err = error_of(bank);
     if (bank.initialized() && p_truth.allFinite()) {
-      const double err = (bank.p_WM_W() - p_truth).norm();
       driven_weight += bank.probabilities()[1];
-      if (!std::isfinite(err)) {
+      if (!std::isfinite(bank_err)) {
         if (non_finite++ == 0)
           spdlog::error("fuse: row {} (t = {} s): the position KF's estimate is not finite", k + 1,
                         t_k);
         continue;
       }
-      pos_all.Add(err);
-      if (moving) pos_moving.Add(err);
+      pos_all.Add(bank_err);
+      if (moving) pos_moving.Add(bank_err);
       plot_pt.push_back(t_k);
-      e_pos.push_back(err * 1e3);
+      e_pos.push_back(bank_err * 1e3);
     }
     if (opt.trace.empty()) continue;
-    constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
     trace << t_k << ',' << trial.movement[k];
     for (int i = 0; i < 4; ++i) cell(okf.q_EB()(i));
-    const bool has_q = q_truth.allFinite(), has_p = bank.initialized();
-    const AngleErrors e = has_q ? BroadErrors(okf.q_EB(), q_truth) : AngleErrors{kNan, kNan, kNan};
     for (double v : {e.total, e.heading, e.inclination}) cell(v);
-    const Eigen::Vector3d p = has_p ? bank.p_WM_W() : Eigen::Vector3d::Constant(kNan);
+    const Eigen::Vector3d p = bank.initialized() ? bank.p_WM_W() : Eigen::Vector3d::Constant(kNan);
     for (int i = 0; i < 3; ++i) cell(p(i));
-    cell((p - p_truth).norm());
-    for (const est::PositionKf* f : {&pkf, &driven})
-      cell(f->initialized() ? (f->p_WM_W() - p_truth).norm() : kNan);
-    cell(has_p ? bank.probabilities()[1] : kNan);
+    for (double v : {bank_err, filter_err[0], filter_err[1]}) cell(v);
+    cell(bank.initialized() ? bank.probabilities()[1] : kNan);
     cell(driven.initialized() ? driven.accel_noise_scale() : kNan);
     trace << ',' << okf.last_accel_used() << ',' << okf.last_mag_used() << '\n';
   }

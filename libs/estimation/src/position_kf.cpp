@@ -231,6 +231,8 @@ void PositionKf::RollBackAccelerometer(double t, const Eigen::Vector3d& p, Posit
   const int points = static_cast<int>(rollback_.size());
   int best = -1, taken_back = 0;
   std::vector<RollbackPoint> best_run;
+  VecN best_x;
+  MatN best_P;
   int accel = 0;  // accelerometer samples after point i
   for (int i = points - 1; i >= 0; --i) {
     if (i < points - 1 && t - rollback_[i].t > RollbackReach()) break;
@@ -258,13 +260,15 @@ void PositionKf::RollBackAccelerometer(double t, const Eigen::Vector3d& p, Posit
       best = i;
       taken_back = accel;
       in = alt;
-      x_ = x;  // the re-run's state, kept if no longer hypothesis is likelier
-      P_ = P;
       run[0].accel_after = 0;
       best_run = std::move(run);
+      best_x = x;
+      best_P = P;
     }
   }
   if (best < 0) return;
+  x_ = best_x;
+  P_ = best_P;
   // The kept points are the re-run's: a later rollback starts from states without the
   // accelerometer taken back.
   rollback_.resize(best);
