@@ -21,9 +21,21 @@ namespace {
 
 constexpr double kG = 9.81;
 
+// A level marker pushed along x while it oscillates in z (NED): its position p_WM_W [m] at t [s]
+// and the accelerometer's specific force f = a − g_E [m/s²] (g_E = +g·down; the filter removes it,
+// PositionKf::WorldAcceleration) with 0.05 m/s² of white noise drawn from N.
+struct PushedMarker {
+  Eigen::Vector3d p_WM_W, f_B;
+};
+PushedMarker Pushed(double t, std::normal_distribution<double>& N, std::mt19937_64& rng) {
+  const Eigen::Vector3d a_W(0.6, 0.0, -0.45 * std::sin(3.0 * t));
+  return {Eigen::Vector3d(0.3 * t * t, -0.1 * t, 0.05 * std::sin(3.0 * t)),
+          a_W - Eigen::Vector3d(0.0, 0.0, kG) + 0.05 * sim::Draw3(N, rng)};
+}
+
 // Two copies of one model: equal evidence, equal weights, and the mixture is the filter's own
-// estimate; the weights follow L_i ← e^{−Δt/τ} L_i + ℓ_i exactly (recomputed from the filters'
-// reported log-likelihoods).
+// estimate; with μ_min 0 (no bound on the evidence) the weights follow L_i ← e^{−Δt/τ} L_i + ℓ_i
+// exactly (recomputed from the filters' reported log-likelihoods).
 TEST(PositionKfBank, WeightsAreTheFadedLikelihoodsOfEachFiltersInnovations) {
   PositionKfSettings a, b;
   a.position_gate_chi2 = b.position_gate_chi2 = 0.0;
@@ -40,14 +52,11 @@ TEST(PositionKfBank, WeightsAreTheFadedLikelihoodsOfEachFiltersInnovations) {
   double L0 = 0.0, L1 = 0.0;
   for (int k = 0; k < 60; ++k) {
     const double t = 0.01 * k;
-    const Eigen::Vector3d p(0.3 * t * t, -0.1 * t, 0.05 * std::sin(3.0 * t));
-    const Eigen::Vector3d a_W(0.6, 0.0, -0.45 * std::sin(3.0 * t));
-    // NED: f = a − g_E with g_E = +g·down; the filter removes it (PositionKf::WorldAcceleration).
-    const Eigen::Vector3d f = a_W - Eigen::Vector3d(0.0, 0.0, kG) + 0.05 * sim::Draw3(N, rng);
-    ASSERT_TRUE(same.UpdateAccel(t, f, Eigen::Matrix3d::Identity()).ok());
-    ASSERT_TRUE(bank.UpdateAccel(t, f, Eigen::Matrix3d::Identity()).ok());
+    const PushedMarker m = Pushed(t, N, rng);
+    ASSERT_TRUE(same.UpdateAccel(t, m.f_B, Eigen::Matrix3d::Identity()).ok());
+    ASSERT_TRUE(bank.UpdateAccel(t, m.f_B, Eigen::Matrix3d::Identity()).ok());
     if (k % 5 != 0) continue;
-    const Eigen::Vector3d z = p + 1e-3 * sim::Draw3(N, rng);
+    const Eigen::Vector3d z = m.p_WM_W + 1e-3 * sim::Draw3(N, rng);
     ASSERT_TRUE(same.UpdatePosition(t, z).ok());
     ASSERT_TRUE(bank.UpdatePosition(t, z).ok());
     EXPECT_NEAR(same.probabilities()[0], 0.5, 1e-15);
@@ -63,6 +72,46 @@ TEST(PositionKfBank, WeightsAreTheFadedLikelihoodsOfEachFiltersInnovations) {
     EXPECT_NEAR((bank.p_WM_W() - mix).norm(), 0.0, 1e-12);
   }
   EXPECT_GT(std::abs(L0 - L1), 1.0);  // the two models were told apart
+}
+
+// With μ_min > 0 the evidence is a Markov-switching prior's: before each sample's ℓ, no model's
+// faded evidence may lie more than ln(1/μ_min) below the best's (each model keeps a prior weight
+// of μ_min, as a model that may become the right one must), so a leader that starts failing is
+// left after the samples it fails, however long it led. Recomputed here from the filters'
+// log-likelihoods; the run is long enough that the lead of the fading sum alone passes the bound.
+TEST(PositionKfBank, NoModelFallsFurtherBehindThanItsPriorWeightAllows) {
+  PositionKfSettings a, b;
+  a.position_gate_chi2 = b.position_gate_chi2 = 0.0;
+  b.accel_sigma = 3.0;
+  PositionKfBankSettings s;
+  s.models = {a, b};
+  s.evidence_tau = 0.5;
+  s.min_probability = 1e-3;
+  PositionKfBank bank(s);
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> N(0.0, 1.0);
+  double L[2] = {}, free_lead = 0.0, largest_free_lead = 0.0;
+  const double fade = std::exp(-0.05 / 0.5), bound = std::log(1.0 / s.min_probability);
+  for (int k = 0; k < 600; ++k) {
+    const double t = 0.01 * k;
+    const PushedMarker m = Pushed(t, N, rng);
+    ASSERT_TRUE(bank.UpdateAccel(t, m.f_B, Eigen::Matrix3d::Identity()).ok());
+    if (k % 5 != 0) continue;
+    ASSERT_TRUE(bank.UpdatePosition(t, m.p_WM_W + 1e-3 * sim::Draw3(N, rng)).ok());
+    if (k == 0) continue;  // the first sample initialises: no evidence
+    double l[2];
+    for (int i = 0; i < 2; ++i) l[i] = bank.filters()[i].last_position_log_likelihood();
+    const double top = std::max(fade * L[0], fade * L[1]);
+    for (int i = 0; i < 2; ++i) L[i] = std::max(fade * L[i], top - bound) + l[i];
+    free_lead = fade * free_lead + (l[0] - l[1]);  // the fading sums' lead without the bound
+    largest_free_lead = std::max(largest_free_lead, std::abs(free_lead));
+    const double best = std::max(L[0], L[1]);
+    const double w0 = std::max(std::exp(L[0] - best), s.min_probability),
+                 w1 = std::max(std::exp(L[1] - best), s.min_probability);
+    EXPECT_NEAR(bank.probabilities()[1], w1 / (w0 + w1), 1e-12) << "sample " << k;
+    EXPECT_LE(std::abs(L[0] - L[1]), bound + std::abs(l[0] - l[1]) + 1e-12);
+  }
+  EXPECT_GT(largest_free_lead, 1.5 * bound);  // the bound was what held the lead (seen: 11.8)
 }
 
 // The evidence itself against a closed form: right after the sample that initialised a filter,

@@ -68,12 +68,19 @@ Status PositionKfBank::UpdatePosition(double t, const Eigen::Vector3d& p_WM_W) {
   for (PositionKf& f : filters_)
     if (Status s = f.UpdatePosition(t, p_WM_W); !s && first) first = s;
   if (!first) return first;
-  // L_i ← e^{−Δt/τ} L_i + ℓ_i.
+  // L_i ← max(e^{−Δt/τ} L_i, max_j e^{−Δt/τ} L_j − ln(1/μ_min)) + ℓ_i (header comment: the
+  // prior weight μ_min every model keeps before a sample).
   const double fade =
       has_last_t_ ? std::exp(-std::max(0.0, t - last_t_) / settings_.evidence_tau) : 0.0;
+  for (double& L : evidence_) L *= fade;
+  if (settings_.min_probability > 0.0) {
+    const double floor =
+        *std::max_element(evidence_.begin(), evidence_.end()) + std::log(settings_.min_probability);
+    for (double& L : evidence_) L = std::max(L, floor);
+  }
   for (size_t i = 0; i < filters_.size(); ++i) {
     const double l = filters_[i].last_position_log_likelihood();
-    evidence_[i] = fade * evidence_[i] + (fresh || !std::isfinite(l) ? 0.0 : l);
+    evidence_[i] += fresh || !std::isfinite(l) ? 0.0 : l;
   }
   has_last_t_ = true;
   last_t_ = t;

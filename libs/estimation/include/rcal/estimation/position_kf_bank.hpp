@@ -10,9 +10,17 @@
 // stable by itself, so a wrong one cannot pull the right one off), and at each position sample
 // its evidence, the log-likelihood ℓ_i = ln N(y_i; 0, S_i) of its own innovation, enters a
 // fading sum
-//   L_i ← e^{−Δt/τ} L_i + ℓ_i,   μ_i = max(e^{L_i − max L}, μ_min) / Σ,
-// where τ = evidence_tau [s] is how long a sample's evidence counts, and μ_min keeps a model that
-// is wrong now able to come back. The estimate is the μ-weighted mixture of the filters' marker
+//   L_i ← max(e^{−Δt/τ} L_i, max_j e^{−Δt/τ} L_j − ln(1/μ_min)) + ℓ_i,
+//   μ_i = max(e^{L_i − max L}, μ_min) / Σ,
+// where τ = evidence_tau [s] is how long a sample's evidence counts, and μ_min is the prior
+// weight every model keeps before each sample, as in a Markov-switching (IMM-style) prior: no
+// model enters a sample more than ln(1/μ_min) behind the best. Without that bound the faded sum
+// of a model that led through a calm stretch grows to tens of nats (a lead of δ per sample sums to
+// δ/(1 − e^{−Δt/τ}), 20δ at 20 Hz and τ 1 s), and when the accelerometer goes wrong (a tap that
+// rings past its gate) the bank kept the failing model for the 4–6 samples that lead took to
+// spend: 60 mm off for 0.2 s on the simulated Panda cell, where the paper's filter alone was
+// within 0.1 mm (rcal position-kf-sweep --taps). With it a model that fails is left after the
+// samples it fails. The estimate is the μ-weighted mixture of the filters' marker
 // positions, its covariance the mixture's (Σ μ_i (P_i + (p_i − p)(p_i − p)ᵀ)). Frames and units
 // as PositionKf: p_WM_W [m] in the position sensor's frame W.
 #pragma once
@@ -31,20 +39,21 @@ struct PositionKfBankSettings {
   std::vector<PositionKfSettings> models;
   /// How long a position sample's evidence counts [s] (the fading memory's time constant).
   double evidence_tau = 1.0;
-  /// Smallest weight of a model [-], so that one wrong now can come back.
+  /// Smallest weight of a model [-], and its prior weight before each sample (header comment), so
+  /// that one wrong now can come back and one right until now can be left at once.
   double min_probability = 1e-3;
 };
 
 /// The bank's accelerometer χ² gate (PositionKfSettings::accel_gate_chi2): the 0.999 quantile of
 /// χ²(3), as for the positions. rcal position-kf-sweep chose it among off, 11.34, 16.27 and 21.11
-/// (the 0.99–0.9999 quantiles) over 96 simulated and real cases, and so did every
-/// leave-one-group-out fold that keeps real data: a tap (one 50–144 m/s² sample) is refused, the
-/// cases without taps are unchanged or closer (README). Since each model also takes back the
-/// accelerometer the positions show wrong (accel_rollback_span) the sweep prefers it off (worst
-/// ratio 0.910 against 0.938: its only taps are the tapping trial's, which ring for 80 ms, and
-/// there the rollback alone is closer, 2.91 against 3.09 mm); it stays on because a tap of one
-/// sample is refused at once, where the rollback can act only at the next position sample
-/// (PositionKfBank.TheDefaultModelsTakeBackTapsTheMotionCannotHave: 0.86 against 1.07 mm).
+/// (the 0.99–0.9999 quantiles): first over 96 simulated and real cases, where a tap (one 50–144
+/// m/s² sample) is refused and the cases without taps are unchanged or closer; then, once each
+/// model also took back the accelerometer the positions show wrong (accel_rollback_span), that
+/// sweep preferred it off, its only taps being the tapping trial's, which ring. With taps in the
+/// simulated cases too (--taps: one sample or ringing, sim::ImuTaps) and the bank's evidence
+/// bounded, the 144 cases choose it again (worst ratio to the paper's filter 0.909, tied with
+/// 21.11 and ahead by the geometric mean, 0.7182 against 0.7245; ungated 0.985), and so does every
+/// leave-one-group-out fold but the one without the 20 Hz cases (README).
 inline constexpr double kBankAccelGateChi2 = 16.27;
 
 /// The two motion models the bank weighs by default, with `base`'s frame, gravity, position σ and
