@@ -88,8 +88,9 @@ TEST(ImuTaps, TapsComeAtTheMeanGapWithTheirAmplitudesAndKinds) {
   EXPECT_NEAR(amplitude_sum / n, 50.0, 4.0 * (40.0 / std::sqrt(12.0)) / std::sqrt(n));
   ASSERT_GT(cos_n, 1000);
   EXPECT_NEAR(cos_sum / cos_n, 0.5, 4.0 * std::sqrt(1.0 / 12.0 / cos_n));
-  // Uniform directions: the mean unit vector is 0 within 4σ (each component's σ is 1/√(3n)).
-  EXPECT_LT(direction_sum.norm() / n, 4.0 * std::sqrt(3.0) / std::sqrt(3.0 * n));
+  // Uniform directions: the mean unit vector is 0 within 4σ (each component's σ is 1/√(3n), so
+  // its norm's scale is √3 of that, 1/√n).
+  EXPECT_LT(direction_sum.norm() / n, 4.0 / std::sqrt(n));
 }
 
 TEST(ImuTaps, TheSeedMakesTheTaps) {

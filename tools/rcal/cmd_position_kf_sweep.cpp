@@ -235,7 +235,9 @@ std::vector<Score> RunCase(const Case& k, const std::vector<Config>& configs) {
     os.gyro_noise_density = ss.imu.gyro_noise_density;
   }
   sim::SensorSim sensors(prog.truth, ss, k.seed);
-  sim::ImuTaps taps(0x7a95'0000ULL + k.seed);  // --taps (sim::ImuTaps' defaults)
+  // --taps (sim::ImuTaps' defaults), on a stream of their own: the sensors' draws stay those of
+  // the untapped twin, so the two cases differ by the taps alone.
+  sim::ImuTaps taps(0x7a95'0000ULL + k.seed);
   estimation::OrientationKf okf(os);
   const Eigen::Matrix3d R_IS = built.spec.imu->R_IS;
   std::vector<estimation::PositionKfBank> kfs;
@@ -284,16 +286,17 @@ double Median(std::vector<double> v) {
 }
 
 int Run(const Options& o) {
+  // Untapped, and with --taps tapped too: the simulated cases' and the table's groups.
+  const std::vector<bool> tapping =
+      o.taps ? std::vector<bool>{false, true} : std::vector<bool>{false};
   std::vector<Case> cases;
   for (const char* imu : {"navigation-grade", "consumer-grade"})
     for (const std::string& cell : o.cells)
       for (double rate : o.rates)
         for (bool lever : {false, true})
-          for (bool taps : {false, true}) {
-            if (taps && !o.taps) continue;
+          for (bool taps : tapping)
             for (int s = 1; s <= o.seeds; ++s)
               cases.push_back({imu, cell, rate, lever, static_cast<unsigned>(s), taps});
-          }
   if (o.broad || !o.broad_trials.empty()) {
     std::vector<std::string> trials;
     for (const std::string& t : o.broad_trials) trials.push_back(ResolvePath(t));
@@ -404,11 +407,10 @@ int Run(const Options& o) {
   // The table: medians over seeds and lever arms.
   std::vector<std::vector<std::string>> table;
   json groups = json::array();
-  for (bool taps : {false, true})
+  for (bool taps : tapping)
     for (const char* imu : {"navigation-grade", "consumer-grade"})
       for (const std::string& cell : o.cells)
         for (double rate : o.rates) {
-          if (taps && !o.taps) continue;
           std::vector<double> pm, ps, cm, cs, ne;
           for (size_t k = 0; k < cases.size(); ++k) {
             if (cases[k].imu != imu || cases[k].cell != cell || cases[k].rate_hz != rate ||
