@@ -12,6 +12,7 @@
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/kinematics/model.hpp"
 #include "rcal/sim/pose_sim.hpp"
+#include "rcal/sim/random_arm.hpp"
 
 namespace rcal::tool {
 namespace {
@@ -124,6 +125,34 @@ TEST(TrackSweep, TheFirstSeedContinuesTheSameRuns) {
   EXPECT_THROW(RunTrackSweep(arm, bad), std::invalid_argument);
   bad.first_seed = -1;
   EXPECT_THROW(RunTrackSweep(arm, bad), std::invalid_argument);
+}
+
+// Joints that share an axis are one change to any data; the sweep counts naming either right.
+// Closed-form cases: a three-joint arm whose second and third joints share an axis (a = 0,
+// α = 0 between them), then the same with the third axis flipped (α = π: a step of one is the
+// opposite step of the other), and with the axes 1 mm apart (a = 1 mm: told apart). The shipped
+// GRB3016 has none; random_dh_204 has its joints 2 and 3 on one axis (a2 = 0, α2 = 0).
+TEST(TrackSweep, JointsOnOneAxisAreIndistinguishable) {
+  const auto arm = [](double a2, double alpha2) {
+    kinematics::ModelBuilder b("three");
+    b.DhLink(0.3, -M_PI / 2, 0.2, 0.0, {"j1", kinematics::JointType::kRevolute, -3.0, 3.0})
+        .DhLink(a2, alpha2, 0.1, 0.0, {"j2", kinematics::JointType::kRevolute, -3.0, 3.0})
+        .DhLink(0.25, M_PI / 2, 0.0, 0.0, {"j3", kinematics::JointType::kRevolute, -3.0, 3.0})
+        .MarkerOffset(Eigen::Vector3d(0.05, 0.0, 0.1));
+    return b.Build();
+  };
+  using Sets = std::vector<std::vector<int>>;
+  for (bool full : {false, true}) {
+    EXPECT_EQ(IndistinguishableJoints(arm(0.0, 0.0), full), (Sets{{0}, {1, 2}, {1, 2}}));
+    EXPECT_EQ(IndistinguishableJoints(arm(0.0, M_PI), full), (Sets{{0}, {1, 2}, {1, 2}}));
+    EXPECT_EQ(IndistinguishableJoints(arm(1e-3, 0.0), full), (Sets{{0}, {1}, {2}}));
+    EXPECT_EQ(IndistinguishableJoints(Grb3016(), full), (Sets{{0}, {1}, {2}, {3}, {4}, {5}}));
+  }
+  const Sets random_204 = IndistinguishableJoints(sim::RandomDhArm(204), false);
+  ASSERT_EQ(random_204.size(), 6u);
+  EXPECT_EQ(random_204[1], (std::vector<int>{1, 2}));
+  EXPECT_EQ(random_204[2], (std::vector<int>{1, 2}));
+  EXPECT_EQ(random_204[3], (std::vector<int>{3}));
 }
 
 }  // namespace

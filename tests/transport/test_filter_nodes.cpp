@@ -314,6 +314,7 @@ TEST(PositionKfNode, ABankPublishesTheMixtureOfItsModels) {
   LcmTransport t("memq://");
   Outputs out(t);
   PositionKfNode node(t, bank_settings, PositionKfNode::Options{});
+  EXPECT_EQ(node.health().activity(), "R_WE: fixed");  // no model with an earth frame
   estimation::PositionKfBank reference(bank_settings);
   std::vector<tool_position_estimate_t> expected;
   for (int k = 0; k < 300; ++k) {
@@ -396,6 +397,7 @@ TEST(PositionKfNode, TheIdentifiersEarthFrameTurnsTheAccelerations) {
   PositionKfNode node(t, settings, options);
   estimation::PositionKf reference(settings), never_told(settings);
   constexpr int kTold = 100;  // the identifier's estimate arrives before sample kTold
+  EXPECT_EQ(node.health().activity(), "R_WE: the cell's, awaiting the identifier's");
   for (int k = 0; k < 300; ++k) {
     const int64_t u = k * kPeriod;
     if (k == kTold) {
@@ -408,8 +410,10 @@ TEST(PositionKfNode, TheIdentifiersEarthFrameTurnsTheAccelerations) {
       Drain(t);
       EXPECT_NE(node.health().last_error().find("kinematic_params.sigmas"), std::string::npos)
           << node.health().last_error();
+      EXPECT_EQ(node.health().activity(), "R_WE: the cell's, awaiting the identifier's");
       t.Publish("KINEMATIC_PARAMS", params);
       Drain(t);
+      EXPECT_EQ(node.health().activity(), "R_WE: the identifier's (1 estimate)");
       ASSERT_TRUE(reference.SetWorldFromEarth(R_WE, C_WE).ok());
     }
     node.OnImu(Imu(u, k));

@@ -408,11 +408,15 @@ int RunSweep(const Options& o) {
       };
       const double pct = r.seeds ? 100.0 / r.seeds : 0.0;
       std::printf(
-          "| %s | %s | %s | %d/%d | %.0f (%.0f) | %.0f %% | %.0f %% / %.0f %% | %.0f %% | %.2f | "
+          "| %s | %s | %s | %d/%d | %.0f (%.0f) | %.0f %%%s | %.0f %% / %.0f %% | %.0f %% | %.2f | "
           "%s | %s |\n",
           r.arm.c_str(), full ? "full pose" : "positions", r.kind.c_str(), r.detected, r.seeds,
-          Median(d), max_delay, pct * r.named_right, pct * r.detected_within_oracle_poses,
-          100.0 * mean(r.oracle_power), 100.0 * mean(r.oracle_power_after), Median(r.recovery),
+          Median(d), max_delay, pct * r.named_right,
+          r.named_indistinguishable > 0
+              ? fmt::format(" ({} by a joint on the same axis)", r.named_indistinguishable).c_str()
+              : "",
+          pct * r.detected_within_oracle_poses, 100.0 * mean(r.oracle_power),
+          100.0 * mean(r.oracle_power_after), Median(r.recovery),
           quiet ? (std::to_string(r.false_alarms) + " / " + std::to_string(r.quiet_poses)).c_str()
                 : "",
           quiet ? (std::to_string(Median(r.steady_ratio)).substr(0, 5)).c_str() : "");
@@ -424,6 +428,7 @@ int RunSweep(const Options& o) {
                       {"detected", r.detected},
                       {"delays_poses", r.delays},
                       {"named_right", r.named_right},
+                      {"named_indistinguishable", r.named_indistinguishable},
                       {"recovery_ratio", r.recovery},
                       {"error_before_m", r.error_before_m},
                       {"error_after_m", r.error_after_m},

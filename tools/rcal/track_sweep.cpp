@@ -92,6 +92,33 @@ double StepNoncentrality(const kinematics::KinematicModel& model, const Eigen::V
   return lambda;
 }
 
+std::vector<std::vector<int>> IndistinguishableJoints(const kinematics::KinematicModel& model,
+                                                      bool full_pose) {
+  constexpr double kStep = 1e-3, kTolerance = 1e-12;  // [rad], [m | rad]
+  sim::Rng rng(1);
+  const std::vector<Eigen::VectorXd> qs = sim::SampleJoints(model, 20, rng);
+  const Eigen::VectorXd x = model.Nominal();
+  const int nq = model.num_joints();
+  // Whether the pose after stepping joint i by +kStep equals the one after stepping j by ±kStep.
+  const auto alike = [&](int i, int j, double sign) {
+    for (const Eigen::VectorXd& q : qs) {
+      Eigen::VectorXd qi = q, qj = q;
+      qi(i) += kStep;
+      qj(j) += sign * kStep;
+      const kinematics::ToolPose a = model.Forward(qi, x), b = model.Forward(qj, x);
+      if ((a.p_WM_W - b.p_WM_W).norm() > kTolerance) return false;
+      if (full_pose && Eigen::AngleAxisd(a.R_EI * b.R_EI.transpose()).angle() > kTolerance)
+        return false;
+    }
+    return true;
+  };
+  std::vector<std::vector<int>> out(static_cast<size_t>(nq));
+  for (int i = 0; i < nq; ++i)
+    for (int j = 0; j < nq; ++j)
+      if (i == j || alike(i, j, 1.0) || alike(i, j, -1.0)) out[static_cast<size_t>(i)].push_back(j);
+  return out;
+}
+
 std::vector<TrackSweepResult> RunTrackSweep(const TrackSweepArm& arm, const TrackSweepSettings& s) {
   TrackSweepResult joint, length;
   joint.arm = length.arm = arm.name;
@@ -99,6 +126,7 @@ std::vector<TrackSweepResult> RunTrackSweep(const TrackSweepArm& arm, const Trac
   joint.kind = "joint offset";
   length.kind = "link length";
   const int nq = arm.model.num_joints();
+  const std::vector<std::vector<int>> alike = IndistinguishableJoints(arm.model, arm.full_pose);
   if (s.first_seed < 0 || s.seeds < 0 || s.first_seed + s.seeds > 1000)
     throw std::invalid_argument("track sweep: seeds must lie in 0 … 999");
   for (int seed = s.first_seed; seed < s.first_seed + s.seeds; ++seed) {
@@ -121,7 +149,12 @@ std::vector<TrackSweepResult> RunTrackSweep(const TrackSweepArm& arm, const Trac
       }
       ++r.seeds;
       int delay = -1;
-      bool right = false, right_at_detection = false;
+      bool right = false, right_at_detection = false, right_by_another = false;
+      // The stepped joint, or one no data can tell from it.
+      const auto is_stepped_joint = [&](int j) {
+        const std::vector<int>& a = alike[static_cast<size_t>(joint_stepped)];
+        return j >= 0 && std::find(a.begin(), a.end(), j) != a.end();
+      };
       std::string named, named_at_detection;
       // The oracle's noncentrality: the step's whitened signature over the poses since it.
       Eigen::VectorXd x_before = run.x_true;
@@ -141,13 +174,14 @@ std::vector<TrackSweepResult> RunTrackSweep(const TrackSweepArm& arm, const Trac
         if (first) delay = k + 1;
         if (first || (delay > 0 && u.reattributed && ekf.changes().size() == changes_before + 1)) {
           const auto& c = first ? *u.change : *u.reattributed;
-          right = kind == 0 ? (!c.joints.empty() && c.joints[0] == joint_stepped)
+          right = kind == 0 ? (!c.joints.empty() && is_stepped_joint(c.joints[0]))
                             : (!c.parameters.empty() && c.parameters[0] == param_stepped);
+          right_by_another = right && kind == 0 && c.joints[0] != joint_stepped;
           if (first) right_at_detection = right;
           if (first && !c.probability.empty()) {
             ++r.alternatives_at_detection;
             for (size_t i = 0; i < c.joints.size(); ++i)
-              if (kind == 0 ? c.joints[i] == joint_stepped : c.parameters[i] == param_stepped) {
+              if (kind == 0 ? is_stepped_joint(c.joints[i]) : c.parameters[i] == param_stepped) {
                 ++r.right_among_alternatives;
                 break;
               }
@@ -169,6 +203,7 @@ std::vector<TrackSweepResult> RunTrackSweep(const TrackSweepArm& arm, const Trac
         ++r.detected;
         r.delays.push_back(delay);
         r.named_right += right;
+        r.named_indistinguishable += right_by_another;
         r.named_right_at_detection += right_at_detection;
       }
       const double after = run.TestError(ekf.x());

@@ -260,10 +260,14 @@ PositionKfNode::PositionKfNode(Transport& t, const estimation::PositionKfBankSet
   if (const auto st = kf_.SetWorldFromEarth(o_.world_from_earth, o_.world_from_earth_covariance);
       !st)
     throw std::invalid_argument("Options::world_from_earth: " + st.error());
-  if (o_.model && o_.model->has_earth())
+  if (o_.model && o_.model->has_earth()) {
     t_.Subscribe<kinematic_params_t>(
         o_.kinematic_params_channel, [this](const kinematic_params_t& m) { OnKinematicParams(m); },
         undecodable);
+    health_.Activity("R_WE: the cell's, awaiting the identifier's");
+  } else {
+    health_.Activity("R_WE: fixed");
+  }
 }
 
 void PositionKfNode::OnKinematicParams(const kinematic_params_t& msg) {
@@ -288,6 +292,10 @@ void PositionKfNode::OnKinematicParams(const kinematic_params_t& msg) {
       !s)
     return Reject("kinematic_params.values: the earth frame's " + s.error());
   ++world_from_earth_updates_;
+  // Told in HEALTH: from the first heartbeat saying so, every estimate is in the identifier's
+  // frame (a replay or a test scores from there; an operator sees the frame was found).
+  health_.Activity("R_WE: the identifier's (" + std::to_string(world_from_earth_updates_) +
+                   (world_from_earth_updates_ == 1 ? " estimate)" : " estimates)"));
 }
 
 void PositionKfNode::Announce() {

@@ -212,6 +212,8 @@ class PositionKfNode {
   void OnOrientation(const orientation_estimate_t& msg);
   void OnPosition(const position_sample_t& msg);
   /// The identifier's estimate: R_WE from its earth frame, from the next accelerometer sample on.
+  /// HEALTH's activity says where R_WE comes from: "R_WE: fixed" (no model with an earth frame),
+  /// "R_WE: the cell's, awaiting the identifier's", then "R_WE: the identifier's (N estimates)".
   void OnKinematicParams(const kinematic_params_t& msg);
   void OnUndecodable(const std::string& reason);
 
