@@ -171,7 +171,8 @@ TEST(PositionKf, WorksInThePositionSensorsFrame) {
 
 // One accelerometer update from the initialised state, against the Kalman filter written out in
 // full (9 states, the bias off): P⁻ = Φ P₀ Φᵀ + Q, then the update of A by z. Q is Eq. 30's
-// correlated white-jerk block, or q_j² Δt on A alone for the accelerometer-driven model.
+// correlated white-jerk block, or for the accelerometer-driven model the ramp's: A's increment
+// (q_j² Δt) with p's and V's shares of it, Δt²/6 and Δt/2 (rank one per axis).
 TEST(PositionKf, EachMotionModelPutsItsJerkNoiseWhereItSays) {
   for (MotionModel model : {MotionModel::kWhiteJerk, MotionModel::kAccelerometerDriven}) {
     PositionKfSettings st;
@@ -197,7 +198,8 @@ TEST(PositionKf, EachMotionModelPutsItsJerkNoiseWhereItSays) {
         Qi << std::pow(dt, 5) / 20, std::pow(dt, 4) / 8, std::pow(dt, 3) / 6, std::pow(dt, 4) / 8,
             std::pow(dt, 3) / 3, dt * dt / 2, std::pow(dt, 3) / 6, dt * dt / 2, dt;
       else
-        Qi(2, 2) = dt;
+        Qi << std::pow(dt, 5) / 36, std::pow(dt, 4) / 12, std::pow(dt, 3) / 6, std::pow(dt, 4) / 12,
+            std::pow(dt, 3) / 4, dt * dt / 2, std::pow(dt, 3) / 6, dt * dt / 2, dt;
       Q.block<3, 3>(3 * i, 3 * i) = q * Qi;
     }
     const Eigen::Matrix<double, 9, 9> Pm = Phi * P0 * Phi.transpose() + Q;
@@ -209,13 +211,44 @@ TEST(PositionKf, EachMotionModelPutsItsJerkNoiseWhereItSays) {
     const Eigen::Matrix<double, 9, 9> P1 = (Eigen::Matrix<double, 9, 9>::Identity() - K * H) * Pm;
     EXPECT_LT((kf.P() - P1).norm(), 1e-9 * P1.norm()) << static_cast<int>(model);
     EXPECT_LT((kf.a_W() - Eigen::Vector3d((K * a_W)(2), (K * a_W)(5), (K * a_W)(8))).norm(), 1e-12);
-    // The accelerometer-driven model gives p and V no noise of their own over the step.
+    // The accelerometer-driven model gives V no noise of its own over the step: only the ramp's
+    // share of A's, (Δt/2)² of it, fully correlated with A's (Q of rank one per axis).
     const double v_var = Pm(1, 1) - (Phi * P0 * Phi.transpose())(1, 1);
-    if (model == MotionModel::kAccelerometerDriven)
-      EXPECT_EQ(v_var, 0.0);
-    else
+    if (model == MotionModel::kAccelerometerDriven) {
+      EXPECT_NEAR(v_var, q * std::pow(dt, 3) / 4, 1e-15);
+    } else {
       EXPECT_NEAR(v_var, q * std::pow(dt, 3) / 3, 1e-15);
+    }
   }
+}
+
+// The accelerometer-driven model integrates the accelerometer by the trapezoid: a tool starting
+// from rest with a constant jerk J (its acceleration a ramp), one position sample at the start,
+// then 1 s of exact accelerometer samples at 100 Hz and no other position sample. The closed form
+// is p = J t³/6, v = J t²/2; the trapezoid is exact for a ramp, the rectangle rule (each sample
+// held over its step, the former Q on A alone) lags by half a step: v by J Δt t/2, p by
+// J Δt t²/4 (5 mm here).
+TEST(PositionKf, TheAccelerometerDrivenModelIntegratesARampExactly) {
+  PositionKfSettings st = AccelerometerDrivenSettings();
+  st.earth = EarthFrame::kEnu;
+  st.accel_bias_walk = 0.0;
+  st.accel_sigma = 1e-5;
+  st.accel_noise_adaptation_tau = 0.0;
+  PositionKf kf(st);
+  const Eigen::Vector3d J(2.0, -1.0, 0.5);  // [m/s³]
+  ASSERT_TRUE(kf.UpdatePosition(0.0, Eigen::Vector3d::Zero()).ok());
+  const double dt = 0.01;
+  for (int k = 0; k <= 100; ++k) {
+    const double t = k * dt;
+    ASSERT_TRUE(
+        kf.UpdateAccel(t, J * t + Eigen::Vector3d(0, 0, kG), Eigen::Matrix3d::Identity()).ok());
+  }
+  const double t = 1.0;
+  const Eigen::Vector3d p = J * t * t * t / 6, v = J * t * t / 2;
+  std::printf("after 1 s: position error %.3g m (the rectangle rule: %.3g m), velocity %.3g m/s\n",
+              (kf.p_WM_W() - p).norm(), J.norm() * dt * t * t / 4, (kf.v_W() - v).norm());
+  EXPECT_LT((kf.p_WM_W() - p).norm(), 0.02 * J.norm() * dt * t * t / 4);
+  EXPECT_LT((kf.v_W() - v).norm(), 0.02 * J.norm() * dt * t / 2);
 }
 
 // The orientation's error between the truth and the filter: tilt and heading errors that wander

@@ -253,10 +253,13 @@ swing::SwingState SwayingTool(double t) {
 
 // The swaying tool under a wandering 7 mrad orientation error,
 // navigation-grade accelerometer, 20 Hz tracker with 0.5 mm per axis; from 20 s to 30 s the
-// accelerometer has 3 m/s² more white error (vibration, taps). In the calm phases the
-// accelerometer-driven model is closer than the paper's, in the bad one the paper's is: the bank
-// weighs each up where it is better and is within 10 % of the better filter in every phase, and
-// better than either over the whole run. 5 seeds; against the simulated truth.
+// accelerometer has 3 m/s² more white error (vibration). In the calm phases the
+// accelerometer-driven model is well ahead of the paper's (0.81 against 1.16 mm) and the bank
+// gives it nearly all the weight; in the bad one the two are close (2.52 against 2.69 mm; the
+// paper's was ahead until the driven model integrated the accelerometer by the trapezoid) and the
+// bank, on the evidence of the innovations, spreads its weight (0.57 on the driven model) and
+// is closer than either. Within 10 % of the better filter in every phase, better than either
+// over the whole run. 5 seeds; against the simulated truth.
 TEST(PositionKfBank, FollowsTheBetterModelAsTheAccelerometerChanges) {
   PositionKfSettings base;
   base.earth = EarthFrame::kEnu;
@@ -305,11 +308,12 @@ TEST(PositionKfBank, FollowsTheBetterModelAsTheAccelerometerChanges) {
         ph, bank, paper, driven, weight[ph] / n[ph]);
     EXPECT_LT(bank, 1.1 * std::min(paper, driven)) << "phase " << ph;
     if (ph != 1) {
-      EXPECT_LT(driven, paper) << "calm phase " << ph;  // the premise
-      EXPECT_GT(weight[ph] / n[ph], 0.7) << "phase " << ph;
+      EXPECT_LT(driven, 0.8 * paper) << "calm phase " << ph;  // the premise
+      EXPECT_GT(weight[ph] / n[ph], 0.9) << "phase " << ph;
     } else {
-      EXPECT_LT(paper, driven);  // the premise
-      EXPECT_LT(weight[ph] / n[ph], 0.5);
+      EXPECT_LT(std::abs(driven / paper - 1.0), 0.1);  // the premise: close
+      EXPECT_LT(bank, std::min(paper, driven));
+      EXPECT_LT(weight[ph] / n[ph], 0.75);  // the evidence moved
     }
   }
   EXPECT_LT(whole[0], whole[1]);

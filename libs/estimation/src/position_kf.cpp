@@ -154,7 +154,7 @@ void PositionKf::PredictTo(double t) {
   if (dt > 0.0) Predict(x_, P_, dt);
 }
 
-void PositionKf::Predict(VecN& x, MatN& P, double dt) const {
+void PositionKf::Predict(VecN& x, MatN& P, double dt, bool hold_acceleration) const {
   Eigen::Matrix3d Phi_axis;
   Phi_axis << 1, dt, dt * dt / 2, 0, 1, dt, 0, 0, 1;
   const double qj = settings_.jerk_noise * settings_.jerk_noise;
@@ -162,8 +162,11 @@ void PositionKf::Predict(VecN& x, MatN& P, double dt) const {
   Eigen::Matrix3d Q_axis = Eigen::Matrix3d::Zero();
   if (settings_.motion_model == MotionModel::kWhiteJerk)
     Q_axis << dt5 / 20, dt4 / 8, dt3 / 6, dt4 / 8, dt3 / 3, dt2 / 2, dt3 / 6, dt2 / 2, dt;
-  else
-    Q_axis(2, 2) = dt;                            // A alone (header comment)
+  else if (!hold_acceleration) {
+    // A's ramp over the step, and p's and V's shares of it (header comment).
+    const Eigen::Vector3d g(dt2 / 6, dt / 2, 1.0);
+    Q_axis = dt * g * g.transpose();
+  }
   Q_axis *= qj * accel_noise_scale_;              // λ: the adaptive noise (header comment)
   MatN Phi = MatN::Identity(), Q = MatN::Zero();  // r_B constant, b_W a random walk
   for (int i = 0; i < 3; ++i) {
@@ -234,6 +237,8 @@ void PositionKf::RollBackAccelerometer(double t, const Eigen::Vector3d& p, Posit
   VecN best_x;
   MatN best_P;
   int accel = 0;  // accelerometer samples after point i
+  // The accelerometer-driven model's hypotheses hold A (header comment).
+  const bool hold = settings_.motion_model == MotionModel::kAccelerometerDriven;
   for (int i = points - 1; i >= 0; --i) {
     if (i < points - 1 && t - rollback_[i].t > RollbackReach()) break;
     accel += rollback_[i].accel_after;
@@ -244,7 +249,7 @@ void PositionKf::RollBackAccelerometer(double t, const Eigen::Vector3d& p, Posit
     MatN P = run[0].P;
     double t_x = run[0].t;
     for (size_t m = 1; m < run.size(); ++m) {
-      if (run[m].t > t_x) Predict(x, P, run[m].t - t_x);
+      if (run[m].t > t_x) Predict(x, P, run[m].t - t_x, hold);
       t_x = run[m].t;
       const PositionInnovation im = Innovation(x, P, run[m].p_WM_W);
       if (!(settings_.position_gate_chi2 > 0.0 && im.nis > settings_.position_gate_chi2))
@@ -253,7 +258,7 @@ void PositionKf::RollBackAccelerometer(double t, const Eigen::Vector3d& p, Posit
       run[m].P = P;
       run[m].accel_after = 0;
     }
-    if (t > t_x) Predict(x, P, t - t_x);
+    if (t > t_x) Predict(x, P, t - t_x, hold);
     const PositionInnovation alt = Innovation(x, P, p);
     if (alt.log_likelihood > best_ll) {
       best_ll = alt.log_likelihood;
