@@ -112,10 +112,17 @@ std::vector<std::vector<int>> IndistinguishableJoints(const kinematics::Kinemati
     }
     return true;
   };
+  // Alike is symmetric: each pair compared once, joints in order in each set.
   std::vector<std::vector<int>> out(static_cast<size_t>(nq));
-  for (int i = 0; i < nq; ++i)
-    for (int j = 0; j < nq; ++j)
-      if (i == j || alike(i, j, 1.0) || alike(i, j, -1.0)) out[static_cast<size_t>(i)].push_back(j);
+  for (int i = 0; i < nq; ++i) {
+    out[static_cast<size_t>(i)].push_back(i);
+    for (int j = i + 1; j < nq; ++j)
+      if (alike(i, j, 1.0) || alike(i, j, -1.0)) {
+        out[static_cast<size_t>(i)].push_back(j);
+        out[static_cast<size_t>(j)].push_back(i);
+      }
+  }
+  for (std::vector<int>& set : out) std::sort(set.begin(), set.end());
   return out;
 }
 
