@@ -480,7 +480,7 @@ struct SimulateImuOptions {
 
 const RegisterCommand kRegisterSimulateImu(
     "simulate-imu", "Simulate an IMU stream in the BROAD layout with hidden effects",
-    [](CLI::App& sub) -> std::function<int()> {
+    [](Args& sub) -> std::function<int()> {
       auto o = std::make_shared<SimulateImuOptions>();
       sub.add_option("--out", o->out, "CSV file to write")->required();
       sub.add_option("--seed", o->seed, "seed of every draw")->capture_default_str();

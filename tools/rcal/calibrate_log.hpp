@@ -2,8 +2,8 @@
 // (cmd_calibrate_log.cpp).
 #pragma once
 
-#include <CLI/CLI.hpp>
 #include <string>
+#include "cli.hpp"
 
 namespace rcal::tool {
 
@@ -20,7 +20,7 @@ struct CalibrateLogOptions {
 
 /// The options calibrate-log has besides LOG, --cell and --json (which `calibrate` shares):
 /// --channel, --allow-gaps. `suffix` is appended to each description.
-void AddCalibrateLogOptions(CLI::App& sub, CalibrateLogOptions& o, const std::string& suffix);
+void AddCalibrateLogOptions(Args& sub, CalibrateLogOptions& o, const std::string& suffix);
 
 /// Runs the identification over the log; returns the exit code. Throws std::runtime_error
 /// naming the file when the log cannot be read.

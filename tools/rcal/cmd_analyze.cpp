@@ -464,7 +464,7 @@ int Run(const Options& o) {
 const RegisterCommand kAnalyze(
     "analyze",
     "Find what the geometric model gets wrong in a pose dataset, and the gain of fixing it",
-    [](CLI::App& sub) -> std::function<int()> {
+    [](Args& sub) -> std::function<int()> {
       auto o = std::make_shared<Options>();
       sub.add_option("data", o->data, "pose dataset CSV (rcal or FIGAROH layout) or IMU stream CSV")
           ->required();

@@ -601,7 +601,7 @@ const RegisterCommand kCalibrate(
     "calibrate",
     "Identify a robot from a pose dataset (CSV), optionally with the effects an analysis found "
     "(--effects), or from an LCM log (--log: the same as calibrate-log)",
-    [](CLI::App& sub) -> std::function<int()> {
+    [](Args& sub) -> std::function<int()> {
       auto o = std::make_shared<Options>();
       sub.add_option("data", o->data, "pose dataset CSV (rcal or FIGAROH layout)");
       sub.add_option("--robot", o->robot,

@@ -43,7 +43,7 @@
 
 namespace rcal::tool {
 
-void AddCalibrateLogOptions(CLI::App& sub, CalibrateLogOptions& o, const std::string& suffix) {
+void AddCalibrateLogOptions(Args& sub, CalibrateLogOptions& o, const std::string& suffix) {
   sub.add_option(
       "--channel", o.channel,
       "channel of the pose measurements (default: the cell's channels.pose_measurement)" + suffix);
@@ -251,7 +251,7 @@ namespace {
 const RegisterCommand kCalibrateLog(
     "calibrate-log",
     "Identify the robot offline from the POSE_MEASUREMENT events of an LCM log (as ekf_identifier)",
-    [](CLI::App& sub) -> std::function<int()> {
+    [](Args& sub) -> std::function<int()> {
       auto o = std::make_shared<CalibrateLogOptions>();
       sub.add_option("log", o->log, "LCM event log (lcm-logger, logger service)")->required();
       sub.add_option("--cell", o->cell, "cell file (schema rcal.cell/1), as ekf_identifier's")

@@ -183,7 +183,7 @@ int Run(const Options& o) {
 const RegisterCommand kCalibrationSweep(
     "calibration-sweep",
     "Calibration against the truth on seeded simulated cells: rank, noise, Cramér–Rao",
-    [](CLI::App& sub) -> std::function<int()> {
+    [](Args& sub) -> std::function<int()> {
       auto o = std::make_shared<Options>();
       sub.add_option("--robot", o->robot, "robot file (YAML or URDF)")->required();
       sub.add_option("--tip", o->tip_link, "URDF tip link (default: detected)");
@@ -202,7 +202,7 @@ const RegisterCommand kCalibrationSweep(
           ->capture_default_str();
       sub.add_option("--jobs", o->jobs, "worker threads (the figures do not depend on it)")
           ->capture_default_str()
-          ->check(CLI::Range(1, 64));
+          ->check(cli::Range(1, 64));
       sub.add_option("--json", o->json_path, "write the per-seed figures and the summary here");
       return [o]() { return Run(*o); };
     });

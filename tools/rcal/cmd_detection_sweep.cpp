@@ -293,7 +293,7 @@ int Run(const Options& o) {
 
 const RegisterCommand kSweep(
     "detection-sweep", "Detection and false-positive rates of rcal analyze on simulated data",
-    [](CLI::App& sub) -> std::function<int()> {
+    [](Args& sub) -> std::function<int()> {
       auto o = std::make_shared<Options>();
       sub.add_option("--seeds", o->seeds, "datasets per cell")->capture_default_str();
       sub.add_option("--first-seed", o->first_seed, "index of the first seed of each cell")
@@ -313,7 +313,7 @@ const RegisterCommand kSweep(
           ->delimiter(',');
       sub.add_option("--jobs", o->jobs, "worker threads (the figures do not depend on it)")
           ->capture_default_str()
-          ->check(CLI::Range(1, 64));
+          ->check(cli::Range(1, 64));
       sub.add_option("--position-sigma-mm", o->position_sigma_mm, "position noise σ per axis")
           ->capture_default_str();
       sub.add_option("--orientation-sigma-deg", o->orientation_sigma_deg,

@@ -112,7 +112,7 @@ int Run(const Options& o) {
 const RegisterCommand kSweepImu(
     "detection-sweep-imu",
     "Detection and false-positive rates of the IMU-stream analysis on simulated streams",
-    [](CLI::App& sub) -> std::function<int()> {
+    [](Args& sub) -> std::function<int()> {
       auto o = std::make_shared<Options>();
       sub.add_option("--seeds", o->seeds, "streams per cell")->capture_default_str();
       sub.add_option("--first-seed", o->first_seed, "seed of the first stream")

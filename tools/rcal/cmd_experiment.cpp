@@ -539,10 +539,10 @@ int RunPaper(const PaperOptions& o) {
 
 const RegisterCommand kExperiment(
     "experiment", "Reproduce the paper's experiments (rcal experiment paper)",
-    [](CLI::App& sub) -> std::function<int()> {
+    [](Args& sub) -> std::function<int()> {
       auto o = std::make_shared<PaperOptions>();
       sub.require_subcommand(1);
-      CLI::App* paper = sub.add_subcommand(
+      Args* paper = sub.add_subcommand(
           "paper", "GRB3016 with Table 3 errors: EKF and LM, Tables 2 and 3, Figs. 7 and 10");
       paper->add_option("--robot", o->robot, "robot file (YAML or URDF)")->capture_default_str();
       paper->add_option("--out", o->out, "report folder")->capture_default_str();
@@ -564,7 +564,7 @@ const RegisterCommand kExperiment(
           ->add_option("--sweep-seeds", o->sweep_seeds,
                        "with --sensors: only the robustness sweep, over this many seeds per "
                        "configuration (seed indices from --seed): median and spread")
-          ->check(CLI::Range(1, 9999));
+          ->check(cli::Range(1, 9999));
       paper
           ->add_option("--sweep-configs", o->sweep_configs,
                        "with --sweep-seeds: configurations to run (baseline, noise-0.5, noise-2, "
@@ -573,7 +573,7 @@ const RegisterCommand kExperiment(
           ->delimiter(',');
       paper->add_option("--jobs", o->jobs, "with --sweep-seeds: worker threads")
           ->capture_default_str()
-          ->check(CLI::Range(1, 64));
+          ->check(cli::Range(1, 64));
       return [o, paper]() {
         if (o->sweep_seeds > 0 || !o->sweep_configs.empty()) {
           if (!o->sensors) throw std::invalid_argument("--sweep-seeds needs --sensors");

@@ -217,7 +217,7 @@ const RegisterCommand kExport(
     "export",
     "Export an identified model: calibrated URDF (set-up frames as fixed joints), every parameter "
     "with its sigma (YAML), and a parity report proving the URDF is the model",
-    [](CLI::App& sub) -> std::function<int()> {
+    [](Args& sub) -> std::function<int()> {
       auto o = std::make_shared<Options>();
       sub.add_option("--calibration", o->calibration,
                      "results.json of rcal calibrate (or its --out folder), or an export's "

@@ -13,6 +13,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -329,7 +330,7 @@ int RunFuse(const FuseOptions& opt) {
 
 const RegisterCommand kRegisterFuse(
     "fuse", "FQA + orientation KF + position KF on a BROAD trial, scored against its truth",
-    [](CLI::App& sub) -> std::function<int()> {
+    [](Args& sub) -> std::function<int()> {
       auto opt = std::make_shared<FuseOptions>();
       sub.add_option("trial", opt->trial, "BROAD trial CSV (../shared/data/broad/*.csv)")
           ->required();

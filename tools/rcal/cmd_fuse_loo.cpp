@@ -219,7 +219,7 @@ const RegisterCommand kRegisterFuseLoo(
     "fuse-loo",
     "orientation KF settings for BROAD chosen by leave-one-trial-out: in-sample and held-out "
     "tables",
-    [](CLI::App& sub) -> std::function<int()> {
+    [](Args& sub) -> std::function<int()> {
       auto opt = std::make_shared<LooOptions>();
       sub.add_option("data", opt->data, "folder of BROAD trials (broad_NN_100hz.csv, README.md)");
       sub.add_option("--grid", opt->grid,

@@ -145,7 +145,7 @@ const RegisterCommand kIdentifiability(
     "identifiability",
     "Rank, unidentifiable combinations and base parameters of a robot in its cell (the count "
     "rcal calibrate identifies)",
-    [](CLI::App& sub) -> std::function<int()> {
+    [](Args& sub) -> std::function<int()> {
       auto o = std::make_shared<Options>();
       sub.add_option("data", o->data,
                      "pose dataset CSV or LCM log: judge at its own poses and markers (as rcal "

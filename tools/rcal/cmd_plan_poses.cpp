@@ -124,7 +124,7 @@ int Run(const Options& o) {
 const RegisterCommand kPlanPoses(
     "plan-poses",
     "Joint configurations to measure: the most information on the identifiable parameters",
-    [](CLI::App& sub) -> std::function<int()> {
+    [](Args& sub) -> std::function<int()> {
       auto o = std::make_shared<Options>();
       sub.add_option("--robot", o->robot, "robot file (YAML or URDF)");
       sub.add_option("--cell", o->cell, "cell file (rcal.cell/1): set-up, noise, constraints");

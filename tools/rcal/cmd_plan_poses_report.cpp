@@ -342,7 +342,7 @@ int Run(const Options& o) {
 const RegisterCommand kPlanPosesReport(
     "plan-poses-report",
     "Held-out error against stops: random, planned, online next-best, IROC-style greedy",
-    [](CLI::App& sub) -> std::function<int()> {
+    [](Args& sub) -> std::function<int()> {
       auto o = std::make_shared<Options>();
       sub.add_option("--arms", o->arms, "random D–H arms")->capture_default_str();
       sub.add_option("--first-arm", o->first_arm, "seed of the first arm")->capture_default_str();
@@ -355,7 +355,7 @@ const RegisterCommand kPlanPosesReport(
       sub.add_option("--position-sigma-mm", o->position_sigma_mm,
                      "position noise σ per axis (--sim: default 0.051, a still window's)")
           ->capture_default_str()
-          ->check(CLI::PositiveNumber)
+          ->check(cli::PositiveNumber)
           ->each([o](const std::string&) { o->position_sigma_given = true; });
       sub.add_option("--sim", o->sim,
                      "instead of random arms: a simulated cell of rcal's own (a sim file, e.g. "
@@ -363,10 +363,10 @@ const RegisterCommand kPlanPosesReport(
       sub.add_option("--orientation-sigma-mrad", o->orientation_sigma_mrad,
                      "--sim: orientation noise σ per axis of a still window's pose")
           ->capture_default_str()
-          ->check(CLI::PositiveNumber);
+          ->check(cli::PositiveNumber);
       sub.add_option("--jobs", o->jobs, "worker threads (the figures do not depend on it)")
           ->capture_default_str()
-          ->check(CLI::Range(1, 64));
+          ->check(cli::Range(1, 64));
       sub.add_option("--criterion", o->criterion,
                      "planned stops: d-optimal, or workspace (predicted error over the workspace)")
           ->capture_default_str();
@@ -374,7 +374,7 @@ const RegisterCommand kPlanPosesReport(
                      "online next-best: a stop's cost as joint-space distance [rad | m] "
                      "(ekf_identifier --next-poses-stop-cost)")
           ->capture_default_str()
-          ->check(CLI::NonNegativeNumber);
+          ->check(cli::NonNegativeNumber);
       sub.add_option("--out", o->out, "report folder")->capture_default_str();
       return [o]() { return Run(*o); };
     });

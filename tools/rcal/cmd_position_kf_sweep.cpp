@@ -545,10 +545,10 @@ const RegisterCommand kPositionKfSweep(
     "The position KF's motion models (accelerometer-driven σ, bias walk, adaptive noise; the "
     "bank of two) against the paper's filter: "
     "simulated cells and BROAD, minimax and leave-one-group-out",
-    [](CLI::App& sub) -> std::function<int()> {
+    [](Args& sub) -> std::function<int()> {
       auto o = std::make_shared<Options>();
       sub.add_option("--seeds", o->seeds, "seeds per case")
-          ->check(CLI::Range(1, 100))
+          ->check(cli::Range(1, 100))
           ->capture_default_str();
       sub.add_flag(
           "--broad", o->broad,
@@ -557,7 +557,7 @@ const RegisterCommand kPositionKfSweep(
                    "add a tapped copy of every simulated case (shocks of 30–70 m/s², one sample or "
                    "ringing for 80 ms, every 2 s on average)");
       sub.add_option("--rate", o->rates, "the simulated tracker's rates [Hz]")
-          ->check(CLI::Range(1.0, 1000.0))
+          ->check(cli::Range(1.0, 1000.0))
           ->capture_default_str();
       sub.add_option("--cell", o->cells, "simulated cells (config/cells/NAME.yaml and .sim.yaml)")
           ->capture_default_str();

@@ -205,7 +205,7 @@ int Run(const Options& o) {
 
 const RegisterCommand kSimulate(
     "simulate", "Write a pose dataset measured on a truth robot with hidden effects",
-    [](CLI::App& sub) -> std::function<int()> {
+    [](Args& sub) -> std::function<int()> {
       auto o = std::make_shared<Options>();
       sub.add_option("--robot", o->robot, "robot file (YAML or URDF)")->required();
       sub.add_option("--effect", o->effects,

@@ -101,7 +101,7 @@ int Run(const Options& o) {
 
 const RegisterCommand kStatus(
     "status", "Health of the live pipeline (HEALTH and SUPERVISOR_STATE heard on LCM)",
-    [](CLI::App& sub) -> std::function<int()> {
+    [](Args& sub) -> std::function<int()> {
       auto o = std::make_shared<Options>();
       sub.add_option("--lcm-url", o->lcm_url,
                      "LCM URL (default $RCAL_LCM_URL, else udpm://239.255.76.67:7667?ttl=0)");

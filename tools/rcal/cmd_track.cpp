@@ -457,7 +457,7 @@ const RegisterCommand kTrack(
     "track",
     "Run the online identification (change detection, re-convergence) over a pose dataset in "
     "time order, or the seeded tracking sweep",
-    [](CLI::App& sub) -> std::function<int()> {
+    [](Args& sub) -> std::function<int()> {
       auto o = std::make_shared<Options>();
       sub.add_option("data", o->data, "pose dataset CSV (rcal or FIGAROH layout)");
       sub.add_option("--robot", o->robot, "robot file (YAML or URDF)");
@@ -482,31 +482,31 @@ const RegisterCommand kTrack(
                      "takes, accepted or refused by its gate (0: none; ekf_identifier's default is "
                      "50)")
           ->capture_default_str()
-          ->check(CLI::Range(0, 1000000));
+          ->check(cli::Range(0, 1000000));
       sub.add_flag("--discrepancy-switch", o->discrepancy_switch,
                    "--cell: switch what the watch suspects in (ekf_identifier "
                    "--discrepancy-switch)");
       sub.add_flag("--sweep", o->sweep, "run the seeded tracking sweep instead (no DATA)");
       sub.add_option("--seeds", o->seeds, "sweep: seeds per arm and step")
           ->capture_default_str()
-          ->check(CLI::Range(1, 1000));
+          ->check(cli::Range(1, 1000));
       sub.add_option("--first-seed", o->first_seed,
                      "sweep: the first seed (the README's table: 0; another range gives figures on "
                      "runs nothing was chosen on)")
           ->capture_default_str()
-          ->check(CLI::Range(0, 999));
+          ->check(cli::Range(0, 999));
       sub.add_option("--quiet-poses", o->quiet_poses,
                      "sweep: poses of the unchanged arm per seed (false alarms)")
           ->capture_default_str();
       sub.add_option("--arm", o->arms, "sweep: robot files (default: four shipped arms)");
       sub.add_option("--random-arms", o->random_arms,
                      "sweep: this many random D–H arms (sim/random_arm.hpp) instead of robot files")
-          ->check(CLI::Range(0, 1000));
+          ->check(cli::Range(0, 1000));
       sub.add_option("--first-arm", o->first_arm, "sweep: seed of the first random arm")
           ->capture_default_str();
       sub.add_option("--jobs", o->jobs, "sweep: worker threads (the figures do not depend on it)")
           ->capture_default_str()
-          ->check(CLI::Range(1, 256));
+          ->check(cli::Range(1, 256));
       sub.add_option("--out", o->out, "sweep: output folder")->capture_default_str();
       return [o]() {
         if (o->sweep) return RunSweep(*o);

@@ -247,7 +247,7 @@ int Run(const Options& o) {
 
 const RegisterCommand kWatch(
     "watch", "A live line per pose of the online calibration (KINEMATIC_PARAMS on LCM)",
-    [](CLI::App& sub) -> std::function<int()> {
+    [](Args& sub) -> std::function<int()> {
       auto o = std::make_shared<Options>();
       sub.add_option("--lcm-url", o->lcm_url,
                      "LCM URL (default $RCAL_LCM_URL, else udpm://239.255.76.67:7667?ttl=0)");
@@ -264,7 +264,7 @@ const RegisterCommand kWatch(
       sub.add_option("--min-poses", o->min_poses,
                      "with --poses: a run that ends (--idle) after at least this many poses is a "
                      "success (a ROS 2 cell refuses the windows before its clocks are known)")
-          ->check(CLI::NonNegativeNumber);
+          ->check(cli::NonNegativeNumber);
       sub.add_option("--idle", o->idle_s, "stop when nothing heard this long [s] (0: never)")
           ->capture_default_str();
       sub.add_option("--step-offset", o->step_offsets,

@@ -2,15 +2,15 @@
 // with a static RCAL_COMMAND object, so adding a command touches no other file.
 #pragma once
 
-#include <CLI/CLI.hpp>
 #include <functional>
 #include <string>
 #include <vector>
+#include "cli.hpp"
 
 namespace rcal::tool {
 
 /// Adds options to `sub` and returns the function that runs the command (its exit code).
-using CommandSetup = std::function<std::function<int()>(CLI::App& sub)>;
+using CommandSetup = std::function<std::function<int()>(Args& sub)>;
 
 struct CommandEntry {
   std::string name;

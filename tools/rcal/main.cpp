@@ -11,6 +11,8 @@
 #include <mutex>
 #include <utility>
 
+#include <CLI/CLI.hpp>
+
 #include "command.hpp"
 
 namespace rcal::tool {
@@ -69,10 +71,13 @@ int main(int argc, char** argv) {
   auto& entries = Registry();
   std::sort(entries.begin(), entries.end(),
             [](const CommandEntry& a, const CommandEntry& b) { return a.name < b.name; });
+  // Each command's Args outlives the parse (its subcommands live in it).
+  std::vector<std::unique_ptr<Args>> args;
   std::vector<std::pair<CLI::App*, std::function<int()>>> runners;
   for (const auto& e : entries) {
     CLI::App* sub = app.add_subcommand(e.name, e.description);
-    runners.emplace_back(sub, e.setup(*sub));
+    args.push_back(std::make_unique<Args>(*sub));
+    runners.emplace_back(sub, e.setup(*args.back()));
   }
   try {
     app.parse(argc, argv);
