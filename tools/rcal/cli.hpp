@@ -78,8 +78,6 @@ class Args {
   /// How many times the option was given on the command line (0: its default stands).
   std::size_t count(const std::string& name) const;
 
-  CLI::App& app() { return *app_; }
-
  private:
   CLI::App* app_;
   std::deque<std::unique_ptr<Args>> subcommands_;
