@@ -1,6 +1,6 @@
 // tools/rcal/cli.hpp: rcal's options reach CLI11 unchanged: values of every bound type, the
-// validators (bounds included, a fraction refused for an integer), flags, counts, each,
-// subcommands, and a refusal names the option.
+// validators (bounds included, a fraction refused for an integer, the help CLI11's own), flags,
+// counts, each, subcommands, and a refusal names the option.
 #include "cli.hpp"
 
 #include <gtest/gtest.h>
@@ -103,6 +103,21 @@ TEST(Cli, ValidatorsRefuseNamingTheOption) {
   }
 }
 
+// An integer range describes itself as CLI11's Range<int> did in the commands' --help.
+TEST(Cli, AnIntegerRangeReadsAsCli11sInHelp) {
+  CLI::App app;
+  Args args(app);
+  int jobs = 1;
+  double tau = 0.5;
+  args.add_option("--jobs", jobs, "")->check(cli::Range(1, 64));
+  args.add_option("--tau", tau, "")->check(cli::Range(0.0, 1.0));
+  CLI::App reference;
+  reference.add_option("--jobs", jobs, "")->check(CLI::Range(1, 64));
+  reference.add_option("--tau", tau, "")->check(CLI::Range(0.0, 1.0));
+  EXPECT_EQ(app.help(), reference.help());
+  EXPECT_NE(app.help().find("[1 - 64]"), std::string::npos) << app.help();
+}
+
 TEST(Cli, RequiredDefaultsEachAndSubcommands) {
   CLI::App app;
   Args args(app);
@@ -116,7 +131,7 @@ TEST(Cli, RequiredDefaultsEachAndSubcommands) {
   paper->add_option("--out", out, "")->default_str("out/x")->each([&](const std::string&) {
     ++given;
   });
-  EXPECT_NE(app.help().find("7"), std::string::npos);  // the captured default is shown
+  EXPECT_NE(app.help().find("INT=7"), std::string::npos) << app.help();  // the captured default
   EXPECT_NE(Parse(app, {"paper"}).find("--robot"), std::string::npos);
   CLI::App app2;
   Args args2(app2);
