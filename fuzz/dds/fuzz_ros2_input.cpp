@@ -4,8 +4,8 @@
 // goes through ros2_input's core exactly as the process feeds it (Ros2Input: the ROS 2 → rcal
 // conversions, the time gates, the magnetometer pairing, the reorder buffer, every source's
 // clock-offset estimator and the arm's temperature and payload). A crash, a sanitizer report, an
-// exception, an event leaving out of time order or an ARM_CONDITIONS report its adapter refuses is
-// a finding.
+// exception, a sample leaving out of time order, the conditions out of their own time order, or an
+// ARM_CONDITIONS report its adapter refuses is a finding.
 //
 // Input: a sequence of records, each one opcode byte (which driver topic) then the bytes its
 // fields are read from; the stream ends when the bytes do.
@@ -17,6 +17,7 @@
 #include <limits>
 #include <optional>
 #include <string>
+#include <variant>
 
 #include "rcal/dds/ros2_convert.hpp"
 #include "rcal/io/cell_yaml.hpp"
@@ -91,12 +92,30 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   std::int64_t clock_us = 1'000'000'000;
   std::int64_t last_out = std::numeric_limits<std::int64_t>::min();
   std::int64_t resyncs = 0;
+  std::int64_t last_conditions = std::numeric_limits<std::int64_t>::min();
   auto drain = [&](bool flush) {
     // A re-synchronised stream (a restarted driver) starts a new time base.
-    if (health.resyncs() != resyncs) last_out = std::numeric_limits<std::int64_t>::min();
+    if (health.resyncs() != resyncs)
+      last_out = last_conditions = std::numeric_limits<std::int64_t>::min();
     resyncs = health.resyncs();
     for (const auto& e : in.Ready(flush)) {
       const std::int64_t u = sensors::Utime(e);
+      if (const auto* c = std::get_if<transport::ArmConditions>(&e)) {
+        // The conditions: their own stream (one taken later than the reorder delay leaves at its
+        // time, behind the samples), strictly in time order, each one its adapter accepts.
+        if (u <= last_conditions) {
+          std::fprintf(stderr, "conditions out of order: %lld µs after %lld µs\n",
+                       static_cast<long long>(u), static_cast<long long>(last_conditions));
+          std::abort();
+        }
+        last_conditions = u;
+        std::string error;
+        if (!transport::ArmConditionsFromMessage(transport::ToArmConditions(*c), &error)) {
+          std::fprintf(stderr, "published a report its adapter refuses: %s\n", error.c_str());
+          std::abort();
+        }
+        continue;
+      }
       if (u < last_out) {
         std::fprintf(stderr, "out of order: %lld µs after %lld µs\n", static_cast<long long>(u),
                      static_cast<long long>(last_out));
@@ -111,14 +130,6 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     // meaning they had).
     const std::uint8_t code = b.U8();
     const std::uint8_t op = code >= 253 ? 6 : code >= 250 ? 5 : code % 5;
-    // What goes out on ARM_CONDITIONS passes its own adapter's check.
-    auto check = [](const std::optional<transport::ArmConditions>& c) {
-      std::string error;
-      if (c && !transport::ArmConditionsFromMessage(transport::ToArmConditions(*c), &error)) {
-        std::fprintf(stderr, "published a report its adapter refuses: %s\n", error.c_str());
-        std::abort();
-      }
-    };
     if (op == 5) {
       dds::Sample<dds::Temperature> s;
       auto& m = s.get();
@@ -126,7 +137,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       Frame(b, m.header, "arm");
       m.temperature = b.Value(300.0);
       m.variance = b.Value(1.0);
-      check(in.OnTemperature(m));
+      in.OnTemperature(m);
     } else if (op == 6) {
       dds::Sample<dds::InertiaStamped> s;
       auto& m = s.get();
@@ -136,7 +147,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       m.inertia.com.x = b.Value(1.0);
       m.inertia.ixx = b.Value(1.0);
       m.inertia.izz = b.Value(1.0);
-      check(in.OnPayload(m));
+      in.OnPayload(m);
     } else if (op == 0) {
       dds::Sample<dds::JointState> s;
       auto& m = s.get();

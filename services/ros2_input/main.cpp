@@ -12,7 +12,8 @@
 //   rt<temperature>   sensor_msgs::msg::dds_::Temperature_ (optional: the arm's temperature)
 //   rt<payload>       geometry_msgs::msg::dds_::InertiaStamped_ (optional: what the arm carries)
 // Publishes on LCM (the cell's channels): JOINTS, IMU, POSITION as sensor_acquisition does, so the
-// rest of the pipeline is unchanged; ARM_CONDITIONS for each temperature or payload report;
+// rest of the pipeline is unchanged; ARM_CONDITIONS for each temperature or payload report (in
+// time order with the samples, its driver's clock moved to the joints': ros2_input.hpp);
 // CLOCK_OFFSET (every source's offset, σ and state) at 1 Hz of the joints' time and whenever a
 // state changes; HEALTH at 1 Hz, with DDS samples lost or rejected by the readers counted as
 // dropped.
@@ -180,6 +181,8 @@ int main(int argc, char** argv) {
           ok = t.Publish(ch.position, transport::ToMessage(*pos));
         else if (const auto* js = std::get_if<joint_state_t>(&e))
           ok = t.Publish(ch.joints, *js);
+        else if (const auto* c = std::get_if<transport::ArmConditions>(&e))
+          ok = t.Publish(ch.arm_conditions, transport::ToArmConditions(*c));
         if (ok) {
           health.Published();
           ++published;
@@ -201,24 +204,16 @@ int main(int argc, char** argv) {
     if (!settings->imu_topic.empty())
       readers.push_back(MakeReader<dds::Imu>(participant.get(), settings->imu_topic,
                                              [&](const dds::Imu& m) { input.OnImu(m); }));
-    // The arm's conditions (temperature, payload): published at once, one stream.
-    auto conditions = [&](const std::optional<transport::ArmConditions>& c) {
-      if (!c) return;
-      if (t.Publish(ch.arm_conditions, transport::ToArmConditions(*c))) {
-        health.Published();
-        ++published;
-      } else {
-        health.Error("LCM publish failed");
-      }
-    };
+    // The arm's conditions (temperature, payload): one stream, through the reorder buffer with
+    // the samples (ros2_input.hpp).
     if (!settings->temperature_topic.empty())
-      readers.push_back(MakeReader<dds::Temperature>(
-          participant.get(), settings->temperature_topic,
-          [&](const dds::Temperature& m) { conditions(input.OnTemperature(m)); }));
+      readers.push_back(
+          MakeReader<dds::Temperature>(participant.get(), settings->temperature_topic,
+                                       [&](const dds::Temperature& m) { input.OnTemperature(m); }));
     if (!settings->payload_topic.empty())
       readers.push_back(MakeReader<dds::InertiaStamped>(
           participant.get(), settings->payload_topic,
-          [&](const dds::InertiaStamped& m) { conditions(input.OnPayload(m)); }));
+          [&](const dds::InertiaStamped& m) { input.OnPayload(m); }));
     for (size_t i = 0; i < settings->positions.size(); ++i) {
       const auto& p = settings->positions[i];
       if (p.pose)
@@ -278,10 +273,11 @@ int main(int argc, char** argv) {
                    c.source, static_cast<int>(c.state), 1e3 * c.offset, 1e3 * c.sigma, c.resets);
     spdlog::info(
         "stopped: {} samples published, {} late (dropped), {} IMU samples with a magnetometer "
-        "reading, {} temperature and {} payload reports; DDS delivery latency median {:.1f} ms, "
-        "99 % {:.1f} ms over {} samples (+ the reorder delay {:.0f} ms before publishing)",
+        "reading, {} temperature and {} payload reports ({} later than the reorder delay, "
+        "published all the same); DDS delivery latency median {:.1f} ms, 99 % {:.1f} ms over {} "
+        "samples (+ the reorder delay {:.0f} ms before publishing)",
         published, input.late(), input.mag_paired(), input.temperatures(), input.payloads(),
-        latency.QuantileMs(0.5), latency.QuantileMs(0.99), latency.count(),
+        input.conditions_late(), latency.QuantileMs(0.5), latency.QuantileMs(0.99), latency.count(),
         1e3 * settings->reorder_delay);
     return 0;
   } catch (const std::exception& e) {

@@ -209,7 +209,10 @@ bool Ros2Input::Admit(Stream& st, int64_t utime, int clock_source) {
   if (!estimation::Usable(v)) return false;
   if (v == estimation::TimeVerdict::kResynchronised) {
     // A restarted driver: its clock is a new one.
+    st.lags.clear();
     if (&st == &joints_) {
+      temperature_.lags.clear();
+      payload_.lags.clear();
       // The arm's clock is the pipeline's: what waits in the buffer belongs to the old time base.
       conditions_.utime = std::numeric_limits<int64_t>::min();
       clocks_->ResetAll();
@@ -242,7 +245,17 @@ std::vector<sensors::SensorEvent> Ros2Input::Ready(bool flush) {
       flush ? std::numeric_limits<int64_t>::max() : newest_ - std::llround(s_.reorder_delay * 1e6);
   while (!queue_.empty() && queue_.begin()->first.first <= until) {
     released_ = queue_.begin()->first.first;
-    out.push_back(std::move(queue_.begin()->second));
+    if (const auto* c = std::get_if<transport::ArmConditions>(&queue_.begin()->second)) {
+      // One stream of conditions: each report carries the newest of both, after the last one (a
+      // report at its time would be a duplicate downstream). conditions_.utime starts at
+      // INT64_MIN, so + 1 cannot overflow and takes any first time.
+      conditions_.utime = std::max(c->utime, conditions_.utime + 1);
+      if (!std::isnan(c->temperature_c)) conditions_.temperature_c = c->temperature_c;
+      if (!std::isnan(c->payload_kg)) conditions_.payload_kg = c->payload_kg;
+      out.emplace_back(conditions_);
+    } else {
+      out.push_back(std::move(queue_.begin()->second));
+    }
     queue_.erase(queue_.begin());
   }
   return out;
@@ -344,44 +357,53 @@ void Ros2Input::OnPoint(size_t i, const dds::PointStamped& m) {
   OnPosition(i, std::move(p), dds::FrameId(m.header), error);
 }
 
-std::optional<transport::ArmConditions> Ros2Input::OnTemperature(const dds::Temperature& m) {
+bool Ros2Input::OnTemperature(const dds::Temperature& m) {
   health_.Received();
   std::string error;
-  auto c = Conditions(dds::FromRos(m, s_.temperature_topic, &error), temperature_, error);
-  if (c) ++temperatures_;
-  return c;
+  const bool ok = Conditions(dds::FromRos(m, s_.temperature_topic, &error), temperature_, error);
+  temperatures_ += ok;
+  return ok;
 }
 
-std::optional<transport::ArmConditions> Ros2Input::OnPayload(const dds::InertiaStamped& m) {
+bool Ros2Input::OnPayload(const dds::InertiaStamped& m) {
   health_.Received();
   std::string error;
-  auto c = Conditions(dds::FromRos(m, s_.payload_topic, &error), payload_, error);
-  if (c) ++payloads_;
-  return c;
+  const bool ok = Conditions(dds::FromRos(m, s_.payload_topic, &error), payload_, error);
+  payloads_ += ok;
+  return ok;
 }
 
-std::optional<transport::ArmConditions> Ros2Input::Conditions(
-    std::optional<transport::ArmConditions> c, Stream& st, const std::string& error) {
-  if (!c) return Refuse(error), std::nullopt;
-  if (!Admit(st, c->utime, -1)) return std::nullopt;
+bool Ros2Input::Conditions(std::optional<transport::ArmConditions> c, Stream& st,
+                           const std::string& error) {
+  if (!c) return Refuse(error), false;
+  if (!Admit(st, c->utime, -1)) return false;
   // Under `none` the gate has put the driver's own stamps in order.
-  int64_t utime = c->utime;
   if (s_.estimate_clock_offsets) {
     if (joints_utime_ == 0)
       return Refuse(st.name +
                     ": a report before the arm's first joints (no arm time to stamp it "
                     "with)"),
-             std::nullopt;
-    utime = joints_utime_;
+             false;
+    // Its clock against the joints': the median of its recent arrival lags (file comment).
+    st.lags.push_back(joints_utime_ - c->utime);
+    if (st.lags.size() > kConditionsLags) st.lags.pop_front();
+    std::vector<int64_t> lags(st.lags.begin(), st.lags.end());
+    const auto mid = lags.begin() + static_cast<std::ptrdiff_t>(lags.size() / 2);
+    std::nth_element(lags.begin(), mid, lags.end());
+    c->utime += *mid;
   }
-  // One stream of conditions: after the last report (two reports between the same two joints'
-  // samples, or the other topic's report stamped later: a microsecond on; one at the same time
-  // would be a duplicate downstream).
-  // (conditions_.utime starts at INT64_MIN, so + 1 cannot overflow and takes any first time.)
-  conditions_.utime = std::max(utime, conditions_.utime + 1);
-  if (!std::isnan(c->temperature_c)) conditions_.temperature_c = c->temperature_c;
-  if (!std::isnan(c->payload_kg)) conditions_.payload_kg = c->payload_kg;
-  return conditions_;
+  if (c->utime < released_) {
+    // Later than the reorder delay: not dropped (a payload change lost would stand wrong until
+    // the next report), published at its time (or just after the last report), counted: the
+    // samples of its time have left, and still_window waits for the conditions of a window.
+    ++conditions_late_;
+    health_.Error(st.name + ": a report at " + std::to_string(c->utime) +
+                  " µs (joints' clock) came after " + std::to_string(released_) +
+                  " µs had been published (later than the reorder delay)");
+  }
+  newest_ = std::max(newest_, c->utime);
+  queue_.emplace(std::pair{c->utime, sequence_++}, *c);
+  return true;
 }
 
 std::vector<ClockStatus> Ros2Input::Clocks() const {

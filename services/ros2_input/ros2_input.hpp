@@ -10,17 +10,27 @@
 //   positions  geometry_msgs/PointStamped (laser tracker) or PoseStamped (motion capture), one
 //              topic per marker → POSITION with the cell's σ², the stamp moved to the joints'
 //              clock.
-//   temperature  sensor_msgs/Temperature of the arm (optional) → ARM_CONDITIONS, published at
-//              once (not through the reorder buffer: still_window keeps the reports apart and
-//              takes the newest at or before each window's end). With clock_offsets `estimate`
-//              the report stands at the joints' newest time when it arrives: a temperature shows
-//              nothing to estimate its driver's clock from, and changes over minutes, against the
-//              milliseconds of delivery; with `none` its own stamp.
+//   temperature  sensor_msgs/Temperature of the arm (optional) → ARM_CONDITIONS, through the
+//              reorder buffer with the samples: still_window takes the report standing at each
+//              window's middle and refuses a window within which the payload changed, so a
+//              report must reach it in time order with the samples around it. With clock_offsets
+//              `none` the report keeps its own stamp. With `estimate` its driver's clock is moved
+//              to the joints' by the median, over its topic's last kConditionsLags reports, of
+//              (the newest joints' stamp when the report arrived − its stamp): a temperature or a
+//              payload shows nothing to estimate a clock from, but the median of its arrivals
+//              is good to the transport's usual latency, whatever one report's delay (a report
+//              stamped on its arrival alone, as before, stood as late as ros2_input was slow to
+//              take it: under a loaded CPU a grasp made inside a still window was stamped after
+//              the window's end, and the window measured under two loads went out as a pose).
 //   payload    geometry_msgs/InertiaStamped of what the arm carries (optional; its mass m [kg])
-//              → ARM_CONDITIONS, as the temperature. The two make one stream of conditions: each
-//              report carries the newest of both (NaN for one not yet reported; still_window
-//              takes a NaN payload as 0), at a time after the last report (a report that would
-//              stand at or before it stands 1 µs after it).
+//              → ARM_CONDITIONS, as the temperature. The two make one stream of conditions: as
+//              they leave the buffer, each report carries the newest of both (NaN for one not yet
+//              reported; still_window takes a NaN payload as 0), at a time after the last report
+//              (a report that would stand at or before it stands 1 µs after it). A report older
+//              than what already left the buffer is not dropped (the conditions would stay wrong
+//              until the next report, which may come only at the next change): it leaves at
+//              once, at its time, counted (conditions_late); still_window decides a window only
+//              once the conditions have been reported past its end.
 //
 // Clocks. Every driver stamps with its own clock. With clock_offsets `estimate` each source's
 // offset against the joints (offset = t_source − t_joints) is estimated from the motion itself
@@ -53,6 +63,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "rcal/clock_offset_t.hpp"
@@ -130,13 +141,14 @@ class Ros2Input {
   /// `i`: the index in settings().positions.
   void OnPose(size_t i, const dds::PoseStamped& m);
   void OnPoint(size_t i, const dds::PointStamped& m);
-  /// The arm's temperature → the ARM_CONDITIONS report to publish now (std::nullopt: refused and
-  /// counted, or no joints' time yet to stamp it with under `estimate`).
-  std::optional<transport::ArmConditions> OnTemperature(const dds::Temperature& m);
-  /// The payload the arm carries → the ARM_CONDITIONS report to publish now, as OnTemperature.
-  std::optional<transport::ArmConditions> OnPayload(const dds::InertiaStamped& m);
+  /// The arm's temperature → into the reorder buffer, stamped on the joints' clock (file
+  /// comment); false: refused and counted (or no joints' time yet to move it by, under
+  /// `estimate`).
+  bool OnTemperature(const dds::Temperature& m);
+  /// The payload the arm carries → into the reorder buffer, as OnTemperature.
+  bool OnPayload(const dds::InertiaStamped& m);
   /// The events to publish now, in time order: those reorder_delay older than the newest
-  /// (`flush`: all).
+  /// (`flush`: all). A transport::ArmConditions event carries the newest of both conditions.
   std::vector<sensors::SensorEvent> Ready(bool flush = false);
 
   /// Every source's clock now.
@@ -154,12 +166,21 @@ class Ros2Input {
   int64_t temperatures() const { return temperatures_; }
   /// Payload reports turned into ARM_CONDITIONS.
   int64_t payloads() const { return payloads_; }
+  /// Conditions reports that arrived older than what had left the buffer (published at once, not
+  /// dropped).
+  int64_t conditions_late() const { return conditions_late_; }
+  /// How many reports the conditions' clock is taken from (the median of their arrival lags).
+  static constexpr size_t kConditionsLags = 21;
   const Ros2InputSettings& settings() const { return s_; }
 
  private:
   struct Stream {
+    Stream(std::string topic, estimation::TimeGate time_gate)
+        : name(std::move(topic)), gate(std::move(time_gate)) {}
     std::string name;
     estimation::TimeGate gate;
+    // A conditions topic's last (newest joints' stamp on arrival − own stamp) [µs], newest last.
+    std::deque<int64_t> lags;
   };
   // Gates the driver's own stamp; false when refused (counted). Resets the source's clock on a
   // re-synchronisation.
@@ -169,10 +190,9 @@ class Ros2Input {
   void Refuse(const std::string& reason);
   void OnPosition(size_t i, std::optional<transport::PositionSample> p, const std::string& frame_id,
                   const std::string& error);
-  // A temperature or payload report (the other field NaN) of stream `st` → the conditions report
-  // with the newest of both, stamped (see the file comment); std::nullopt: refused.
-  std::optional<transport::ArmConditions> Conditions(std::optional<transport::ArmConditions> c,
-                                                     Stream& st, const std::string& error);
+  // A temperature or payload report (the other field NaN) of stream `st` → stamped on the joints'
+  // clock (see the file comment) and queued; false: refused.
+  bool Conditions(std::optional<transport::ArmConditions> c, Stream& st, const std::string& error);
 
   Ros2InputSettings s_;
   transport::Health& health_;
@@ -187,8 +207,9 @@ class Ros2Input {
   std::map<std::pair<int64_t, int64_t>, sensors::SensorEvent> queue_;
   int64_t sequence_ = 0, newest_ = std::numeric_limits<int64_t>::min(),
           released_ = std::numeric_limits<int64_t>::min();
-  int64_t joints_utime_ = 0, late_ = 0, mag_paired_ = 0, temperatures_ = 0, payloads_ = 0;
-  // The newest conditions published: their time [µs, joints' clock], temperature and payload.
+  int64_t joints_utime_ = 0, late_ = 0, mag_paired_ = 0, temperatures_ = 0, payloads_ = 0,
+          conditions_late_ = 0;
+  // The newest conditions released: their time [µs, joints' clock], temperature and payload.
   transport::ArmConditions conditions_{std::numeric_limits<int64_t>::min()};
 };
 

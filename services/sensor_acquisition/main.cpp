@@ -25,7 +25,9 @@
 // the arm's temperature warming as sim::SessionSettings says, with --sim-warmup as the time
 // constant, plus its 0.3 K sensor noise; the payload it was told to carry: none, or with
 // --sim-payloads one per stop, taken on halfway through the move to it, or with
-// --sim-payload-at stop halfway through its still interval), and with --sim-effect
+// --sim-payload-at stop halfway through its still interval; --sim-conditions-late S: each report
+// published S seconds of sensor time after it is made, as from a slower bridge), and with
+// --sim-effect
 // (the arm grows with its temperature, or with time; its joints give way under gravity and the
 // payload, turn by a periodic gear error or a scale off their readings, or stand off them by their
 // backlash in the direction they came in) the tool moves as the extended model says under the
@@ -69,6 +71,7 @@
 
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <deque>
 #include <functional>
 #include <limits>
 #include <optional>
@@ -127,6 +130,8 @@ int RunSource(rcal::sensors::SensorSource& source, rcal::transport::Transport& t
       ok = t.Publish(channels.position, transport::ToMessage(*pos));
     else if (const auto* js = std::get_if<joint_state_t>(&*e))
       ok = t.Publish(channels.joints, *js);
+    else if (const auto* c = std::get_if<transport::ArmConditions>(&*e))
+      ok = t.Publish(channels.arm_conditions, transport::ToArmConditions(*c));
     else
       ok = t.Publish(channels.pose_measurement, std::get<pose_measurement_t>(*e));
     if (ok) {
@@ -270,8 +275,8 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
                  const std::vector<std::string>& sim_effects,
                  const std::vector<double>& payloads_kg,
                  rcal::cell::SimArmConditions::PayloadChangeAt payload_at, double warmup_s,
-                 bool follow, bool linger, int64_t start_utime, double speed, const Resume& resume,
-                 rcal::transport::LcmTransport& t) {
+                 double conditions_late_s, bool follow, bool linger, int64_t start_utime,
+                 double speed, const Resume& resume, rcal::transport::LcmTransport& t) {
   using namespace rcal;
   // SimulateWindows' programme: the home pose, then the calibration and test stops.
   cell::SimProgramme sim_run = cell::MakeSimProgramme(built, sim_spec, seed, num_cal, num_test);
@@ -381,6 +386,8 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
       ++published;
     }
   };
+  // The controller's reports made and not yet published: (sensor time made [s], report).
+  std::deque<std::pair<double, transport::ArmConditions>> reports;
   while (!services::StopRequested()) {
     // Leaving a calibration stop: where to next (before the first tick of the move).
     const double t_next = static_cast<double>(k) / ss.rate_hz;  // [s] of the next tick
@@ -403,7 +410,12 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
       c.utime = utime;
       c.temperature_c = conditions.Reported(f->t, tick);
       c.payload_kg = conditions.ReportedPayload(f->t);
-      count(t.Publish(channels.arm_conditions, transport::ToArmConditions(c)));
+      reports.emplace_back(f->t, c);
+    }
+    // Each report conditions_late_s after it was made (stamped when made).
+    while (!reports.empty() && f->t - reports.front().first >= conditions_late_s - 1e-9) {
+      count(t.Publish(channels.arm_conditions, transport::ToArmConditions(reports.front().second)));
+      reports.pop_front();
     }
     transport::ImuSample imu;
     imu.utime = utime;
@@ -422,6 +434,8 @@ int RunSensorSim(const rcal::io::BuiltCell& built, const rcal::cell::CellSimSpec
     health.Tick(utime, t);
     t.HandleTimeout(0);  // keeps LCM's receive queue empty
   }
+  for (const auto& [made, c] : reports)  // the end of the programme: the rest at once
+    count(t.Publish(channels.arm_conditions, transport::ToArmConditions(c)));
   lease.Stopped(k, k >= sensors.num_ticks());
   health.Final(t);
   spdlog::info("done: {} samples published", published);
@@ -565,6 +579,13 @@ int main(int argc, char** argv) {
                  "simulated controller reports on ARM_CONDITIONS")
       ->check(CLI::Range(1.0, 1e6))
       ->capture_default_str();
+  double conditions_late_s = 0.0;
+  app.add_option("--sim-conditions-late", conditions_late_s,
+                 "sim sensors: the simulated controller's ARM_CONDITIONS reports reach LCM this "
+                 "long [s of sensor time] after they are made (stamped when made): a controller "
+                 "bridge slower than the sensors")
+      ->check(CLI::Range(0.0, 60.0))
+      ->capture_default_str();
   bool follow = false;
   app.add_flag("--follow-next-poses", follow,
                "sim: go where ekf_identifier's NEXT_POSES asks (its best suggestion) instead of to "
@@ -638,8 +659,8 @@ int main(int argc, char** argv) {
     if (app.get_option("--seed")->count() == 0) seed = sim_spec.seed;
     if (level == "sensors")
       return RunSensorSim(built, sim_spec, seed, poses > 0 ? poses : sim_spec.num_cal, test_poses,
-                          step_offsets, sim_effects, payloads_kg, payload_at, warmup_s, follow,
-                          linger, start_utime, speed, resume, t);
+                          step_offsets, sim_effects, payloads_kg, payload_at, warmup_s,
+                          conditions_late_s, follow, linger, start_utime, speed, resume, t);
     // Pose level: the cell's model at the sim file's truth, measured as the cell's position sensor
     // measures (its largest σ per axis; orientation when it is a 6-DoF tracker), one pose per stop.
     const auto& model = built.model;

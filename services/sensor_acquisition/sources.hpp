@@ -18,12 +18,15 @@
 #include "rcal/joint_state_t.hpp"
 #include "rcal/kinematics/model.hpp"
 #include "rcal/pose_measurement_t.hpp"
+#include "rcal/transport/adapters.hpp"
 #include "rcal/transport/filter_nodes.hpp"
 
 namespace rcal::sensors {
 
+/// One sample of a source, published on its channel (ARM_CONDITIONS for the arm's conditions: a
+/// live source such as ros2_input's drivers orders them with the samples).
 using SensorEvent = std::variant<transport::ImuSample, transport::PositionSample, joint_state_t,
-                                 pose_measurement_t>;
+                                 pose_measurement_t, transport::ArmConditions>;
 
 /// Sensor time of an event [µs].
 int64_t Utime(const SensorEvent& e);

@@ -39,7 +39,14 @@
 // ArmConditionsHistory::ForWindow): the newest report at or before the window's middle, if at
 // most --conditions-max-age old (its detected end lies up to a second into the next move). A
 // window within which the reported payload changed (a grasp at the stop, or a pick reported as
-// the arm left) was measured under two loads: it is refused, named and counted in HEALTH. A cell
+// the arm left) was measured under two loads: it is refused, named and counted in HEALTH. The
+// reports come on their own stream, from another process, and may reach still_window after the
+// samples that end a window (under a loaded CPU a grasp made inside a window came after it had
+// been decided, and the window went out as a pose): once ARM_CONDITIONS has been seen, a window
+// is held until a report after its end has come (ArmConditionsHistory::ReportedPast; reports come
+// in time order), or until --conditions-wait seconds of sensor time have passed its end, then
+// decided on what came, counted in HEALTH gaps with the reason in last_error (so are the windows
+// held when the streams end or restart). Windows go out in the order they were formed. A cell
 // that sends no ARM_CONDITIONS gets temperature unknown (NaN) and payload 0, as before; once
 // reports have come, a window with none standing (the controller went quiet) goes out so too, and
 // is counted in HEALTH gaps with the reason in last_error. A report not measured (NaN) stays
@@ -52,6 +59,8 @@
 #include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <deque>
+#include <limits>
 #include <optional>
 
 #include "rcal/clock_offset_t.hpp"
@@ -74,13 +83,25 @@ using namespace rcal;
 namespace ch = transport::channels;
 
 class StillWindowNode {
+  // A still window formed, awaiting its conditions (Release).
+  struct Held {
+    kinematics::PoseMeasurement z;
+    double t_begin, t_end;  // [s] sensor time
+    int imu_samples, position_samples;
+    kinematics::EffectContext context;  // approach and time; the conditions when decided
+  };
+
  public:
   /// The final HEALTH (on a clean stop): the counts up to the end.
-  void Finish() { health_.Final(t_); }
+  void Finish() {
+    Release(now_s_, true);
+    health_.Final(t_);
+  }
   StillWindowNode(const io::BuiltCell& cell, const estimation::TimeGateSettings& time,
                   transport::Transport& t, const std::string& name, double clock_fraction,
-                  double conditions_max_age)
+                  double conditions_max_age, double conditions_wait)
       : pipeline_(cell.pipeline),
+        conditions_wait_(conditions_wait),
         clock_fraction_(clock_fraction),
         conditions_(conditions_max_age),
         warmup_(cell.spec.still_window.warmup),
@@ -125,6 +146,8 @@ class StillWindowNode {
     const auto v = health_.Gate(gate, utime, field);
     if (v == estimation::TimeVerdict::kResynchronised) {
       spdlog::warn("{}", health_.last_error());
+      Release(now_s_, true);  // the old time base's windows, on what came
+      now_s_ = -std::numeric_limits<double>::infinity();
       pipeline_.Reset();
       dropped_ = 0;
       resets_ = 0;
@@ -165,6 +188,8 @@ class StillWindowNode {
           disagreements_);
     }
     for (const auto& p : pipeline_.TakePoses()) Emit(p);
+    now_s_ = std::max(now_s_, Seconds(utime));
+    Release(now_s_);
     health_.Tick(utime, t_);
   }
   void OnJoints(const joint_state_t& m) {
@@ -222,6 +247,7 @@ class StillWindowNode {
                    c->temperature_c, c->payload_kg);
     conditions_seen_ = true;
     conditions_.Add({Seconds(c->utime), c->temperature_c, c->payload_kg});
+    Release(now_s_);
   }
   // The arm's conditions standing at the middle of the window [t_begin, t_end] [s] into `context`
   // (file comment). False: the window is refused (the payload changed within it), counted.
@@ -295,16 +321,41 @@ class StillWindowNode {
       spdlog::warn("window {:.3f}–{:.3f} s refused: {}", p.t_begin, p.t_end, veto);
       return;
     }
-    const int64_t utime = std::llround(p.t_end * 1e6);
-    kinematics::EffectContext context;
-    context.time_s = p.t_end;
-    context.dq_sign = approach;
-    if (!TakeConditions(p.t_begin, p.t_end, context)) return;
+    Held w{z, p.t_begin, p.t_end, p.imu_samples, p.position_samples, {}};
+    w.context.time_s = p.t_end;
+    w.context.dq_sign = approach;
+    held_.push_back(std::move(w));
+  }
+  // The windows held for their conditions, in order, decided once ARM_CONDITIONS has reported past
+  // their end, or once sensor time `now_s` [s] is --conditions-wait past it, or at once (`all`:
+  // the streams ended or restarted; a cell that sends no ARM_CONDITIONS holds nothing).
+  void Release(double now_s, bool all = false) {
+    while (!held_.empty()) {
+      Held& w = held_.front();
+      const bool known = !conditions_seen_ || conditions_.ReportedPast(w.t_end);
+      if (!known && !all && now_s - w.t_end < conditions_wait_) return;
+      if (!known) {
+        health_.Gap(1);
+        health_.Error(fmt::format(
+            "window {:.3f}–{:.3f} s decided without ARM_CONDITIONS past its end ({}): a payload "
+            "change within it may not be seen",
+            w.t_begin, w.t_end,
+            all ? "the streams ended or restarted"
+                : fmt::format("waited {} s of sensor time", conditions_wait_)));
+        spdlog::warn("{}", health_.last_error());
+      }
+      Decide(w);
+      held_.pop_front();
+    }
+  }
+  void Decide(Held& w) {
+    if (!TakeConditions(w.t_begin, w.t_end, w.context)) return;
+    const int64_t utime = std::llround(w.t_end * 1e6);
     if (t_.Publish(channels_.pose_measurement,
-                   transport::ToMessage(z, utime, emitted_, marker_id_, context))) {
+                   transport::ToMessage(w.z, utime, emitted_, marker_id_, w.context))) {
       health_.Published();
       spdlog::info("pose {}: window {:.3f}–{:.3f} s, {} IMU / {} position samples", emitted_,
-                   p.t_begin, p.t_end, p.imu_samples, p.position_samples);
+                   w.t_begin, w.t_end, w.imu_samples, w.position_samples);
       ++emitted_;
     } else {
       health_.Error("publish failed");
@@ -312,6 +363,8 @@ class StillWindowNode {
   }
 
   estimation::PosePipeline pipeline_;
+  std::deque<Held> held_;
+  double conditions_wait_;
   double clock_fraction_;
   // The input's latest CLOCK_OFFSET, if it sends one.
   std::optional<std::vector<transport::SourceClock>> clocks_;
@@ -327,6 +380,7 @@ class StillWindowNode {
   transport::Transport& t_;
   transport::Health health_;
   std::optional<double> t_first_;
+  double now_s_ = -std::numeric_limits<double>::infinity();  // newest sample's time [s]
   int emitted_ = 0;
   Eigen::VectorXd q_last_stop_;  // joints of the last still window (its pose or not)
   std::int64_t dropped_ = 0, resets_ = 0, disagreements_ = 0;
@@ -362,6 +416,13 @@ int main(int argc, char** argv) {
                  "and still give its pose the temperature and payload")
       ->check(CLI::Range(0.0, 3600.0))
       ->capture_default_str();
+  double conditions_wait = 2.0;
+  app.add_option("--conditions-wait", conditions_wait,
+                 "ARM_CONDITIONS: how long [s of sensor time] after a window's end it waits for a "
+                 "report past its end before it is decided on what came (a payload change "
+                 "reported late falls inside it); at least the controller's report period")
+      ->check(CLI::Range(0.0, 3600.0))
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
   try {
@@ -370,7 +431,7 @@ int main(int argc, char** argv) {
     transport::LcmTransport t(lcm_url);
     spdlog::info("still_window on {}: cell {} ({}), {}", t.url(), cell.spec.name, cell.spec.source,
                  cell.pipeline.use_orientation ? "position and orientation" : "positions only");
-    StillWindowNode node(cell, time, t, name, clock_fraction, conditions_max_age);
+    StillWindowNode node(cell, time, t, name, clock_fraction, conditions_max_age, conditions_wait);
     if (const int rc =
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
         rc != 0)

@@ -99,6 +99,28 @@ TEST(ArmConditions, AWindowTakesItsMiddlesReportAndNamesAPayloadChangeWithinIt) 
   EXPECT_FALSE(late.ForWindow(1.0, 4.0).payload_change);
 }
 
+// A window may be decided once a report after its end has come: before that, a report still to
+// come may fall inside it (the grasp made at the stop, reported late). The same window decided
+// before and after that report: the change is seen only after.
+TEST(ArmConditions, AWindowIsKnownOnceAReportAfterItsEndHasCome) {
+  ArmConditionsHistory h(10.0);
+  EXPECT_FALSE(h.ReportedPast(0.0));  // nothing yet
+  h.Add({1.0, 20.0, 0.0});
+  EXPECT_TRUE(h.ReportedPast(0.5));
+  EXPECT_FALSE(h.ReportedPast(1.0));  // a report may still come at 1.0 (it would replace this)
+  EXPECT_FALSE(h.ReportedPast(2.0));
+  EXPECT_FALSE(h.ForWindow(1.2, 2.0).payload_change);  // decided too early: no change seen
+  h.Add({1.5, 20.0, 10.0});                            // the grasp, reported late
+  EXPECT_FALSE(h.ReportedPast(2.0));
+  h.Add({2.5, 20.0, 10.0});
+  EXPECT_TRUE(h.ReportedPast(2.0));
+  const auto w = h.ForWindow(1.2, 2.0);
+  ASSERT_TRUE(w.payload_change);
+  EXPECT_EQ(w.payload_change->t, 1.5);
+  h.Clear();  // a new time base: nothing known
+  EXPECT_FALSE(h.ReportedPast(0.5));
+}
+
 // A controller reporting every 30 s, with reports standing for 60 s: its gate accepts each
 // report (the sensors' 10 s horizon alone refuses nearly all of them), and still refuses one
 // beyond the widened horizon.

@@ -380,9 +380,10 @@ TEST_F(Ros2Cell, AnArmGrowingAsItWarmsIsNamedThroughItsRos2Drivers) {
 // The ROS 2 twin of SensorPipeline.AWindowMeasuredUnderTwoPayloadsIsRefusedAndCounted: a grasp
 // made at the measurement stop (ros2_sim_drivers --sim-payload-at stop), its
 // geometry_msgs/InertiaStamped published as it is made. Through ros2_input (clocks estimated: the
-// report is stamped on the arm's clock as it arrives), still_window refuses exactly the windows of
-// the stops where the payload changed, and every pose it publishes carries the payload its stop
-// held (truth: the simulator's schedule).
+// report moved to the arm's clock by the median of its arrival lags), still_window refuses exactly
+// the windows of the stops where the payload changed, and every pose it publishes carries the
+// payload its stop held (truth: the simulator's schedule). Under load: beside a sensor-level
+// pipeline and a busy core (README).
 TEST_F(Ros2Cell, AWindowMeasuredUnderTwoPayloadsIsRefusedThroughItsRos2Drivers) {
   RCAL_IN_NAMESPACE("Ros2Cell.AWindowMeasuredUnderTwoPayloadsIsRefusedThroughItsRos2Drivers");
   constexpr int kStops = 20;

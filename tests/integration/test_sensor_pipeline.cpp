@@ -127,7 +127,8 @@ class SensorPipeline : public ProcessFixture {
 
   LiveRun RunCell(const std::string& cell_file, const std::string& sim_file, int cal, int test,
                   const std::vector<std::string>& more = {},
-                  const std::vector<std::string>& ekf_more = {}, int judged = -1) {
+                  const std::vector<std::string>& ekf_more = {}, int judged = -1,
+                  const std::vector<std::string>& still_window_more = {}) {
     if (judged < 0) judged = cal;
     LiveRun run;
     transport::LcmTransport t(kUrl);
@@ -155,8 +156,9 @@ class SensorPipeline : public ProcessFixture {
         run.checkpoint.string()};
     ekf_cmd.insert(ekf_cmd.end(), ekf_more.begin(), ekf_more.end());
     const pid_t ekf = Start(ekf_cmd, "ekf_identifier.log");
-    const pid_t sw =
-        Start({RCAL_STILL_WINDOW, "--lcm-url", kUrl, "--cell", cell_file}, "still_window.log");
+    std::vector<std::string> sw_cmd = {RCAL_STILL_WINDOW, "--lcm-url", kUrl, "--cell", cell_file};
+    sw_cmd.insert(sw_cmd.end(), still_window_more.begin(), still_window_more.end());
+    const pid_t sw = Start(sw_cmd, "still_window.log");
     // Both listening (the identifier announces itself with a CALIBRATION_STATUS).
     EXPECT_TRUE(
         integration::Until([&] { return run.status.has_value(); }, [&] { t.HandleTimeout(100); }));
@@ -778,10 +780,14 @@ TEST_F(SensorPipeline, AWindowMeasuredUnderTwoPayloadsIsRefusedAndCounted) {
   ASSERT_GE(grasped.size(), 4u);
   ASSERT_LE(grasped.size(), static_cast<size_t>(kCal - 4));
   const int published = kCal - static_cast<int>(grasped.size());
-  const LiveRun run = RunCell(
-      RCAL_SOURCE_DIR "/config/cells/grb3016.yaml", sim_file, kCal, 5,
-      {"--seed", std::to_string(kSeed), "--sim-payloads", "0,10", "--sim-payload-at", "stop"}, {},
-      published);
+  // The controller's reports reach LCM 2.5 s of sensor time after they are made: a grasp made
+  // inside a window is reported after still_window has seen the samples that end it (its end is
+  // detected within about a second), so the window is decided only once a report after its end
+  // has come, waiting up to 5 s (reports every second, 2.5 s late: up to 3.5 s after its end).
+  const LiveRun run = RunCell(RCAL_SOURCE_DIR "/config/cells/grb3016.yaml", sim_file, kCal, 5,
+                              {"--seed", std::to_string(kSeed), "--sim-payloads", "0,10",
+                               "--sim-payload-at", "stop", "--sim-conditions-late", "2.5"},
+                              {}, published, {"--conditions-wait", "5"});
   ASSERT_EQ(run.poses.size(), static_cast<size_t>(published));
   std::set<int> stops;
   for (const pose_measurement_t& m : run.poses) {

@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -175,55 +176,101 @@ dds::Sample<dds::Temperature> RosTemperature(int64_t utime, double celsius) {
   return std::move(*dds::ToRos(c, 0.09, "arm", &error));
 }
 
+// The conditions among events, in their order.
+std::vector<transport::ArmConditions> ConditionsIn(
+    const std::vector<sensors::SensorEvent>& events) {
+  std::vector<transport::ArmConditions> out;
+  for (const auto& e : events)
+    if (const auto* c = std::get_if<transport::ArmConditions>(&e)) out.push_back(*c);
+  return out;
+}
+
 TEST_F(Ros2InputTest, TheArmsTemperatureBecomesArmConditionsOnTheArmsClock) {
   EXPECT_EQ(settings_.temperature_topic, "/arm/temperature");
-  {
-    // clock_offsets none: the drivers share the joints' clock, the report keeps its stamp.
-    Ros2Input in(settings_, cell_.model, health_);
-    const auto c = in.OnTemperature(RosTemperature(2'000'000, 24.5).get());
-    ASSERT_TRUE(c);
-    EXPECT_EQ(c->utime, 2'000'000);
-    EXPECT_EQ(c->temperature_c, 24.5);
-    EXPECT_TRUE(std::isnan(c->payload_kg));
-    // A duplicate, one out of order, and kelvin: refused, counted, named.
-    EXPECT_FALSE(in.OnTemperature(RosTemperature(2'000'000, 24.5).get()));
-    EXPECT_FALSE(in.OnTemperature(RosTemperature(1'000'000, 24.5).get()));
-    EXPECT_FALSE(in.OnTemperature(RosTemperature(3'000'000, 297.6).get()));
-    EXPECT_EQ(health_.duplicates(), 1);
-    EXPECT_EQ(health_.out_of_order(), 1);
-    EXPECT_NE(health_.last_error().find("/arm/temperature.temperature: 297.600000 °C"),
-              std::string::npos)
-        << health_.last_error();
-    // A controller that reports slowly (every 60 s, beyond the sensors' 10 s horizon) is taken.
-    EXPECT_TRUE(in.OnTemperature(RosTemperature(62'000'000, 25.0).get()));
-    EXPECT_EQ(health_.out_of_horizon(), 0);
-    EXPECT_EQ(in.temperatures(), 2);
-    // Nothing went into the sensor events.
-    EXPECT_TRUE(in.Ready(true).empty());
+  // clock_offsets none: the drivers share the joints' clock, the report keeps its stamp.
+  Ros2Input in(settings_, cell_.model, health_);
+  EXPECT_TRUE(in.OnTemperature(RosTemperature(2'000'000, 24.5).get()));
+  // A duplicate, one out of order, and kelvin: refused, counted, named.
+  EXPECT_FALSE(in.OnTemperature(RosTemperature(2'000'000, 24.5).get()));
+  EXPECT_FALSE(in.OnTemperature(RosTemperature(1'000'000, 24.5).get()));
+  EXPECT_FALSE(in.OnTemperature(RosTemperature(3'000'000, 297.6).get()));
+  EXPECT_EQ(health_.duplicates(), 1);
+  EXPECT_EQ(health_.out_of_order(), 1);
+  EXPECT_NE(health_.last_error().find("/arm/temperature.temperature: 297.600000 °C"),
+            std::string::npos)
+      << health_.last_error();
+  // A controller that reports slowly (every 60 s, beyond the sensors' 10 s horizon) is taken.
+  EXPECT_TRUE(in.OnTemperature(RosTemperature(62'000'000, 25.0).get()));
+  EXPECT_EQ(health_.out_of_horizon(), 0);
+  EXPECT_EQ(in.temperatures(), 2);
+  // Out through the reorder buffer, as ARM_CONDITIONS events only.
+  const auto events = in.Ready(true);
+  const auto out = ConditionsIn(events);
+  ASSERT_EQ(out.size(), 2u);
+  EXPECT_EQ(events.size(), 2u);
+  EXPECT_EQ(out[0].utime, 2'000'000);
+  EXPECT_EQ(out[0].temperature_c, 24.5);
+  EXPECT_TRUE(std::isnan(out[0].payload_kg));
+  EXPECT_EQ(out[1].utime, 62'000'000);
+  EXPECT_EQ(out[1].temperature_c, 25.0);
+}
+
+// clock_offsets estimate: the temperature driver counts from its boot; its reports are moved to
+// the arm's clock by the median of their arrival lags, so a report that ros2_input takes late (a
+// loaded CPU, a DDS hiccup) still stands when it was made, not when it was taken. Truth: the
+// simulated time each report was made at.
+TEST_F(Ros2InputTest, AReportTakenLateStandsWhenItWasMade) {
+  Ros2InputSettings s = settings_;
+  s.estimate_clock_offsets = true;
+  s.reorder_delay = 0.2;
+  transport::Health health("ros2_input");
+  Ros2Input in(s, cell_.model, health);
+  constexpr int64_t kArm0 = 1'700'000'000'000'000;  // the arm's clock at t = 0 [µs]
+  constexpr int64_t kBoot = 5'000'000;              // the temperature driver's at t = 0 [µs]
+  EXPECT_FALSE(in.OnTemperature(RosTemperature(kBoot, 24.0).get()));
+  EXPECT_NE(health.last_error().find("before the arm's first joints"), std::string::npos);
+  std::vector<transport::ArmConditions> out;
+  // Joints at 125 Hz (8 ms) for 4 s; a report every 100 ms, taken 3 ms after it is made, but
+  // those made from 3.0 s to 3.4 s taken together 0.5 s late (a stalled reader: its topic keeps
+  // its order, the joints go on).
+  std::vector<int64_t> made;  // [µs], t
+  for (int64_t k = 0; k <= 500; ++k) {
+    const int64_t t = 8'000 * k;
+    in.OnJointState(RosJoints(cell_, kArm0 + t).get());
+    if (t == 3'504'000)
+      for (int64_t r = 30; r < 35; ++r) {
+        ASSERT_TRUE(in.OnTemperature(RosTemperature(kBoot + 100'000 * r, 20.0 + 0.1 * r).get()));
+        made.push_back(100'000 * r);
+      }
+    for (int64_t r = (t - 8'000 - 3'000) / 100'000 + 1; r * 100'000 + 3'000 <= t; ++r) {
+      if (r < 1 || (r >= 30 && r < 35)) continue;  // before the joints; stalled
+      ASSERT_TRUE(in.OnTemperature(RosTemperature(kBoot + 100'000 * r, 20.0 + 0.1 * r).get()));
+      made.push_back(100'000 * r);
+    }
+    for (const auto& c : ConditionsIn(in.Ready())) out.push_back(c);
   }
-  {
-    // clock_offsets estimate: the driver's clock is unknown (here its boot time, 5 s); the
-    // report stands at the arm's newest time when it arrives, none before the arm's first.
-    Ros2InputSettings s = settings_;
-    s.estimate_clock_offsets = true;
-    transport::Health health("ros2_input");
-    Ros2Input in(s, cell_.model, health);
-    EXPECT_FALSE(in.OnTemperature(RosTemperature(5'000'000, 24.0).get()));
-    EXPECT_NE(health.last_error().find("before the arm's first joints"), std::string::npos);
-    in.OnJointState(RosJoints(cell_, 1'700'000'000'000'000).get());
-    auto c = in.OnTemperature(RosTemperature(6'000'000, 24.1).get());
-    ASSERT_TRUE(c);
-    EXPECT_EQ(c->utime, 1'700'000'000'000'000);
-    // A second report before the next joints' sample: a microsecond on, not a duplicate.
-    c = in.OnTemperature(RosTemperature(6'500'000, 24.2).get());
-    ASSERT_TRUE(c);
-    EXPECT_EQ(c->utime, 1'700'000'000'000'001);
-    in.OnJointState(RosJoints(cell_, 1'700'000'000'008'000).get());
-    c = in.OnTemperature(RosTemperature(7'000'000, 24.3).get());
-    ASSERT_TRUE(c);
-    EXPECT_EQ(c->utime, 1'700'000'000'008'000);
-    EXPECT_EQ(health.rejected(), 1);
+  for (const auto& c : ConditionsIn(in.Ready(true))) out.push_back(c);
+  std::sort(made.begin(), made.end());
+  ASSERT_EQ(out.size(), made.size());
+  // The three made more than the reorder delay (0.2 s) before they were taken came after the
+  // samples of their time had left: counted, published all the same, at their time.
+  EXPECT_EQ(in.conditions_late(), 3);
+  for (size_t i = 0; i < out.size(); ++i) {
+    // In time order, each within a joints' period and the taking delay of when it was made.
+    EXPECT_NEAR(static_cast<double>(out[i].utime - kArm0), static_cast<double>(made[i]), 11'000.0)
+        << "report " << i;
+    if (i > 0) {
+      EXPECT_GT(out[i].utime, out[i - 1].utime);
+    }
   }
+  // The stalled ones where they were made, not up to 0.5 s later at their arrival: 23.0 °C
+  // was made at 3.0 s.
+  const auto stalled = std::find_if(out.begin(), out.end(), [](const transport::ArmConditions& c) {
+    return std::abs(c.temperature_c - 23.0) < 1e-9;
+  });
+  ASSERT_NE(stalled, out.end());
+  EXPECT_NEAR(static_cast<double>(stalled->utime - kArm0), 3e6, 11'000.0);
+  EXPECT_EQ(health.rejected(), 1);
 }
 
 dds::Sample<dds::InertiaStamped> RosPayload(int64_t utime, double kg) {
@@ -235,39 +282,66 @@ dds::Sample<dds::InertiaStamped> RosPayload(int64_t utime, double kg) {
 }
 
 // The payload (geometry_msgs/InertiaStamped) and the temperature make one stream of conditions:
-// each report carries the newest of both, in time order (a report stamped before the last one
-// stands a microsecond after it); a payload in grams is refused and named.
+// in time order across the two topics, each report carries the newest of both; a report older
+// than what already left stands a microsecond after it, counted, not dropped; a payload in grams
+// is refused and named.
 TEST_F(Ros2InputTest, ThePayloadAndTheTemperatureMakeOneStreamOfConditions) {
   EXPECT_EQ(settings_.payload_topic, "/arm/payload");
   Ros2Input in(settings_, cell_.model, health_);  // clock_offsets none: own stamps
-  auto c = in.OnTemperature(RosTemperature(2'000'000, 24.5).get());
-  ASSERT_TRUE(c);
-  EXPECT_TRUE(std::isnan(c->payload_kg));  // none reported yet
-  c = in.OnPayload(RosPayload(3'000'000, 5.0).get());
-  ASSERT_TRUE(c);
-  EXPECT_EQ(c->utime, 3'000'000);
-  EXPECT_EQ(c->temperature_c, 24.5);
-  EXPECT_EQ(c->payload_kg, 5.0);
-  c = in.OnTemperature(RosTemperature(4'000'000, 25.0).get());
-  ASSERT_TRUE(c);
-  EXPECT_EQ(c->temperature_c, 25.0);
-  EXPECT_EQ(c->payload_kg, 5.0);
-  // In order on its own topic, before the last report of the stream: just after that report.
-  c = in.OnPayload(RosPayload(3'500'000, 7.0).get());
-  ASSERT_TRUE(c);
-  EXPECT_EQ(c->utime, 4'000'001);
-  EXPECT_EQ(c->temperature_c, 25.0);
-  EXPECT_EQ(c->payload_kg, 7.0);
-  EXPECT_FALSE(in.OnPayload(RosPayload(3'500'000, 7.0).get()));  // a duplicate
-  EXPECT_FALSE(in.OnPayload(RosPayload(5'000'000, 7000.0).get()));
+  EXPECT_TRUE(in.OnTemperature(RosTemperature(2'000'000, 24.5).get()));
+  EXPECT_TRUE(in.OnPayload(RosPayload(3'000'000, 5.0).get()));
+  EXPECT_TRUE(in.OnTemperature(RosTemperature(4'000'000, 25.0).get()));
+  auto out = ConditionsIn(in.Ready());  // the two older than the delay (50 ms) before 4 s
+  ASSERT_EQ(out.size(), 2u);
+  EXPECT_EQ(out[0].utime, 2'000'000);
+  EXPECT_TRUE(std::isnan(out[0].payload_kg));  // none reported yet
+  EXPECT_EQ(out[1].utime, 3'000'000);
+  EXPECT_EQ(out[1].temperature_c, 24.5);
+  EXPECT_EQ(out[1].payload_kg, 5.0);
+  // In order on its own topic, before the other topic's last report, not yet published: in its
+  // place in time.
+  EXPECT_TRUE(in.OnPayload(RosPayload(3'500'000, 7.0).get()));
+  out = ConditionsIn(in.Ready(true));
+  ASSERT_EQ(out.size(), 2u);
+  EXPECT_EQ(out[0].utime, 3'500'000);
+  EXPECT_EQ(out[0].temperature_c, 24.5);
+  EXPECT_EQ(out[0].payload_kg, 7.0);
+  EXPECT_EQ(out[1].utime, 4'000'000);
+  EXPECT_EQ(out[1].temperature_c, 25.0);
+  EXPECT_EQ(out[1].payload_kg, 7.0);
+  // Older than what was published: not dropped, counted, at once, and after the stream's last
+  // report (a microsecond after it).
+  in.OnJointState(RosJoints(cell_, 4'200'000).get());
+  EXPECT_EQ(in.Ready().size(), 0u);  // 4.2 s: newer than the delay
+  EXPECT_TRUE(in.OnPayload(RosPayload(3'800'000, 8.0).get()));
+  EXPECT_EQ(in.conditions_late(), 1);
+  EXPECT_NE(health_.last_error().find("/arm/payload: a report at 3800000"), std::string::npos)
+      << health_.last_error();
+  out = ConditionsIn(in.Ready());
+  ASSERT_EQ(out.size(), 1u);
+  EXPECT_EQ(out[0].utime, 4'000'001);
+  EXPECT_EQ(out[0].payload_kg, 8.0);
+  // Two reports at one time: a microsecond apart (one time twice would be a duplicate
+  // downstream).
+  EXPECT_TRUE(in.OnTemperature(RosTemperature(5'000'000, 25.5).get()));
+  EXPECT_TRUE(in.OnPayload(RosPayload(5'000'000, 9.0).get()));
+  out = ConditionsIn(in.Ready(true));
+  ASSERT_EQ(out.size(), 2u);
+  EXPECT_EQ(out[0].utime, 5'000'000);
+  EXPECT_EQ(out[1].utime, 5'000'001);
+  EXPECT_EQ(out[1].temperature_c, 25.5);
+  EXPECT_EQ(out[1].payload_kg, 9.0);
+  EXPECT_FALSE(in.OnPayload(RosPayload(5'000'000, 9.0).get()));  // a duplicate
+  EXPECT_FALSE(in.OnPayload(RosPayload(6'000'000, 7000.0).get()));
   EXPECT_NE(health_.last_error().find("/arm/payload.inertia.m: 7000.000000 kg"), std::string::npos)
       << health_.last_error();
   EXPECT_EQ(health_.duplicates(), 1);
-  EXPECT_EQ(in.payloads(), 2);
-  EXPECT_EQ(in.temperatures(), 2);
+  EXPECT_EQ(in.payloads(), 4);
+  EXPECT_EQ(in.temperatures(), 3);
   // Every report is one ARM_CONDITIONS accepts.
   std::string error;
-  EXPECT_TRUE(transport::ArmConditionsFromMessage(transport::ToArmConditions(*c), &error)) << error;
+  EXPECT_TRUE(transport::ArmConditionsFromMessage(transport::ToArmConditions(out[1]), &error))
+      << error;
 }
 
 TEST_F(Ros2InputTest, ClockMessageListsEverySource) {

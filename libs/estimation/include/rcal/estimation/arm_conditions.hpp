@@ -11,8 +11,11 @@
 // already describe the next stop (a pick reported as the arm leaves), and a slowly changing
 // temperature is best represented at the middle of the samples averaged. A window within which
 // the reported payload changed (a grasp made at the stop, or reported as the arm left it) was
-// measured under two loads: ForWindow names the change and the caller refuses the window. Reports
-// must arrive in non-decreasing time (the caller's time gate refuses the others); the history is
+// measured under two loads: ForWindow names the change and the caller refuses the window. The
+// reports of a window may reach the caller after the samples that end it (another process, another
+// transport, a loaded CPU): a caller decides a window once ReportedPast its end (no report still
+// to come can fall inside it), or once it has waited long enough. Reports must arrive in
+// non-decreasing time (the caller's time gate refuses the others); the history is
 // bounded (`capacity`), the oldest dropped first, so a flood of reports cannot grow it.
 #pragma once
 
@@ -68,6 +71,10 @@ class ArmConditionsHistory {
   static constexpr double kPayloadTolerance = 0.01;
   Window ForWindow(double t_begin, double t_end,
                    double payload_tolerance_kg = kPayloadTolerance) const;
+
+  /// Whether a report after sensor time t [s] has come: reports come in time order, so no report
+  /// still to come can stand at or before t, and a window ending at t may be decided.
+  bool ReportedPast(double t) const { return !reports_.empty() && reports_.back().t > t; }
 
   /// Drops everything (the time base changed: a stream re-synchronised).
   void Clear() { reports_.clear(); }
