@@ -239,12 +239,14 @@ void Ros2Input::Queue(int64_t utime, sensors::SensorEvent e) {
 
 std::vector<sensors::SensorEvent> Ros2Input::Ready(bool flush) {
   std::vector<sensors::SensorEvent> out;
-  // newest_ is a real stamp (|utime| < 2.2e15 µs: int32 seconds) once anything was queued.
-  if (queue_.empty()) return out;
+  // newest_ is a real stamp (|utime| < 2.2e15 µs: int32 seconds) once a sample was queued; the
+  // conditions alone wait for the samples (or the flush).
+  if (queue_.empty() || (!flush && newest_ == std::numeric_limits<int64_t>::min())) return out;
   const int64_t until =
       flush ? std::numeric_limits<int64_t>::max() : newest_ - std::llround(s_.reorder_delay * 1e6);
   while (!queue_.empty() && queue_.begin()->first.first <= until) {
-    released_ = queue_.begin()->first.first;
+    // (A report taken late leaves behind what left: released_ never goes back.)
+    released_ = std::max(released_, queue_.begin()->first.first);
     if (const auto* c = std::get_if<transport::ArmConditions>(&queue_.begin()->second)) {
       // One stream of conditions: each report carries the newest of both, after the last one (a
       // report at its time would be a duplicate downstream). conditions_.utime starts at
@@ -401,7 +403,8 @@ bool Ros2Input::Conditions(std::optional<transport::ArmConditions> c, Stream& st
                   " µs (joints' clock) came after " + std::to_string(released_) +
                   " µs had been published (later than the reorder delay)");
   }
-  newest_ = std::max(newest_, c->utime);
+  // Not the newest: the samples alone set the pace of the buffer (a report stamped far ahead
+  // would release them all at once and make the next ones late).
   queue_.emplace(std::pair{c->utime, sequence_++}, *c);
   return true;
 }
