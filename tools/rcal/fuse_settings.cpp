@@ -32,6 +32,7 @@ std::vector<Field> OrientationFields(est::OrientationKfSettings& s) {
           {"heading_sigma", "rad", &s.heading_sigma},
           {"accel_lowpass_tau", "s", &s.accel_lowpass_tau},
           {"mag_lowpass_tau", "s", &s.mag_lowpass_tau},
+          {"mag_delay", "s", &s.mag_delay},
           {"tilt_motion_accel", "m_s2", &s.tilt_motion_accel},
           {"tilt_motion_rate", "rad_s", &s.tilt_motion_rate},
           {"mag_evidence_inflation", "factor", &s.mag_evidence_inflation},

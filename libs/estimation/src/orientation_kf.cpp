@@ -175,8 +175,13 @@ Status OrientationKf::Update(double t, const Eigen::Vector3d& gyro_B, const Eige
   const Eigen::Vector3d down_B = -R_EB().transpose() * UpVector(settings_.earth);
   tilt_sigma_k_ = TiltSigma(f_B - f_meas_B);
   heading_sigma_k_ = settings_.heading_sigma;  // MagAccepted inflates it with its evidence
-  SensorUse use{AccelAccepted(f_meas_B), MagAccepted(m_B, f_B, down_B, dt)};
-  if (use.mag) m_I_lp_ += LowPassGain(dt, settings_.mag_lowpass_tau) * (R_IB * m_B - m_I_lp_);
+  // The field the body sees now: a delayed magnetometer's sample turned on by the rate since.
+  const Eigen::Vector3d m_now_B =
+      settings_.mag_delay == 0.0
+          ? m_B
+          : Eigen::Vector3d(geometry::Exp(omega_B_ * settings_.mag_delay).transpose() * m_B);
+  SensorUse use{AccelAccepted(f_meas_B), MagAccepted(m_now_B, f_B, down_B, dt)};
+  if (use.mag) m_I_lp_ += LowPassGain(dt, settings_.mag_lowpass_tau) * (R_IB * m_now_B - m_I_lp_);
   const Eigen::Vector3d m_meas_B = R_IB.transpose() * m_I_lp_;
 
   last_tilt_nis_ = last_heading_nis_ = std::numeric_limits<double>::quiet_NaN();

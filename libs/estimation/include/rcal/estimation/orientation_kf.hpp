@@ -26,6 +26,8 @@
 //   Ordering (2) before (3) makes ω_k the rate over the interval ending at t_k, as a sampled
 //   gyro measures it; propagating with ω̂_{k−1} (Eq. 20 read literally) lags the gyro by one
 //   sample, which costs several degrees on fast motion.
+// Magnetometer delay (beyond the paper): m_B is first turned to the gyro's time with the rate,
+// m_B ← Exp(ω̂_B mag_delay)ᵀ m_B (settings).
 // FQA inputs (beyond the paper): f_B and the accepted m_B are first low-passed (time constants
 // accel_lowpass_tau, mag_lowpass_tau) in a strapdown frame I integrated from the gyro alone,
 // f̄_I ← f̄_I + α (R_IB f_B − f̄_I), and rotated back, f̄_B = R_IBᵀ f̄_I. In I gravity and the
@@ -108,6 +110,12 @@ struct OrientationKfSettings {
   /// (the paper). Linear accelerations average out; gravity does not.
   double accel_lowpass_tau = 3.0;
   double mag_lowpass_tau = 3.0;
+  /// How far the magnetometer lags the gyro [s]: a sample stamped t measured the field the body
+  /// saw at t − mag_delay (a magnetometer low-passes internally). The sample is turned to time t
+  /// with the rate before anything uses it: m_B(t) = Exp(ω̂_B mag_delay)ᵀ m_meas (the body turned
+  /// by ω̂ mag_delay since). Uncompensated, a lag δ puts the field δ|ω| rad off in fast rotation:
+  /// its dip then fails the gate and its heading is wrong. 0 = as stamped.
+  double mag_delay = 0.0;
   /// See the header comment. false: one FQA(acc, mag) quaternion as in the paper.
   bool decoupled_fqa = true;
   /// Accelerometer weighted by motion: the tilt rows' standard deviation grows with the motion
