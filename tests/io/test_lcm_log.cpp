@@ -5,6 +5,7 @@
 #include "rcal/io/lcm_log.hpp"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
@@ -42,7 +43,9 @@ int64_t OffsetOf(int i) {
 }
 
 std::vector<uint8_t> WriteLog() {
-  const fs::path path = fs::temp_directory_path() / "rcal_test_lcm_log_written.lcmlog";
+  // Named after the process: ctest runs this file's tests as parallel processes.
+  const fs::path path = fs::temp_directory_path() /
+                        ("rcal_test_lcm_log_written_" + std::to_string(::getpid()) + ".lcmlog");
   fs::remove(path);
   {
     lcm::LogFile log(path.string(), "w");
@@ -95,7 +98,8 @@ std::vector<int> Except(std::initializer_list<int> lost) {
 
 TEST(LcmLog, AnIntactLogIsReadBitExactFromAFileAndFromMemory) {
   const std::vector<uint8_t> bytes = WriteLog();
-  const fs::path path = fs::temp_directory_path() / "rcal_test_lcm_log_intact.lcmlog";
+  const fs::path path = fs::temp_directory_path() /
+                        ("rcal_test_lcm_log_intact_" + std::to_string(::getpid()) + ".lcmlog");
   std::ofstream(path, std::ios::binary)
       .write(reinterpret_cast<const char*>(bytes.data()), static_cast<long>(bytes.size()));
   EXPECT_TRUE(IsLcmLogFile(path));

@@ -18,8 +18,7 @@ namespace fs = std::filesystem;
 using testing::RunRcal;
 
 TEST(PlanPoses, WritesStopsInsideTheLimitsThatRaiseTheInformation) {
-  const fs::path out = fs::temp_directory_path() / "rcal_test_plan_poses" / "P.csv";
-  fs::remove_all(out.parent_path());
+  const fs::path out = testing::TempDir("plan_poses", "stops") / "P.csv";
   const auto r = RunRcal(
       "plan-poses --robot tests/data/arms/kr6_like.urdf --count 12 "
       "--candidates 1500 --position-only --seed 3 --out " +
@@ -66,9 +65,7 @@ TEST(PlanPoses, WritesStopsInsideTheLimitsThatRaiseTheInformation) {
 }
 
 TEST(PlanPoses, BadInputIsRefusedNamingIt) {
-  const fs::path dir = fs::temp_directory_path() / "rcal_test_plan_poses_bad";
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = testing::TempDir("plan_poses", "bad");
   EXPECT_NE(RunRcal("plan-poses --robot tests/data/arms/kr6_like.urdf --count 0 --out " +
                     (dir / "P.csv").string())
                 .output.find("--count: at least 1"),
@@ -110,8 +107,7 @@ TEST(PlanPoses, BadInputIsRefusedNamingIt) {
 // measured, 20 stops of online next-best are short of 50 random stops, while 50 of them beat 20
 // random ones.
 TEST(PlanPoses, OnTheDemoCellNoTwentyStopsReachFiftyRandomOnes) {
-  const fs::path dir = fs::temp_directory_path() / "rcal_test_plan_poses_cell";
-  fs::remove_all(dir);
+  const fs::path dir = testing::TempDir("plan_poses", "cell");
   const auto r = RunRcal(
       "plan-poses-report --sim config/cells/grb3016.sim.yaml --seeds 8 --counts 20,50 --jobs 2 "
       "--out " +

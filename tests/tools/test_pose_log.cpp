@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <cstdio>
 #include <cstdlib>
@@ -39,8 +40,10 @@ namespace {
 namespace fs = std::filesystem;
 constexpr const char* kChannel = transport::channels::kPoseMeasurement;
 
+// Named after the process too: ctest runs this file's tests as parallel processes.
 fs::path TempDir(const std::string& name) {
-  const fs::path d = fs::temp_directory_path() / ("rcal_test_pose_log_" + name);
+  const fs::path d =
+      fs::temp_directory_path() / ("rcal_test_pose_log_" + name + "_" + std::to_string(::getpid()));
   fs::remove_all(d);
   fs::create_directories(d);
   return d;

@@ -34,8 +34,7 @@ namespace fs = std::filesystem;
 // D–H arm as full poses (with an IMU frame to identify) and as positions only, the arm named in
 // the JSON; --arm with --random-arms, and seeds past 999, are refused naming the option.
 TEST(Track, TheSweepRunsOnRandomArmsAndFurtherSeeds) {
-  const fs::path dir = fs::temp_directory_path() / "rcal_track_sweep_random";
-  fs::remove_all(dir);
+  const fs::path dir = testing::TempDir("track", "sweep_random");
   const auto r = testing::RunRcal(
       "track --sweep --random-arms 1 --first-arm 7 --seeds 1 "
       "--first-seed 3 --quiet-poses 0 --jobs 2 --out " +
@@ -63,9 +62,7 @@ TEST(Track, TheSweepRunsOnRandomArmsAndFurtherSeeds) {
 }
 
 TEST(Track, TraceAndJsonOfAStepInTimeOrder) {
-  const fs::path dir = fs::temp_directory_path() / "rcal_track_test";
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = testing::TempDir("track", "test");
   // The KR6-like arm with the frames `--frames auto` gives it (world ← base, marker 0).
   io::UrdfOptions uo;
   uo.add_base_frame = true;
@@ -124,9 +121,7 @@ TEST(Track, TraceAndJsonOfAStepInTimeOrder) {
 // a log's poses took the fixed --position-sigma-mm: on the live demo's log the replayed NIS
 // differed from the live identifier's from the first poses on, and so did the change it found.
 TEST(Track, AnLcmLogRunsWithEachPosesOwnCovarianceAsTheIdentifierDoes) {
-  const fs::path dir = fs::temp_directory_path() / "rcal_track_log_test";
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = testing::TempDir("track", "log_test");
   const std::string cell_file = std::string(RCAL_SOURCE_DIR) + "/config/cells/grb3016.yaml";
   const io::BuiltCell built = io::LoadCell(cell_file);
   sim::Rng rng(83);
@@ -227,9 +222,7 @@ TEST(Track, TheDiscrepancyWatchRunsOverALogAsTheIdentifierRunsIt) {
   for (const Case& k : {Case{"joint_compliance:j2=2e-6", "joint_compliance j2", 2e-6, false},
                         Case{"backlash:j2=4e-4", "backlash j2", 4e-4, true}}) {
     SCOPED_TRACE(k.effect);
-    const fs::path dir = fs::temp_directory_path() / "rcal_track_watch_test";
-    fs::remove_all(dir);
-    fs::create_directories(dir);
+    const fs::path dir = testing::TempDir("track", "watch_test");
     const std::string cell_file = std::string(RCAL_SOURCE_DIR) + "/config/cells/grb3016_poses.yaml";
     const io::BuiltCell built = io::LoadCell(cell_file);
     const std::vector<cell::TimedPose> poses = WriteEffectLog(dir, built, k.effect);

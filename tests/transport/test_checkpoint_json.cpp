@@ -1,5 +1,6 @@
 // A checkpoint written as text and restored continues exactly as the uninterrupted identifier.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <filesystem>
@@ -22,7 +23,8 @@ TEST(Checkpoint, RestoredIdentifierContinuesBitForBit) {
     first.Update(g.poses[k]);
   }
   CheckpointFile f{ModelId(g.model), 1234, 14, first.Checkpoint(), {}, {}};
-  const auto dir = std::filesystem::temp_directory_path() / "rcal_checkpoint_test";
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("rcal_checkpoint_test_" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
   SaveCheckpoint(dir / "ekf.json", f);
   const CheckpointFile back = LoadCheckpoint(dir / "ekf.json");
