@@ -5,7 +5,6 @@
 #include "rcal/io/lcm_log.hpp"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
@@ -13,6 +12,8 @@
 #include <lcm/lcm-cpp.hpp>
 #include <string>
 #include <vector>
+
+#include "io_test_util.hpp"
 
 namespace rcal::io {
 namespace {
@@ -43,10 +44,8 @@ int64_t OffsetOf(int i) {
 }
 
 std::vector<uint8_t> WriteLog() {
-  // Named after the process: ctest runs this file's tests as parallel processes.
-  const fs::path path = fs::temp_directory_path() /
-                        ("rcal_test_lcm_log_written_" + std::to_string(::getpid()) + ".lcmlog");
-  fs::remove(path);
+  const testing::ScratchDir scratch;  // the running test's own (ctest runs them side by side)
+  const fs::path path = scratch / "written.lcmlog";
   {
     lcm::LogFile log(path.string(), "w");
     EXPECT_TRUE(log.good());
@@ -98,8 +97,8 @@ std::vector<int> Except(std::initializer_list<int> lost) {
 
 TEST(LcmLog, AnIntactLogIsReadBitExactFromAFileAndFromMemory) {
   const std::vector<uint8_t> bytes = WriteLog();
-  const fs::path path = fs::temp_directory_path() /
-                        ("rcal_test_lcm_log_intact_" + std::to_string(::getpid()) + ".lcmlog");
+  const testing::ScratchDir scratch;
+  const fs::path path = scratch / "intact.lcmlog";
   std::ofstream(path, std::ios::binary)
       .write(reinterpret_cast<const char*>(bytes.data()), static_cast<long>(bytes.size()));
   EXPECT_TRUE(IsLcmLogFile(path));

@@ -2,6 +2,7 @@
 // folder (so relative paths such as config/robots/... resolve), stdout and stderr together.
 #pragma once
 
+#include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -11,6 +12,8 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <system_error>
+#include <vector>
 
 namespace rcal::tool::testing {
 
@@ -39,13 +42,27 @@ inline nlohmann::json ReadJson(const std::filesystem::path& p) {
   return nlohmann::json::parse(in);
 }
 
-/// A fresh folder rcal_<prefix>_<name>_<pid> in the temporary directory.
+/// A fresh folder rcal_<prefix>_<name>_<pid> in the temporary directory (named after the process:
+/// ctest runs a file's tests as parallel processes). Removed when the process ends if every test
+/// passed; kept, with what the commands wrote, when one failed.
 inline std::filesystem::path TempDir(const std::string& prefix, const std::string& name) {
   namespace fs = std::filesystem;
+  // Made at the first call, after gtest's UnitTest (so destroyed before it).
+  struct Made {
+    std::vector<fs::path> dirs;
+    ~Made() {
+      if (::testing::UnitTest::GetInstance()->Passed()) {
+        std::error_code ec;
+        for (const fs::path& d : dirs) fs::remove_all(d, ec);
+      }
+    }
+  };
+  static Made made;
   const fs::path d =
       fs::temp_directory_path() / ("rcal_" + prefix + "_" + name + "_" + std::to_string(getpid()));
   fs::remove_all(d);
   fs::create_directories(d);
+  made.dirs.push_back(d);
   return d;
 }
 

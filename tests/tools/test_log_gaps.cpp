@@ -6,7 +6,6 @@
 // num_joints = −1 in one event (the whole log refused) and 2^28 + 6 (SIGSEGV in the decoder).
 #include <gtest/gtest.h>
 #include <sys/wait.h>
-#include <unistd.h>
 
 #include <cstdlib>
 #include <filesystem>
@@ -25,6 +24,7 @@
 #include "rcal/sim/pose_sim.hpp"
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
+#include "rcal_cli.hpp"
 
 namespace rcal::tool {
 namespace {
@@ -32,14 +32,10 @@ namespace {
 namespace fs = std::filesystem;
 using Bytes = std::vector<uint8_t>;
 
-// Named after the process too: ctest runs this file's tests as parallel processes, and two of
-// them sharing one folder removed each other's files (CI, stop 46).
+// A fresh folder per name and process: ctest runs this file's tests as parallel processes, and
+// two of them sharing one folder removed each other's files (CI, stop 46).
 fs::path TempDir(const std::string& name) {
-  const fs::path d =
-      fs::temp_directory_path() / ("rcal_test_log_gaps_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
+  return testing::TempDir("test_log_gaps", name);
 }
 
 struct Result {

@@ -5,7 +5,6 @@
 
 #include <gtest/gtest.h>
 #include <sys/wait.h>
-#include <unistd.h>
 
 #include <cstdio>
 #include <cstdlib>
@@ -33,6 +32,7 @@
 #include "rcal/sim/sensor_sim.hpp"
 #include "rcal/transport/adapters.hpp"
 #include "rcal/transport/channels.hpp"
+#include "rcal_cli.hpp"
 
 namespace rcal::tool {
 namespace {
@@ -40,13 +40,9 @@ namespace {
 namespace fs = std::filesystem;
 constexpr const char* kChannel = transport::channels::kPoseMeasurement;
 
-// Named after the process too: ctest runs this file's tests as parallel processes.
+// A fresh folder per name and process (ctest runs this file's tests as parallel processes).
 fs::path TempDir(const std::string& name) {
-  const fs::path d =
-      fs::temp_directory_path() / ("rcal_test_pose_log_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
+  return testing::TempDir("test_pose_log", name);
 }
 
 // The GRB3016 as `rcal analyze --frames auto` builds it for position data: a world ← base frame
