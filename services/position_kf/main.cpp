@@ -103,9 +103,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--accel-gate", settings.accel_gate_chi2,
                  "χ² gate on the accelerometer's 3-dof innovation (a tap or shock the motion "
-                 "cannot have is refused and counted; 16.27 is the 0.999 quantile, as the "
-                 "positions'); 0 = off; default: the bank's 16.27 (rcal position-kf-sweep), off "
-                 "for one motion model")
+                 "cannot have is refused and counted; 11.34 is the 0.99 quantile, 16.27 the "
+                 "0.999 of the positions' gate); 0 = off; default: the bank's 11.34 (rcal "
+                 "position-kf-sweep), off for one motion model")
       ->check(CLI::Range(0.0, 1e6));
   app.add_option("--accel-rollback-span", settings.accel_rollback_span,
                  "how far back a position sample may take back the accelerometer it shows wrong "

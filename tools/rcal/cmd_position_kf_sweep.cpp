@@ -1,4 +1,5 @@
-// rcal position-kf-sweep [--seeds N] [--cell NAME] [--rate HZ] [--taps] [--broad] [--json FILE]:
+// rcal position-kf-sweep [--seeds N] [--cell NAME] [--rate HZ] [--taps] [--broad] [--banks-only]
+// [--json FILE]:
 // how estimation::AccelerometerDrivenSettings() were chosen, and why position_kf runs the bank of
 // it and the paper's model (estimation::PositionKfBank of DefaultBankModels, the last candidates)
 // by default with the accelerometer gate kBankAccelGateChi2, rerun. The simulated cells' own
@@ -60,6 +61,7 @@ struct Options {
   std::vector<double> rates = {20.0, 100.0};  // the tracker's rates [Hz]
   std::vector<std::string> cells = {"grb3016", "panda"};  // simulated cells (config/cells/NAME)
   std::vector<std::string> broad_trials;                  // empty: every trial
+  bool banks_only = false;  // the paper's filter and the bank's gates only
   std::string json_path;
 };
 
@@ -309,7 +311,8 @@ int Run(const Options& o) {
         cases.push_back({"BROAD", trial, 20.0, true, static_cast<unsigned>(s)});
   }
   std::vector<Config> configs = {Config{}};  // the paper's first
-  for (const Config& c : Grid()) configs.push_back(c);
+  for (const Config& c : Grid())
+    if (c.bank || !o.banks_only) configs.push_back(c);
   std::vector<std::vector<Score>> scores;  // [case][config]
   for (size_t k = 0; k < cases.size(); ++k) {
     scores.push_back(RunCase(cases[k], configs));
@@ -402,7 +405,23 @@ int Run(const Options& o) {
     banks.push_back(b);
   }
   const size_t bank = choose_among(all, [&](size_t c) { return configs[c].bank; });
-  std::printf("the bank's choice: %s\n\n", configs[bank].Name().c_str());
+  std::printf("the bank's choice: %s\n", configs[bank].Name().c_str());
+  // Seed by seed, the same choice on that seed's cases alone: how often each bank wins says
+  // whether the choice is more than one draw of the noise.
+  std::map<std::string, int> seed_wins;
+  for (int s = 1; s <= o.seeds; ++s) {
+    std::vector<size_t> ks;
+    for (size_t k = 0; k < cases.size(); ++k)
+      if (cases[k].seed == static_cast<unsigned>(s)) ks.push_back(k);
+    ++seed_wins[configs[choose_among(ks, [&](size_t c) { return configs[c].bank; })].Name()];
+  }
+  json bank_seed_wins = json::object();
+  std::printf("the bank's choice seed by seed (%d seeds):", o.seeds);
+  for (const auto& [name, n] : seed_wins) {
+    std::printf(" %s %d;", name.c_str(), n);
+    bank_seed_wins[name] = n;
+  }
+  std::printf("\n\n");
 
   // The table: medians over seeds and lever arms.
   std::vector<std::vector<std::string>> table;
@@ -533,6 +552,7 @@ int Run(const Options& o) {
                   {"chosen_accelerometer_driven", driven},
                   {"bank", bank_json},
                   {"banks", banks},
+                  {"bank_seed_wins", bank_seed_wins},
                   {"groups", groups},
                   {"folds", folds},
                   {"case_scores", case_scores}};
@@ -563,6 +583,9 @@ const RegisterCommand kPositionKfSweep(
           ->capture_default_str();
       sub.add_option("--broad-trial", o->broad_trials,
                      "these BROAD trial files only (implies --broad)");
+      sub.add_flag("--banks-only", o->banks_only,
+                   "the paper's filter and the bank's four accelerometer gates only (to settle "
+                   "the gate on more seeds)");
       sub.add_option("--json", o->json_path, "write the figures here");
       return [o]() { return Run(*o); };
     });
