@@ -993,6 +993,9 @@ TEST(RcalCli, PositionKfSweepBanksOnlyChoosesAmongTheGatesSeedBySeed) {
   // Only the paper's filter and banks were run: every choice is one of them.
   EXPECT_TRUE(j.at("chosen").at("bank").get<bool>()) << r.output;
   EXPECT_TRUE(j.at("chosen_simulated").at("bank").get<bool>()) << r.output;
+  // No accelerometer-driven candidate of its own was run: no choice among them is claimed.
+  EXPECT_TRUE(j.at("chosen_accelerometer_driven").is_null()) << r.output;
+  EXPECT_EQ(r.output.find("among its candidates"), std::string::npos) << r.output;
   int seeds = 0;
   for (const auto& [name, n] : j.at("bank_seed_wins").items()) {
     EXPECT_EQ(name.rfind("bank", 0), 0u) << name;

@@ -372,12 +372,14 @@ int Run(const Options& o) {
       if ((cases[k].imu == "BROAD") == real) r.push_back(ratio(k, c));
     return r.empty() ? 1.0 : Median(r);
   };
-  std::printf(
-      "the accelerometer-driven filter's (minimax among its candidates): %s, worst ratio %s, "
-      "median %s on the simulated cases and %s on the real ones\n",
-      configs[chosen_driven].Name().c_str(), Fmt(worst(chosen_driven, all), 3).c_str(),
-      Fmt(median_ratio(chosen_driven, false), 3).c_str(),
-      Fmt(median_ratio(chosen_driven, true), 3).c_str());
+  // (With --banks-only it has no candidates of its own: nothing to say.)
+  if (!o.banks_only)
+    std::printf(
+        "the accelerometer-driven filter's (minimax among its candidates): %s, worst ratio %s, "
+        "median %s on the simulated cases and %s on the real ones\n",
+        configs[chosen_driven].Name().c_str(), Fmt(worst(chosen_driven, all), 3).c_str(),
+        Fmt(median_ratio(chosen_driven, false), 3).c_str(),
+        Fmt(median_ratio(chosen_driven, true), 3).c_str());
   // The bank of the two models (position_kf --motion-model bank), ungated and gated: each, and the
   // choice among them (its accelerometer gate: estimation::kBankAccelGateChi2).
   // With --taps, each bank's figures on the tapped cases alone too: the gate is for them.
@@ -519,10 +521,13 @@ int Run(const Options& o) {
   chosen_simulated["worst_ratio"] = simulated.empty() ? 1.0 : worst(chosen_sim, simulated);
   json chosen_all = ConfigJson(configs[chosen]);
   chosen_all["worst_ratio"] = worst(chosen, all);
-  json driven = ConfigJson(configs[chosen_driven]);
-  driven["worst_ratio"] = worst(chosen_driven, all);
-  driven["median_ratio_simulated"] = median_ratio(chosen_driven, false);
-  driven["median_ratio_real"] = median_ratio(chosen_driven, true);
+  json driven = nullptr;  // null with --banks-only
+  if (!o.banks_only) {
+    driven = ConfigJson(configs[chosen_driven]);
+    driven["worst_ratio"] = worst(chosen_driven, all);
+    driven["median_ratio_simulated"] = median_ratio(chosen_driven, false);
+    driven["median_ratio_real"] = median_ratio(chosen_driven, true);
+  }
   // The bank's choice among its gates: its worst and median ratios, as the driven filter's.
   json bank_json = ConfigJson(configs[bank]);
   bank_json["worst_ratio"] = worst(bank, all);
