@@ -389,12 +389,13 @@ TEST(PositionKfBank, TheDefaultModelsTakeBackTapsTheMotionCannotHave) {
   EXPECT_GT(mm[2], 3.0 * tracker_mm);  // …where every tap pushes the bank off
   // The paper's model refuses every tap; the accelerometer-driven one nearly every: its
   // acceleration may leave the last sample by the jerk noise (50 m/s³/√Hz) times λ, so while λ is
-  // above 12.7 (60²/11.34/(50² · 0.01 s)) a 60 m/s² tap is within what it predicts. Nothing else
-  // is refused beyond the 0.99 quantile's one sample in a hundred of the 9 000 (and 50 % more for
-  // the draw).
+  // above 12.7 (60²/11.34/(50² · 0.01 s)) a 60 m/s² tap is within what it predicts (seen at the
+  // gate 11.34: 45 of 45 for both; at 16.27 the accelerometer-driven one let 2 through). Nothing
+  // else is refused: the adaptive noise keeps the calm samples well inside the gate (seen: not one
+  // of the 9 000 beyond the taps).
   EXPECT_GE(refused[0], taps);
   EXPECT_GE(refused[1], taps * 9 / 10);
-  for (std::int64_t r : refused) EXPECT_LE(r, taps + 135);
+  for (std::int64_t r : refused) EXPECT_LE(r, taps + 9);
   // Ungated, each model takes back each tap once, when the next position sample shows it.
   for (std::int64_t r : rollbacks) {
     EXPECT_GE(r, taps * 9 / 10);

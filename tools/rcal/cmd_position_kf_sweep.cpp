@@ -406,7 +406,8 @@ int Run(const Options& o) {
     std::printf("\n");
     banks.push_back(b);
   }
-  const size_t bank = choose_among(all, [&](size_t c) { return configs[c].bank; });
+  const auto is_bank = [&](size_t c) { return configs[c].bank; };
+  const size_t bank = choose_among(all, is_bank);
   std::printf("the bank's choice: %s\n", configs[bank].Name().c_str());
   // Seed by seed, the same choice on that seed's cases alone: how often each bank wins says
   // whether the choice is more than one draw of the noise.
@@ -415,7 +416,7 @@ int Run(const Options& o) {
     std::vector<size_t> ks;
     for (size_t k = 0; k < cases.size(); ++k)
       if (cases[k].seed == static_cast<unsigned>(s)) ks.push_back(k);
-    ++seed_wins[configs[choose_among(ks, [&](size_t c) { return configs[c].bank; })].Name()];
+    ++seed_wins[configs[choose_among(ks, is_bank)].Name()];
   }
   json bank_seed_wins = json::object();
   std::printf("the bank's choice seed by seed (%d seeds):", o.seeds);
