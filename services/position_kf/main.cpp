@@ -112,6 +112,13 @@ int main(int argc, char** argv) {
                  "(a tap or shock the gate let in) [s]; 0 = off")
       ->check(CLI::Range(0.0, 10.0))
       ->capture_default_str();
+  app.add_option("--accel-delay", settings.accel_delay,
+                 "the accelerometer's lag behind its stamps [s] (its internal low-pass; rcal fuse "
+                 "measures it from a recording, accel_lag in its JSON): each sample is turned to "
+                 "its own time's attitude and extrapolated to its stamp; default the cell's "
+                 "sensors.imu.accel_delay, else 0 (taken as stamped)")
+      ->check(CLI::Range(0.0, estimation::kMaxAccelDelay))
+      ->capture_default_str();
   app.add_option("--orientation-wait", orientation_wait,
                  "IMU sensor time a position sample waits for a stopped orientation stream [s]")
       ->check(CLI::Range(0.0, 3600.0))
@@ -185,6 +192,7 @@ int main(int argc, char** argv) {
                              &options.ranges);
       if (app.count("--position-sigma") == 0)
         settings.position_sigma = cell.position.sigma.maxCoeff();
+      if (cell.imu && app.count("--accel-delay") == 0) settings.accel_delay = cell.imu->accel_delay;
       if (app.count("--marker-id") == 0) options.marker_id = cell.position.markers.front();
       // The cell gives the lever arm to its first marker, in the IMU's mounting frame; the filter
       // works in the axes the samples come in (r_B = R_ISᵀ r_I).
@@ -234,12 +242,14 @@ int main(int argc, char** argv) {
         m.accel_gate_chi2 = settings.accel_gate_chi2;
     transport::PositionKfNode node(t, bank, options);
     node.Announce();
-    spdlog::info("position_kf on {} (earth {}, lever arm r_B [{}, {}, {}] m{}; {} model{})",
-                 t.url(), earth, settings.lever_arm_B.x(), settings.lever_arm_B.y(),
-                 settings.lever_arm_B.z(), settings.estimate_lever_arm ? ", estimated" : "",
-                 motion_model,
-                 motion_model == "bank" ? fmt::format(", evidence τ {} s", bank.evidence_tau)
-                                        : std::string());
+    spdlog::info(
+        "position_kf on {} (earth {}, lever arm r_B [{}, {}, {}] m{}, accelerometer lag "
+        "{} s; {} model{})",
+        t.url(), earth, settings.lever_arm_B.x(), settings.lever_arm_B.y(),
+        settings.lever_arm_B.z(), settings.estimate_lever_arm ? ", estimated" : "",
+        settings.accel_delay, motion_model,
+        motion_model == "bank" ? fmt::format(", evidence τ {} s", bank.evidence_tau)
+                               : std::string());
     for (const estimation::PositionKfSettings& m : bank.models)
       spdlog::info(
           "  {} motion model: acceleration bias walk {} m/s²/√s, σ {} m/s², relative σ {}, "

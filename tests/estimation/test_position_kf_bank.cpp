@@ -134,6 +134,30 @@ TEST(PositionKfBank, TheEvidenceIsTheInnovationsGaussianLogLikelihood) {
   }
 }
 
+// The default models take what belongs to the IMU and the cell from the base settings (a lag or a
+// lever arm given to position_kf reaches both models), and their motion noise from their own.
+TEST(PositionKfBank, EveryDefaultModelTakesTheImusLagFrameAndLeverArm) {
+  PositionKfSettings base;
+  base.earth = EarthFrame::kEnu;
+  base.gravity = 9.80;
+  base.position_sigma = 2e-4;
+  base.accel_delay = 3e-3;
+  base.lever_arm_B = Eigen::Vector3d(0.01, -0.02, 0.03);
+  base.estimate_lever_arm = true;
+  base.accel_sigma = 7.0;  // a motion noise: not the models'
+  const std::vector<PositionKfSettings> models = DefaultBankModels(base);
+  ASSERT_EQ(models.size(), 2u);
+  for (const PositionKfSettings& m : models) {
+    EXPECT_EQ(m.earth, base.earth);
+    EXPECT_EQ(m.gravity, base.gravity);
+    EXPECT_EQ(m.position_sigma, base.position_sigma);
+    EXPECT_EQ(m.accel_delay, base.accel_delay);
+    EXPECT_EQ(m.lever_arm_B, base.lever_arm_B);
+    EXPECT_TRUE(m.estimate_lever_arm);
+    EXPECT_NE(m.accel_sigma, base.accel_sigma);
+  }
+}
+
 // A bank of one filter is that filter, bit for bit (position_kf's single-model mode runs as one).
 TEST(PositionKfBank, ABankOfOneIsItsFilter) {
   PositionKfSettings s;

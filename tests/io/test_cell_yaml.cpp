@@ -312,11 +312,12 @@ TEST(CellYaml, SetValuesReachTheSettings) {
       "channels: {imu: CELL2_IMU, pose_measurement: cell2/POSE}\n";
   Replace(text, "earth: ned",
           "earth: enu\n    gravity: 9.80\n    to_marker: [0.01, -0.02, 0.03]\n"
-          "    accel_bias: {sigma: 1.5e-4, random_walk: 2e-5}");
+          "    accel_bias: {sigma: 1.5e-4, random_walk: 2e-5}\n    accel_delay: 0.00225");
   CellSpec spec = ParseCellYaml(text, "set.yaml");
   ASSERT_TRUE(spec.imu.has_value());
   EXPECT_EQ(spec.imu->to_marker_I, Eigen::Vector3d(0.01, -0.02, 0.03));
   EXPECT_FALSE(spec.imu->estimate_to_marker);
+  EXPECT_EQ(spec.imu->accel_delay, 0.00225);
   {
     std::string estimated = text;
     Replace(estimated, "to_marker: [0.01, -0.02, 0.03]", "to_marker: estimate");
@@ -343,6 +344,7 @@ TEST(CellYaml, SetValuesReachTheSettings) {
   EXPECT_EQ(p.position.earth, estimation::EarthFrame::kEnu);
   EXPECT_EQ(p.orientation.gravity, 9.80);
   EXPECT_EQ(p.position.gravity, 9.80);
+  EXPECT_EQ(p.position.accel_delay, 0.00225);
   EXPECT_EQ(c.spec.still_window.warmup, 2.0);
   EXPECT_EQ(c.ekf.prior_sigma_length, 0.02);
   EXPECT_EQ(c.ekf.prior_sigma_angle, 0.04);
@@ -598,6 +600,10 @@ INSTANTIATE_TEST_SUITE_P(
                 "sensors.imu.to_marker: beyond 1 m from the IMU: millimetres?"},
         BadCase{kG, "    gravity: 9.81", "    gravity: 9.81\n    to_marker: [0.01, .nan, 0]",
                 "sensors.imu.to_marker[1]: value is not finite"},
+        BadCase{kG, "    gravity: 9.81", "    gravity: 9.81\n    accel_delay: 2.25",
+                "sensors.imu.accel_delay: 2.25 s is beyond 0.05 s: ms?"},
+        BadCase{kG, "    gravity: 9.81", "    gravity: 9.81\n    accel_delay: -0.001",
+                "sensors.imu.accel_delay: -0.001 s is below 0 s"},
         BadCase{kG, "    gravity: 9.81", "    gravity: 9.81\n    to_marker: guess",
                 "sensors.imu.to_marker: expected a list of 3 numbers"},
         BadCase{kG, "    gravity: 9.81", "    gravity: 9.81\n    accel_bias: {sigma: 15}",

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <numbers>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 
 #include "rcal/geometry/so3.hpp"
@@ -56,6 +57,12 @@ PositionKfSettings AccelerometerDrivenSettings() {
 }
 
 PositionKf::PositionKf(const PositionKfSettings& settings) : settings_(settings) {
+  if (!(settings_.accel_delay >= 0.0 && settings_.accel_delay <= kMaxAccelDelay)) {
+    std::ostringstream o;
+    o << "position_kf: accel_delay must be a time in [0, " << kMaxAccelDelay << "] s, got "
+      << settings_.accel_delay;
+    throw std::invalid_argument(o.str());
+  }
   Reset();
 }
 
@@ -75,6 +82,8 @@ void PositionKf::Reset() {
   last_position_t_ = 0.0;
   has_last_omega_ = false;
   last_omega_B_.setZero();
+  has_last_z_ = false;
+  last_z_.setZero();
   rollback_.clear();
 }
 
@@ -330,9 +339,21 @@ Status PositionKf::UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen
   last_omega_B_ = omega_B;
   last_omega_t_ = t;
   has_last_omega_ = true;
+  // The accelerometer's lag (header comment): z(t − δ) with the attitude of then, extrapolated
+  // to t along the previous sample's; κ weighs the noise.
+  Eigen::Vector3d z = WorldAcceleration(f_B, R_EB);
+  double kappa = 0.0;
+  if (const double delay = settings_.accel_delay; delay > 0.0) {
+    const Eigen::Vector3d z_then = WorldAcceleration(geometry::Exp(-delay * omega_B) * f_B, R_EB);
+    const double step = t - last_z_t_;
+    if (has_last_z_ && step > 0.0 && step <= kMaxAccelExtrapolationStep) kappa = delay / step;
+    z = z_then + kappa * (z_then - last_z_);
+    last_z_ = z_then;
+    last_z_t_ = t;
+    has_last_z_ = true;
+  }
   if (!initialized_) return Status::Ok();
   PredictTo(t);
-  const Eigen::Vector3d z = WorldAcceleration(f_B, R_EB);
   // h = A − R_WB M r_B + b_W, R_WB = R_WE R_EB, M = [α]× + [ω]×² (header comment).
   const Eigen::Matrix3d W = geometry::Skew(omega_B);
   const Eigen::Matrix3d M = geometry::Skew(alpha_B) + W * W;
@@ -342,7 +363,8 @@ Status PositionKf::UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen
   if (settings_.accel_bias_walk > 0.0) H.middleCols<3>(kBias).setIdentity();
   // σ² + (σ_rel |a_W|)², times the adaptive λ (header comment).
   const double s_rel = settings_.accel_relative_sigma * z.norm();
-  Eigen::Matrix3d R = accel_noise_scale_ *
+  const double extrapolation = (1.0 + kappa) * (1.0 + kappa) + kappa * kappa;  // 1 when δ = 0
+  Eigen::Matrix3d R = accel_noise_scale_ * extrapolation *
                       (settings_.accel_sigma * settings_.accel_sigma + s_rel * s_rel) *
                       Eigen::Matrix3d::Identity();
   if (!R_WE_covariance_.isZero()) {
@@ -355,6 +377,7 @@ Status PositionKf::UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen
   const Eigen::Matrix3d S_inv = S.inverse();
   if (settings_.accel_gate_chi2 > 0.0 && !(y.dot(S_inv * y) <= settings_.accel_gate_chi2)) {
     ++counters_.accel_rejected;
+    has_last_z_ = false;   // nor is the next sample extrapolated along a refused one
     return GuardState(t);  // the prediction to t stands
   }
   const Eigen::Matrix<double, kN, 3> K = P_ * H.transpose() * S_inv;

@@ -21,6 +21,7 @@ std::vector<PositionKfSettings> DefaultBankModels(const PositionKfSettings& base
     s->lever_arm_B = base.lever_arm_B;
     s->estimate_lever_arm = base.estimate_lever_arm;
     s->lever_arm_sigma = base.lever_arm_sigma;
+    s->accel_delay = base.accel_delay;  // the IMU's, as the frame and the lever arm
   }
   return {paper, driven};
 }

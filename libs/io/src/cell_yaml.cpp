@@ -12,6 +12,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "rcal/estimation/position_kf.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/yaml_reader.hpp"
 
@@ -165,7 +166,7 @@ Eigen::Matrix3d ReadAxes(const Reader& r, const YAML::Node& n, const std::string
 ImuSensorSpec ReadImu(const Reader& r, const YAML::Node& n, const std::string& path) {
   r.CheckMap(n, path,
              {"id", "rate", "axes", "noise_density", "range", "earth", "gravity", "to_marker",
-              "accel_bias"});
+              "accel_bias", "accel_delay"});
   ImuSensorSpec s;
   if (n["id"]) s.id = Label(r, n["id"], path + ".id");
   s.rate = Bounded(r, r.Require(n, path, "rate"), path + ".rate", "Hz", 1.0, 10000.0,
@@ -209,6 +210,9 @@ ImuSensorSpec ReadImu(const Reader& r, const YAML::Node& n, const std::string& p
                "beyond 1 m from the IMU: millimetres? (write metres, or `estimate`)", &t);
     }
   }
+  if (n["accel_delay"])
+    s.accel_delay = Bounded(r, n["accel_delay"], path + ".accel_delay", "s", 0.0,
+                            estimation::kMaxAccelDelay, "ms? (write seconds: 2.25 ms = 0.00225)");
   if (const YAML::Node b = n["accel_bias"]) {
     const std::string p = path + ".accel_bias";
     r.CheckMap(b, p, {"sigma", "random_walk"});
@@ -803,6 +807,7 @@ BuiltCell BuildCell(const CellSpec& spec) {
     ps.orientation.accel_range = spec.imu->accel_range;
     ps.accel_bias_sigma = spec.imu->accel_bias_sigma;
     ps.accel_bias_random_walk = spec.imu->accel_bias_random_walk;
+    ps.position.accel_delay = spec.imu->accel_delay;
   }
 
   identification::EkfSettings& es = c.ekf;

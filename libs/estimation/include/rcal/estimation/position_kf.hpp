@@ -115,6 +115,19 @@
 // better. Cost: no hypothesis can make a sample likelier than N(0; 0, R) (NIS 0, S = R), so while
 // the sample is within the test's margin of that bound, none is tried: every sample of a calm run.
 // Otherwise up to kMaxRollbackPoints re-runs of a few predictions and 3×3 solves.
+// The accelerometer's lag (beyond the paper; accel_delay δ): a sample stamped t is the specific
+// force of t − δ (the sensor's internal low-pass; the magnetometer's is OrientationKf's
+// mag_delay). Taken as stamped, the filter's acceleration is δ behind the tool's, an error of the
+// jerk times δ (BROAD's fast translation: jerks of 100 m/s³, and the accelerometer agrees with the
+// optical truth's acceleration to 0.43 m/s² as stamped, 0.23 m/s² read 2.3 ms earlier). So each
+// sample is first put in the earth frame with the attitude of its own time, R_EB(t − δ) =
+// R_EB Exp(−ω_B δ), z(t − δ) = R_WE (R_EB Exp(−ω_B δ) f_B + g_E), and then extrapolated to t
+// along the line through the previous sample's, z = z(t − δ) + δ (z(t − δ) − z(t′ − δ)) / (t − t′)
+// (t′ the previous sample's stamp; exact for a ramp, and causal). Its noise, two white samples
+// weighted 1 + κ and −κ with κ = δ / (t − t′), is the accelerometer's variance times
+// (1 + κ)² + κ². After a gap of more than kMaxAccelExtrapolationStep, at the first sample and after
+// one the accelerometer's gate refused (a tap: extrapolated along it, the next sample would ring
+// by −κ times the tap), the sample is taken at z(t − δ) unextrapolated.
 #pragma once
 
 #include <Eigen/Core>
@@ -136,6 +149,9 @@ Eigen::Matrix<double, 9, 1> PaperGammaPos(double g, double t);
 /// Most intervals between position samples whose accelerometer one sample can take back (the
 /// bound on accel_rollback_span's cost at high position rates).
 inline constexpr int kMaxRollbackPoints = 8;
+
+/// The longest step between accelerometer samples over which accel_delay extrapolates [s].
+inline constexpr double kMaxAccelExtrapolationStep = 0.1;
 
 /// How the white-jerk noise enters the state (header comment).
 enum class MotionModel {
@@ -191,7 +207,16 @@ struct PositionKfSettings {
   /// between position samples that began within this span (always the last one; at most
   /// kMaxRollbackPoints). 0 = off. Needs the position gate (its χ² quantile is the test's).
   double accel_rollback_span = 0.3;
+  /// The accelerometer's lag behind its stamps [s] (see the header comment): a sample stamped t
+  /// is the specific force of t − accel_delay (a MEMS accelerometer low-passes internally; BROAD's
+  /// reads ≈ 2.3 ms behind its optical truth). Each sample is turned back to the body's attitude
+  /// of then and extrapolated to t along the last two samples. 0 = taken as stamped; at most
+  /// kMaxAccelDelay (the constructor refuses more, a negative or a non-finite value).
+  double accel_delay = 0.0;
 };
+
+/// The largest accel_delay the filter takes [s]: beyond it the extrapolation is no estimate.
+inline constexpr double kMaxAccelDelay = 0.05;
 
 /// The accelerometer-driven filter's settings (position_kf --motion-model accelerometer-driven;
 /// the defaults above are the paper's filter): MotionModel::kAccelerometerDriven,
@@ -332,6 +357,10 @@ class PositionKf {
   double last_position_t_ = 0.0;    // for the adaptation's step a = Δt/τ
   bool has_last_omega_ = false;     // for α_B by differencing
   double last_omega_t_ = 0.0;
+  // The previous accelerometer sample's earth-frame acceleration z(t′ − δ), for accel_delay.
+  bool has_last_z_ = false;
+  Eigen::Vector3d last_z_ = Eigen::Vector3d::Zero();
+  double last_z_t_ = 0.0;
   Eigen::Vector3d last_omega_B_ = Eigen::Vector3d::Zero();
   // The states right after the last position samples, newest last, with the sample each took
   // and the accelerometer samples applied after it (accel_rollback_intervals).

@@ -60,10 +60,10 @@ struct PositionKfBankSettings {
 inline constexpr double kBankAccelGateChi2 = 11.34;
 
 /// The two motion models the bank weighs by default, with `base`'s frame, gravity, position σ and
-/// gate, accelerometer rollback span, and lever arm: the paper's white jerk (σ 0.3 m/s²) and
-/// AccelerometerDrivenSettings(), both with the adaptive accelerometer noise (τ 0.1 s) and the
-/// accelerometer gate kBankAccelGateChi2 (off; the motion models' own settings, as σ and τ; set
-/// each model's accel_gate_chi2 to change it).
+/// gate, accelerometer rollback span, lever arm and accelerometer lag (accel_delay): the paper's
+/// white jerk (σ 0.3 m/s²) and AccelerometerDrivenSettings(), both with the adaptive accelerometer
+/// noise (τ 0.1 s) and the accelerometer gate kBankAccelGateChi2 (off; the motion models' own
+/// settings, as σ and τ; set each model's accel_gate_chi2 to change it).
 std::vector<PositionKfSettings> DefaultBankModels(const PositionKfSettings& base);
 
 class PositionKfBank {

@@ -62,6 +62,10 @@
 //                                          #   the first marker, in the mounting frame (|r| ≤ 1 m),
 //                                          #   or `estimate` (position_kf estimates it); absent:
 //                                          #   zero, the IMU taken at the marker (the paper's)
+//       accel_delay: 0.00225               # optional [s], 0 to 0.05: the accelerometer's lag
+//                                          #   behind its stamps (rcal fuse measures it from a
+//                                          #   recording: accel_lag); position_kf takes it out;
+//                                          #   absent: 0, samples taken as stamped
 //     position:                            # required: the position sensor (tracker, camera)
 //       id: "AT960 123"                    # optional (text)
 //       markers: [0]                       # required: the marker ids it measures, exactly the
@@ -220,6 +224,8 @@ struct ImuSensorSpec {
   /// IMU → first marker r_IM_I in the mounting frame [m] (zero: the IMU taken at the marker).
   Eigen::Vector3d to_marker_I = Eigen::Vector3d::Zero();
   bool estimate_to_marker = false;  ///< `to_marker: estimate`: the position filter estimates it
+  /// The accelerometer's lag behind its stamps [s] (estimation::PositionKfSettings::accel_delay).
+  double accel_delay = 0.0;
 };
 
 struct PositionSensorSpec {
