@@ -25,6 +25,7 @@
 #include <tuple>
 #include <vector>
 
+#include "accel_lag_json.hpp"
 #include "command.hpp"
 #include "fuse_settings.hpp"
 #include "rcal/discrepancy/imu_scoring.hpp"
@@ -317,14 +318,7 @@ int RunFuse(const FuseOptions& opt) {
   j["lever_arm_B_m"] = {pkf.lever_arm_B().x(), pkf.lever_arm_B().y(), pkf.lever_arm_B().z()};
   j["mag_reference"] = {{"norm_uT", okf.mag_ref_norm()}, {"dip_rad", okf.mag_ref_dip()}};
   if (lag)
-    j["accel_lag"] = {
-        {"delay_s", lag->delay},
-        {"delay_sigma_s", lag->delay_sigma},
-        {"lever_arm_B_m", {lag->lever_arm_B.x(), lag->lever_arm_B.y(), lag->lever_arm_B.z()}},
-        {"bias_W_m_s2", {lag->bias_W.x(), lag->bias_W.y(), lag->bias_W.z()}},
-        {"triplets", lag->triplets},
-        {"residual_rms_m_s2", lag->residual_rms},
-        {"jerk_rms_m_s3", lag->jerk_rms}};
+    j["accel_lag"] = AccelLagJson(*lag);
   else
     j["accel_lag"] = {{"error", lag.error()}};
   if (!opt.json.empty()) io::AtomicWriteFile(opt.json, j.dump(2) + "\n");
