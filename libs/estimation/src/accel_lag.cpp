@@ -35,16 +35,16 @@ std::string Sample(const char* field, std::size_t i) {
   return o.str();
 }
 
-// The weighted normal equations of rows [first, last) of the triplets; w per row and axis.
+// The weighted normal equations of triplets [first, last); w per triplet.
 struct Normal {
   Eigen::Matrix<double, 7, 7> N = Eigen::Matrix<double, 7, 7>::Zero();
   Eigen::Matrix<double, 7, 1> b = Eigen::Matrix<double, 7, 1>::Zero();
 };
-Normal Accumulate(const std::vector<Triplet>& tr, const std::vector<Eigen::Vector3d>& w,
-                  std::size_t first, std::size_t last) {
+Normal Accumulate(const std::vector<Triplet>& tr, const std::vector<double>& w, std::size_t first,
+                  std::size_t last) {
   Normal n;
   for (std::size_t j = first; j < last; ++j) {
-    const Row WA = w[j].asDiagonal() * tr[j].A;
+    const Row WA = w[j] * tr[j].A;
     n.N += tr[j].A.transpose() * WA;
     n.b += WA.transpose() * tr[j].y;
   }
@@ -157,7 +157,7 @@ Result<AccelLagEstimate> EstimateAccelLag(const AccelLagData& d, const AccelLagS
   // axes, since a tap turned into W reaches every axis, and its ȧ makes the triplet a leverage
   // point that a per-axis weight still lets pull (the taps of AccelLag.TapsDoNotPullTheLag: 2.69
   // ms per axis, 2.97 ms per triplet, true 3; Tukey's biweight, 5.4 ms, is worse still).
-  std::vector<Eigen::Vector3d> w(tr.size(), Eigen::Vector3d::Ones());
+  std::vector<double> w(tr.size(), 1.0);
   auto theta = Solve(Accumulate(tr, w, 0, tr.size()));
   if (!theta) return R::Error(theta.error());
   for (int pass = 0; pass < 6; ++pass) {
@@ -172,7 +172,7 @@ Result<AccelLagEstimate> EstimateAccelLag(const AccelLagData& d, const AccelLagS
       double u = 0.0;
       for (int i = 0; i < 3; ++i)
         u = std::max(u, std::abs(tr[j].y(i) - tr[j].A.row(i).dot(*theta)) / sigma(i));
-      w[j].setConstant(u <= kAccelLagHuber ? 1.0 : kAccelLagHuber / u);
+      w[j] = u <= kAccelLagHuber ? 1.0 : kAccelLagHuber / u;
     }
     theta = Solve(Accumulate(tr, w, 0, tr.size()));
     if (!theta) return R::Error(theta.error());
