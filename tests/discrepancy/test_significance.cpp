@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <limits>
+#include <numbers>
 
 namespace rcal::discrepancy {
 namespace {
@@ -38,6 +39,39 @@ TEST(Significance, ZFromLogPIsExactWherePUnderflows) {
     EXPECT_NEAR(NormalUpperQuantileLog(LogNormalUpper(z)), z, 1e-9 * std::max(1.0, z)) << z;
   EXPECT_EQ(NormalUpperQuantileLog(0.0), -kInf);   // p = 1
   EXPECT_EQ(NormalUpperQuantileLog(-kInf), kInf);  // p = 0
+}
+
+TEST(Significance, StudentTTailAgainstItsClosedForms) {
+  // ν = 1 (Cauchy): P(T > t) = atan(1/t)/π for t > 0, exact far into the tail.
+  for (double t : {0.3, 1.0, 12.0, 1e3, 1e8, 1e200})
+    EXPECT_NEAR(LogStudentTUpper(t, 1.0), std::log(std::atan(1.0 / t) / std::numbers::pi), 1e-11)
+        << t;
+  // ν = 2: P(T > t) = 1 / (√(2 + t²) (√(2 + t²) + t)).
+  for (double t : {0.1, 2.0, 30.0, 1e6}) {
+    const double r = std::sqrt(2.0 + t * t);
+    EXPECT_NEAR(LogStudentTUpper(t, 2.0), -std::log(r * (r + t)), 1e-11) << t;
+  }
+  // ν = 7 (eight jackknife blocks), Abramowitz & Stegun 26.7.3 for odd ν: P(|T| < t) =
+  // (2/π)(θ + sin θ (cos θ + ⅔ cos³θ + 8/15 cos⁵θ)), θ = atan(t/√7); and the tables' 0.999
+  // quantile 4.785 and 0.975 quantile 2.365.
+  for (double t : {0.5, 2.365, 4.785, 9.0}) {
+    const double th = std::atan(t / std::sqrt(7.0)), c = std::cos(th);
+    const double A =
+        2.0 / std::numbers::pi *
+        (th + std::sin(th) * (c + 2.0 / 3.0 * std::pow(c, 3) + 8.0 / 15.0 * std::pow(c, 5)));
+    EXPECT_NEAR(LogStudentTUpper(t, 7.0), std::log(0.5 * (1.0 - A)), 1e-9) << t;
+  }
+  EXPECT_NEAR(std::exp(LogStudentTUpper(4.785, 7.0)), 1e-3, 2e-6);
+  EXPECT_NEAR(std::exp(LogStudentTUpper(2.365, 7.0)), 0.025, 5e-5);
+  // Symmetry, t = 0, and the normal limit.
+  EXPECT_NEAR(std::exp(LogStudentTUpper(-2.365, 7.0)), 0.975, 5e-5);
+  EXPECT_DOUBLE_EQ(LogStudentTUpper(0.0, 3.0), std::log(0.5));
+  EXPECT_NEAR(LogStudentTUpper(3.0, 1e7), LogNormalUpper(3.0), 1e-5);
+  // The t of a jackknife is far less significant than the same ratio read as a z.
+  EXPECT_GT(LogStudentTUpper(4.0, 7.0), LogNormalUpper(4.0) + 4.0);
+  EXPECT_TRUE(std::isnan(LogStudentTUpper(std::nan(""), 7.0)));
+  EXPECT_TRUE(std::isnan(LogStudentTUpper(1.0, 0.0)));
+  EXPECT_EQ(LogStudentTUpper(kInf, 7.0), -kInf);
 }
 
 TEST(Significance, InfiniteZAndTinyPAreWrittenAsBounds) {

@@ -83,7 +83,8 @@ TEST(ImuStream, EffectsHaveTheirSize) {
   }
   EXPECT_LT(max_rest, 1e-9);
   EXPECT_GT(max_motion, 0.5);
-  EXPECT_LE(max_motion, 2.0 * std::sqrt(3.0) + 1e-9);
+  // |a_i| ≤ Σ|B| + |c_i| and |c_i| ≤ Σ|B| (c_i is a w-weighted mean of Σ B sin(…)).
+  EXPECT_LE(max_motion, 2.0 * 2.0 * std::sqrt(3.0) + 1e-9);
   // Time offset: the gyro at t equals the offset-free gyro at t − τ (τ = 3 samples).
   sim::ImuStreamEffects to;
   to.time_offset_s = 0.03;
@@ -94,6 +95,59 @@ TEST(ImuStream, EffectsHaveTheirSize) {
     EXPECT_LT((shifted[k].gyro - plain[k - 3].gyro).norm(), 1e-9);
     EXPECT_LT((shifted[k].q_WI - plain[k].q_WI).norm(), 1e-12);  // truth is not shifted
   }
+}
+
+TEST(ImuStream, PositionsIntegrateTheAccelerationAndAreStillAtRest) {
+  sim::ImuStreamEffects la;
+  la.linear_accel = 3.0;
+  std::mt19937_64 rng(5);
+  const auto s = sim::SimulateImuStream(Quiet(), la, rng);
+  const double dt = 0.01;
+  // Numerov: p(k+1) − 2 p(k) + p(k−1) = dt²/12 (a(k+1) + 10 a(k) + a(k−1)) + O(dt⁶), with a the
+  // linear acceleration the (noise-free) accelerometer shows: R_WI f − g up.
+  auto a_W = [&](size_t k) {
+    return Eigen::Vector3d(QuatToMatrix(s[k].q_WI) * s[k].accel - Eigen::Vector3d(0, 0, 9.81));
+  };
+  double max_err = 0.0, max_a = 0.0;
+  for (size_t k = 1; k + 1 < s.size(); ++k) {
+    const Eigen::Vector3d dd = (s[k + 1].p_W - 2.0 * s[k].p_W + s[k - 1].p_W) / (dt * dt);
+    const Eigen::Vector3d numerov = (a_W(k + 1) + 10.0 * a_W(k) + a_W(k - 1)) / 12.0;
+    max_err = std::max(max_err, (dd - numerov).norm());
+    max_a = std::max(max_a, a_W(k).norm());
+  }
+  EXPECT_GT(max_a, 1.0);
+  EXPECT_LT(max_err, 1e-4);
+  // Still at every rest: each motion segment ends with no net velocity (c_i).
+  for (auto [b, e] : {std::pair{0, 499}, std::pair{1101, 1599}, std::pair{2201, 2699}})
+    EXPECT_LT((s[e].p_W - s[b].p_W).norm(), 1e-5) << b;
+  EXPECT_GT((s[1101].p_W - s[499].p_W).norm(), 1e-3);  // it did move
+}
+
+TEST(ImuStream, TheAccelerometersDelayShiftsItAlone) {
+  // δ = one sample period, noise off: the accelerometer at k reads the delay-free one at k − 1,
+  // the gyro, field, truth and positions are unchanged.
+  sim::ImuStreamEffects plain_e, late_e;
+  plain_e.linear_accel = late_e.linear_accel = 3.0;
+  late_e.accel_delay_s = 0.01;
+  std::mt19937_64 r1(6), r2(6);
+  const auto plain = sim::SimulateImuStream(Quiet(), plain_e, r1);
+  const auto late = sim::SimulateImuStream(Quiet(), late_e, r2);
+  ASSERT_EQ(plain.size(), late.size());
+  double max_shift = 0.0, max_unshifted = 0.0, max_other = 0.0;
+  for (size_t k = 1; k < plain.size(); ++k) {
+    max_shift = std::max(max_shift, (late[k].accel - plain[k - 1].accel).norm());
+    max_unshifted = std::max(max_unshifted, (late[k].accel - plain[k].accel).norm());
+    max_other =
+        std::max({max_other, (late[k].gyro - plain[k].gyro).norm(),
+                  (late[k].mag_uT - plain[k].mag_uT).norm(), (late[k].p_W - plain[k].p_W).norm()});
+  }
+  EXPECT_LT(max_shift, 1e-6);
+  EXPECT_GT(max_unshifted, 0.05);  // the delay is visible
+  EXPECT_LT(max_other, 1e-6);
+  sim::ImuStreamEffects bad;
+  bad.accel_delay_s = std::nan("");
+  std::mt19937_64 r3(1);
+  EXPECT_THROW(sim::SimulateImuStream(Quiet(), bad, r3), std::invalid_argument);
 }
 
 TEST(ImuStream, GyroBiasRandomWalkHasItsRate) {

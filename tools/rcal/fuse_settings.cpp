@@ -128,12 +128,13 @@ est::PositionKfSettings BroadPositionSettings(double pos_noise_m) {
   // what rings past it is taken back (accel_rollback_span).
   s.accel_gate_chi2 = est::kBankAccelGateChi2;
   s.estimate_lever_arm = true;
-  // BROAD's accelerometer reads 2.25 ms late (est::EstimateAccelLag: `rcal fuse` measures it on
+  // BROAD's accelerometer reads 2.85 ms late (est::EstimateAccelLag: `rcal fuse` measures it on
   // each trial from the simulated position sensor and the filter's attitude, accel_lag in the
-  // JSON; 2.25 ± 0.08 ms pooled by inverse variance over the sixteen trials, 2.15–2.38 ms
-  // without any one of them; the optical truth's own acceleration says 2.2–2.35 ms). A property
-  // of the IMU, measured, not tuned: the position RMSE is flat from 2 to 3 ms (README).
-  s.accel_delay = 2.25e-3;
+  // JSON; 2.85 ± 0.07 ms pooled by inverse variance over the sixteen trials, 2.81–2.91 ms
+  // without any one of them; `rcal analyze` reads 2.1–2.8 ms per trial from the optical truth's
+  // positions and attitude). A property of the IMU, measured, not tuned: the position RMSE is
+  // flat from 2 to 3 ms (README).
+  s.accel_delay = 2.85e-3;
   return s;
 }
 

@@ -13,6 +13,9 @@
 #include <string>
 
 #include "rcal/discrepancy/significance.hpp"
+#include "rcal/estimation/accel_lag.hpp"
+#include "rcal/estimation/position_kf.hpp"
+#include "rcal/estimation/position_kf_bank.hpp"
 #include "rcal/geometry/so3.hpp"
 
 namespace rcal::discrepancy {
@@ -114,15 +117,19 @@ std::vector<const ImuCandidate*> ImuAnalysis::effects() const {
 }
 
 std::string ImuCandidate::gain_metric() const {
-  return cause == "magnetic_disturbance" ? "heading" : "total";
+  if (cause == "magnetic_disturbance") return "heading";
+  return cause == "accel_lag" ? "position" : "total";
 }
 
 void MarkLosingExtensions(std::vector<ImuCandidate>& candidates) {
   for (auto& c : candidates) {
     if (!c.tested) continue;
-    const bool heading = c.gain_metric() == "heading";
-    const double b = (heading ? c.before.heading : c.before.total).value();
-    const double e = (heading ? c.after.heading : c.after.total).value();
+    const std::string metric = c.gain_metric();
+    const bool heading = metric == "heading", position = metric == "position";
+    const double b =
+        position ? c.position_before_m : (heading ? c.before.heading : c.before.total).value();
+    const double e =
+        position ? c.position_after_m : (heading ? c.after.heading : c.after.total).value();
     // A loss within kLoseTolerance is "gains nothing" (two filters on the same samples differ
     // by that much from noise alone: a 10 ms time offset, re-timed, scores 0.99-1.05x), not a
     // loss; trial 35's magnet gate doubled the heading error.
@@ -130,11 +137,11 @@ void MarkLosingExtensions(std::vector<ImuCandidate>& candidates) {
     c.loses_to_truth = std::isfinite(b) && std::isfinite(e) && e > (1.0 + kLoseTolerance) * b;
     if (c.loses_to_truth && c.significant) {
       char buf[160];
+      const double scale = position ? 1e3 : 180.0 / std::numbers::pi;
       std::snprintf(buf, sizeof buf,
                     "significant, but its extension raises the %s RMSE against the truth from "
-                    "%.2f to %.2f deg: not named",
-                    c.gain_metric().c_str(), b * 180.0 / std::numbers::pi,
-                    e * 180.0 / std::numbers::pi);
+                    "%.2f to %.2f %s: not named",
+                    metric.c_str(), b * scale, e * scale, position ? "mm" : "deg");
       c.note += (c.note.empty() ? "" : "; ") + std::string(buf);
     }
   }
@@ -149,6 +156,7 @@ ImuStreamData FromSimulatedStream(const std::vector<sim::ImuStreamSample>& strea
     d.mag_uT.push_back(r.mag_uT);
     d.q_truth.push_back(r.q_WI);
     d.movement.push_back(r.movement);
+    d.p_W.push_back(r.p_W);
   }
   return d;
 }
@@ -162,6 +170,8 @@ void ValidateImuStream(const ImuStreamData& d) {
     throw std::invalid_argument("IMU stream: q_truth must be empty or one row per t_s");
   if (!d.movement.empty() && d.movement.size() != n)
     throw std::invalid_argument("IMU stream: movement must be empty or one row per t_s");
+  if (!d.p_W.empty() && d.p_W.size() != n)
+    throw std::invalid_argument("IMU stream: pos_x..pos_z must be empty or one row per t_s");
   auto row = [](size_t k) { return " at row " + std::to_string(k + 1); };
   for (size_t k = 0; k < n; ++k) {
     if (!std::isfinite(d.t[k]))
@@ -174,6 +184,9 @@ void ValidateImuStream(const ImuStreamData& d) {
       throw std::invalid_argument("IMU stream: acc_x..acc_z not finite" + row(k));
     if (!d.mag_uT[k].allFinite())
       throw std::invalid_argument("IMU stream: mag_x..mag_z not finite" + row(k));
+    // NaN is an occluded position; an infinity is no measurement of anything.
+    if (!d.p_W.empty() && !d.p_W[k].allFinite() && !d.p_W[k].array().isNaN().all())
+      throw std::invalid_argument("IMU stream: pos_x..pos_z neither finite nor all NaN" + row(k));
   }
 }
 
@@ -734,6 +747,19 @@ ImuCandidate TestAccelMotion(const Context& c, const std::vector<Eigen::Vector4d
 
 // ----- time_offset -----
 
+// A lag's test, its z already in `cand`: significant beyond the two-sided critical value at α_c
+// and at least min_periods sample periods; a measurable lag below that is said so in the note.
+void JudgeLag(const Context& c, double lag_s, double alpha_c, double min_periods,
+              const std::string& what, int ms_digits, ImuCandidate& cand) {
+  cand.critical = NormalQuantileUpper(alpha_c / 2.0);
+  const bool large = std::abs(lag_s) >= min_periods * c.dt;
+  cand.significant = cand.statistic > cand.critical && large;
+  if (cand.statistic > cand.critical && !large)
+    cand.note = "the " + what + " is measurable (z beyond critical) but |" +
+                Fixed(lag_s * 1e3, ms_digits) + " ms| is below " + Fixed(min_periods, 2) +
+                " sample periods: too small to matter, not significant as an effect";
+}
+
 struct TimeOffsetTest {
   ImuCandidate candidate;
   double tau_first = kNaN, tau_second = kNaN;  // lag fitted on each half of the motion samples
@@ -787,18 +813,175 @@ TimeOffsetTest TestTimeOffset(const Context& c, double alpha_c, bool has_truth) 
   r.tau_second =
       EstimateLag(c, w_truth, {motion_idx.begin() + static_cast<long>(h), motion_idx.end()});
   to.statistic = std::isfinite(sigma) && sigma > 0 ? std::abs(tau) / sigma : 0.0;
-  to.critical = NormalQuantileUpper(alpha_c / 2.0);
-  const bool large = std::abs(tau) >= c.s.min_offset_periods * c.dt;
-  to.significant = to.statistic > to.critical && large;
-  if (to.statistic > to.critical && !large)
-    to.note = "the offset is measurable (z beyond critical) but |" + Fixed(tau * 1e3, 2) +
-              " ms| is below " + Fixed(c.s.min_offset_periods, 2) +
-              " sample periods: too small to matter, not significant as an effect";
+  JudgeLag(c, tau, alpha_c, c.s.min_offset_periods, "offset", 2, to);
   to.values = {{"time_offset_s", tau, sigma},
                {"time_offset_first_half_s", r.tau_first, sigma * std::sqrt(2.0)},
                {"time_offset_second_half_s", r.tau_second, sigma * std::sqrt(2.0)},
                {"sample_period_s", c.dt, 0.0}};
   return r;
+}
+
+// ----- accel_lag -----
+
+struct AccelLagTest {
+  ImuCandidate candidate;
+  double delay_first = kNaN, delay_second = kNaN;  // δ fitted on each half of the stream
+  int split = 0;                                   // first sample of the second half
+  std::vector<char> tracker;  // 1: a position the position KF fuses and the lag is read from
+  Eigen::Vector3d gyro_bias = Eigen::Vector3d::Zero();  // the reference rest's mean gyro [rad/s]
+};
+
+// One finite position per accel_lag_position_period_s, on the grid of the first (as a tracker
+// at that rate on the stream's clock).
+std::vector<char> TrackerSamples(const Context& c) {
+  std::vector<char> tracker(c.n, 0);
+  double next = -std::numeric_limits<double>::infinity();
+  for (int k = 0; k < c.n; ++k) {
+    if (!c.d.p_W[k].allFinite() || c.d.t[k] < next - 1e-9) continue;
+    next = (std::isfinite(next) ? next : c.d.t[k]) + c.s.accel_lag_position_period_s;
+    tracker[k] = 1;
+  }
+  return tracker;
+}
+
+// The lag estimator's input over the samples [begin, end): the accelerometer with the attitude
+// q_WI (NaN: the sample is left out) and ω = gyro − the reference rest's mean, and the tracker's
+// positions.
+est::AccelLagData LagData(const Context& c, const std::vector<Eigen::Vector4d>& q_WI,
+                          const AccelLagTest& r, int begin, int end) {
+  est::AccelLagData d;
+  for (int k = begin; k < end; ++k) {
+    if (!q_WI[k].allFinite()) continue;
+    d.t_imu.push_back(c.d.t[k]);
+    d.f_B.push_back(c.d.accel[k]);
+    d.R_EB.push_back(geometry::QuatToMatrix(q_WI[k]));
+    d.omega_B.push_back(c.d.gyro[k] - r.gyro_bias);
+    if (r.tracker[k]) {
+      d.t_position.push_back(c.d.t[k]);
+      d.p_WM_W.push_back(c.d.p_W[k]);
+    }
+  }
+  return d;
+}
+
+// accel_lag (positions present): the lag of the accelerometer behind the positions, on the whole
+// stream and on each half (for the cross-fitted gain).
+AccelLagTest TestAccelLag(const Context& c, const std::vector<Eigen::Vector4d>& q_WI,
+                          double alpha_c, const ImuAnalysis& a) {
+  AccelLagTest r;
+  r.split = c.n;
+  ImuCandidate& al = r.candidate;
+  al.cause = "accel_lag";
+  al.axes = {"accelerometer"};
+  if (!a.has_positions) {
+    al.note =
+        "no positions (pos_x..pos_z) in the stream: nothing to time the accelerometer against";
+    return r;
+  }
+  spdlog::info("imu analysis: accelerometer lag against the positions");
+  r.tracker = TrackerSamples(c);
+  long n_ref = 0;
+  for (int k = 0; k < c.n; ++k)
+    if (c.ref_mask[k]) {
+      r.gyro_bias += c.d.gyro[k];
+      ++n_ref;
+    }
+  if (n_ref > 0) r.gyro_bias /= static_cast<double>(n_ref);
+  est::AccelLagSettings ls;
+  ls.earth = est::EarthFrame::kEnu;
+  ls.gravity = a.gravity_ref;
+  ls.blocks = c.s.accel_lag_blocks;
+  const auto whole = est::EstimateAccelLag(LagData(c, q_WI, r, 0, c.n), ls);
+  if (!whole) {
+    al.note = "not measurable: " + whole.error();
+    return r;
+  }
+  al.tested = true;
+  std::vector<int> motion_idx;
+  for (int k = 0; k < c.n; ++k)
+    if (Moving(c.d, c.rest_mask, k)) motion_idx.push_back(k);
+  r.split = motion_idx.empty() ? c.n / 2 : motion_idx[motion_idx.size() / 2];
+  const auto first = est::EstimateAccelLag(LagData(c, q_WI, r, 0, r.split), ls);
+  const auto second = est::EstimateAccelLag(LagData(c, q_WI, r, r.split, c.n), ls);
+  r.delay_first = first ? first->delay : kNaN;
+  r.delay_second = second ? second->delay : kNaN;
+  const double delay = whole->delay, sigma = whole->delay_sigma;
+  // δ/σ_δ over the jackknife's blocks is Student's t with B − 1 degrees of freedom: written as
+  // the z of the same tail probability, so that one critical value serves every candidate.
+  al.statistic =
+      sigma > 0 ? NormalUpperQuantileLog(LogStudentTUpper(std::abs(delay) / sigma, ls.blocks - 1.0))
+                : 0.0;
+  JudgeLag(c, delay, alpha_c, c.s.min_accel_lag_periods, "lag", 3, al);
+  if (!first || !second)
+    al.note += std::string(al.note.empty() ? "" : "; ") + "a half of the stream gives no lag (" +
+               (first ? second.error() : first.error()) + "): the gain is not measured";
+  if (al.significant && delay < 0)
+    al.note += std::string(al.note.empty() ? "" : "; ") +
+               "the accelerometer leads the positions (or the position sensor is late): the "
+               "position KF cannot take out a lead, its extension applies 0";
+  const double half_sigma = sigma * std::sqrt(2.0);
+  al.values = {{"accel_lag_s", delay, sigma},
+               {"accel_lag_first_half_s", r.delay_first, half_sigma},
+               {"accel_lag_second_half_s", r.delay_second, half_sigma},
+               {"lever_arm_x_m", whole->lever_arm_B.x(), 0.0},
+               {"lever_arm_y_m", whole->lever_arm_B.y(), 0.0},
+               {"lever_arm_z_m", whole->lever_arm_B.z(), 0.0},
+               {"jerk_rms_m_s3", whole->jerk_rms, 0.0},
+               {"residual_rms_m_s2", whole->residual_rms, 0.0},
+               {"position_triplets", static_cast<double>(whole->triplets), 0.0},
+               {"position_period_s", c.s.accel_lag_position_period_s, 0.0}};
+  return r;
+}
+
+// The position KF as position_kf runs it by default (the bank of DefaultBankModels, ENU, the
+// lever arm estimated) with accel_delay δ (a lead applied as 0) over the stream: its error |p̂ − p|
+// [m] at the movement samples in [begin, end) it did not fuse, into err[k] (NaN elsewhere left).
+void PositionErrors(const Context& c, const std::vector<Eigen::Vector4d>& q_base,
+                    const AccelLagTest& r, double gravity, double delay, int begin, int end,
+                    std::vector<double>& err) {
+  est::PositionKfSettings base;
+  base.earth = est::EarthFrame::kEnu;
+  base.gravity = gravity;
+  base.position_sigma = c.s.accel_lag_position_sigma;
+  base.estimate_lever_arm = true;  // the IMU is seldom at the tracked point
+  base.accel_delay = std::clamp(delay, 0.0, est::kMaxAccelDelay);
+  est::PositionKfBankSettings bank_settings;
+  bank_settings.models = est::DefaultBankModels(base);
+  est::PositionKfBank kf(bank_settings);
+  for (int k = 0; k < end; ++k) {
+    if (!q_base[k].allFinite()) continue;
+    (void)kf.UpdateAccel(c.d.t[k], c.d.accel[k], geometry::QuatToMatrix(q_base[k]),
+                         c.d.gyro[k] - r.gyro_bias);
+    if (r.tracker[k]) {
+      (void)kf.UpdatePosition(c.d.t[k], c.d.p_W[k]);
+      continue;
+    }
+    if (k >= begin && kf.initialized() && Moving(c.d, c.rest_mask, k) && c.d.p_W[k].allFinite())
+      err[k] = (kf.p_WM_W() - c.d.p_W[k]).norm();
+  }
+}
+
+double RmsOfFinite(const std::vector<double>& v) {
+  Rms r;
+  for (double x : v)
+    if (std::isfinite(x)) r.Add(x);
+  return r.value();
+}
+
+// accel_lag's gain: the base position KF (δ = 0) against δ of one half applied to the other; the
+// per-sample errors into a (for the report's plot).
+void MeasureAccelLagGain(const Context& c, const std::vector<Eigen::Vector4d>& q_base,
+                         const AccelLagTest& r, double gravity, ImuAnalysis& a) {
+  ImuCandidate& al = a.candidates[4];
+  if (!al.tested || !std::isfinite(r.delay_first) || !std::isfinite(r.delay_second)) return;
+  spdlog::info("imu analysis: position KF with and without the accelerometer's lag");
+  a.position_err_base_m.assign(c.n, kNaN);
+  a.position_err_ext_m.assign(c.n, kNaN);
+  PositionErrors(c, q_base, r, gravity, 0.0, 0, c.n, a.position_err_base_m);
+  PositionErrors(c, q_base, r, gravity, r.delay_second, 0, r.split, a.position_err_ext_m);
+  PositionErrors(c, q_base, r, gravity, r.delay_first, r.split, c.n, a.position_err_ext_m);
+  al.position_before_m = RmsOfFinite(a.position_err_base_m);
+  al.position_after_m = RmsOfFinite(a.position_err_ext_m);
 }
 
 // ----- Gains -----
@@ -931,9 +1114,12 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
   ValidateImuStream(data);
   Context c = MakeContext(data, settings);
   const auto& s = settings;
-  const double alpha_c = s.alpha / 4.0;  // Bonferroni over the four candidates
-
   ImuAnalysis a;
+  a.has_positions = false;
+  for (const auto& p : data.p_W) a.has_positions |= p.allFinite();
+  // Bonferroni over the candidates this stream can test: four, five with positions.
+  const double alpha_c = s.alpha / (a.has_positions ? 5.0 : 4.0);
+
   a.samples = c.n;
   a.rate_hz = c.rate;
   a.has_movement = !data.movement.empty();
@@ -988,19 +1174,20 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
   const ImuCandidate md = TestMagneticDisturbance(c, q_base, alpha_c, a);
   const ImuCandidate am = TestAccelMotion(c, q_base, alpha_c, a);
   const TimeOffsetTest to = TestTimeOffset(c, alpha_c, a.has_truth);
-  a.candidates = {gb, md, am, to.candidate};
-
-  if (a.has_truth) {
-    const ExtensionSettings ext{gb.values.back().value, a.mag_ref_norm_uT, a.mag_ref_dip_rad,
-                                a.mag_gate_norm_uT / a.mag_ref_norm_uT, a.mag_gate_dip_rad};
-    ExtendedFilters filters(data, base_f, ext);
-    MeasureCandidateGains(c, q_base, to, filters, a);
-    MarkLosingExtensions(a.candidates);
-    a.gain_metric = a.candidates[1].named() ? "heading" : "total";  // the gate acts on heading
-    MeasureSelectionGain(c, q_base, to, filters, a);
-  } else {
-    a.gain_metric = a.candidates[1].named() ? "heading" : "total";
-  }
+  const ExtensionSettings ext{gb.values.back().value, a.mag_ref_norm_uT, a.mag_ref_dip_rad,
+                              a.mag_gate_norm_uT / a.mag_ref_norm_uT, a.mag_gate_dip_rad};
+  ExtendedFilters filters(data, base_f, ext);
+  // The lag is fitted with the truth's attitude where the stream has one (as the time offset is):
+  // the base filter's, which trusts a linearly accelerating accelerometer, scatters it by its tilt
+  // errors (simulated streams with 6 m/s²: σ 0.2–0.5 ms against 0.02–0.04 ms) and shifts it by its
+  // own timing. The gain is the position KF's with the filter's attitude, as the pipeline runs it.
+  const AccelLagTest al = TestAccelLag(c, a.has_truth ? data.q_truth : q_base, alpha_c, a);
+  a.candidates = {gb, md, am, to.candidate, al.candidate};
+  MeasureAccelLagGain(c, q_base, al, a.gravity_ref, a);
+  if (a.has_truth) MeasureCandidateGains(c, q_base, to, filters, a);
+  MarkLosingExtensions(a.candidates);  // accel_lag's truth is the positions, with or without q
+  a.gain_metric = a.candidates[1].named() ? "heading" : "total";  // the gate acts on heading
+  if (a.has_truth) MeasureSelectionGain(c, q_base, to, filters, a);
   for (const auto& cnd : a.candidates)
     spdlog::info("imu analysis: {} {} (z {}, critical {:.2f}){}{}", cnd.cause,
                  !cnd.tested       ? "not tested"

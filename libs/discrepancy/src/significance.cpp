@@ -23,7 +23,56 @@ double ZOfLargestP() {
   return z;
 }
 
+// The continued fraction of the incomplete beta function (Lentz's method; Numerical Recipes
+// §6.4): I_x(a, b) = x^a (1 − x)^b / (a B(a, b)) · BetaContinuedFraction(a, b, x), converging
+// fast for x < (a + 1) / (a + b + 2).
+double BetaContinuedFraction(double a, double b, double x) {
+  constexpr double kTiny = 1e-300, kEps = 1e-15;
+  const double qab = a + b, qap = a + 1.0, qam = a - 1.0;
+  auto guard = [](double v) { return std::abs(v) < kTiny ? kTiny : v; };
+  double c = 1.0, d = 1.0 / guard(1.0 - qab * x / qap), h = d;
+  for (int m = 1; m <= 500; ++m) {
+    const double m2 = 2.0 * m;
+    double aa = m * (b - m) * x / ((qam + m2) * (a + m2));
+    d = 1.0 / guard(1.0 + aa * d);
+    c = guard(1.0 + aa / c);
+    h *= d * c;
+    aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2));
+    d = 1.0 / guard(1.0 + aa * d);
+    c = guard(1.0 + aa / c);
+    const double step = d * c;
+    h *= step;
+    if (std::abs(step - 1.0) < kEps) break;
+  }
+  return h;
+}
+
+// ln I_x(a, b) from ln x and ln(1 − x) (each exact where x or 1 − x underflows).
+double LogIncompleteBeta(double a, double b, double log_x, double log_1mx) {
+  const double x = std::exp(log_x);
+  const double log_beta = std::lgamma(a) + std::lgamma(b) - std::lgamma(a + b);
+  if (x < (a + 1.0) / (a + b + 2.0))
+    return a * log_x + b * log_1mx - std::log(a) - log_beta +
+           std::log(BetaContinuedFraction(a, b, x));
+  // I_x(a, b) = 1 − I_{1−x}(b, a), the fraction converging on that side.
+  const double log_other = b * log_1mx + a * log_x - std::log(b) - log_beta +
+                           std::log(BetaContinuedFraction(b, a, std::exp(log_1mx)));
+  return std::log1p(-std::exp(log_other));
+}
+
 }  // namespace
+
+double LogStudentTUpper(double t, double dof) {
+  if (std::isnan(t) || !(dof > 0)) return std::numeric_limits<double>::quiet_NaN();
+  if (t == 0) return std::log(0.5);
+  const double u = std::abs(t);
+  // x = ν / (ν + t²), 1 − x = t² / (ν + t²), in logs (t² overflows beyond 1e154).
+  const double log_sum = u > 1e100 ? 2.0 * std::log(u) : std::log(dof + u * u);
+  const double log_x = std::log(dof) - log_sum, log_1mx = 2.0 * std::log(u) - log_sum;
+  const double log_upper =
+      std::isinf(u) ? -kInf : std::log(0.5) + LogIncompleteBeta(0.5 * dof, 0.5, log_x, log_1mx);
+  return t > 0 ? log_upper : std::log1p(-std::exp(log_upper));
+}
 
 double LogNormalUpper(double z) {
   if (std::isnan(z)) return z;

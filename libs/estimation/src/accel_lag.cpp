@@ -93,15 +93,16 @@ Result<AccelLagEstimate> EstimateAccelLag(const AccelLagData& d, const AccelLagS
   if (!AllFinite(d.p_WM_W, &bad)) return R::Error(Sample("p_WM_W", bad) + " is not finite");
   if (n < 3) return R::Error("accel_lag: fewer than three IMU samples");
 
-  // Per IMU sample: a = R_WE (R_EB f − g·up), R_WB ([α]× + [ω]×²), and ȧ, α by central differences.
+  // Per IMU sample: a = R_WE (R_EB f − g·up), R_WB ([α]× + [ω]×²), and R_WB ḟ_B (δ's column), α
+  // by central differences.
   const Eigen::Vector3d g_up = s.gravity * UpVector(s.earth);
-  std::vector<Eigen::Vector3d> a(n), a_dot(n);
+  std::vector<Eigen::Vector3d> a(n), f_dot_W(n);
   std::vector<Eigen::Matrix3d> L(n);
   for (std::size_t k = 0; k < n; ++k) a[k] = s.R_WE * (d.R_EB[k] * d.f_B[k] - g_up);
   for (std::size_t k = 0; k < n; ++k) {
     const std::size_t lo = k == 0 ? 0 : k - 1, hi = k + 1 == n ? k : k + 1;
     const double span = d.t_imu[hi] - d.t_imu[lo];
-    a_dot[k] = (a[hi] - a[lo]) / span;
+    f_dot_W[k] = s.R_WE * d.R_EB[k] * (d.f_B[hi] - d.f_B[lo]) / span;
     const Eigen::Vector3d alpha_B = (d.omega_B[hi] - d.omega_B[lo]) / span;
     const Eigen::Matrix3d W = geometry::Skew(d.omega_B[k]);
     L[k] = s.R_WE * d.R_EB[k] * (geometry::Skew(alpha_B) + W * W);
@@ -133,7 +134,7 @@ Result<AccelLagEstimate> EstimateAccelLag(const AccelLagData& d, const AccelLagS
       if (!(w > 0.0)) continue;
       sum_w += w;
       int_a += w * a[k];
-      t.A.col(0) += w * a_dot[k];
+      t.A.col(0) += w * f_dot_W[k];
       t.A.middleCols<3>(1) += w * L[k];
     }
     if (!(sum_w > 0.0)) continue;

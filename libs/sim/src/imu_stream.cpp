@@ -58,6 +58,15 @@ class Motion {
     for (int k = 0; k < s.motion_segments; ++k) {
       rot_.push_back(Draw(s.max_rate, rng));
       acc_.push_back(Draw(linear ? linear_accel : 0.0, rng));
+      // c = (2/T) ∫₀ᵀ w(s) Σ B sin(…) ds (Simpson): no net velocity change over the segment.
+      constexpr int kSteps = 4000;
+      const double hs = s.motion_s / kSteps;
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      for (int i = 0; i <= kSteps; ++i) {
+        const double weight = (i == 0 || i == kSteps) ? 1.0 : (i % 2 ? 4.0 : 2.0);
+        sum += weight * Window(i * hs) * acc_.back().At(i * hs);
+      }
+      acc_offset_.push_back(2.0 / s.motion_s * sum * hs / 3.0);
     }
   }
   // Motion segment k and the time s into it, or −1 at rest.
@@ -83,12 +92,14 @@ class Motion {
   Eigen::Vector3d Accel(double t) const {
     double s = 0.0;
     const int k = Segment(t, &s);
-    return k < 0 ? Eigen::Vector3d::Zero() : Eigen::Vector3d(Window(s) * acc_[k].At(s));
+    return k < 0 ? Eigen::Vector3d::Zero()
+                 : Eigen::Vector3d(Window(s) * (acc_[k].At(s) - acc_offset_[k]));
   }
 
  private:
   const ImuStreamSettings& s_;
   std::vector<Harmonics> rot_, acc_;
+  std::vector<Eigen::Vector3d> acc_offset_;  // c per segment [m/s²]
 };
 
 }  // namespace
@@ -106,17 +117,32 @@ std::vector<ImuStreamSample> SimulateImuStream(const ImuStreamSettings& settings
       settings.rest_s + settings.motion_segments * (settings.rest_s + settings.motion_s);
   const auto n = static_cast<long>(std::floor(duration * settings.rate_hz));
   const double tau = effects.time_offset_s;
+  const double delta = effects.accel_delay_s;
+  if (!std::isfinite(tau) || !std::isfinite(delta))
+    throw std::invalid_argument(
+        "SimulateImuStream: time_offset_s and accel_delay_s must be finite");
 
   // Orientation on a fine grid from t_min, by exact exponential steps with the midpoint rate.
   const double h = dt / settings.substeps;
-  const double t_min = -std::abs(tau) - 2.0 * dt;
-  const double t_max = duration + std::abs(tau) + 2.0 * dt;
+  const double t_min = -std::abs(tau) - std::abs(delta) - 2.0 * dt;
+  const double t_max = duration + std::abs(tau) + std::abs(delta) + 2.0 * dt;
   const auto grid = static_cast<long>(std::ceil((t_max - t_min) / h)) + 1;
   std::vector<Eigen::Vector4d> q(grid);
   q[0] = settings.q0_WI.normalized();
   for (long i = 1; i < grid; ++i)
     q[i] = geometry::QuatMultiply(q[i - 1], QuatExp(motion.Omega(t_min + (i - 0.5) * h) * h))
                .normalized();
+  // Position and velocity on the same grid: midpoint velocity, trapezoid position.
+  std::vector<Eigen::Vector3d> v(grid, Eigen::Vector3d::Zero()), p(grid, Eigen::Vector3d::Zero());
+  for (long i = 1; i < grid; ++i) {
+    v[i] = v[i - 1] + h * motion.Accel(t_min + (i - 0.5) * h);
+    p[i] = p[i - 1] + 0.5 * h * (v[i - 1] + v[i]);
+  }
+  auto p_at = [&](double t) -> Eigen::Vector3d {
+    const long i = std::clamp(static_cast<long>(std::floor((t - t_min) / h)), 0L, grid - 2);
+    const double u = t - (t_min + i * h);
+    return p[i] + u * v[i] + 0.5 * u * u * motion.Accel(t_min + i * h + 0.5 * u);
+  };
   auto q_at = [&](double t) -> Eigen::Vector4d {
     const long i = std::clamp(static_cast<long>(std::floor((t - t_min) / h)), 0L, grid - 2);
     const double delta = t - (t_min + i * h);
@@ -143,6 +169,13 @@ std::vector<ImuStreamSample> SimulateImuStream(const ImuStreamSettings& settings
     truth.omega_I = motion.Omega(t_imu);
     truth.a_W = motion.Accel(t_imu);
     ImuSample m = imu.Sample(truth);
+    if (delta != 0.0) {  // the accelerometer reads the specific force of t_imu − δ
+      const Eigen::Matrix3d R_late = geometry::QuatToMatrix(q_at(t_imu - delta));
+      const Eigen::Vector3d f_late =
+          R_late.transpose() * (motion.Accel(t_imu - delta) - imu_settings.g_W);
+      const Eigen::Vector3d f_now = truth.R_WI.transpose() * (truth.a_W - imu_settings.g_W);
+      m.accel_S += imu_settings.R_SI * (f_late - f_now);
+    }
     if (k > 0)
       for (int i = 0; i < 3; ++i)
         b_rw(i) += effects.gyro_bias_random_walk(i) * std::sqrt(dt) * normal(rng);
@@ -160,6 +193,7 @@ std::vector<ImuStreamSample> SimulateImuStream(const ImuStreamSettings& settings
     double u = 0.0;
     s.movement = motion.Segment(t, &u) >= 0 ? 1 : 0;
     s.gyro_bias = imu.gyro_bias() + b_rw;
+    s.p_W = p_at(t);
     out.push_back(s);
   }
   return out;

@@ -2,7 +2,9 @@
 // extended model and its gain on data the fit did not use (issue 6, IMU streams).
 //
 // Data: the BROAD layout (../shared/data/broad/README.md): t [s], gyro [rad/s], specific force
-// [m/s²], field [µT] in the IMU frame, optional truth q_WI (IMU → ENU, [w,x,y,z]) and movement.
+// [m/s²], field [µT] in the IMU frame, optional truth q_WI (IMU → ENU, [w,x,y,z]) and movement,
+// optional positions p_W of the tool (a tracker's or the optical truth's, in a frame aligned with
+// ENU [m]).
 //
 // Base model (sim/imu_model.hpp, sim/imu_stream.hpp with every effect off):
 //   gyro  ω_m = ω + b + n_g,   b constant,                  n_g white, density N_g [rad/s/√Hz]
@@ -22,7 +24,8 @@
 // allan_test_tau_min_s, rests of at least twice that) cannot run and gyro_bias rests on the drift
 // between the first and the last rest alone. ImuAnalysis::rest_note says so in words.
 //
-// Candidates (cause vocabulary), each tested at α / 4 (Bonferroni over the four):
+// Candidates (cause vocabulary), each tested at α / 4 (Bonferroni over the four; α / 5 when the
+// stream has positions and accel_lag is tested too):
 //  gyro_bias   overlapping Allan variance per axis over the rest segments (pooled), relative
 //              confidence s(τ) = 1/√(2 Σ_seg (N_seg/m − 1)); fitted AVAR = N²/τ + (2 ln2/π) B² +
 //              K² τ/3 (white density N, bias instability B, rate random walk K, weighted LS).
@@ -50,12 +53,32 @@
 //              blocks (sd/√B). Effect when |τ|/σ > Φ⁻¹(1 − α/8) and |τ| ≥ min_offset_periods
 //              sample periods. Extension: the estimate stamped t is compared with truth at t − τ,
 //              τ fitted on the other half of the movement samples (2-fold).
-// Gain: the truth is never used by a fit except the time offset's (cross-fitted), so the gain
-// of an extension is the BROAD RMSE (discrepancy/imu_scoring.hpp) over movement samples of the
-// base filter vs the same filter with the extension; `gain` is base vs all selected
-// extensions together, metric heading RMSE when magnetic_disturbance is selected (the gate acts on
-// heading only), else total RMSE. Without truth
-// the gain is not measured (has_truth = false, NaN figures).
+//  accel_lag   (positions present) the accelerometer reads δ late against the position sensor
+//              (and the gyro): estimation::EstimateAccelLag (accel_lag.hpp) on the accelerometer
+//              turned by the truth's attitude (the base filter's without truth: its tilt errors
+//              under linear acceleration scatter δ tenfold) and the positions taken one every
+//              accel_lag_position_period_s (a tracker's rate: the second differences of 10 ms
+//              steps drown in the positions' noise). Test: t = δ/σ_δ, σ_δ the estimator's
+//              jackknife over B blocks, so t has B − 1 degrees of freedom
+//              (significance.hpp, LogStudentTUpper), written as the z of the same p; effect when
+//              beyond Φ⁻¹(1 − α_c/2) and |δ| ≥ min_accel_lag_periods sample periods. A time
+//              offset of the whole IMU is also a lag of its accelerometer behind the positions and
+//              the truth's attitude, so both are named then. Extension: the position KF as
+//              position_kf runs it (the bank of DefaultBankModels, position_kf_bank.hpp, with the
+//              lever arm estimated; ENU, gravity the reference rest's |f|, the base filter's
+//              attitude) with accel_delay = δ, cross-fitted: δ of the first half of the stream
+//              (split at the middle movement sample) applied to the second half and the reverse;
+//              a negative δ (the accelerometer leads: more likely the position sensor is late)
+//              cannot be taken out causally and is applied as 0. Its gain is the position RMSE
+//              [m] over the movement samples the filter did not fuse (between the tracker's
+//              samples), base (accel_delay = 0) vs extended; it changes no orientation, so it is
+//              not part of the orientation gain below.
+// Gain: the truth is never used by a fit except the time offset's and the accelerometer lag's
+// (both cross-fitted), so the gain of an extension is the BROAD RMSE (discrepancy/imu_scoring.hpp)
+// over movement samples of the base filter vs the same filter with the extension; `gain` is base
+// vs all selected extensions together, metric heading RMSE when magnetic_disturbance is selected
+// (the gate acts on heading only), else total RMSE. Without truth the gain is not measured
+// (has_truth = false, NaN figures).
 #pragma once
 
 #include <Eigen/Core>
@@ -79,6 +102,9 @@ struct ImuStreamData {
   std::vector<Eigen::Vector3d> mag_uT;   ///< [µT]
   std::vector<Eigen::Vector4d> q_truth;  ///< IMU → ENU [w,x,y,z]; empty: none; NaN: occluded
   std::vector<int> movement;             ///< 1 moving, 0 rest; empty: rest detected
+  /// The tool's position, ENU-aligned [m] (the IMU's point: a lever arm is estimated); empty:
+  /// none; NaN: occluded.
+  std::vector<Eigen::Vector3d> p_W;
 };
 
 /// The base model's stated noise and the tests' settings.
@@ -114,6 +140,16 @@ struct ImuAnalysisSettings {
   double max_lag_s = 0.2;           ///< lag grid ± [s]
   int offset_blocks = 8;            ///< blocks for the offset's σ [-]
   double min_offset_periods = 0.5;  ///< smallest reported offset [sample periods]
+  // Accelerometer lag (positions present).
+  /// The positions are taken one per this period [s]: the tracker the position KF fuses and the
+  /// lag estimator's triplets (their second differences over shorter steps are mostly noise).
+  double accel_lag_position_period_s = 0.05;
+  double accel_lag_position_sigma = 1e-3;  ///< the position KF's position noise σ [m]
+  int accel_lag_blocks = 8;                ///< jackknife blocks of the lag's σ [-]
+  /// Smallest lag named [sample periods]: the estimator's trapezoid and central differences are
+  /// exact to O(Δt²), and a clean simulated stream read with exact positions shows 0.0015 periods
+  /// at z 3.4; the lags that cost (BROAD: 0.2–0.3 periods) are far above.
+  double min_accel_lag_periods = 0.05;
   /// The filter (base and extensions differ only in the fields named above). ENU.
   estimation::OrientationKfSettings filter = [] {
     estimation::OrientationKfSettings s;
@@ -130,7 +166,8 @@ struct ImuValue {
 
 /// One candidate: its test, and (with truth) its gain.
 struct ImuCandidate {
-  std::string cause;              ///< gyro_bias | magnetic_disturbance | accel_motion | time_offset
+  /// gyro_bias | magnetic_disturbance | accel_motion | time_offset | accel_lag
+  std::string cause;
   std::vector<std::string> axes;  ///< axes found ("x","y","z") or the sensor
   std::vector<ImuValue> values;   ///< fitted figures with σ (SI, unit in the name)
   double statistic = 0.0;  ///< z (or Φ̄⁻¹(p) for a binomial test; ±∞: significance.hpp)
@@ -147,9 +184,14 @@ struct ImuCandidate {
   bool tested = false;  ///< false: not testable on this stream (reason in note)
   std::string note;
   OrientationScore before, after;  ///< base filter vs base + this extension (movement samples)
+  /// accel_lag: the position KF's RMSE [m] over the movement samples it did not fuse, base vs
+  /// extended (NaN for the other candidates, or when not measured).
+  double position_before_m = std::numeric_limits<double>::quiet_NaN();
+  double position_after_m = std::numeric_limits<double>::quiet_NaN();
   /// Named as an effect: significant and not losing against the truth.
   bool named() const { return significant && !loses_to_truth; }
-  /// "heading" for magnetic_disturbance (its gate acts on heading only), "total" otherwise.
+  /// "heading" for magnetic_disturbance (its gate acts on heading only), "position" for
+  /// accel_lag (it changes no orientation), "total" otherwise.
   std::string gain_metric() const;
 };
 
@@ -181,7 +223,9 @@ struct ImuAnalysis {
   double sigma_mag_norm_uT = 0.0, sigma_dip_rad = 0.0, sigma_accel_norm = 0.0;
   double mag_gate_norm_uT = 0.0, mag_gate_dip_rad = 0.0;  ///< the fitted gate half-widths
   AllanCurve allan;
-  std::vector<ImuCandidate> candidates;  ///< all four, tested or not
+  bool has_positions = false;
+  /// gyro_bias, magnetic_disturbance, accel_motion, time_offset, accel_lag; tested or not.
+  std::vector<ImuCandidate> candidates;
   /// The named candidates (ImuCandidate::named).
   std::vector<const ImuCandidate*> effects() const;
   // Gain of all selected extensions together.
@@ -193,6 +237,9 @@ struct ImuAnalysis {
   std::vector<char> mag_disturbed;  ///< within disturbed_window_s of a sample outside the gate
   std::vector<double> heading_err_base_rad, heading_err_ext_rad;
   std::vector<double> total_err_base_rad, total_err_ext_rad;
+  /// accel_lag's position KF without and with the lag (cross-fitted), |p̂ − p| at the movement
+  /// samples it did not fuse [m] (empty when not measured).
+  std::vector<double> position_err_base_m, position_err_ext_m;
 };
 
 /// Checks the stream (equal lengths, finite IMU values, increasing time) and throws

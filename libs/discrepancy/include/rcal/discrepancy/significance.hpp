@@ -28,6 +28,12 @@ inline constexpr double kPBound = 1e-300;
 double LogNormalUpper(double z);
 /// The z with ln P(Z > z) = log_p (log_p ≤ 0): +∞ for log_p = −∞ (p = 0), −∞ for log_p = 0.
 double NormalUpperQuantileLog(double log_p);
+/// ln P(T > t), T Student's t with `dof` degrees of freedom (> 0): the tail of a mean over a few
+/// blocks divided by its standard error (sd/√B has B − 1 degrees of freedom; a normal critical
+/// value would make such a ratio significant several times too often). By the regularised
+/// incomplete beta function, P(T > t) = ½ I_{ν/(ν+t²)}(ν/2, ½), its continued fraction in log
+/// space, so ln p stays finite far into the tail. NaN for a NaN t or dof ≤ 0.
+double LogStudentTUpper(double t, double dof);
 
 /// A z as written: within [−8.21, 38.47] as it is; beyond, as the bound a double p can express
 /// (text above).

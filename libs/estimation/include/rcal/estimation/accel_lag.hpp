@@ -13,9 +13,15 @@
 // M the hat (linear B-spline) on [t₀, t₂] peaked at t₁ with unit integral (Peano kernel of the
 // divided difference; exact for any motion). The accelerometer's side is the same integral of the
 // marker's acceleration, by the trapezoid over the IMU samples in [t₀, t₂]:
-//   p̈_M(s) = a(s + δ) + R_WB(s) ([α_B]× + [ω_B]×²) r_B − b_W,  a = R_WE (R_EB f_B − g·up_E),
-// linearised in δ, a(s + δ) ≈ a(s) + δ ȧ(s) (ȧ by central differences between samples). So
-//   y − ∫ a M = δ ∫ ȧ M + (∫ R_WB ([α]× + [ω]×²) M) r_B − b_W,
+//   p̈_M(s) = R_WB(s) f_B(s + δ) − g·up + R_WB(s) ([α_B]× + [ω_B]×²) r_B − b_W,
+// the sensor reading late in its own axes (f_B(s) is the body's specific force of s − δ), so,
+// linearised in δ, R_WB f_B(s + δ) ≈ R_WB (f_B + δ ḟ_B)(s) (ḟ_B by central differences between
+// samples). With a = R_WE (R_EB f_B − g·up_E),
+//   y − ∫ a M = δ ∫ R_WB ḟ_B M + (∫ R_WB ([α]× + [ω]×²) M) r_B − b_W.
+// δ's column R_WB ḟ_B = ȧ − ω_W × (a + g·up) holds the jerk and the gravity turned by the body's
+// rotation over δ (a tilt rate of 2 rad/s turns g by 0.1 m/s² over 5 ms, more than the jerk of a
+// slow translation gives; a column of ȧ alone missed it: the lag scattered by ~0.5 ms between
+// simulated streams whose σ said 0.1 ms). So
 // linear in θ = (δ, r_B, b_W): seven unknowns, three rows per triplet, solved by least squares,
 // reweighted (Huber's weight per triplet, on its largest residual over the robust σ of its axis)
 // so that a tap or a glitch of the position sensor does not pull δ; a triplet whose span holds an
@@ -71,7 +77,7 @@ struct AccelLagEstimate {
   Eigen::Vector3d bias_W = Eigen::Vector3d::Zero();       ///< b_W [m/s²], as PositionKf's
   int triplets = 0;                                       ///< position triplets used
   double residual_rms = 0.0;                              ///< per axis, after the fit [m/s²]
-  double jerk_rms = 0.0;  ///< RMS of ∫ ȧ M per axis [m/s³]: what δ is read from
+  double jerk_rms = 0.0;  ///< RMS of ∫ R_WB ḟ_B M per axis [m/s³]: what δ is read from
 };
 
 /// δ, r_B and b_W by the model of the header comment. Refused, naming the field, when the data

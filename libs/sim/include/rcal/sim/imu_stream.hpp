@@ -7,20 +7,26 @@
 //   motion_segments times, ending with a rest. In a motion segment of length T starting at t_0,
 //   s = t − t_0, window w(s) = sin²(π s / T):
 //     ω_I,i(t) = w(s) Σ_j A_ij sin(2π f_ij s + φ_ij)      angular rate in the IMU frame [rad/s]
-//     a_W,i(t) = w(s) Σ_j B_ij sin(2π g_ij s + ψ_ij)      linear acceleration (effect only)
+//     a_W,i(t) = w(s) (Σ_j B_ij sin(2π g_ij s + ψ_ij) − c_i)   linear acceleration (effect only)
 //   with 3 harmonics per axis, f, g uniform in [0.2, 1.2] Hz, phases uniform, A scaled so that
-//   Σ_j |A_ij| = max_rate (B: Σ_j |B_ij| = linear_accel). R_WI(t) is integrated from ω_I with
-//   exact exponential steps of h = 1/(rate·substeps), q̇ = ½ q ⊗ [0, ω_I].
+//   Σ_j |A_ij| = max_rate (B: Σ_j |B_ij| = linear_accel); c_i = (2/T) ∫ w Σ_j B_ij sin(…) ds
+//   makes the segment's net velocity change zero, so the tool is still again at every rest.
+//   R_WI(t) is integrated from ω_I with exact exponential steps of h = 1/(rate·substeps),
+//   q̇ = ½ q ⊗ [0, ω_I]; the position p_W (0 at the start) from a_W on the same grid (midpoint
+//   velocity, trapezoid position).
 // IMU (ImuModel, settings.imu with g_W = [0, 0, −g], m_W in ENU [µT]):
 //   gyro ω_S = ω_I(t − τ) + b_c + b_rw(t) + n_g      (b_c: the constant bias of settings.imu)
-//   acc  f_S = R_WI(t − τ)ᵀ (a_W(t − τ) − g_W) + n_a
+//   acc  f_S = R_WI(t − τ − δ)ᵀ (a_W(t − τ − δ) − g_W) + n_a
 //   mag  m_S = R_WI(t − τ)ᵀ (m_W + d_W(t − τ)) + n_m
 // Effects (ImuStreamEffects, all off by default — the base model the analysis fits):
 //   gyro_bias_random_walk σ_b,i [rad/s/√s] per axis: b_rw,k = b_rw,k−1 + σ_b √Δt ν_k;
 //   magnetic disturbance: d_W = mag_disturbance_uT over [start, end) of the stream clock, else 0;
 //   linear_accel [m/s²]: a_W as above during motion (0 when off: rotation about the sensor);
 //   time_offset τ [s]: the IMU sample stamped t measures the motion the truth shows at t − τ
-//   (τ > 0: the IMU stamps late).
+//   (τ > 0: the IMU stamps late);
+//   accel_delay δ [s]: the accelerometer alone reads δ later still (a MEMS accelerometer's
+//   internal low-pass; estimation::PositionKfSettings::accel_delay takes it out).
+// The position p_W [m] of each row is the truth's at its stamp t (a tracker on the truth clock).
 // Every draw comes from the caller's std::mt19937_64: the same settings, effects and generator
 // state give the same stream.
 #pragma once
@@ -60,6 +66,7 @@ struct ImuStreamEffects {
   Eigen::Vector3d mag_disturbance_uT = Eigen::Vector3d(10.0, 0.0, 0.0);
   double linear_accel = 0.0;   ///< Σ of harmonic amplitudes per axis during motion [m/s²]
   double time_offset_s = 0.0;  ///< τ [s], see the header comment
+  double accel_delay_s = 0.0;  ///< δ [s], see the header comment
 };
 
 /// One row of the BROAD layout.
@@ -71,6 +78,7 @@ struct ImuStreamSample {
   Eigen::Vector4d q_WI = Eigen::Vector4d(1.0, 0, 0, 0);  ///< truth IMU → ENU [w,x,y,z]
   int movement = 0;                                      ///< 1 in motion segments
   Eigen::Vector3d gyro_bias = Eigen::Vector3d::Zero();   ///< truth total gyro bias [rad/s]
+  Eigen::Vector3d p_W = Eigen::Vector3d::Zero();         ///< truth IMU position, ENU [m]
 };
 
 /// Simulates the stream; see the header comment.
