@@ -22,6 +22,9 @@ struct Truth {
   double tracker_sigma = 1e-3;               // [m] per axis
   double taps = 0.0;  // [m/s²] on one accelerometer sample every 2 s (0: none)
   bool still = false;
+  int position_every = 5;  // the tracker reads every n-th IMU sample (5: 20 Hz)
+  /// The tracker's frame W against E = ENU: its positions are R_WE p_E (the bias stays in E).
+  Eigen::Matrix3d R_WE = Eigen::Matrix3d::Identity();
 };
 
 inline Eigen::Matrix3d R_of(double t, bool still) {
@@ -64,10 +67,10 @@ inline AccelLagData Record(const Truth& truth, std::uint64_t seed) {
     d.f_B.push_back(f_B);
     d.R_EB.push_back(R);
     d.omega_B.push_back(Eigen::Vector3d(W(2, 1), W(0, 2), W(1, 0)));
-    if (k % 5 == 0) {
+    if (k % truth.position_every == 0) {
       Marker(t, truth.still, &p, &a);
       d.t_position.push_back(t);
-      d.p_WM_W.push_back(p + truth.tracker_sigma * sim::Draw3(N, rng));
+      d.p_WM_W.push_back(truth.R_WE * p + truth.tracker_sigma * sim::Draw3(N, rng));
     }
   }
   return d;

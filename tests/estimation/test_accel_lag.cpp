@@ -6,8 +6,10 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <cstdio>
+#include <numbers>
 #include <random>
 #include <vector>
 
@@ -106,6 +108,63 @@ TEST(AccelLag, RefusesWhatCannotGiveALag) {
     ASSERT_FALSE(e.ok());
     EXPECT_NE(e.error().find("does not determine"), std::string::npos) << e.error();
   }
+}
+
+// A tracker whose frame is only guessed (115° from the earth frame): asked to, the estimator finds
+// the frame (closed-form alignment, then refined with the rest) and the lag as if it were given;
+// taken as the identity, the lag is lost and the residual is several times larger.
+TEST(AccelLag, FindsThePositionSensorsFrameWhenAsked) {
+  lagged::Truth truth;
+  truth.R_WE = Eigen::AngleAxisd(2.0, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  const AccelLagData d = lagged::Record(truth, 4);
+  AccelLagSettings s = Enu();
+  s.estimate_R_WE = true;
+  const auto e = EstimateAccelLag(d, s);
+  ASSERT_TRUE(e.ok()) << e.error();
+  EXPECT_TRUE(e->R_WE_estimated);
+  const double angle_err = Eigen::AngleAxisd(e->R_WE * truth.R_WE.transpose()).angle();
+  EXPECT_LT(angle_err, 0.2 * std::numbers::pi / 180.0)
+      << angle_err * 180.0 / std::numbers::pi << " deg";
+  EXPECT_NEAR(e->delay, truth.delay, std::max(3.0 * e->delay_sigma, 3e-4));
+  EXPECT_LT((e->lever_arm_B - truth.r_B).norm(), 5e-3);
+  // The same data given the true frame: the same lag.
+  AccelLagSettings given = Enu();
+  given.R_WE = truth.R_WE;
+  const auto g = EstimateAccelLag(d, given);
+  ASSERT_TRUE(g.ok());
+  EXPECT_FALSE(g->R_WE_estimated);
+  EXPECT_NEAR(e->delay, g->delay, 2e-4);
+  // Taken as the identity: the residual carries the turned acceleration.
+  const auto wrong = EstimateAccelLag(d, Enu());
+  ASSERT_TRUE(wrong.ok());
+  EXPECT_GT(wrong->residual_rms, 3.0 * e->residual_rms);
+  // A motion along one line cannot fix a frame.
+  AccelLagData line = d;
+  for (auto& p : line.p_WM_W) p = Eigen::Vector3d(p.x(), 0.0, 0.0);
+  for (auto& f : line.f_B) f.setZero();
+  const auto refused = EstimateAccelLag(line, s);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().find("frame"), std::string::npos) << refused.error();
+}
+
+// A 100 Hz tracker of 0.3 mm: second differences over its own 10 ms steps are mostly noise
+// (√6 · 0.3 mm / (10 ms)² = 7 m/s²); taking each triplet's outer samples 50 ms away reads the lag
+// several times better from the same samples.
+TEST(AccelLag, AFastTrackersTripletsSpanTheStepAsked) {
+  lagged::Truth truth;
+  truth.position_every = 1;
+  truth.tracker_sigma = 3e-4;
+  const AccelLagData d = lagged::Record(truth, 6);
+  AccelLagSettings near = Enu(), spread = Enu();
+  spread.min_position_step = 0.05;
+  const auto a = EstimateAccelLag(d, near), b = EstimateAccelLag(d, spread);
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_NEAR(b->delay, truth.delay, std::max(3.0 * b->delay_sigma, 3e-4));
+  EXPECT_LT(b->delay_sigma, 0.5 * a->delay_sigma) << a->delay_sigma << " vs " << b->delay_sigma;
+  EXPECT_GT(b->triplets, 5000);  // every sample is a middle one, not one in five
+  AccelLagSettings bad = Enu();
+  bad.min_position_step = -1.0;
+  EXPECT_FALSE(EstimateAccelLag(d, bad).ok());
 }
 
 }  // namespace

@@ -37,10 +37,15 @@ void Write(lcm::LogFile& log, const char* channel, const Msg& m, int64_t utime) 
 }
 
 // The run as a log; with `garbage`, one IMU event that does not decode (a loss of the log's).
-fs::path WriteRun(const fs::path& dir, bool with_orientation, bool garbage) {
-  const estimation::AccelLagData d = estimation::lagged::Record(estimation::lagged::Truth{}, 2);
+// The tracker's frame is turned by R_WE from the IMU's earth frame (ENU).
+fs::path WriteRun(const fs::path& dir, bool with_orientation, bool garbage,
+                  const Eigen::Matrix3d& R_WE = Eigen::Matrix3d::Identity()) {
+  estimation::lagged::Truth truth;
+  truth.R_WE = R_WE;
+  const estimation::AccelLagData d = estimation::lagged::Record(truth, 2);
+  const bool turned = !R_WE.isIdentity();
   const fs::path path = dir / (std::string(with_orientation ? "run" : "no_orientation") +
-                               (garbage ? "_garbage" : "") + ".lcmlog");
+                               (garbage ? "_garbage" : "") + (turned ? "_turned" : "") + ".lcmlog");
   lcm::LogFile log(path.string(), "w");
   EXPECT_TRUE(log.good());
   size_t j = 0;
@@ -95,6 +100,28 @@ TEST(RcalAccelLag, FindsTheLagOfARecordedRunAndPrintsTheCellLine) {
 
 // A log that lost an event is refused (the figure would rest on less than was recorded) unless
 // --allow-gaps, and the event is counted either way.
+// No cell to fix the tracker's frame, which is 115° from the earth frame: the command estimates it
+// with the lag, prints it as q_WE and writes it to the JSON.
+TEST(RcalAccelLag, WithoutACellTheTrackersFrameIsEstimated) {
+  const fs::path dir = testing::TempDir("accel_lag", "frame");
+  const Eigen::Matrix3d R_WE =
+      Eigen::AngleAxisd(2.0, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  const fs::path log = WriteRun(dir, true, false, R_WE);
+  const testing::Result r = testing::RunRcal("accel-lag " + log.string() + " --earth enu --json " +
+                                             (dir / "lag.json").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const nlohmann::json j = testing::ReadJson(dir / "lag.json");
+  EXPECT_TRUE(j.at("R_WE_estimated").get<bool>());
+  const auto q = j.at("q_WE");
+  const Eigen::Quaterniond q_WE(q[0].get<double>(), q[1].get<double>(), q[2].get<double>(),
+                                q[3].get<double>());
+  EXPECT_LT(q_WE.angularDistance(Eigen::Quaterniond(R_WE)), 0.2 * 3.141592653589793 / 180.0);
+  EXPECT_NEAR(j.at("delay_s").get<double>(), 3e-3, 3e-4) << r.output;
+  EXPECT_NE(r.output.find("position sensor's frame W from the IMU's earth frame E, estimated"),
+            std::string::npos)
+      << r.output;
+}
+
 TEST(RcalAccelLag, ALossyLogIsRefusedUnlessAllowed) {
   const fs::path dir = testing::TempDir("accel_lag", "garbage");
   const fs::path log = WriteRun(dir, true, true);

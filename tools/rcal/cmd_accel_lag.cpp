@@ -4,9 +4,12 @@
 // of the tool's marker, through estimation::EstimateAccelLag (accel_lag.hpp). Prints the figure
 // and the cell line that takes it out (sensors.imu.accel_delay, read by position_kf). Every
 // event is decoded against its schema and checked as the filter nodes check it; what is refused
-// is counted, and a lossy log is refused unless --allow-gaps.
+// is counted, and a lossy log is refused unless --allow-gaps. Where the cell does not fix the
+// position sensor's frame (no cell, or earth_from_world only guessed), the estimator finds it too
+// (AccelLagSettings::estimate_R_WE) and prints it.
 #include <spdlog/spdlog.h>
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cstdio>
 #include <map>
@@ -43,6 +46,8 @@ struct AccelLagOptions {
   int sensor_id = 0;   // the tool's IMU (others' samples are ignored, as orientation_kf does)
   std::string earth;   // ned | enu; empty: the cell's, else ned
   bool allow_gaps = false;
+  double position_step =
+      0.05;  // [s] each triplet's outer samples at least this far (accel_lag.hpp)
 };
 
 // Events of one channel: how many, how many refused, the first reason.
@@ -58,10 +63,12 @@ struct ChannelCount {
 
 int RunAccelLag(const AccelLagOptions& o) {
   est::AccelLagSettings settings;
+  settings.min_position_step = o.position_step;
+  settings.estimate_R_WE = true;  // unless the cell fixes the frame (below)
   int marker_id = o.marker_id < 0 ? 0 : o.marker_id;
   std::string imu = o.imu_channel, orientation = o.orientation_channel,
               position = o.position_channel;
-  std::string frame = "the identity (no cell: the position sensor's frame taken as the earth's)";
+  std::string frame = "estimated (no cell)";
   if (!o.cell.empty()) {
     const io::BuiltCell built = io::LoadCell(ResolvePath(o.cell));
     const io::CellSpec& cell = built.spec;
@@ -76,9 +83,10 @@ int RunAccelLag(const AccelLagOptions& o) {
         cell.frames.earth_from_world && cell.frames.earth_from_world->mode == io::SetupMode::kGuess;
     if (built.model.has_earth() && !guessed) {
       settings.R_WE = built.model.EarthFromWorld(built.model.Nominal()).transpose();
+      settings.estimate_R_WE = false;
       frame = "the cell's earth_from_world";
     } else {
-      frame = "the identity (the cell does not fix earth_from_world)";
+      frame = "estimated (the cell does not fix earth_from_world)";
     }
   }
   if (!o.earth.empty())
@@ -166,6 +174,13 @@ int RunAccelLag(const AccelLagOptions& o) {
       lag->delay * 1e3, lag->delay_sigma * 1e3, lag->triplets, lag->jerk_rms, lag->residual_rms,
       lag->lever_arm_B.x() * 1e3, lag->lever_arm_B.y() * 1e3, lag->lever_arm_B.z() * 1e3,
       std::max(lag->delay, 0.0));
+  const Eigen::Quaterniond q_WE(lag->R_WE);
+  if (lag->R_WE_estimated)
+    std::printf(
+        "position sensor's frame W from the IMU's earth frame E, estimated: q_WE [w, x, y, z] = "
+        "[%.5f, %.5f, %.5f, %.5f] (%.2f deg from the identity)\n",
+        q_WE.w(), q_WE.x(), q_WE.y(), q_WE.z(),
+        Eigen::AngleAxisd(lag->R_WE).angle() * 180.0 / 3.141592653589793);
   if (lag->delay < 0.0 || lag->delay > est::kMaxAccelDelay)
     spdlog::warn(
         "the lag is outside what position_kf takes ([0, {}] s): a lead, or not the sensor's own "
@@ -178,6 +193,9 @@ int RunAccelLag(const AccelLagOptions& o) {
     j["imu_without_orientation"] = unpaired;
     j["position_samples"] = data.t_position.size();
     j["marker_id"] = marker_id;
+    j["q_WE"] = {q_WE.w(), q_WE.x(), q_WE.y(), q_WE.z()};
+    j["R_WE_estimated"] = lag->R_WE_estimated;
+    j["min_position_step_s"] = settings.min_position_step;
     j["refused"] = {{imu, n_imu.refused}, {orientation, n_att.refused}, {position, n_pos.refused}};
     io::AtomicWriteFile(o.json, j.dump(2) + "\n");
   }
@@ -204,6 +222,11 @@ const RegisterCommand kRegisterAccelLag(
       sub.add_option("--position-channel", o->position_channel, "without --cell")
           ->capture_default_str();
       sub.add_option("--json", o->json, "write the figures (SI) to this file");
+      sub.add_option("--position-step", o->position_step,
+                     "each position triplet's outer samples at least this far from its middle "
+                     "one [s] (a fast tracker's neighbours are mostly noise); 0: the neighbours")
+          ->check(cli::Range(0.0, 1.0))
+          ->capture_default_str();
       sub.add_flag("--allow-gaps", o->allow_gaps,
                    "go on when the log lost events or bytes (warned, not refused)");
       return [o] { return RunAccelLag(*o); };

@@ -1,6 +1,7 @@
 #include "rcal/estimation/accel_lag.hpp"
 
 #include <Eigen/Cholesky>
+#include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
 #include <sstream>
@@ -11,13 +12,37 @@
 namespace rcal::estimation {
 namespace {
 
-using Row = Eigen::Matrix<double, 3, 7>;  // ∂(y − ∫aM)/∂θ, θ = (δ, r_B, b_W)
+using Vec = Eigen::VectorXd;
+using Rows = Eigen::Matrix<double, 3, Eigen::Dynamic>;  // ∂(y − ∫aM)/∂θ
 
-// One triplet's rows: the regressors and the left-hand side y − ∫ a M.
+// One triplet in the earth frame E, before the position sensor's frame W is applied: the
+// hat-weighted integrals of the linear acceleration a_E = R_EB f − g·up (u_E), of δ's column R_EB ḟ
+// and of the lever arm's R_EB M (B_E, four columns), and the position sensor's second divided
+// difference y_W (twice it, in W).
 struct Triplet {
-  Row A;
+  Eigen::Vector3d u_E, y_W;
+  Eigen::Matrix<double, 3, 4> B_E;
+};
+
+// A triplet's rows in W for a frame R_WE: y = y_W − R_WE u_E against θ = (δ, r_B, b_W[, φ]),
+// A = [R_WE B_E, −I[, −[R_WE u_E]×]] (φ: a small rotation of W on the left, R_WE ← Exp(φ) R_WE).
+struct Row {
+  Rows A;
   Eigen::Vector3d y;
 };
+std::vector<Row> Build(const std::vector<Triplet>& tr, const Eigen::Matrix3d& R_WE, bool frame) {
+  std::vector<Row> rows(tr.size());
+  for (std::size_t j = 0; j < tr.size(); ++j) {
+    Row& r = rows[j];
+    const Eigen::Vector3d u_W = R_WE * tr[j].u_E;
+    r.A.resize(3, frame ? 10 : 7);
+    r.A.leftCols<4>() = R_WE * tr[j].B_E;
+    r.A.middleCols<3>(4) = -Eigen::Matrix3d::Identity();
+    if (frame) r.A.rightCols<3>() = -geometry::Skew(u_W);
+    r.y = tr[j].y_W - u_W;
+  }
+  return rows;
+}
 
 template <class V>
 bool AllFinite(const std::vector<V>& v, std::size_t* bad) {
@@ -35,39 +60,91 @@ std::string Sample(const char* field, std::size_t i) {
   return o.str();
 }
 
-// The weighted normal equations of triplets [first, last); w per triplet.
+// The weighted normal equations of rows [first, last); w per triplet.
 struct Normal {
-  Eigen::Matrix<double, 7, 7> N = Eigen::Matrix<double, 7, 7>::Zero();
-  Eigen::Matrix<double, 7, 1> b = Eigen::Matrix<double, 7, 1>::Zero();
+  Eigen::MatrixXd N;
+  Vec b;
 };
-Normal Accumulate(const std::vector<Triplet>& tr, const std::vector<double>& w, std::size_t first,
+Normal Accumulate(const std::vector<Row>& rows, const std::vector<double>& w, std::size_t first,
                   std::size_t last) {
-  Normal n;
+  const Eigen::Index k = rows.empty() ? 7 : rows.front().A.cols();
+  Normal n{Eigen::MatrixXd::Zero(k, k), Vec::Zero(k)};
   for (std::size_t j = first; j < last; ++j) {
-    const Row WA = w[j] * tr[j].A;
-    n.N += tr[j].A.transpose() * WA;
-    n.b += WA.transpose() * tr[j].y;
+    n.N.noalias() += w[j] * rows[j].A.transpose() * rows[j].A;
+    n.b.noalias() += w[j] * rows[j].A.transpose() * rows[j].y;
   }
   return n;
 }
 
-Result<Eigen::Matrix<double, 7, 1>> Solve(const Normal& n) {
-  // The lag is read from the jerk column, the lever arm from the rotation: without either the
-  // system is singular.
-  const Eigen::LDLT<Eigen::Matrix<double, 7, 7>> ldlt(n.N);
+Result<Vec> Solve(const Normal& n) {
+  // The lag is read from the jerk column, the lever arm from the rotation, the frame from the
+  // acceleration's directions: without them the system is singular.
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(n.N);
   const double scale = n.N.diagonal().maxCoeff();
   if (ldlt.info() != Eigen::Success || !(scale > 0.0) ||
       !(ldlt.vectorD().cwiseAbs().minCoeff() > 1e-12 * scale))
-    return Result<Eigen::Matrix<double, 7, 1>>::Error(
+    return Result<Vec>::Error(
         "accel_lag: the recording does not determine the lag (no motion, or no rotation for "
         "the lever arm)");
-  return Eigen::Matrix<double, 7, 1>(ldlt.solve(n.b));
+  return Vec(ldlt.solve(n.b));
 }
 
 double Median(std::vector<double> v) {
   const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
   std::nth_element(v.begin(), mid, v.end());
   return *mid;
+}
+
+// Huber-reweighted least squares (a few passes), one weight per triplet: the smallest over its
+// axes, since a tap turned into W reaches every axis, and its ȧ makes the triplet a leverage
+// point that a per-axis weight still lets pull (the taps of AccelLag.TapsDoNotPullTheLag: 2.69
+// ms per axis, 2.97 ms per triplet, true 3; Tukey's biweight, 5.4 ms, is worse still).
+Result<Vec> RobustFit(const std::vector<Row>& rows, std::vector<double>& w) {
+  w.assign(rows.size(), 1.0);
+  auto theta = Solve(Accumulate(rows, w, 0, rows.size()));
+  if (!theta) return theta;
+  for (int pass = 0; pass < 6; ++pass) {
+    Eigen::Vector3d sigma;
+    for (int i = 0; i < 3; ++i) {
+      std::vector<double> r(rows.size());
+      for (std::size_t j = 0; j < rows.size(); ++j)
+        r[j] = std::abs(rows[j].y(i) - rows[j].A.row(i).dot(*theta));
+      sigma(i) = std::max(1.4826 * Median(r), 1e-12);
+    }
+    for (std::size_t j = 0; j < rows.size(); ++j) {
+      double u = 0.0;
+      for (int i = 0; i < 3; ++i)
+        u = std::max(u, std::abs(rows[j].y(i) - rows[j].A.row(i).dot(*theta)) / sigma(i));
+      w[j] = u <= kAccelLagHuber ? 1.0 : kAccelLagHuber / u;
+    }
+    theta = Solve(Accumulate(rows, w, 0, rows.size()));
+    if (!theta) return theta;
+  }
+  return theta;
+}
+
+// The frame W ← E that best turns the triplets' accelerations onto the position sensor's, both
+// centred (a constant bias drops out): Kabsch, R = V diag(1, 1, det(V Uᵀ)) Uᵀ from the SVD
+// U S Vᵀ of Σ (u − ū)(y − ȳ)ᵀ. Refused when the acceleration spans less than a plane.
+Result<Eigen::Matrix3d> AlignFrames(const std::vector<Triplet>& tr) {
+  Eigen::Vector3d u_mean = Eigen::Vector3d::Zero(), y_mean = Eigen::Vector3d::Zero();
+  for (const Triplet& t : tr) {
+    u_mean += t.u_E / static_cast<double>(tr.size());
+    y_mean += t.y_W / static_cast<double>(tr.size());
+  }
+  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+  for (const Triplet& t : tr) H += (t.u_E - u_mean) * (t.y_W - y_mean).transpose();
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  const Eigen::Vector3d sv = svd.singularValues();
+  if (!(sv(1) > 1e-6 * sv(0)))
+    return Result<Eigen::Matrix3d>::Error(
+        "accel_lag: the motion does not determine the position sensor's frame (its acceleration "
+        "spans less than a plane)");
+  const Eigen::Matrix3d& U = svd.matrixU();
+  const Eigen::Matrix3d& V = svd.matrixV();
+  Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
+  D(2, 2) = (V * U.transpose()).determinant() < 0.0 ? -1.0 : 1.0;
+  return Eigen::Matrix3d(V * D * U.transpose());
 }
 
 }  // namespace
@@ -79,7 +156,8 @@ Result<AccelLagEstimate> EstimateAccelLag(const AccelLagData& d, const AccelLagS
     return R::Error("accel_lag: f_B, R_EB and omega_B must have one entry per t_imu");
   if (d.p_WM_W.size() != m) return R::Error("accel_lag: p_WM_W must have one entry per t_position");
   if (!(s.blocks >= 2) || !(s.min_triplets_per_block >= 1) || !(s.max_step_ratio >= 1.0) ||
-      !(s.max_imu_step > 0.0) || !std::isfinite(s.gravity) || !s.R_WE.allFinite())
+      !(s.max_imu_step > 0.0) || !std::isfinite(s.gravity) || !s.R_WE.allFinite() ||
+      !(s.min_position_step >= 0.0 && std::isfinite(s.min_position_step)))
     return R::Error("accel_lag: settings out of range (blocks ≥ 2, max_step_ratio ≥ 1, ...)");
   std::size_t bad = 0;
   for (const auto& [v, field] :
@@ -93,25 +171,38 @@ Result<AccelLagEstimate> EstimateAccelLag(const AccelLagData& d, const AccelLagS
   if (!AllFinite(d.p_WM_W, &bad)) return R::Error(Sample("p_WM_W", bad) + " is not finite");
   if (n < 3) return R::Error("accel_lag: fewer than three IMU samples");
 
-  // Per IMU sample: a = R_WE (R_EB f − g·up), R_WB ([α]× + [ω]×²), and R_WB ḟ_B (δ's column), α
-  // by central differences.
+  // Per IMU sample in E: a = R_EB f − g·up, R_EB ([α]× + [ω]×²), and R_EB ḟ_B (δ's column), α
+  // by central differences. The position sensor's frame is applied to the triplets (Build).
   const Eigen::Vector3d g_up = s.gravity * UpVector(s.earth);
-  std::vector<Eigen::Vector3d> a(n), f_dot_W(n);
+  std::vector<Eigen::Vector3d> a(n), f_dot_E(n);
   std::vector<Eigen::Matrix3d> L(n);
-  for (std::size_t k = 0; k < n; ++k) a[k] = s.R_WE * (d.R_EB[k] * d.f_B[k] - g_up);
+  for (std::size_t k = 0; k < n; ++k) a[k] = d.R_EB[k] * d.f_B[k] - g_up;
   for (std::size_t k = 0; k < n; ++k) {
     const std::size_t lo = k == 0 ? 0 : k - 1, hi = k + 1 == n ? k : k + 1;
     const double span = d.t_imu[hi] - d.t_imu[lo];
-    f_dot_W[k] = s.R_WE * d.R_EB[k] * (d.f_B[hi] - d.f_B[lo]) / span;
+    f_dot_E[k] = d.R_EB[k] * (d.f_B[hi] - d.f_B[lo]) / span;
     const Eigen::Vector3d alpha_B = (d.omega_B[hi] - d.omega_B[lo]) / span;
     const Eigen::Matrix3d W = geometry::Skew(d.omega_B[k]);
-    L[k] = s.R_WE * d.R_EB[k] * (geometry::Skew(alpha_B) + W * W);
+    L[k] = d.R_EB[k] * (geometry::Skew(alpha_B) + W * W);
   }
 
-  // The triplets (header comment): y = 2 p[t₀, t₁, t₂] against ∫ (·) M by the trapezoid.
+  // The triplets (header comment): y = 2 p[t₀, t₁, t₂] against ∫ (·) M by the trapezoid. With
+  // min_position_step, each triplet's outer samples are the first at least that far from its
+  // middle one (a fast tracker's neighbours are mostly noise in a second difference).
   std::vector<Triplet> tr;
+  std::size_t lo_j = 0;
   for (std::size_t j = 1; j + 1 < m; ++j) {
-    const double t0 = d.t_position[j - 1], t1 = d.t_position[j], t2 = d.t_position[j + 1];
+    std::size_t j0 = j - 1, j2 = j + 1;
+    if (s.min_position_step > 0.0) {
+      // A step of exactly min_position_step (a 20 Hz tracker's stamps) is far enough.
+      const double step = s.min_position_step * (1.0 - 1e-9);
+      while (lo_j + 1 < j && d.t_position[j] - d.t_position[lo_j + 1] >= step) ++lo_j;
+      j0 = lo_j;
+      while (j2 + 1 < m && d.t_position[j2] - d.t_position[j] < step) ++j2;
+      if (d.t_position[j] - d.t_position[j0] < step || d.t_position[j2] - d.t_position[j] < step)
+        continue;  // the recording's ends
+    }
+    const double t0 = d.t_position[j0], t1 = d.t_position[j], t2 = d.t_position[j2];
     const double h1 = t1 - t0, h2 = t2 - t1;
     if (std::max(h1, h2) > s.max_step_ratio * std::min(h1, h2)) continue;
     const auto first = std::lower_bound(d.t_imu.begin(), d.t_imu.end(), t0);
@@ -124,8 +215,8 @@ Result<AccelLagEstimate> EstimateAccelLag(const AccelLagData& d, const AccelLagS
       gap = d.t_imu[k + 1] - d.t_imu[k] > s.max_imu_step;
     if (gap) continue;
     Triplet t;
-    t.A.setZero();
-    Eigen::Vector3d int_a = Eigen::Vector3d::Zero();
+    t.B_E.setZero();
+    t.u_E.setZero();
     double sum_w = 0.0;
     for (std::size_t k = k0 + 1; k < k1; ++k) {
       const double tk = d.t_imu[k];
@@ -133,17 +224,15 @@ Result<AccelLagEstimate> EstimateAccelLag(const AccelLagData& d, const AccelLagS
       const double w = hat * 0.5 * (std::min(d.t_imu[k + 1], t2) - std::max(d.t_imu[k - 1], t0));
       if (!(w > 0.0)) continue;
       sum_w += w;
-      int_a += w * a[k];
-      t.A.col(0) += w * f_dot_W[k];
-      t.A.middleCols<3>(1) += w * L[k];
+      t.u_E += w * a[k];
+      t.B_E.col(0) += w * f_dot_E[k];
+      t.B_E.rightCols<3>() += w * L[k];
     }
     if (!(sum_w > 0.0)) continue;
-    t.A.leftCols<4>() /= sum_w;
-    t.A.rightCols<3>() = -Eigen::Matrix3d::Identity();  // z = A − R_WB M r_B + b_W
-    const Eigen::Vector3d y =
-        2.0 * ((d.p_WM_W[j + 1] - d.p_WM_W[j]) / h2 - (d.p_WM_W[j] - d.p_WM_W[j - 1]) / h1) /
-        (t2 - t0);
-    t.y = y - int_a / sum_w;
+    t.u_E /= sum_w;
+    t.B_E /= sum_w;
+    t.y_W =
+        2.0 * ((d.p_WM_W[j2] - d.p_WM_W[j]) / h2 - (d.p_WM_W[j] - d.p_WM_W[j0]) / h1) / (t2 - t0);
     tr.push_back(t);
   }
   const std::size_t per_block = tr.size() / static_cast<std::size_t>(s.blocks);
@@ -154,52 +243,51 @@ Result<AccelLagEstimate> EstimateAccelLag(const AccelLagData& d, const AccelLagS
     return R::Error(o.str());
   }
 
-  // Huber-reweighted least squares (a few passes), one weight per triplet: the smallest over its
-  // axes, since a tap turned into W reaches every axis, and its ȧ makes the triplet a leverage
-  // point that a per-axis weight still lets pull (the taps of AccelLag.TapsDoNotPullTheLag: 2.69
-  // ms per axis, 2.97 ms per triplet, true 3; Tukey's biweight, 5.4 ms, is worse still).
-  std::vector<double> w(tr.size(), 1.0);
-  auto theta = Solve(Accumulate(tr, w, 0, tr.size()));
-  if (!theta) return R::Error(theta.error());
-  for (int pass = 0; pass < 6; ++pass) {
-    Eigen::Vector3d sigma;
-    for (int i = 0; i < 3; ++i) {
-      std::vector<double> r(tr.size());
-      for (std::size_t j = 0; j < tr.size(); ++j)
-        r[j] = std::abs(tr[j].y(i) - tr[j].A.row(i).dot(*theta));
-      sigma(i) = std::max(1.4826 * Median(r), 1e-12);
+  // The position sensor's frame: as given, or (estimate_R_WE) aligned in closed form and refined
+  // with δ, r_B and b_W by Gauss–Newton on a small rotation φ of W (three more columns).
+  Eigen::Matrix3d R_WE = s.R_WE;
+  std::vector<double> w;
+  if (s.estimate_R_WE) {
+    const auto aligned = AlignFrames(tr);
+    if (!aligned) return R::Error(aligned.error());
+    R_WE = *aligned;
+    for (int iter = 0; iter < 20; ++iter) {
+      const auto step = RobustFit(Build(tr, R_WE, true), w);
+      if (!step) return R::Error(step.error());
+      const Eigen::Vector3d phi = step->tail<3>();
+      R_WE = geometry::Exp(phi) * R_WE;
+      if (phi.norm() < 1e-10) break;
     }
-    for (std::size_t j = 0; j < tr.size(); ++j) {
-      double u = 0.0;
-      for (int i = 0; i < 3; ++i)
-        u = std::max(u, std::abs(tr[j].y(i) - tr[j].A.row(i).dot(*theta)) / sigma(i));
-      w[j] = u <= kAccelLagHuber ? 1.0 : kAccelLagHuber / u;
-    }
-    theta = Solve(Accumulate(tr, w, 0, tr.size()));
-    if (!theta) return R::Error(theta.error());
   }
+  const std::vector<Row> rows = Build(tr, R_WE, s.estimate_R_WE);
+  const auto theta = RobustFit(rows, w);
+  if (!theta) return R::Error(theta.error());
 
   AccelLagEstimate e;
   e.delay = (*theta)(0);
   e.lever_arm_B = theta->segment<3>(1);
-  e.bias_W = theta->tail<3>();
+  e.bias_W = theta->segment<3>(4);
+  e.R_WE = R_WE;
+  e.R_WE_estimated = s.estimate_R_WE;
   e.triplets = static_cast<int>(tr.size());
   double r2 = 0.0, j2 = 0.0;
-  for (const Triplet& t : tr) {
-    r2 += (t.y - t.A * *theta).squaredNorm();
-    j2 += t.A.col(0).squaredNorm();
+  for (const Row& r : rows) {
+    r2 += (r.y - r.A * *theta).squaredNorm();
+    j2 += r.A.col(0).squaredNorm();
   }
   e.residual_rms = std::sqrt(r2 / (3.0 * static_cast<double>(tr.size())));
   e.jerk_rms = std::sqrt(j2 / (3.0 * static_cast<double>(tr.size())));
   // σ_δ: the delete-one-block jackknife over contiguous blocks (header comment), weights fixed.
   std::vector<Normal> block;
-  Normal all;
   for (int b = 0; b < s.blocks; ++b) {
     const std::size_t first = static_cast<std::size_t>(b) * per_block;
     const std::size_t last = b + 1 == s.blocks ? tr.size() : first + per_block;
-    block.push_back(Accumulate(tr, w, first, last));
-    all.N += block.back().N;
-    all.b += block.back().b;
+    block.push_back(Accumulate(rows, w, first, last));
+  }
+  Normal all = block.front();
+  for (std::size_t b = 1; b < block.size(); ++b) {
+    all.N += block[b].N;
+    all.b += block[b].b;
   }
   std::vector<double> delays;
   for (const Normal& nb : block) {

@@ -30,6 +30,14 @@
 // (neighbours share two samples), so the residuals are correlated and the least-squares σ is
 // wrong: σ_δ is the delete-one-block jackknife over B contiguous blocks of triplets,
 // σ² = (B − 1)/B Σ (δ₋b − δ̄)² (a block at rest only adds nothing and removes nothing).
+//
+// The position sensor's frame (estimate_R_WE, beyond the paper): where a cell only guesses
+// earth_from_world, a wrong R_WE turns the acceleration by its error (the linear acceleration,
+// not gravity, which is removed in E). It is estimated from the same triplets: first aligned in
+// closed form (Kabsch: the rotation that best turns the centred ∫ a_E M onto the centred y, a
+// constant bias dropping out; refused when the acceleration spans less than a plane), then
+// refined by Gauss–Newton with δ, r_B and b_W on a small rotation φ of W, R_WE ← Exp(φ) R_WE,
+// whose columns are −[R_WE ∫ a_E M]× (ten unknowns, re-linearised until |φ| < 1e-10).
 #pragma once
 
 #include <Eigen/Core>
@@ -58,6 +66,13 @@ struct AccelLagSettings {
   double gravity = 9.81;  ///< [m/s²]
   /// The position sensor's frame W against the earth frame E (PositionKf::SetWorldFromEarth).
   Eigen::Matrix3d R_WE = Eigen::Matrix3d::Identity();
+  /// Estimate R_WE as well (a real cell whose tracker frame is only guessed): aligned in closed
+  /// form, then refined with the rest (header comment); R_WE above is then not used.
+  bool estimate_R_WE = false;
+  /// Each triplet's outer position samples are the first at least this far from its middle one
+  /// [s]; 0: the neighbours. A tracker of 100 Hz or more gives second differences over its own
+  /// steps that are mostly noise (0.1 mm over 10 ms: 2.4 m/s²); 0.05 s is a 20 Hz tracker's.
+  double min_position_step = 0.0;
   /// A triplet whose two steps differ by more than this factor, or whose span holds an IMU step
   /// longer than max_imu_step, is not used (a dropped sample or a gap).
   double max_step_ratio = 1.5;
@@ -75,9 +90,12 @@ struct AccelLagEstimate {
   double delay_sigma = 0.0;  ///< its standard error, by the blocks' jackknife [s]
   Eigen::Vector3d lever_arm_B = Eigen::Vector3d::Zero();  ///< IMU → marker r_B [m]
   Eigen::Vector3d bias_W = Eigen::Vector3d::Zero();       ///< b_W [m/s²], as PositionKf's
-  int triplets = 0;                                       ///< position triplets used
-  double residual_rms = 0.0;                              ///< per axis, after the fit [m/s²]
-  double jerk_rms = 0.0;  ///< RMS of ∫ R_WB ḟ_B M per axis [m/s³]: what δ is read from
+  /// The frame used: the settings' R_WE, or the estimate (R_WE_estimated).
+  Eigen::Matrix3d R_WE = Eigen::Matrix3d::Identity();
+  bool R_WE_estimated = false;
+  int triplets = 0;           ///< position triplets used
+  double residual_rms = 0.0;  ///< per axis, after the fit [m/s²]
+  double jerk_rms = 0.0;      ///< RMS of ∫ R_WB ḟ_B M per axis [m/s³]: what δ is read from
 };
 
 /// δ, r_B and b_W by the model of the header comment. Refused, naming the field, when the data
