@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <numbers>
 #include <random>
 #include <sstream>
@@ -259,6 +260,23 @@ TEST(ImuAnalysis, BadInputNamesTheRow) {
     EXPECT_NE(std::string(e.what()).find("mag_x..mag_z not finite at row 42"), std::string::npos)
         << e.what();
   }
+  // A position may be occluded (all NaN), never infinite or half there.
+  auto q = disc::FromSimulatedStream(sim::SimulateImuStream(Short(), {}, rng));
+  q.p_W[9] = Eigen::Vector3d(std::nan(""), 0.0, 0.0);
+  q.p_W[10].setConstant(std::nan(""));
+  try {
+    disc::AnalyzeImuStream(q);
+    FAIL() << "a half-NaN position accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("pos_x..pos_z neither finite nor all NaN at row 10"),
+              std::string::npos)
+        << e.what();
+  }
+  q.p_W[9].setConstant(std::nan(""));
+  q.p_W[20].x() = std::numeric_limits<double>::infinity();
+  EXPECT_THROW(disc::AnalyzeImuStream(q), std::invalid_argument);
+  q.p_W.pop_back();
+  EXPECT_THROW(disc::AnalyzeImuStream(q), std::invalid_argument);  // one row short
 }
 
 // Real data: BROAD trial 30 (a magnet near the path). Parsed here without rcal_io.
