@@ -124,7 +124,8 @@ std::vector<Event> Simulate(const Arm& arm, const StreamSettings& s, unsigned se
     e.kind = 1;
     e.arrival = 0.0031 + k / s.imu_rate;  // the IMU's ticks are not the controller's
     e.stamp = e.arrival + s.imu_offset + s.jitter * n01(rng);
-    e.v = imu.Sample(truth.Imu(truth.At(e.arrival))).gyro_S;
+    // The gyro's mean rate over the interval ending at the sample (the convention estimated).
+    e.v = imu.Sample(truth.Imu(truth.At(e.arrival), 1.0 / s.imu_rate)).gyro_S;
     ev.push_back(std::move(e));
   }
   for (int k = 0; k / s.marker_rate <= T; ++k) {
@@ -443,8 +444,10 @@ TEST(ClockOffsetWindow, RecoversTheShiftOfExactSignalsWithGainAndLevel) {
   for (const double d : {0.037, -0.3127}) {
     std::vector<SourceSample> m;
     for (int k = 0; k <= 20 * 100; ++k) {
+      // The gyro's rate over the 10 ms interval ending at its stamp s, which is the rate at the
+      // interval's midpoint s − 5 ms to O(Δt²).
       const double s = 100.0 + k / 100.0 + 0.0031;
-      m.push_back({s, 0.05 + 1.02 * Bell(s - d)});
+      m.push_back({s, 0.05 + 1.02 * Bell(s - 0.005 - d)});
     }
     const auto w = EstimateOffsetWindow(ref, m, ClockSource::kImu, {});
     ASSERT_TRUE(w.ok()) << w.reason;

@@ -207,6 +207,33 @@ TEST(SensorSim, ImuAtRestReadsGravityAndTheFieldAndStreamsAreDeterministic) {
   EXPECT_LT((m_sum - m_exp).norm() / n, 5 * 0.2 / std::sqrt(n));
 }
 
+// The gyro reports the mean rate over the interval that ends at each tick, which the filters'
+// interval rule q_k = q_{k−1} Exp(ω_k Δt) integrates onto the truth's attitude (noise off); the
+// truth's rate at the instant of each tick (ToolState::omega_I) integrated the same way drifts.
+TEST(SensorSim, TheGyroIsTheMeanRateOverEachSampleInterval) {
+  const auto m = Cell();
+  const ToolMotionTruth truth(m, Truth(m), Program(m, 4, 9));
+  SensorSimSettings s;
+  s.imu.white_noise = false;
+  SensorSim sensors(truth, s, 1);
+  auto f = sensors.Next();
+  ASSERT_TRUE(f);
+  Eigen::Matrix3d R_interval = f->truth.R_EI, R_instant = R_interval;
+  double err_interval = 0.0, err_instant = 0.0, max_rate = 0.0;
+  while ((f = sensors.Next())) {
+    R_interval = R_interval * geometry::Exp(f->imu.gyro_S * 0.01);
+    R_instant = R_instant * geometry::Exp(f->truth.omega_I * 0.01);
+    err_interval =
+        std::max(err_interval, geometry::Log(f->truth.R_EI.transpose() * R_interval).norm());
+    err_instant =
+        std::max(err_instant, geometry::Log(f->truth.R_EI.transpose() * R_instant).norm());
+    max_rate = std::max(max_rate, f->truth.omega_I.norm());
+  }
+  EXPECT_GT(max_rate, 0.5);       // [rad/s]
+  EXPECT_LT(err_interval, 1e-9);  // [rad] rounding
+  EXPECT_GT(err_instant, 20 * err_interval + 1e-5);
+}
+
 // An encoder swapped mid-run: from t_s on, joint 2 reads 1 mrad less than where the arm stands.
 // Independent truth: the model at the truth errors with θ2 1 mrad larger, evaluated at the
 // readings, is where the arm is (to rounding); before t_s the readings are the truth's joints.

@@ -293,12 +293,15 @@ std::vector<std::pair<int, int>> FindRests(Context& c, bool* short_rests) {
 // Truth body rate by central differences, NaN where undefined.
 std::vector<Eigen::Vector3d> TruthRates(const Context& c) {
   std::vector<Eigen::Vector3d> w(c.n, Eigen::Vector3d::Constant(kNaN));
-  for (int k = 1; k + 1 < c.n; ++k) {
+  // The rate over the interval that ends at sample k, the convention of the gyro the filters
+  // integrate (q_k = q_{k−1} Exp(ω_k Δt)) and of a rate-integrating gyro: a gyro that keeps it
+  // reads no offset (against the rate at the instant, a central difference, it would read Δt/2).
+  for (int k = 1; k < c.n; ++k) {
     const auto& a = c.d.q_truth[k - 1];
-    const auto& b = c.d.q_truth[k + 1];
+    const auto& b = c.d.q_truth[k];
     if (!a.allFinite() || !b.allFinite()) continue;
     const Eigen::Matrix3d R = geometry::QuatToMatrix(a).transpose() * geometry::QuatToMatrix(b);
-    w[k] = geometry::Log(R) / (2.0 * c.dt);
+    w[k] = geometry::Log(R) / c.dt;
   }
   return w;
 }
@@ -767,9 +770,9 @@ struct TimeOffsetTest {
 };
 
 // σ of the lag over the motion samples: sd / √B of the lags of B contiguous blocks (NaN with
-// fewer than two finite).
+// fewer than two finite); `blocks` the number that gave a lag.
 double LagSigma(const Context& c, const std::vector<Eigen::Vector3d>& w_truth,
-                const std::vector<int>& motion_idx) {
+                const std::vector<int>& motion_idx, int* blocks) {
   const int B = std::max(2, c.s.offset_blocks);
   std::vector<double> taus;
   for (int b = 0; b < B; ++b) {
@@ -779,6 +782,7 @@ double LagSigma(const Context& c, const std::vector<Eigen::Vector3d>& w_truth,
     const double t = EstimateLag(c, w_truth, blk);
     if (std::isfinite(t)) taus.push_back(t);
   }
+  *blocks = static_cast<int>(taus.size());
   return taus.size() >= 2 ? Sd(taus) / std::sqrt(taus.size()) : kNaN;
 }
 
@@ -805,14 +809,19 @@ TimeOffsetTest TestTimeOffset(const Context& c, double alpha_c, bool has_truth) 
   }
   to.tested = true;
   const double tau = EstimateLag(c, w_truth, motion_idx);
-  const double sigma = LagSigma(c, w_truth, motion_idx);
+  int blocks = 0;
+  const double sigma = LagSigma(c, w_truth, motion_idx, &blocks);
   const size_t h = motion_idx.size() / 2;
   r.split = motion_idx[h];
   r.tau_first =
       EstimateLag(c, w_truth, {motion_idx.begin(), motion_idx.begin() + static_cast<long>(h)});
   r.tau_second =
       EstimateLag(c, w_truth, {motion_idx.begin() + static_cast<long>(h), motion_idx.end()});
-  to.statistic = std::isfinite(sigma) && sigma > 0 ? std::abs(tau) / sigma : 0.0;
+  // τ/σ over the blocks is Student's t with B − 1 degrees of freedom, written as the z of the
+  // same tail probability (as accel_lag's).
+  to.statistic = std::isfinite(sigma) && sigma > 0
+                     ? NormalUpperQuantileLog(LogStudentTUpper(std::abs(tau) / sigma, blocks - 1.0))
+                     : 0.0;
   JudgeLag(c, tau, alpha_c, c.s.min_offset_periods, "offset", 2, to);
   to.values = {{"time_offset_s", tau, sigma},
                {"time_offset_first_half_s", r.tau_first, sigma * std::sqrt(2.0)},

@@ -155,9 +155,21 @@ OffsetWindowEstimate EstimateOffsetWindow(const std::vector<ReferenceSample>& re
   // Source samples that map inside the joint span for every lag of the search, with a margin
   // of two steps for the refinement.
   const double lo = ref.t_first() + L + 2 * step, hi = ref.t_last() - L - 2 * step;
+  // A gyro sample is the mean rate over the interval that ends at its stamp (the orientation
+  // filter's convention, and a rate-integrating gyro's): it is compared with the reference at
+  // that interval's midpoint, half the median stamp spacing earlier, so that the offset is the
+  // stamp's and the filter fed with it integrates each interval where it happened.
+  double shift = 0.0;
+  if (imu) {
+    std::vector<double> gaps;
+    gaps.reserve(measured.size());
+    for (size_t k = 1; k < measured.size(); ++k) gaps.push_back(measured[k].t - measured[k - 1].t);
+    std::nth_element(gaps.begin(), gaps.begin() + gaps.size() / 2, gaps.end());
+    shift = 0.5 * gaps[gaps.size() / 2];
+  }
   std::vector<SourceSample> m;
   for (const auto& x : measured)
-    if (x.t >= lo && x.t <= hi) m.push_back(x);
+    if (x.t - shift >= lo && x.t - shift <= hi) m.push_back({x.t - shift, x.y});
   const double span = m.size() >= 2 ? m.back().t - m.front().t : 0.0;
   if (m.size() < 10 || span < s.min_window_s) {
     out.reason =

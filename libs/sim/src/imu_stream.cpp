@@ -166,7 +166,9 @@ std::vector<ImuStreamSample> SimulateImuStream(const ImuStreamSettings& settings
     ImuTruth truth;
     truth.t = t;
     truth.R_WI = geometry::QuatToMatrix(q_at(t_imu));
-    truth.omega_I = motion.Omega(t_imu);
+    // The gyro's rate is the mean over the sample interval ending at t_imu (sim::ImuTruth).
+    const Eigen::Matrix3d R_WI_before = geometry::QuatToMatrix(q_at(t_imu - dt));
+    truth.omega_I = geometry::Log(R_WI_before.transpose() * truth.R_WI) / dt;
     truth.a_W = motion.Accel(t_imu);
     ImuSample m = imu.Sample(truth);
     if (delta != 0.0) {  // the accelerometer reads the specific force of t_imu − δ

@@ -121,6 +121,15 @@ ImuTruth ToolMotionTruth::Imu(const ToolState& s) const {
   return u;
 }
 
+ImuTruth ToolMotionTruth::Imu(const ToolState& s, double interval_s) const {
+  ImuTruth u = Imu(s);
+  Eigen::VectorXd q_before;
+  trajectory_.Sample(s.t - interval_s, q_before);
+  const Eigen::Matrix3d R_EI_before = Pose(q_before, s.t - interval_s).R_EI;
+  u.omega_I = geometry::Log(R_EI_before.transpose() * s.R_EI) / interval_s;
+  return u;
+}
+
 namespace {
 ImuModelSettings WithRate(ImuModelSettings s, double rate) {
   s.rate_hz = rate;
@@ -182,7 +191,7 @@ std::optional<SensorFrame> SensorSim::Next() {
   if (settings_.joint_resolution > 0)
     for (int i = 0; i < f.q.size(); ++i)
       f.q(i) = settings_.joint_resolution * std::round(f.q(i) / settings_.joint_resolution);
-  f.imu = imu_.Sample(truth_.Imu(f.truth));
+  f.imu = imu_.Sample(truth_.Imu(f.truth, 1.0 / settings_.rate_hz));
   const int stop = truth_.trajectory().StillAt(f.t);
   if (stop >= 0 && settings_.mag_disturbance) {
     const Eigen::Matrix3d R_SI =

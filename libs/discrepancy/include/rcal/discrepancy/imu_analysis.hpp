@@ -48,11 +48,14 @@
 //              the samples outside band_z σ_|f|, and the RMS angle between f and the base
 //              filter's gravity direction. Extension: reject_accel.
 //  time_offset  (truth present) lag L minimising Σ|ω_m(t) − b̄ − ω_truth(t − L)|² over motion
-//              samples (ω_truth by central differences of the truth quaternion), integer grid to
-//              ±max_lag_s then a parabola through the minimum; σ from offset_blocks contiguous
-//              blocks (sd/√B). Effect when |τ|/σ > Φ⁻¹(1 − α/8) and |τ| ≥ min_offset_periods
-//              sample periods. Extension: the estimate stamped t is compared with truth at t − τ,
-//              τ fitted on the other half of the movement samples (2-fold).
+//              samples (ω_truth the truth quaternion's rate over the interval ending at each
+//              sample, the gyro convention the filters integrate: such a gyro reads τ = 0),
+//              integer grid to ±max_lag_s then a parabola through the minimum; σ from
+//              offset_blocks contiguous blocks (sd/√B), so τ/σ is Student's t with B − 1 degrees
+//              of freedom, written as the z of the same p. Effect when beyond Φ⁻¹(1 − α_c/2) and
+//              |τ| ≥ min_offset_periods sample periods. Extension: the estimate stamped t is
+//              compared with truth at t − τ, τ fitted on the other half of the movement samples
+//              (2-fold).
 //  accel_lag   (positions present) the accelerometer reads δ late against the position sensor
 //              (and the gyro): estimation::EstimateAccelLag (accel_lag.hpp) on the accelerometer
 //              turned by the truth's attitude (the base filter's without truth: its tilt errors

@@ -17,7 +17,11 @@
 //
 // Offset convention: offset = t_source − t_joints for the same physical instant. A source sample
 // stamped s therefore happened at joint time s − offset (ClockOffsetEstimator::ToJointTime). An
-// IMU whose stamps run 37 ms late has offset +0.037 s.
+// IMU whose stamps run 37 ms late has offset +0.037 s. A gyro sample is the mean rate over the
+// interval that ends at its stamp (the orientation filter integrates it so), so it is compared
+// with the reference at the interval's midpoint, stamp − Δt/2 (Δt the median stamp spacing):
+// read at the stamp instead, the offset would be Δt/2 early and the filter's attitude fed with
+// it half a sample ahead of the arm.
 //
 // Method, per source and window (the overlap of the ring buffers, at most buffer_s):
 //   1. signals: joint velocities q̇ from the stream, or, when absent, from a local quadratic

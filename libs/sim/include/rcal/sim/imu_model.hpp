@@ -3,7 +3,9 @@
 // Frames: W (earth/world, the frame of a_W, g_W, m_W), I (the IMU body frame the truth
 // orientation R_WI refers to), S (the sensor's own axes, rotated on the mount: v_S = R_SI v_I).
 // Model, every effect switchable:
-//   gyro  ω_S = (I + M_g) R_SI ω_I + b_g + n_g
+//   gyro  ω_S = (I + M_g) R_SI ω_I + b_g + n_g   (ω_I: the truth's mean rate over the sample
+//         interval ending at the stamp, what a rate-integrating gyro reports and what the
+//         orientation filter integrates: q_k = q_{k−1} Exp(ω_k Δt); see ImuTruth::omega_I)
 //   accel f_S = (I + M_a) R_SI R_WIᵀ (a_W − g_W) + b_a + n_a      (specific force)
 //   mag   m_S = R_SI R_WIᵀ m_W + b_m + n_m                       (b_m: hard iron)
 //   M_*: scale (diagonal) and misalignment (off-diagonal); b_* = constant + random walk
@@ -23,9 +25,13 @@ namespace rcal::sim {
 struct ImuTruth {
   double t = 0.0;                                      ///< [s]
   Eigen::Matrix3d R_WI = Eigen::Matrix3d::Identity();  ///< IMU → world orientation
-  Eigen::Vector3d omega_I = Eigen::Vector3d::Zero();   ///< angular rate in I [rad/s]
-  Eigen::Vector3d a_W = Eigen::Vector3d::Zero();       ///< acceleration in W, no gravity [m/s²]
-  Eigen::Vector3d p_W = Eigen::Vector3d::Zero();       ///< position in W [m]
+  /// Angular rate in I [rad/s]. The simulated cells give the mean over the sample interval
+  /// ending at t, Log(R_WI(t − Δt)ᵀ R_WI(t)) / Δt, so that the filters' interval rule integrates
+  /// the noise-free gyro exactly; the rate at the instant t would put their attitude half a sample
+  /// ahead of the truth.
+  Eigen::Vector3d omega_I = Eigen::Vector3d::Zero();
+  Eigen::Vector3d a_W = Eigen::Vector3d::Zero();  ///< acceleration in W, no gravity [m/s²]
+  Eigen::Vector3d p_W = Eigen::Vector3d::Zero();  ///< position in W [m]
 };
 
 struct ImuSample {

@@ -61,8 +61,13 @@ class ToolMotionTruth {
                   JointTrajectory trajectory, double fd_step = 1e-3);
   /// The truth state at t [s] (clamped to the trajectory's span, where the arm stands still).
   ToolState At(double t) const;
-  /// The IMU truth (ImuModel's W = earth E): R_WI = R_EI, a_W = R_EW a_WI_W, p_W = R_EW p_WI_W.
+  /// The IMU truth (ImuModel's W = earth E): R_WI = R_EI, a_W = R_EW a_WI_W, p_W = R_EW p_WI_W,
+  /// ω_I the rate at the instant s.t (ToolState::omega_I).
   ImuTruth Imu(const ToolState& s) const;
+  /// The same with ω_I the mean rate over the sample interval (s.t − interval_s, s.t]:
+  /// Log(R_EI(s.t − interval_s)ᵀ R_EI(s.t)) / interval_s, what a gyro sampled every interval_s
+  /// [s] reports (ImuTruth::omega_I). SensorSim samples its IMU this way.
+  ImuTruth Imu(const ToolState& s, double interval_s) const;
   /// The IMU → marker lever arm r_IM_I in the IMU frame [m] (the first marker; zero: the IMU at
   /// the marker point).
   void set_imu_to_marker_I(const Eigen::Vector3d& r_IM_I) { r_IM_I_ = r_IM_I; }
