@@ -290,7 +290,7 @@ std::vector<std::pair<int, int>> FindRests(Context& c, bool* short_rests) {
   return rests;
 }
 
-// Truth body rate by central differences, NaN where undefined.
+// Truth body rate over each sample interval, NaN where undefined.
 std::vector<Eigen::Vector3d> TruthRates(const Context& c) {
   std::vector<Eigen::Vector3d> w(c.n, Eigen::Vector3d::Constant(kNaN));
   // The rate over the interval that ends at sample k, the convention of the gyro the filters
