@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <numbers>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -180,7 +181,7 @@ int RunAccelLag(const AccelLagOptions& o) {
         "position sensor's frame W from the IMU's earth frame E, estimated: q_WE [w, x, y, z] = "
         "[%.5f, %.5f, %.5f, %.5f] (%.2f deg from the identity)\n",
         q_WE.w(), q_WE.x(), q_WE.y(), q_WE.z(),
-        Eigen::AngleAxisd(lag->R_WE).angle() * 180.0 / 3.141592653589793);
+        Eigen::AngleAxisd(lag->R_WE).angle() * 180.0 / std::numbers::pi);
   if (lag->delay < 0.0 || lag->delay > est::kMaxAccelDelay)
     spdlog::warn(
         "the lag is outside what position_kf takes ([0, {}] s): a lead, or not the sensor's own "

@@ -12,8 +12,12 @@
 namespace rcal::estimation {
 namespace {
 
-using Vec = Eigen::VectorXd;
-using Rows = Eigen::Matrix<double, 3, Eigen::Dynamic>;  // ∂(y − ∫aM)/∂θ
+// θ = (δ, r_B, b_W[, φ]): 7 unknowns, 10 with the frame. Fixed capacity, so that a row per
+// triplet and the normal equations of every Gauss–Newton pass allocate nothing.
+constexpr int kMaxUnknowns = 10;
+using Vec = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxUnknowns, 1>;
+using Mat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxUnknowns, kMaxUnknowns>;
+using Rows = Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, kMaxUnknowns>;  // ∂(y − ∫aM)/∂θ
 
 // One triplet in the earth frame E, before the position sensor's frame W is applied: the
 // hat-weighted integrals of the linear acceleration a_E = R_EB f − g·up (u_E), of δ's column R_EB ḟ
@@ -62,13 +66,13 @@ std::string Sample(const char* field, std::size_t i) {
 
 // The weighted normal equations of rows [first, last); w per triplet.
 struct Normal {
-  Eigen::MatrixXd N;
+  Mat N;
   Vec b;
 };
 Normal Accumulate(const std::vector<Row>& rows, const std::vector<double>& w, std::size_t first,
                   std::size_t last) {
   const Eigen::Index k = rows.empty() ? 7 : rows.front().A.cols();
-  Normal n{Eigen::MatrixXd::Zero(k, k), Vec::Zero(k)};
+  Normal n{Mat::Zero(k, k), Vec::Zero(k)};
   for (std::size_t j = first; j < last; ++j) {
     n.N.noalias() += w[j] * rows[j].A.transpose() * rows[j].A;
     n.b.noalias() += w[j] * rows[j].A.transpose() * rows[j].y;
@@ -79,7 +83,7 @@ Normal Accumulate(const std::vector<Row>& rows, const std::vector<double>& w, st
 Result<Vec> Solve(const Normal& n) {
   // The lag is read from the jerk column, the lever arm from the rotation, the frame from the
   // acceleration's directions: without them the system is singular.
-  const Eigen::LDLT<Eigen::MatrixXd> ldlt(n.N);
+  const Eigen::LDLT<Mat> ldlt(n.N);
   const double scale = n.N.diagonal().maxCoeff();
   if (ldlt.info() != Eigen::Success || !(scale > 0.0) ||
       !(ldlt.vectorD().cwiseAbs().minCoeff() > 1e-12 * scale))
@@ -103,18 +107,18 @@ Result<Vec> RobustFit(const std::vector<Row>& rows, std::vector<double>& w) {
   w.assign(rows.size(), 1.0);
   auto theta = Solve(Accumulate(rows, w, 0, rows.size()));
   if (!theta) return theta;
+  std::vector<Eigen::Vector3d> res(rows.size());  // |y − A θ| per triplet and axis
+  std::vector<double> r(rows.size());
   for (int pass = 0; pass < 6; ++pass) {
+    for (std::size_t j = 0; j < rows.size(); ++j)
+      res[j] = (rows[j].y - rows[j].A * *theta).cwiseAbs();
     Eigen::Vector3d sigma;
     for (int i = 0; i < 3; ++i) {
-      std::vector<double> r(rows.size());
-      for (std::size_t j = 0; j < rows.size(); ++j)
-        r[j] = std::abs(rows[j].y(i) - rows[j].A.row(i).dot(*theta));
+      for (std::size_t j = 0; j < rows.size(); ++j) r[j] = res[j](i);
       sigma(i) = std::max(1.4826 * Median(r), 1e-12);
     }
     for (std::size_t j = 0; j < rows.size(); ++j) {
-      double u = 0.0;
-      for (int i = 0; i < 3; ++i)
-        u = std::max(u, std::abs(rows[j].y(i) - rows[j].A.row(i).dot(*theta)) / sigma(i));
+      const double u = res[j].cwiseQuotient(sigma).maxCoeff();
       w[j] = u <= kAccelLagHuber ? 1.0 : kAccelLagHuber / u;
     }
     theta = Solve(Accumulate(rows, w, 0, rows.size()));
