@@ -7,17 +7,11 @@
 
 #include "rcal/estimation/arm_conditions.hpp"
 #include "rcal/estimation/clock_offset.hpp"
+#include "rcal/numeric/median.hpp"
 
 namespace rcal::ros2 {
 
-namespace {
-// The median of `v` (the upper one of an even count) [µs]; v not empty.
-int64_t MedianOf(std::vector<int64_t> v) {
-  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-  std::nth_element(v.begin(), mid, v.end());
-  return *mid;
-}
-}  // namespace
+using numeric::UpperMedian;  // of µs stamps; the upper one of an even count
 
 // ---- clocks -----------------------------------------------------------------------------------
 
@@ -123,7 +117,7 @@ class ClockOffsetTracker {
     if (s.coarse_us) return true;
     s.arrivals.push_back(utime - *latest_joints_);
     if (static_cast<int>(s.arrivals.size()) < kCoarseSamples) return false;
-    s.coarse_us = MedianOf(s.arrivals);
+    s.coarse_us = UpperMedian(s.arrivals);
     // Within the search range, the estimator finds it all: no coarse shift (exact, no latency).
     if (std::abs(1e-6 * static_cast<double>(*s.coarse_us)) < 0.5 * s.estimator.settings().max_lag_s)
       s.coarse_us = 0;
@@ -397,7 +391,7 @@ bool Ros2Input::Conditions(std::optional<transport::ArmConditions> c, Stream& st
     // Its clock against the joints': the median of its recent arrival lags (file comment).
     st.lags.push_back(joints_utime_ - c->utime);
     if (st.lags.size() > kConditionsLags) st.lags.pop_front();
-    c->utime += MedianOf({st.lags.begin(), st.lags.end()});
+    c->utime += UpperMedian(std::vector<int64_t>(st.lags.begin(), st.lags.end()));
   }
   if (c->utime < released_) {
     // Later than the reorder delay: not dropped (a payload change lost would stand wrong until

@@ -192,6 +192,43 @@ TEST(ImuAnalysis, FindsATimeOffsetAndItsValue) {
   }
 }
 
+// Whether an offset matters is judged by the attitude error it causes against the filter's own:
+// the same small offset is named on a stream the base filter follows to a tenth of a degree, where
+// re-timing gains, and not where 6 m/s² of linear acceleration tilts the filter by far more, where
+// re-timing cannot gain. The measured cross-fitted gain (against the truth) must agree with the
+// judgement either way.
+TEST(ImuAnalysis, ASmallOffsetIsNamedWhereReTimingGainsAndNotWhereItCannot) {
+  for (std::uint64_t seed : {52u, 53u}) {
+    for (double linear_accel : {0.0, 6.0}) {
+      sim::ImuStreamEffects e;
+      e.time_offset_s = 0.002;
+      e.linear_accel = linear_accel;
+      std::mt19937_64 rng(seed);
+      const auto a = disc::AnalyzeImuStream(
+          disc::FromSimulatedStream(sim::SimulateImuStream(Short(), e, rng)));
+      const auto& c = Cand(a, "time_offset");
+      const double gain = 1.0 - c.after.total.value() / c.before.total.value();
+      std::printf(
+          "seed %d, linear accel %.0f m/s²: offset %.3f ms (z %.1f), base %.3f deg, "
+          "expected gain %.3f, measured %.3f\n",
+          static_cast<int>(seed), linear_accel, 1e3 * c.values[0].value, c.statistic,
+          c.before.total.value() * 180.0 / std::numbers::pi, c.values.back().value, gain);
+      EXPECT_NEAR(c.values[0].value, 0.002, 3e-4) << seed;
+      // The quadrature rule predicts the measured gain.
+      EXPECT_NEAR(c.values.back().value, gain, 0.05) << seed;
+      EXPECT_GT(c.statistic, c.critical) << "measurable in both, seed " << seed;
+      if (linear_accel == 0.0) {
+        EXPECT_TRUE(c.named()) << seed << " " << c.note;
+        EXPECT_GT(gain, 0.1) << seed;
+      } else {
+        EXPECT_FALSE(c.significant) << seed;
+        EXPECT_NE(c.note.find("expected to gain"), std::string::npos) << c.note;
+        EXPECT_LT(gain, 0.1) << seed;
+      }
+    }
+  }
+}
+
 // The accelerometer reading late behind the positions (accel_lag): hidden in streams with linear
 // acceleration whose positions an optical-grade tracker reads (0.1 mm), it is named with its size
 // and the position KF with it is closer to the truth on the half of the stream it was not fitted

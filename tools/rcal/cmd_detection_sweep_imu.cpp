@@ -62,7 +62,7 @@ std::vector<Cell> Cells() {
     c.effects.linear_accel = a;
     cells.push_back(c);
   }
-  for (double ms : {4.0, 6.0, 10.0}) {
+  for (double ms : {1.0, 2.0, 4.0}) {
     Cell c{"time_offset", "time offset " + Fmt(ms, 0) + " ms", {}, {"accel_lag"}};
     c.effects.time_offset_s = ms * 1e-3;
     cells.push_back(c);

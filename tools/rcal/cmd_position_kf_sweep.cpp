@@ -45,6 +45,7 @@
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/cell_yaml.hpp"
 #include "rcal/io/csv_table.hpp"
+#include "rcal/numeric/median.hpp"
 #include "rcal/sim/imu_taps.hpp"
 #include "rcal/sim/sensor_sim.hpp"
 #include "report.hpp"
@@ -281,11 +282,7 @@ std::vector<Score> RunCase(const Case& k, const std::vector<Config>& configs) {
   return Scores(ss_m, n_m, ss_s, n_s, nees, n);
 }
 
-double Median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const size_t h = v.size() / 2;
-  return v.size() % 2 ? v[h] : 0.5 * (v[h - 1] + v[h]);
-}
+using numeric::Median;
 
 int Run(const Options& o) {
   // Untapped, and with --taps tapped too: the simulated cases' and the table's groups.

@@ -12,13 +12,6 @@
 
 namespace rcal::tool {
 
-double Median(std::vector<double> v) {
-  if (v.empty()) return std::nan("");
-  std::sort(v.begin(), v.end());
-  const size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
 namespace {
 
 // An arm with a truth on the base set, test joints, and a pose source whose joints may read off.

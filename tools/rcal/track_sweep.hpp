@@ -13,6 +13,7 @@
 
 #include "rcal/identification/ekf_identifier.hpp"
 #include "rcal/kinematics/model.hpp"
+#include "rcal/numeric/median.hpp"
 
 namespace rcal::tool {
 
@@ -107,6 +108,7 @@ std::vector<std::vector<int>> IndistinguishableJoints(const kinematics::Kinemati
 /// same run every time.
 std::vector<TrackSweepResult> RunTrackSweep(const TrackSweepArm& arm, const TrackSweepSettings& s);
 
-double Median(std::vector<double> v);
+/// The median (numeric/median.hpp): the mean of the two middle values for an even count.
+using numeric::Median;
 
 }  // namespace rcal::tool

@@ -17,11 +17,13 @@
 #include "rcal/estimation/position_kf.hpp"
 #include "rcal/estimation/position_kf_bank.hpp"
 #include "rcal/geometry/so3.hpp"
+#include "rcal/numeric/median.hpp"
 
 namespace rcal::discrepancy {
 namespace {
 
 namespace est = rcal::estimation;
+using numeric::UpperMedian;
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr const char* kAxis[3] = {"x", "y", "z"};
 
@@ -74,11 +76,6 @@ double Sd(const std::vector<double>& v) {
   double s = 0.0;
   for (double x : v) s += (x - m) * (x - m);
   return std::sqrt(s / static_cast<double>(v.size() - 1));
-}
-double Median(std::vector<double> v) {
-  if (v.empty()) return kNaN;
-  std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
-  return v[v.size() / 2];
 }
 
 Eigen::Vector4d QuatNlerp(const Eigen::Vector4d& a, Eigen::Vector4d b, double u) {
@@ -251,7 +248,7 @@ std::vector<std::pair<int, int>> FindRests(Context& c, bool* short_rests) {
     std::array<std::vector<double>, 3> g;
     for (int k = 0; k < c.n; ++k)
       for (int i = 0; i < 3; ++i) g[i].push_back(d.gyro[k](i));
-    Eigen::Vector3d med(Median(g[0]), Median(g[1]), Median(g[2]));
+    Eigen::Vector3d med(UpperMedian(g[0]), UpperMedian(g[1]), UpperMedian(g[2]));
     for (int k = 0; k < c.n; ++k)
       still[k] = (d.gyro[k] - med).norm() < c.s.still_gyro &&
                  std::abs(d.accel[k].norm() - c.s.gravity) < c.s.still_accel;
@@ -433,7 +430,7 @@ std::array<double, 3> FitWhiteLevels(const ImuAnalysisSettings& s, AllanCurve& A
       v.push_back(A.adev_rad_s[i][0] * std::sqrt(A.tau_s[0]));
       rel = A.rel_sigma[0];
     }
-    const double w = v.empty() ? s.gyro_noise_density : Median(v);
+    const double w = v.empty() ? s.gyro_noise_density : UpperMedian(v);
     A.white_level[i] = std::max(w, s.gyro_noise_density);
     white_rel[i] = std::isfinite(rel) ? rel / std::sqrt(std::max<size_t>(1, v.size())) : 0.0;
   }
@@ -619,7 +616,7 @@ FieldDeviations DeviationsFromReference(const Context& c,
 double RobustSpread(const std::vector<double>& v, double floor) {
   std::vector<double> abs_v;
   for (double x : v) abs_v.push_back(std::abs(x));
-  return std::max(1.4826 * Median(abs_v), floor);
+  return std::max(1.4826 * UpperMedian(abs_v), floor);
 }
 
 struct GateCounts {
@@ -752,15 +749,13 @@ ImuCandidate TestAccelMotion(const Context& c, const std::vector<Eigen::Vector4d
 
 // A lag's test, its z already in `cand`: significant beyond the two-sided critical value at α_c
 // and at least min_periods sample periods; a measurable lag below that is said so in the note.
-void JudgeLag(const Context& c, double lag_s, double alpha_c, double min_periods,
-              const std::string& what, int ms_digits, ImuCandidate& cand) {
+// Significant when z is beyond the critical value and `large`; a measurable lag that is not
+// large says why (`why_small`) in the candidate's note.
+void JudgeLag(double alpha_c, bool large, const std::string& why_small, ImuCandidate& cand) {
   cand.critical = NormalQuantileUpper(alpha_c / 2.0);
-  const bool large = std::abs(lag_s) >= min_periods * c.dt;
   cand.significant = cand.statistic > cand.critical && large;
   if (cand.statistic > cand.critical && !large)
-    cand.note = "the " + what + " is measurable (z beyond critical) but |" +
-                Fixed(lag_s * 1e3, ms_digits) + " ms| is below " + Fixed(min_periods, 2) +
-                " sample periods: too small to matter, not significant as an effect";
+    cand.note = why_small + ": too small to matter, not significant as an effect";
 }
 
 struct TimeOffsetTest {
@@ -788,7 +783,8 @@ double LagSigma(const Context& c, const std::vector<Eigen::Vector3d>& w_truth,
 
 // time_offset (truth present): the lag between gyro and truth rate over the motion samples, and
 // on each half of them (for the cross-fitted gain).
-TimeOffsetTest TestTimeOffset(const Context& c, double alpha_c, bool has_truth) {
+TimeOffsetTest TestTimeOffset(const Context& c, const std::vector<Eigen::Vector4d>& q_base,
+                              double alpha_c, bool has_truth) {
   TimeOffsetTest r;
   r.split = c.n;
   ImuCandidate& to = r.candidate;
@@ -822,11 +818,33 @@ TimeOffsetTest TestTimeOffset(const Context& c, double alpha_c, bool has_truth) 
   to.statistic = std::isfinite(sigma) && sigma > 0
                      ? NormalUpperQuantileLog(LogStudentTUpper(std::abs(tau) / sigma, blocks - 1.0))
                      : 0.0;
-  JudgeLag(c, tau, alpha_c, c.s.min_offset_periods, "offset", 2, to);
+  // Does it matter? The offset alone turns the attitude by |τ| |ω|: RMS over the motion samples
+  // e_τ = |τ| ω_rms. Against the base filter's total RMSE e (movement samples), in quadrature
+  // with the rest of its error, re-timing is expected to lower e by 1 − √(1 − (e_τ/e)²).
+  Rms w_rms;
+  for (int k : motion_idx) w_rms.Add(w_truth[k].norm());
+  const double e_tau = std::abs(tau) * w_rms.value();
+  const double e_base = ScoreAgainstTruth(c.d, q_base).total.value();
+  const double share = e_tau / e_base;
+  const double expected_gain =
+      std::isfinite(share) ? (share >= 1.0 ? 1.0 : 1.0 - std::sqrt(1.0 - share * share)) : 0.0;
+  JudgeLag(alpha_c, expected_gain >= c.s.min_offset_gain,
+           "the offset is measurable (z beyond critical) but the attitude error it causes, |" +
+               Fixed(tau * 1e3, 2) + " ms| x " + Fixed(w_rms.value(), 2) +
+               " rad/s RMS = " + Fixed(e_tau * 180.0 / std::numbers::pi, 3) + " deg, is " +
+               Fixed(100.0 * share, 1) + " % of the base filter's total RMSE (" +
+               Fixed(e_base * 180.0 / std::numbers::pi, 2) +
+               " deg): re-timing is expected to gain " + Fixed(100.0 * expected_gain, 1) +
+               " %, below " + Fixed(100.0 * c.s.min_offset_gain, 0) + " %",
+           to);
   to.values = {{"time_offset_s", tau, sigma},
                {"time_offset_first_half_s", r.tau_first, sigma * std::sqrt(2.0)},
                {"time_offset_second_half_s", r.tau_second, sigma * std::sqrt(2.0)},
-               {"sample_period_s", c.dt, 0.0}};
+               {"sample_period_s", c.dt, 0.0},
+               {"motion_rate_rms_rad_s", w_rms.value(), 0.0},
+               {"attitude_error_of_offset_rad", e_tau, 0.0},
+               {"base_total_rmse_rad", e_base, 0.0},
+               {"expected_retiming_gain", expected_gain, 0.0}};
   return r;
 }
 
@@ -920,7 +938,10 @@ AccelLagTest TestAccelLag(const Context& c, const std::vector<Eigen::Vector4d>& 
   al.statistic =
       sigma > 0 ? NormalUpperQuantileLog(LogStudentTUpper(std::abs(delay) / sigma, ls.blocks - 1.0))
                 : 0.0;
-  JudgeLag(c, delay, alpha_c, c.s.min_accel_lag_periods, "lag", 3, al);
+  JudgeLag(alpha_c, std::abs(delay) >= c.s.min_accel_lag_periods * c.dt,
+           "the lag is measurable (z beyond critical) but |" + Fixed(delay * 1e3, 3) +
+               " ms| is below " + Fixed(c.s.min_accel_lag_periods, 2) + " sample periods",
+           al);
   if (!first || !second)
     al.note += std::string(al.note.empty() ? "" : "; ") + "a half of the stream gives no lag (" +
                (first ? second.error() : first.error()) + "): the gain is not measured";
@@ -1182,7 +1203,7 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
   const ImuCandidate gb = TestGyroBias(c, alpha_c, a);
   const ImuCandidate md = TestMagneticDisturbance(c, q_base, alpha_c, a);
   const ImuCandidate am = TestAccelMotion(c, q_base, alpha_c, a);
-  const TimeOffsetTest to = TestTimeOffset(c, alpha_c, a.has_truth);
+  const TimeOffsetTest to = TestTimeOffset(c, q_base, alpha_c, a.has_truth);
   const ExtensionSettings ext{gb.values.back().value, a.mag_ref_norm_uT, a.mag_ref_dip_rad,
                               a.mag_gate_norm_uT / a.mag_ref_norm_uT, a.mag_gate_dip_rad};
   ExtendedFilters filters(data, base_f, ext);

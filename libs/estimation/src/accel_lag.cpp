@@ -8,6 +8,7 @@
 #include <string>
 
 #include "rcal/geometry/so3.hpp"
+#include "rcal/numeric/median.hpp"
 
 namespace rcal::estimation {
 namespace {
@@ -93,12 +94,6 @@ Result<Vec> Solve(const Normal& n) {
   return Vec(ldlt.solve(n.b));
 }
 
-double Median(std::vector<double> v) {
-  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-  std::nth_element(v.begin(), mid, v.end());
-  return *mid;
-}
-
 // Huber-reweighted least squares (a few passes), one weight per triplet: the smallest over its
 // axes, since a tap turned into W reaches every axis, and its ȧ makes the triplet a leverage
 // point that a per-axis weight still lets pull (the taps of AccelLag.TapsDoNotPullTheLag: 2.69
@@ -115,7 +110,7 @@ Result<Vec> RobustFit(const std::vector<Row>& rows, std::vector<double>& w) {
     Eigen::Vector3d sigma;
     for (int i = 0; i < 3; ++i) {
       for (std::size_t j = 0; j < rows.size(); ++j) r[j] = res[j](i);
-      sigma(i) = std::max(1.4826 * Median(r), 1e-12);
+      sigma(i) = std::max(1.4826 * numeric::UpperMedian(r), 1e-12);
     }
     for (std::size_t j = 0; j < rows.size(); ++j) {
       const double u = res[j].cwiseQuotient(sigma).maxCoeff();

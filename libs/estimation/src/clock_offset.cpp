@@ -1,4 +1,5 @@
 #include "rcal/estimation/clock_offset.hpp"
+#include "rcal/numeric/median.hpp"
 
 #include <Eigen/Cholesky>
 #include <Eigen/Geometry>
@@ -164,8 +165,7 @@ OffsetWindowEstimate EstimateOffsetWindow(const std::vector<ReferenceSample>& re
     std::vector<double> gaps;
     gaps.reserve(measured.size());
     for (size_t k = 1; k < measured.size(); ++k) gaps.push_back(measured[k].t - measured[k - 1].t);
-    std::nth_element(gaps.begin(), gaps.begin() + gaps.size() / 2, gaps.end());
-    shift = 0.5 * gaps[gaps.size() / 2];
+    shift = 0.5 * numeric::UpperMedian(std::move(gaps));
   }
   std::vector<SourceSample> m;
   for (const auto& x : measured)

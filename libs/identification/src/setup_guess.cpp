@@ -10,19 +10,13 @@
 
 #include "rcal/geometry/so3.hpp"
 #include "rcal/identification/calibration.hpp"
+#include "rcal/numeric/median.hpp"
 
 namespace rcal::identification {
 namespace {
 
 using kinematics::KinematicModel;
 using kinematics::PoseMeasurement;
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  const size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + mid, v.end());
-  return v[mid];
-}
 
 // Rotation nearest to M = U Σ Vᵀ with det +1 (the reflection guard of Kabsch): U D Vᵀ.
 Eigen::Matrix3d ProperRotation(const Eigen::Matrix3d& U, const Eigen::Matrix3d& V) {
@@ -173,7 +167,7 @@ std::vector<int> DropOutliers(std::vector<int> use, int max_out, double ratio, d
     fit(others);
     std::vector<double> r;
     for (int i : others) r.push_back(residual(i));
-    if (residual(worst) > ratio * std::max(Median(r), floor)) {
+    if (residual(worst) > ratio * std::max(numeric::UpperMedian(r), floor)) {
       outliers.push_back(worst);
       use = others;
       continue;

@@ -12,6 +12,7 @@
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/plot.hpp"
 #include "rcal/io/robot_urdf.hpp"
+#include "rcal/numeric/median.hpp"
 
 namespace rcal::io {
 namespace {
@@ -38,13 +39,6 @@ struct Fnv {
     for (int i = 0; i < 3; ++i) Num(v(i));
   }
 };
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  const size_t m = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(m), v.end());
-  return v[m];
-}
 
 double Angle(const Eigen::Matrix3d& A, const Eigen::Matrix3d& B) {
   return Eigen::AngleAxisd(A.transpose() * B).angle();
@@ -332,15 +326,15 @@ ParityReport CheckUrdfParity(const std::string& urdf_xml, const RobotSpec& spec,
   for (Pair& p : pairs) {
     ParityCheck& c = p.check;
     c.max = *std::max_element(c.errors.begin(), c.errors.end());
-    c.median = Median(c.errors);
+    c.median = numeric::UpperMedian(c.errors);
     auto& all = c.orientation ? all_o : all_p;
     all.insert(all.end(), c.errors.begin(), c.errors.end());
     r.checks.push_back(std::move(c));
   }
   r.max_position_m = all_p.empty() ? 0.0 : *std::max_element(all_p.begin(), all_p.end());
-  r.median_position_m = Median(all_p);
+  r.median_position_m = all_p.empty() ? 0.0 : numeric::UpperMedian(all_p);
   r.max_orientation_rad = all_o.empty() ? 0.0 : *std::max_element(all_o.begin(), all_o.end());
-  r.median_orientation_rad = Median(all_o);
+  r.median_orientation_rad = all_o.empty() ? 0.0 : numeric::UpperMedian(all_o);
   // NaN compares false: a NaN error fails.
   r.passed = r.max_position_m <= options.position_tol_m &&
              r.max_orientation_rad <= options.orientation_tol_rad;

@@ -12,6 +12,7 @@
 
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/csv_table.hpp"
+#include "rcal/numeric/median.hpp"
 
 namespace rcal::io {
 namespace {
@@ -44,12 +45,6 @@ struct StreamUnits {
   double gyro_scale_se = std::nan("");
 };
 
-double Median(std::vector<double> v) {
-  if (v.empty()) return std::nan("");
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-  return v[v.size() / 2];
-}
-
 StreamUnits ReadUnits(const CsvTable& t) {
   StreamUnits u;
   std::vector<double> time, acc, mag;
@@ -72,8 +67,8 @@ StreamUnits ReadUnits(const CsvTable& t) {
     } catch (const std::exception&) {
     }
   }
-  u.accel_median = Median(acc);
-  u.mag_median = Median(mag);
+  u.accel_median = numeric::UpperMedian(acc);
+  u.mag_median = numeric::UpperMedian(mag);
   // Least squares of Δu = s·p, p = −(ω̄ × ū)·Δt, over consecutive rows.
   double pp = 0, pd = 0, dd = 0;
   int n = 0;

@@ -14,6 +14,7 @@
 #include "rcal/geometry/so3.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/csv_table.hpp"
+#include "rcal/numeric/median.hpp"
 
 namespace rcal::io {
 namespace {
@@ -442,8 +443,7 @@ void CheckPosesPlausible(const PoseDataset& data, const kinematics::KinematicMod
       for (const auto& p : data.samples)
         if (std::isfinite(p.p_WM_W(k))) v.push_back(p.p_WM_W(k));
       if (v.empty()) continue;
-      std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-      centre(k) = v[v.size() / 2];
+      centre(k) = numeric::UpperMedian(std::move(v));
     }
     bound = (1.0 + std::sqrt(3.0)) * ArmReach(model, false) + settings.reach_margin_m;
   }
@@ -459,9 +459,7 @@ void CheckPosesPlausible(const PoseDataset& data, const kinematics::KinematicMod
       all_in_mm = all_in_mm && std::isfinite(d) && d * 1e-3 <= bound;
     }
     if (!dist.empty()) {
-      std::nth_element(dist.begin(), dist.begin() + static_cast<std::ptrdiff_t>(dist.size() / 2),
-                       dist.end());
-      const double median = dist[dist.size() / 2];
+      const double median = numeric::UpperMedian(std::move(dist));
       const double reach = ArmReach(model, !unknown_base);
       if (median > bound)
         hint = "; half the positions lie " + Number(median) + " m or more from " +
