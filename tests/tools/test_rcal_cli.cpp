@@ -1193,9 +1193,16 @@ TEST(RcalCli, FuseSetTakesOnlyWholeFiniteNumbersAndTheJsonNamesUnits) {
     EXPECT_NE(r.exit_code, 0) << "'" << bad << "': " << r.output;
     EXPECT_NE(r.output.find("tilt_sigma"), std::string::npos) << "'" << bad << "': " << r.output;
   }
+  // A whole-number setting takes a whole number in its range.
+  for (const char* bad : {"3", "0", "1.5", "-1", "2e9"}) {
+    const Result r = RunRcal(fuse + "--set accel_lowpass_order=" + bad);
+    EXPECT_NE(r.exit_code, 0) << "'" << bad << "': " << r.output;
+    EXPECT_NE(r.output.find("accel_lowpass_order"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("whole number from 1 to 2"), std::string::npos) << r.output;
+  }
   const Result ok = RunRcal(fuse +
                             "--set tilt_sigma=0.02 --set pos.accel_sigma_m_s2=2 --set "
-                            "heading_sigma_rad=5e-2 --json " +
+                            "heading_sigma_rad=5e-2 --set accel_lowpass_order=2 --json " +
                             (d / "f.json").string());
   ASSERT_EQ(ok.exit_code, 0) << ok.output;
   const json j = ReadJson(d / "f.json");
@@ -1204,11 +1211,12 @@ TEST(RcalCli, FuseSetTakesOnlyWholeFiniteNumbersAndTheJsonNamesUnits) {
   EXPECT_EQ(s.at("heading_sigma_rad").get<double>(), 0.05);
   EXPECT_EQ(s.at("pos.accel_sigma_m_s2").get<double>(), 2.0);
   EXPECT_EQ(s.at("gravity_m_s2").get<double>(), 9.81);
+  EXPECT_EQ(s.at("accel_lowpass_order").get<int>(), 2);
   // Every key ends in its unit; the dimensionless ones say what they are.
   for (const auto& [key, value] : s.items()) {
     bool named = false;
     for (const char* end : {"_m_s2", "_rad", "_s", "_rad_s", "_sqrt_hz", "_sqrt_s", "_chi2",
-                            "_fraction", "_m", "_factor"})
+                            "_fraction", "_m", "_factor", "_order"})
       named |= key.size() > std::string(end).size() &&
                key.compare(key.size() - std::string(end).size(), std::string::npos, end) == 0;
     EXPECT_TRUE(named) << key;

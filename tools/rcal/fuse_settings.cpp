@@ -19,7 +19,10 @@ struct Field {
   const char* name;
   const char* unit;
   double* value;
+  int* integer = nullptr;  // instead of value: a whole-number setting in [lo, hi] (an order)
+  int lo = 0, hi = 0;
   std::string key() const { return *unit ? std::string(name) + "_" + unit : std::string(name); }
+  double get() const { return integer ? *integer : *value; }
 };
 std::vector<Field> OrientationFields(est::OrientationKfSettings& s) {
   return {{"gravity", "m_s2", &s.gravity},
@@ -31,6 +34,7 @@ std::vector<Field> OrientationFields(est::OrientationKfSettings& s) {
           {"tilt_sigma", "rad", &s.tilt_sigma},
           {"heading_sigma", "rad", &s.heading_sigma},
           {"accel_lowpass_tau", "s", &s.accel_lowpass_tau},
+          {"accel_lowpass_order", "", nullptr, &s.accel_lowpass_order, 1, 2},
           {"mag_lowpass_tau", "s", &s.mag_lowpass_tau},
           {"mag_delay", "s", &s.mag_delay},
           {"tilt_motion_accel", "m_s2", &s.tilt_motion_accel},
@@ -96,7 +100,16 @@ void ApplyOverrides(const std::vector<std::string>& overrides, est::OrientationK
     const auto it = std::find_if(fields.begin(), fields.end(),
                                  [&](const Field& f) { return name == f.name || name == f.key(); });
     if (it == fields.end()) throw std::runtime_error("fuse: --set: unknown setting '" + name + "'");
-    *it->value = ParseSetting(name, kv.substr(eq + 1));
+    const double v = ParseSetting(name, kv.substr(eq + 1));
+    if (!it->integer) {
+      *it->value = v;
+      continue;
+    }
+    if (v != std::round(v) || v < it->lo || v > it->hi)
+      throw std::runtime_error("fuse: --set " + name + ": '" + kv.substr(eq + 1) +
+                               "' is not a whole number from " + std::to_string(it->lo) + " to " +
+                               std::to_string(it->hi));
+    *it->integer = static_cast<int>(v);
   }
 }
 
@@ -149,15 +162,15 @@ FuseSettings BroadSettingsWith(const std::vector<std::string>& overrides, double
 nlohmann::json SettingsJson(const FuseSettings& s) {
   FuseSettings c = s;
   nlohmann::json js;
-  for (const Field& f : OrientationFields(c.orientation)) js[f.key()] = *f.value;
-  for (const Field& f : PositionFields(c.position)) js[f.key()] = *f.value;
+  for (const Field& f : OrientationFields(c.orientation)) js[f.key()] = f.get();
+  for (const Field& f : PositionFields(c.position)) js[f.key()] = f.get();
   return js;
 }
 
 nlohmann::json ImuRangesJson(const FuseSettings& s) {
   FuseSettings c = s;
   nlohmann::json js;
-  for (const Field& f : ImuFields(c.imu)) js[f.key()] = *f.value;
+  for (const Field& f : ImuFields(c.imu)) js[f.key()] = f.get();
   return js;
 }
 

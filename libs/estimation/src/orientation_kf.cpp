@@ -7,6 +7,7 @@
 #include <sstream>
 #include <string>
 
+#include "rcal/estimation/low_pass.hpp"
 #include "rcal/geometry/so3.hpp"
 
 namespace rcal::estimation {
@@ -39,12 +40,6 @@ std::string Num(double v) {
   return o.str();
 }
 
-// Gain of a first-order low-pass with time constant tau [s] over a step dt [s]; 1 (no filtering)
-// for tau <= 0.
-double LowPassGain(double dt, double tau) {
-  return tau > 0.0 ? 1.0 - std::exp(-dt / tau) : 1.0;
-}
-
 }  // namespace
 
 Eigen::Matrix<double, 7, 7> PaperPhiOri(const Eigen::Vector4d& q, double dt) {
@@ -71,6 +66,9 @@ void OrientationKf::Reset() {
   bias_B_.setZero();
   q_IB_ = Eigen::Vector4d(1, 0, 0, 0);
   f_I_lp_.setZero();
+  f_I_in1_.setZero();
+  f_I_in2_.setZero();
+  f_I_out2_.setZero();
   m_I_lp_.setZero();
   P_.setIdentity();
   const std::int64_t resets = counters_.resets;
@@ -168,7 +166,7 @@ Status OrientationKf::Update(double t, const Eigen::Vector3d& gyro_B, const Eige
   // Strapdown frame I (gyro only, never corrected) and the sensors low-passed in it: in I,
   // gravity and the earth field are nearly constant while linear accelerations average out.
   const Eigen::Matrix3d R_IB = PropagateStrapdown(dt);
-  f_I_lp_ += LowPassGain(dt, settings_.accel_lowpass_tau) * (R_IB * f_B - f_I_lp_);
+  LowPassAccel(R_IB * f_B, dt);
   const Eigen::Vector3d f_meas_B = R_IB.transpose() * f_I_lp_;
 
   // Accelerometer and magnetometer acceptance.
@@ -181,7 +179,8 @@ Status OrientationKf::Update(double t, const Eigen::Vector3d& gyro_B, const Eige
           ? m_B
           : Eigen::Vector3d(geometry::Exp(omega_B_ * settings_.mag_delay).transpose() * m_B);
   SensorUse use{AccelAccepted(f_meas_B), MagAccepted(m_now_B, f_B, down_B, dt)};
-  if (use.mag) m_I_lp_ += LowPassGain(dt, settings_.mag_lowpass_tau) * (R_IB * m_now_B - m_I_lp_);
+  if (use.mag)
+    m_I_lp_ += FirstOrderLowPassGain(dt, settings_.mag_lowpass_tau) * (R_IB * m_now_B - m_I_lp_);
   const Eigen::Vector3d m_meas_B = R_IB.transpose() * m_I_lp_;
 
   last_tilt_nis_ = last_heading_nis_ = std::numeric_limits<double>::quiet_NaN();
@@ -234,6 +233,7 @@ Status OrientationKf::Initialize(double t, const Eigen::Vector3d& gyro_B,
   q_EB_ = *q0;
   q_IB_ = *q0;
   f_I_lp_ = QuatToMatrix(q_IB_) * f_B;
+  f_I_in1_ = f_I_in2_ = f_I_out2_ = f_I_lp_;  // the second-order low-pass at rest on it
   m_I_lp_ = QuatToMatrix(q_IB_) * m_B;
   omega_B_ = gyro_B;
   bias_B_.setZero();
@@ -285,6 +285,27 @@ void OrientationKf::ZeroRateUpdate() {
   H.block<3, 3>(0, 3).setIdentity();
   Correct(H, -omega_B_, std::pow(settings_.zero_rate_sigma, 2) * Eigen::MatrixXd::Identity(3, 3));
   ++counters_.zero_rate_updates;
+}
+
+void OrientationKf::LowPassAccel(const Eigen::Vector3d& f_I, double dt) {
+  const double tau = settings_.accel_lowpass_tau;
+  if (settings_.accel_lowpass_order != 2 || !(tau > 0.0)) {
+    f_I_lp_ += FirstOrderLowPassGain(dt, tau) * (f_I - f_I_lp_);
+    return;
+  }
+  // A step longer than τ (a gap in the data) would put the bilinear map's cutoff near or past
+  // Nyquist (dt < π τ / √2): the filter then starts again from this sample, as at initialisation.
+  if (dt > tau) {
+    f_I_lp_ = f_I_in1_ = f_I_in2_ = f_I_out2_ = f_I;
+    return;
+  }
+  const Butterworth2 c = Butterworth2::LowPass(dt, tau);
+  const Eigen::Vector3d y =
+      c.b0 * f_I + c.b1 * f_I_in1_ + c.b2 * f_I_in2_ - c.a1 * f_I_lp_ - c.a2 * f_I_out2_;
+  f_I_in2_ = f_I_in1_;
+  f_I_in1_ = f_I;
+  f_I_out2_ = f_I_lp_;
+  f_I_lp_ = y;
 }
 
 Eigen::Matrix3d OrientationKf::PropagateStrapdown(double dt) {
@@ -350,7 +371,7 @@ double OrientationKf::TiltSigma(const Eigen::Vector3d& f_motion_B) const {
 
 void OrientationKf::FollowAcceptedField(double m_norm, double dip, double dt) {
   if (settings_.mag_reference_tau > 0.0 && still()) {
-    const double a = LowPassGain(dt, settings_.mag_reference_tau);
+    const double a = FirstOrderLowPassGain(dt, settings_.mag_reference_tau);
     mag_ref_norm_ += a * (m_norm - mag_ref_norm_);
     mag_ref_dip_ += a * (dip - mag_ref_dip_);
   }
@@ -359,7 +380,7 @@ void OrientationKf::FollowAcceptedField(double m_norm, double dip, double dt) {
 
 void OrientationKf::FollowRejectedField(double m_norm, double dip, double dt) {
   // Candidate new reference: adopted after a long, steady rejection.
-  const double a = LowPassGain(dt, 2.0);
+  const double a = FirstOrderLowPassGain(dt, 2.0);
   if (mag_rejected_time_ == 0.0) {
     mag_cand_norm_ = m_norm;
     mag_cand_dip_ = dip;
