@@ -405,6 +405,19 @@ TEST(OrientationKf, ResetsWhenTheStateGoesNonFinite) {
   EXPECT_EQ(kf.counters().resets, 1);
 }
 
+// 60 s of the simulated motion (with the gyro bias, or none) with linear accelerations of
+// 3.6 m/s² at 1 Hz from 10 s on, one period on, one off, bending the measured gravity.
+Sim LinearlyAccelerated(int seed, bool gyro_bias) {
+  Sim sim;
+  if (!gyro_bias) sim.bias.setZero();
+  sim.Run(6000, seed);
+  for (int k = 1000; k < 6000; ++k)
+    if ((k / 100) % 2 == 0)
+      sim.acc[k] += sim.R_EB[k].transpose() * Eigen::Vector3d(3.0, -2.0, 0.0) *
+                    std::sin(k * sim.dt * 2.0 * std::numbers::pi);
+  return sim;
+}
+
 // BROAD trial 02 (real IMU, optical truth) with the default settings, scored as the benchmark
 // scores. Thresholds: the published Madgwick figures for this trial (1.50 / 1.26 / 0.80°).
 // Issue 17: the accelerometer weighted by motion, σ_tilt inflated by |f_B − f̄_B| (the raw
@@ -419,12 +432,7 @@ TEST(OrientationKf, ResetsWhenTheStateGoesNonFinite) {
 TEST(OrientationKf, MotionWeightedAccelerometerDoesNotBeatTrustingEverySample) {
   EXPECT_EQ(OrientationKfSettings{}.tilt_motion_accel, 0.0);
   const auto ratios = SortedOverSeeds(16, [](int seed) {
-    Sim sim;
-    sim.Run(6000, seed);
-    for (int k = 1000; k < 6000; ++k)
-      if ((k / 100) % 2 == 0)
-        sim.acc[k] += sim.R_EB[k].transpose() * Eigen::Vector3d(3.0, -2.0, 0.0) *
-                      std::sin(k * sim.dt * 2.0 * std::numbers::pi);
+    const Sim sim = LinearlyAccelerated(seed, true);
     OrientationKfSettings s = MatchedSettings(sim);
     s.accel_lowpass_tau = 3.0;
     const double plain = RmsTiltAfter(sim, s, 1000);
@@ -454,13 +462,7 @@ TEST(OrientationKf, ASecondOrderLowPassHelpsOnlyWhereTheBiasIsNotLearnedThroughI
   EXPECT_EQ(OrientationKfSettings{}.accel_lowpass_order, 1);
   for (const bool learn_bias : {false, true}) {
     const auto ratios = SortedOverSeeds(16, [&](int seed) {
-      Sim sim;
-      if (!learn_bias) sim.bias.setZero();
-      sim.Run(6000, seed);
-      for (int k = 1000; k < 6000; ++k)
-        if ((k / 100) % 2 == 0)
-          sim.acc[k] += sim.R_EB[k].transpose() * Eigen::Vector3d(3.0, -2.0, 0.0) *
-                        std::sin(k * sim.dt * 2.0 * std::numbers::pi);
+      const Sim sim = LinearlyAccelerated(seed, learn_bias);
       OrientationKfSettings s = MatchedSettings(sim);
       s.accel_lowpass_tau = 3.0;
       s.estimate_gyro_bias = learn_bias;

@@ -824,6 +824,56 @@ TEST(PositionKf, RefusesAWorldFromEarthThatIsNotARotation) {
   EXPECT_EQ(kf.R_WE(), R_WE);
 }
 
+// A gated position sample re-initialises the position at once when the adaptation has given up
+// on the prediction (λ at accel_noise_max_scale): a prediction whose noise is beyond what the
+// filter may take is no reference by which to call a sample an outlier. Below the cap the same
+// sample is an outlier and is gated. (On BROAD trial 16's shaking, the accelerometer-driven model
+// ran metres off while one sample in a few still passed the gate and kept the count of
+// consecutive rejections from its limit:
+// RcalCli.FuseTheShakingOfTrial16NeverRunsAPositionFilterOff.)
+TEST(PositionKf, AGatedSampleReinitialisesOnceTheAdaptationHasGivenUp) {
+  for (const double cap : {4.0, 1e4}) {
+    PositionKfSettings s = AccelerometerDrivenSettings();
+    s.earth = EarthFrame::kEnu;
+    s.accel_noise_adaptation_tau = 0.1;
+    s.accel_noise_max_scale = cap;
+    PositionKf kf(s);
+    const Eigen::Vector3d p0(0.3, -0.2, 1.1), f_still(0.0, 0.0, kG);
+    // Still for 1 s, then a sample 20 mm off (NIS ~ 50, gated: λ × e^{4.5} ≈ 90, to the cap of 4,
+    // far below 1e4), then a jump of 0.5 m (λ × 90 again before the gate: 4, or 8100 < 1e4).
+    int k = 0;
+    for (; k <= 100; ++k) {
+      ASSERT_TRUE(kf.UpdateAccel(0.01 * k, f_still, Eigen::Matrix3d::Identity()).ok());
+      if (k % 5 == 0) {
+        ASSERT_TRUE(kf.UpdatePosition(0.01 * k, p0).ok());
+      }
+    }
+    k = 105;  // the tracker's next sample, 50 ms on
+    for (int j = 0; j < 1; ++j, k += 5) {
+      ASSERT_TRUE(kf.UpdateAccel(0.01 * k, f_still, Eigen::Matrix3d::Identity()).ok());
+      ASSERT_TRUE(kf.UpdatePosition(0.01 * k, p0 + Eigen::Vector3d(0.02, 0.0, 0.0)).ok());
+    }
+    const double scale = kf.accel_noise_scale();
+    const auto before = kf.counters();
+    const Eigen::Vector3d jump = p0 + Eigen::Vector3d(0.0, 0.5, 0.0);
+    ASSERT_TRUE(kf.UpdateAccel(0.01 * k, f_still, Eigen::Matrix3d::Identity()).ok());
+    ASSERT_TRUE(kf.UpdatePosition(0.01 * k, jump).ok());
+    if (cap == 4.0) {
+      EXPECT_EQ(scale, cap);
+      EXPECT_EQ(kf.counters().reinitialised, before.reinitialised + 1);
+      EXPECT_EQ(kf.counters().position_rejected, before.position_rejected);
+      EXPECT_TRUE(kf.last_position_accepted());
+      EXPECT_LT((kf.p_WM_W() - jump).norm(), 1e-9);
+    } else {
+      EXPECT_LT(scale, cap);
+      EXPECT_EQ(kf.counters().reinitialised, before.reinitialised);
+      EXPECT_EQ(kf.counters().position_rejected, before.position_rejected + 1);
+      EXPECT_FALSE(kf.last_position_accepted());
+      EXPECT_LT((kf.p_WM_W() - p0).norm(), 0.02);
+    }
+  }
+}
+
 TEST(PositionKf, GatesInjectedOutliers) {
   const std::vector<int> outliers = {1000, 1500, 2005, 3000, 3500};
   PositionKf kf;

@@ -414,17 +414,21 @@ void PositionKf::AdaptAccelNoise(double t) {
                                   std::max(1.0, settings_.accel_noise_max_scale));
 }
 
+void PositionKf::InitialiseOn(double t, const Eigen::Vector3d& p_WM_W) {
+  Initialise(t, p_WM_W);
+  rollback_.clear();  // no hypothesis reaches back past a (re-)initialisation
+  last_position_t_ = t;
+  last_position_log_likelihood_ = 0.0;
+  ++counters_.position_samples;
+  last_position_accepted_ = true;
+  last_position_nis_ = 0.0;
+  KeepRollbackPoint(p_WM_W);
+}
+
 Status PositionKf::UpdatePosition(double t, const Eigen::Vector3d& p_WM_W) {
   if (auto s = Check(t, p_WM_W, "position p_WM_W"); !s) return s;
   if (!initialized_) {
-    Initialise(t, p_WM_W);
-    rollback_.clear();  // no hypothesis reaches back past a (re-)initialisation
-    last_position_t_ = t;
-    last_position_log_likelihood_ = 0.0;
-    ++counters_.position_samples;
-    last_position_accepted_ = true;
-    last_position_nis_ = 0.0;
-    KeepRollbackPoint(p_WM_W);
+    InitialiseOn(t, p_WM_W);
     return Status::Ok();
   }
   PredictTo(t);
@@ -434,6 +438,16 @@ Status PositionKf::UpdatePosition(double t, const Eigen::Vector3d& p_WM_W) {
   last_position_log_likelihood_ = in.log_likelihood;
   AdaptAccelNoise(t);
   if (settings_.position_gate_chi2 > 0.0 && last_position_nis_ > settings_.position_gate_chi2) {
+    if (accel_noise_scale_ >= settings_.accel_noise_max_scale) {
+      // The adaptation has given up on the prediction (λ at its cap: the noise the innovations
+      // ask for is beyond what it may take), so it is no reference by which to call a sample an
+      // outlier: the sample re-initialises the position at once. (In violent shaking the
+      // accelerometer-driven model ran metres off while one sample in four still passed the gate,
+      // which kept the count of consecutive rejections from ever reaching its limit.)
+      ++counters_.reinitialised;
+      InitialiseOn(t, p_WM_W);
+      return Status::Ok();
+    }
     ++counters_.position_rejected;
     last_position_accepted_ = false;
     KeepRollbackPoint(p_WM_W);

@@ -83,7 +83,12 @@
 // (λ × e^{9a} at most). Mehra's covariance matching (IEEE TAC 1972) in the form of a single
 // scale, as fading-memory filters use it. Update as
 // NOTES.md Eqs. 15–17, Joseph form. The position sensor is χ²-gated: NIS = yᵀS⁻¹y >
-// position_gate_chi2 rejects it (counted); so is the accelerometer when accel_gate_chi2 > 0 (its
+// position_gate_chi2 rejects it (counted), unless λ is at its cap: the adaptation has then given
+// up on the prediction, which is no reference by which to call a sample an outlier, so the sample
+// re-initialises the position (Counters::reinitialised; in BROAD trial 16's shaking the
+// accelerometer-driven model ran metres off while one sample in a few still passed the gate and
+// kept max_consecutive_rejections from being reached). So is the accelerometer when
+// accel_gate_chi2 > 0 (its
 // innovation against the predicted acceleration: a tap or shock the motion cannot have, which
 // the adaptive noise would otherwise take in, is skipped). Bad input and out-of-order time are
 // refused with a Status; the state is unchanged. A state that goes non-finite anyway is never kept:
@@ -236,7 +241,7 @@ class PositionKf {
     std::int64_t position_rejected = 0;  ///< position samples rejected by the χ² gate
     std::int64_t accel_rejected = 0;     ///< accelerometer samples rejected by its χ² gate
     std::int64_t input_rejected = 0;     ///< refused calls (bad input, time order)
-    std::int64_t reinitialised = 0;      ///< re-initialisations after a run of rejections
+    std::int64_t reinitialised = 0;      ///< re-initialisations (rejections, or λ at its cap)
     std::int64_t accel_rollbacks = 0;    ///< intervals whose accelerometer was taken back
     std::int64_t accel_rolled_back = 0;  ///< accelerometer samples taken back in them
     std::int64_t resets = 0;             ///< state went non-finite: reset (kept by Reset)
@@ -338,6 +343,8 @@ class PositionKf {
   // After an update: Ok, or the state went non-finite and the filter was reset (an Error).
   Status GuardState(double t);
   void Initialise(double t, const Eigen::Vector3d& p);
+  // Initialise on a position sample, which counts as taken (no rollback reaches before it).
+  void InitialiseOn(double t, const Eigen::Vector3d& p_WM_W);
   // The adaptive accelerometer noise's step at a position sample (header comment).
   void AdaptAccelNoise(double t);
 
