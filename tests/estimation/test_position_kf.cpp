@@ -872,6 +872,24 @@ TEST(PositionKf, AGatedSampleReinitialisesOnceTheAdaptationHasGivenUp) {
       EXPECT_LT((kf.p_WM_W() - p0).norm(), 0.02);
     }
   }
+  // Without the adaptation (the paper's constant σ) there is no cap to reach, whatever it says:
+  // a far sample is gated.
+  PositionKfSettings s = AccelerometerDrivenSettings();
+  s.earth = EarthFrame::kEnu;
+  s.accel_noise_adaptation_tau = 0.0;
+  s.accel_noise_max_scale = 1.0;
+  PositionKf kf(s);
+  const Eigen::Vector3d p0(0.3, -0.2, 1.1), f_still(0.0, 0.0, kG);
+  for (int k = 0; k <= 100; ++k) {
+    ASSERT_TRUE(kf.UpdateAccel(0.01 * k, f_still, Eigen::Matrix3d::Identity()).ok());
+    if (k % 5 == 0) {
+      ASSERT_TRUE(
+          kf.UpdatePosition(0.01 * k, k < 100 ? p0 : Eigen::Vector3d(p0.x(), 0.3, 1.1)).ok());
+    }
+  }
+  EXPECT_EQ(kf.counters().reinitialised, 0);
+  EXPECT_EQ(kf.counters().position_rejected, 1);
+  EXPECT_LT((kf.p_WM_W() - p0).norm(), 0.02);
 }
 
 TEST(PositionKf, GatesInjectedOutliers) {

@@ -438,7 +438,8 @@ Status PositionKf::UpdatePosition(double t, const Eigen::Vector3d& p_WM_W) {
   last_position_log_likelihood_ = in.log_likelihood;
   AdaptAccelNoise(t);
   if (settings_.position_gate_chi2 > 0.0 && last_position_nis_ > settings_.position_gate_chi2) {
-    if (accel_noise_scale_ >= settings_.accel_noise_max_scale) {
+    if (settings_.accel_noise_adaptation_tau > 0.0 && settings_.accel_noise_max_scale > 1.0 &&
+        accel_noise_scale_ >= settings_.accel_noise_max_scale) {
       // The adaptation has given up on the prediction (λ at its cap: the noise the innovations
       // ask for is beyond what it may take), so it is no reference by which to call a sample an
       // outlier: the sample re-initialises the position at once. (In violent shaking the

@@ -83,9 +83,9 @@
 // (λ × e^{9a} at most). Mehra's covariance matching (IEEE TAC 1972) in the form of a single
 // scale, as fading-memory filters use it. Update as
 // NOTES.md Eqs. 15–17, Joseph form. The position sensor is χ²-gated: NIS = yᵀS⁻¹y >
-// position_gate_chi2 rejects it (counted), unless λ is at its cap: the adaptation has then given
-// up on the prediction, which is no reference by which to call a sample an outlier, so the sample
-// re-initialises the position (Counters::reinitialised; in BROAD trial 16's shaking the
+// position_gate_chi2 rejects it (counted), unless the adaptation is on and λ at its cap: having
+// given up on the prediction, it has no reference by which to call a sample an outlier, so the
+// sample re-initialises the position (Counters::reinitialised; in BROAD trial 16's shaking the
 // accelerometer-driven model ran metres off while one sample in a few still passed the gate and
 // kept max_consecutive_rejections from being reached). So is the accelerometer when
 // accel_gate_chi2 > 0 (its
