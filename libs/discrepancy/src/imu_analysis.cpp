@@ -748,9 +748,8 @@ ImuCandidate TestAccelMotion(const Context& c, const std::vector<Eigen::Vector4d
 // ----- time_offset -----
 
 // A lag's test, its z already in `cand`: significant beyond the two-sided critical value at α_c
-// and at least min_periods sample periods; a measurable lag below that is said so in the note.
-// Significant when z is beyond the critical value and `large`; a measurable lag that is not
-// large says why (`why_small`) in the candidate's note.
+// and `large` (each test's own criterion of mattering); a measurable lag that is not large says
+// why (`why_small`) in the candidate's note.
 void JudgeLag(double alpha_c, bool large, const std::string& why_small, ImuCandidate& cand) {
   cand.critical = NormalQuantileUpper(alpha_c / 2.0);
   cand.significant = cand.statistic > cand.critical && large;
@@ -783,8 +782,8 @@ double LagSigma(const Context& c, const std::vector<Eigen::Vector3d>& w_truth,
 
 // time_offset (truth present): the lag between gyro and truth rate over the motion samples, and
 // on each half of them (for the cross-fitted gain).
-TimeOffsetTest TestTimeOffset(const Context& c, const std::vector<Eigen::Vector4d>& q_base,
-                              double alpha_c, bool has_truth) {
+TimeOffsetTest TestTimeOffset(const Context& c, const OrientationScore& base_score, double alpha_c,
+                              bool has_truth) {
   TimeOffsetTest r;
   r.split = c.n;
   ImuCandidate& to = r.candidate;
@@ -824,7 +823,7 @@ TimeOffsetTest TestTimeOffset(const Context& c, const std::vector<Eigen::Vector4
   Rms w_rms;
   for (int k : motion_idx) w_rms.Add(w_truth[k].norm());
   const double e_tau = std::abs(tau) * w_rms.value();
-  const double e_base = ScoreAgainstTruth(c.d, q_base).total.value();
+  const double e_base = base_score.total.value();
   const double share = e_tau / e_base;
   const double expected_gain =
       std::isfinite(share) ? (share >= 1.0 ? 1.0 : 1.0 - std::sqrt(1.0 - share * share)) : 0.0;
@@ -1081,8 +1080,7 @@ void MeasureCandidateGains(const Context& c, const std::vector<Eigen::Vector4d>&
   const auto& data = c.d;
   ImuCandidate &gb = a.candidates[0], &md = a.candidates[1], &am = a.candidates[2],
                &to = a.candidates[3];
-  const OrientationScore base_score = ScoreAgainstTruth(data, q_base);
-  gb.before = md.before = am.before = to.before = base_score;
+  gb.before = md.before = am.before = to.before = a.base_score;
   gb.after = ScoreAgainstTruth(data, filters.Run(true, false, false));
   const auto& q_mag = filters.Run(false, true, false);
   md.after = ScoreAgainstTruth(data, q_mag);
@@ -1132,7 +1130,6 @@ void MeasureSelectionGain(const Context& c, const std::vector<Eigen::Vector4d>& 
   const bool sb = a.candidates[0].named(), sm = a.candidates[1].named(),
              sa = a.candidates[2].named(), st = a.candidates[3].named();
   const auto& q_ext = filters.Run(sb, sm, sa);
-  a.base_score = ScoreAgainstTruth(c.d, q_base);
   a.extended_score = st ? ScoreShifted(c, q_ext, t) : ScoreAgainstTruth(c.d, q_ext);
   a.time_offset_s = st ? a.candidates[3].values[0].value : 0.0;
   StoreErrorSeries(c, q_base, q_ext, a);
@@ -1203,7 +1200,9 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
   const ImuCandidate gb = TestGyroBias(c, alpha_c, a);
   const ImuCandidate md = TestMagneticDisturbance(c, q_base, alpha_c, a);
   const ImuCandidate am = TestAccelMotion(c, q_base, alpha_c, a);
-  const TimeOffsetTest to = TestTimeOffset(c, q_base, alpha_c, a.has_truth);
+  // The base filter against the truth (movement samples; empty without truth), scored once.
+  a.base_score = ScoreAgainstTruth(data, q_base);
+  const TimeOffsetTest to = TestTimeOffset(c, a.base_score, alpha_c, a.has_truth);
   const ExtensionSettings ext{gb.values.back().value, a.mag_ref_norm_uT, a.mag_ref_dip_rad,
                               a.mag_gate_norm_uT / a.mag_ref_norm_uT, a.mag_gate_dip_rad};
   ExtendedFilters filters(data, base_f, ext);
