@@ -283,9 +283,10 @@ int main(int argc, char** argv) {
               : std::string();
       spdlog::info(
           "{}position samples refused by the χ² gate {}, accelerometer samples {}; accelerometer "
-          "taken back {} times ({} samples)",
+          "taken back {} times ({} samples), refused samples reinstated {} times ({} samples)",
           which, f.counters().position_rejected, f.counters().accel_rejected,
-          f.counters().accel_rollbacks, f.counters().accel_rolled_back);
+          f.counters().accel_rollbacks, f.counters().accel_rolled_back,
+          f.counters().accel_reinstatements, f.counters().accel_reinstated);
       if (bank.models[i].accel_bias_walk > 0.0) {
         const Eigen::Vector3d b_W = f.accel_bias_W();
         spdlog::info(

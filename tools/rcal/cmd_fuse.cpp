@@ -286,12 +286,16 @@ int RunFuse(const FuseOptions& opt) {
   j["position_paper_model"] = {{"rmse_m", paper_all.value()},
                                {"rmse_movement_m", paper_moving.value()},
                                {"rejected", pkf.counters().position_rejected},
-                               {"accelerometer_rejected", pkf.counters().accel_rejected}};
+                               {"accelerometer_rejected", pkf.counters().accel_rejected},
+                               {"accelerometer_rolled_back", pkf.counters().accel_rolled_back},
+                               {"accelerometer_reinstated", pkf.counters().accel_reinstated}};
   j["position_accelerometer_driven"] = {
       {"rmse_m", driven_all.value()},
       {"rmse_movement_m", driven_moving.value()},
       {"rejected", driven.counters().position_rejected},
       {"accelerometer_rejected", driven.counters().accel_rejected},
+      {"accelerometer_rolled_back", driven.counters().accel_rolled_back},
+      {"accelerometer_reinstated", driven.counters().accel_reinstated},
       {"accel_noise_adaptation_tau_s", driven_settings.accel_noise_adaptation_tau},
       {"mean_weight", pos_all.n > 0 ? driven_weight / static_cast<double>(pos_all.n) : 0.0}};
   j["position_bank_evidence_tau_s"] = bank_settings.evidence_tau;

@@ -218,6 +218,12 @@ void PositionKf::ApplyPosition(VecN& x, MatN& P, const PositionInnovation& in) c
   P = 0.5 * (P + P.transpose());
 }
 
+int PositionKf::kept_accel_samples() const {
+  int n = 0;
+  for (const RollbackPoint& point : rollback_) n += static_cast<int>(point.accel.size());
+  return n;
+}
+
 double PositionKf::RollbackReach() const {
   // A sample exactly one span back is within it whatever the rounding of its time stamp.
   return settings_.accel_rollback_span * (1.0 + 1e-9) + 1e-9;
@@ -225,7 +231,7 @@ double PositionKf::RollbackReach() const {
 
 void PositionKf::KeepRollbackPoint(const Eigen::Vector3d& p) {
   if (!(settings_.accel_rollback_span > 0.0)) return;
-  rollback_.push_back({t_, p, x_, P_, 0});
+  rollback_.push_back({t_, p, x_, P_, {}});
   // Points older than the span can start no hypothesis once a newer one is there.
   while (rollback_.size() > 1 && (static_cast<int>(rollback_.size()) > kMaxRollbackPoints ||
                                   t_ - rollback_.front().t > RollbackReach()))
@@ -241,54 +247,79 @@ void PositionKf::RollBackAccelerometer(double t, const Eigen::Vector3d& p, Posit
   double best_ll = in.log_likelihood + 0.5 * settings_.position_gate_chi2;
   if (best_ll >= ll_bound) return;
   const int points = static_cast<int>(rollback_.size());
-  int best = -1, taken_back = 0;
-  std::vector<RollbackPoint> best_run;
+  // The best hypothesis: the point it starts from, whether it reinstates the refused samples
+  // (else it takes back the applied ones), how many, and its re-run (the state after each point).
+  int best = -1, best_count = 0;
+  bool best_reinstates = false;
+  std::vector<std::pair<VecN, MatN>> best_states, states;
   VecN best_x;
   MatN best_P;
-  int accel = 0;  // accelerometer samples after point i
-  // The accelerometer-driven model's hypotheses hold A (header comment).
+  int applied = 0, refused = 0;  // accelerometer samples after point i
+  // The accelerometer-driven model's take-back hypotheses hold A (header comment).
   const bool hold = settings_.motion_model == MotionModel::kAccelerometerDriven;
   for (int i = points - 1; i >= 0; --i) {
     if (i < points - 1 && t - rollback_[i].t > RollbackReach()) break;
-    accel += rollback_[i].accel_after;
-    if (accel == 0) continue;  // nothing to take back
-    // From point i on, the motion model alone; the later samples re-applied behind the gate.
-    std::vector<RollbackPoint> run(rollback_.begin() + i, rollback_.end());
-    VecN x = run[0].x;
-    MatN P = run[0].P;
-    double t_x = run[0].t;
-    for (size_t m = 1; m < run.size(); ++m) {
-      if (run[m].t > t_x) Predict(x, P, run[m].t - t_x, hold);
-      t_x = run[m].t;
-      const PositionInnovation im = Innovation(x, P, run[m].p_WM_W);
-      if (!(settings_.position_gate_chi2 > 0.0 && im.nis > settings_.position_gate_chi2))
-        ApplyPosition(x, P, im);
-      run[m].x = x;
-      run[m].P = P;
-      run[m].accel_after = 0;
-    }
-    if (t > t_x) Predict(x, P, t - t_x, hold);
-    const PositionInnovation alt = Innovation(x, P, p);
-    if (alt.log_likelihood > best_ll) {
-      best_ll = alt.log_likelihood;
-      best = i;
-      taken_back = accel;
-      in = alt;
-      run[0].accel_after = 0;
-      best_run = std::move(run);
-      best_x = x;
-      best_P = P;
+    for (const AccelSample& a : rollback_[i].accel) ++(a.applied ? applied : refused);
+    applied += rollback_[i].applied_not_kept;
+    for (const bool reinstate : {false, true}) {
+      const int count = reinstate ? refused : applied;
+      // Nothing to take back, or to reinstate; a re-run needs every sample since (only the
+      // newest point can have more than were kept).
+      if (count == 0 || (reinstate && !rollback_.back().complete)) continue;
+      // From point i on: the motion model alone, or with every accelerometer sample; the later
+      // position samples re-applied behind the gate.
+      const bool hold_here = hold && !reinstate;
+      VecN x = rollback_[i].x;
+      MatN P = rollback_[i].P;
+      double t_x = rollback_[i].t;
+      states.clear();
+      for (int m = i; m < points; ++m) {
+        if (m > i) {
+          if (rollback_[m].t > t_x) Predict(x, P, rollback_[m].t - t_x, hold_here);
+          t_x = rollback_[m].t;
+          const PositionInnovation im = Innovation(x, P, rollback_[m].p_WM_W);
+          if (!(im.nis > settings_.position_gate_chi2)) ApplyPosition(x, P, im);
+        }
+        states.emplace_back(x, P);
+        if (!reinstate) continue;
+        for (const AccelSample& a : rollback_[m].accel) {
+          if (a.t > t_x) Predict(x, P, a.t - t_x);
+          t_x = std::max(t_x, a.t);
+          ApplyAccel(x, P, a);
+        }
+      }
+      if (t > t_x) Predict(x, P, t - t_x, hold_here);
+      const PositionInnovation alt = Innovation(x, P, p);
+      if (alt.log_likelihood > best_ll) {
+        best_ll = alt.log_likelihood;
+        best = i;
+        best_count = count;
+        best_reinstates = reinstate;
+        in = alt;
+        best_states.swap(states);
+        best_x = x;
+        best_P = P;
+      }
     }
   }
   if (best < 0) return;
   x_ = best_x;
   P_ = best_P;
-  // The kept points are the re-run's: a later rollback starts from states without the
-  // accelerometer taken back.
-  rollback_.resize(best);
-  rollback_.insert(rollback_.end(), best_run.begin(), best_run.end());
-  ++counters_.accel_rollbacks;
-  counters_.accel_rolled_back += taken_back;
+  // The kept points are the re-run's: a later hypothesis starts from states with the
+  // accelerometer as this one took it, and may reverse it.
+  for (int m = best; m < points; ++m) {
+    rollback_[m].x = best_states[m - best].first;
+    rollback_[m].P = best_states[m - best].second;
+    for (AccelSample& a : rollback_[m].accel) a.applied = best_reinstates;
+    rollback_[m].applied_not_kept = 0;  // taken back with the kept ones (a take-back)
+  }
+  if (best_reinstates) {
+    ++counters_.accel_reinstatements;
+    counters_.accel_reinstated += best_count;
+  } else {
+    ++counters_.accel_rollbacks;
+    counters_.accel_rolled_back += best_count;
+  }
 }
 
 void PositionKf::Initialise(double t, const Eigen::Vector3d& p) {
@@ -357,36 +388,54 @@ Status PositionKf::UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen
   // h = A − R_WB M r_B + b_W, R_WB = R_WE R_EB, M = [α]× + [ω]×² (header comment).
   const Eigen::Matrix3d W = geometry::Skew(omega_B);
   const Eigen::Matrix3d M = geometry::Skew(alpha_B) + W * W;
-  Eigen::Matrix<double, 3, kN> H = Eigen::Matrix<double, 3, kN>::Zero();
-  for (int i = 0; i < 3; ++i) H(i, IA(i)) = 1.0;
-  H.middleCols<3>(kLever) = -(R_WE_ * R_EB) * M;
-  if (settings_.accel_bias_walk > 0.0) H.middleCols<3>(kBias).setIdentity();
+  AccelSample a;
+  a.t = t;
+  a.z = z;
+  for (int i = 0; i < 3; ++i) a.H(i, IA(i)) = 1.0;
+  a.H.middleCols<3>(kLever) = -(R_WE_ * R_EB) * M;
+  if (settings_.accel_bias_walk > 0.0) a.H.middleCols<3>(kBias).setIdentity();
   // σ² + (σ_rel |a_W|)², times the adaptive λ (header comment).
   const double s_rel = settings_.accel_relative_sigma * z.norm();
   const double extrapolation = (1.0 + kappa) * (1.0 + kappa) + kappa * kappa;  // 1 when δ = 0
-  Eigen::Matrix3d R = accel_noise_scale_ * extrapolation *
-                      (settings_.accel_sigma * settings_.accel_sigma + s_rel * s_rel) *
-                      Eigen::Matrix3d::Identity();
+  a.R = accel_noise_scale_ * extrapolation *
+        (settings_.accel_sigma * settings_.accel_sigma + s_rel * s_rel) *
+        Eigen::Matrix3d::Identity();
   if (!R_WE_covariance_.isZero()) {
     // The frame's uncertainty (SetWorldFromEarth): ∂(Exp(δφ) z)/∂δφ = −[z]×.
     const Eigen::Matrix3d Z = geometry::Skew(z);
-    R += Z * R_WE_covariance_ * Z.transpose();
+    a.R += Z * R_WE_covariance_ * Z.transpose();
   }
-  const Eigen::Vector3d y = z - H * x_;
-  const Eigen::Matrix3d S = H * P_ * H.transpose() + R;
-  const Eigen::Matrix3d S_inv = S.inverse();
-  if (settings_.accel_gate_chi2 > 0.0 && !(y.dot(S_inv * y) <= settings_.accel_gate_chi2)) {
+  const Eigen::Vector3d y = z - a.H * x_;
+  const Eigen::Matrix3d S = a.H * P_ * a.H.transpose() + a.R;
+  a.applied =
+      !(settings_.accel_gate_chi2 > 0.0 && !(y.dot(S.inverse() * y) <= settings_.accel_gate_chi2));
+  // Kept, applied or not, for the rollback's hypotheses (header comment).
+  if (!rollback_.empty()) {
+    RollbackPoint& last = rollback_.back();
+    if (static_cast<int>(last.accel.size()) < kMaxKeptAccelSamples) {
+      last.accel.push_back(a);
+    } else {
+      last.complete = false;
+      last.applied_not_kept += a.applied ? 1 : 0;
+    }
+  }
+  if (!a.applied) {
     ++counters_.accel_rejected;
     has_last_z_ = false;   // nor is the next sample extrapolated along a refused one
     return GuardState(t);  // the prediction to t stands
   }
-  const Eigen::Matrix<double, kN, 3> K = P_ * H.transpose() * S_inv;
-  x_ += K * y;
-  const MatN IKH = MatN::Identity() - K * H;
-  P_ = IKH * P_ * IKH.transpose() + K * R * K.transpose();
+  ApplyAccel(x_, P_, a);
   ++counters_.accel_samples;
-  if (!rollback_.empty()) ++rollback_.back().accel_after;
   return GuardState(t);
+}
+
+void PositionKf::ApplyAccel(VecN& x, MatN& P, const AccelSample& a) const {
+  const Eigen::Vector3d y = a.z - a.H * x;
+  const Eigen::Matrix3d S = a.H * P * a.H.transpose() + a.R;
+  const Eigen::Matrix<double, kN, 3> K = P * a.H.transpose() * S.inverse();
+  x += K * y;
+  const MatN IKH = MatN::Identity() - K * a.H;
+  P = IKH * P * IKH.transpose() + K * a.R * K.transpose();
 }
 
 Status PositionKf::GuardState(double t) {
@@ -414,8 +463,19 @@ void PositionKf::AdaptAccelNoise(double t) {
                                   std::max(1.0, settings_.accel_noise_max_scale));
 }
 
-void PositionKf::InitialiseOn(double t, const Eigen::Vector3d& p_WM_W) {
+void PositionKf::InitialiseOn(double t, const Eigen::Vector3d& p_WM_W,
+                              const std::optional<PositionSample>& previous) {
   Initialise(t, p_WM_W);
+  if (previous && t > previous->t) {
+    // The mean velocity over the interval, as uncertain as it is large (header comment).
+    const double dt = t - previous->t;
+    const Eigen::Vector3d v_W = (p_WM_W - previous->p_WM_W) / dt;
+    const double s_p = settings_.position_sigma, s_v0 = settings_.initial_velocity_sigma;
+    for (int i = 0; i < 3; ++i) {
+      x_(IV(i)) = v_W(i);
+      P_(IV(i), IV(i)) = 2.0 * s_p * s_p / (dt * dt) + s_v0 * s_v0 + v_W(i) * v_W(i);
+    }
+  }
   rollback_.clear();  // no hypothesis reaches back past a (re-)initialisation
   last_position_t_ = t;
   last_position_log_likelihood_ = 0.0;
@@ -446,7 +506,10 @@ Status PositionKf::UpdatePosition(double t, const Eigen::Vector3d& p_WM_W) {
       // accelerometer-driven model ran metres off while one sample in four still passed the gate,
       // which kept the count of consecutive rejections from ever reaching its limit.)
       ++counters_.reinitialised;
-      InitialiseOn(t, p_WM_W);
+      std::optional<PositionSample> previous;
+      if (!rollback_.empty())
+        previous = PositionSample{rollback_.back().t, rollback_.back().p_WM_W};
+      InitialiseOn(t, p_WM_W, previous);
       return Status::Ok();
     }
     ++counters_.position_rejected;

@@ -87,8 +87,13 @@
 // given up on the prediction, it has no reference by which to call a sample an outlier, so the
 // sample re-initialises the position (Counters::reinitialised; in BROAD trial 16's shaking the
 // accelerometer-driven model ran metres off while one sample in a few still passed the gate and
-// kept max_consecutive_rejections from being reached). So is the accelerometer when
-// accel_gate_chi2 > 0 (its
+// kept max_consecutive_rejections from being reached). Its velocity then starts at the mean v̄
+// over the interval from the position sample before, σ² = 2 σ_p² / Δt² + initial_velocity_sigma²
+// + v̄² per axis: the motion that made the adaptation give up is seldom at rest (started at rest in
+// trial 16's shaking, the marker at up to 7 m/s, the re-initialised filter was 20–40 mm off 10 ms
+// later, every time), and v̄ is as uncertain as it is large (a jump of the marker, which is no
+// motion, gives as large a mean: the next sample then outweighs it).
+// So is the accelerometer gated when accel_gate_chi2 > 0 (its
 // innovation against the predicted acceleration: a tap or shock the motion cannot have, which
 // the adaptive noise would otherwise take in, is skipped). Bad input and out-of-order time are
 // refused with a Status; the state is unchanged. A state that goes non-finite anyway is never kept:
@@ -117,9 +122,20 @@
 // tapping trial: that model alone 315 mm with the trapezoid, 6.2 mm with A held; the white-jerk
 // model, whose jerk noise is its motion model, re-runs with it: held, 3.5 → 4.9 mm). A position
 // outlier is no reason to roll back: without the accelerometer the prediction explains it no
-// better. Cost: no hypothesis can make a sample likelier than N(0; 0, R) (NIS 0, S = R), so while
+// better.
+// The mirror case: the onset of a real, violent motion (BROAD's fast translation B: a shaking
+// from 20 to 94 m/s² within 40 ms) looks to the accelerometer's gate like a tap, and the refused
+// samples' integral, metres per second the tool did have, is missing: both bank models ran
+// 20–130 mm off for 0.15 s. So the hypotheses also include that the accelerometer was right over
+// the last j intervals, its refused samples with the others: the state after the position sample
+// j back, run to now with every accelerometer sample since applied, ungated (the position samples
+// re-applied behind the gate). Taken on the same test, its refused samples are counted as
+// reinstated (Counters), and a later rollback may take them back as any other. A tap is not
+// reinstated: its integral is a move the positions did not make.
+// Cost: no hypothesis can make a sample likelier than N(0; 0, R) (NIS 0, S = R), so while
 // the sample is within the test's margin of that bound, none is tried: every sample of a calm run.
-// Otherwise up to kMaxRollbackPoints re-runs of a few predictions and 3×3 solves.
+// Otherwise up to 2 kMaxRollbackPoints re-runs of a few predictions, accelerometer updates and
+// 3×3 solves.
 // The accelerometer's lag (beyond the paper; accel_delay δ): a sample stamped t is the specific
 // force of t − δ (the sensor's internal low-pass; the magnetometer's is OrientationKf's
 // mag_delay). Taken as stamped, the filter's acceleration is δ behind the tool's, an error of the
@@ -137,6 +153,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 #include "rcal/estimation/fqa.hpp"
@@ -154,6 +171,12 @@ Eigen::Matrix<double, 9, 1> PaperGammaPos(double g, double t);
 /// Most intervals between position samples whose accelerometer one sample can take back (the
 /// bound on accel_rollback_span's cost at high position rates).
 inline constexpr int kMaxRollbackPoints = 8;
+
+/// Most accelerometer samples kept after one position sample for the rollback's hypotheses (the
+/// bound on their memory, about 0.5 MB a point, when the position sensor stops while the IMU
+/// streams). Beyond it the samples are counted but not kept, and no refused sample is reinstated
+/// until the next position sample: such a gap is longer than any span a rollback reaches.
+inline constexpr int kMaxKeptAccelSamples = 1024;
 
 /// The longest step between accelerometer samples over which accel_delay extrapolates [s].
 inline constexpr double kMaxAccelExtrapolationStep = 0.1;
@@ -236,15 +259,18 @@ PositionKfSettings AccelerometerDrivenSettings();
 class PositionKf {
  public:
   struct Counters {
-    std::int64_t accel_samples = 0;      ///< accelerometer updates applied
-    std::int64_t position_samples = 0;   ///< position samples accepted
-    std::int64_t position_rejected = 0;  ///< position samples rejected by the χ² gate
-    std::int64_t accel_rejected = 0;     ///< accelerometer samples rejected by its χ² gate
-    std::int64_t input_rejected = 0;     ///< refused calls (bad input, time order)
-    std::int64_t reinitialised = 0;      ///< re-initialisations (rejections, or λ at its cap)
-    std::int64_t accel_rollbacks = 0;    ///< intervals whose accelerometer was taken back
-    std::int64_t accel_rolled_back = 0;  ///< accelerometer samples taken back in them
-    std::int64_t resets = 0;             ///< state went non-finite: reset (kept by Reset)
+    std::int64_t accel_samples = 0;         ///< accelerometer updates applied
+    std::int64_t position_samples = 0;      ///< position samples accepted
+    std::int64_t position_rejected = 0;     ///< position samples rejected by the χ² gate
+    std::int64_t accel_rejected = 0;        ///< accelerometer samples rejected by its χ² gate
+    std::int64_t input_rejected = 0;        ///< refused calls (bad input, time order)
+    std::int64_t reinitialised = 0;         ///< re-initialisations (rejections, or λ at its cap)
+    std::int64_t accel_rollbacks = 0;       ///< intervals whose accelerometer was taken back
+    std::int64_t accel_rolled_back = 0;     ///< accelerometer samples taken back in them
+    std::int64_t accel_reinstatements = 0;  ///< times refused accelerometer samples were
+                                            ///< reinstated (header comment)
+    std::int64_t accel_reinstated = 0;      ///< refused accelerometer samples reinstated
+    std::int64_t resets = 0;                ///< state went non-finite: reset (kept by Reset)
   };
 
   explicit PositionKf(const PositionKfSettings& settings = {});
@@ -305,6 +331,9 @@ class PositionKf {
   /// adaptation is off or the innovations are as predicted).
   double accel_noise_scale() const { return accel_noise_scale_; }
   bool last_position_accepted() const { return last_position_accepted_; }
+  /// Accelerometer samples kept for the rollback's hypotheses [-]: those since the oldest position
+  /// sample a rollback may reach, at most kMaxKeptAccelSamples after each.
+  int kept_accel_samples() const;
   const Counters& counters() const { return counters_; }
 
   /// World-frame acceleration a_W = R_WE (R_EB f_B − g·up_E) [m/s²] (what the accelerometer
@@ -336,15 +365,33 @@ class PositionKf {
   void ApplyPosition(VecN& x, MatN& P, const PositionInnovation& in) const;
   // After a position sample p at t_: the state the next ones may roll back to.
   void KeepRollbackPoint(const Eigen::Vector3d& p);
-  // The accelerometer of the last intervals taken back when the position sample p at t shows it
-  // wrong (header comment); `in` is the sample's innovation, replaced when rolled back.
+  // The accelerometer's measurement as UpdateAccel built it, kept for the rollback's hypotheses.
+  struct AccelSample {
+    double t = 0.0;
+    Eigen::Vector3d z = Eigen::Vector3d::Zero();
+    Eigen::Matrix<double, 3, kN> H = Eigen::Matrix<double, 3, kN>::Zero();
+    Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+    bool applied = false;  // false: refused by the gate, or taken back
+  };
+  // The accelerometer update of (x, P) with one sample, Joseph form.
+  void ApplyAccel(VecN& x, MatN& P, const AccelSample& a) const;
+  // The accelerometer of the last intervals taken back, or its refused samples reinstated, when
+  // the position sample p at t shows it wrong (header comment); `in` is the sample's innovation,
+  // replaced when a hypothesis is taken.
   void RollBackAccelerometer(double t, const Eigen::Vector3d& p, PositionInnovation& in);
   Status Check(double t, const Eigen::Vector3d& v, const char* name);
   // After an update: Ok, or the state went non-finite and the filter was reset (an Error).
   Status GuardState(double t);
   void Initialise(double t, const Eigen::Vector3d& p);
   // Initialise on a position sample, which counts as taken (no rollback reaches before it).
-  void InitialiseOn(double t, const Eigen::Vector3d& p_WM_W);
+  // With `previous` (the position sample before, re-initialising in motion), the velocity starts
+  // at the mean over that interval (header comment).
+  struct PositionSample {
+    double t = 0.0;
+    Eigen::Vector3d p_WM_W = Eigen::Vector3d::Zero();
+  };
+  void InitialiseOn(double t, const Eigen::Vector3d& p_WM_W,
+                    const std::optional<PositionSample>& previous = std::nullopt);
   // The adaptive accelerometer noise's step at a position sample (header comment).
   void AdaptAccelNoise(double t);
 
@@ -370,13 +417,15 @@ class PositionKf {
   double last_z_t_ = 0.0;
   Eigen::Vector3d last_omega_B_ = Eigen::Vector3d::Zero();
   // The states right after the last position samples, newest last, with the sample each took
-  // and the accelerometer samples applied after it (accel_rollback_intervals).
+  // and the accelerometer samples that came after it, applied or not (accel_rollback_span).
   struct RollbackPoint {
     double t = 0.0;
     Eigen::Vector3d p_WM_W = Eigen::Vector3d::Zero();
     VecN x = VecN::Zero();
     MatN P = MatN::Identity();
-    int accel_after = 0;
+    std::vector<AccelSample> accel;  // at most kMaxKeptAccelSamples
+    int applied_not_kept = 0;        // applied samples beyond them
+    bool complete = true;            // every sample after it kept
   };
   std::vector<RollbackPoint> rollback_;
 };
