@@ -470,9 +470,7 @@ WanderRun SimulateWanderingOrientation(std::uint64_t seed, const PositionKfSetti
 // the tool closer than the tracker alone between the tracker's samples, consistently, and its
 // bias follows the truth's; the paper's filter (white jerk, the error counted as white noise) is
 // worse than the tracker; the accelerometer-driven filter without the bias state has nothing to
-// take the error and is worse than the tracker too (the rollback, choosing at each position
-// sample between its accelerometer and its motion model, keeps it from running off: 2.25 mm with
-// the take-back alone, 1.27 mm since taken-back samples may be reinstated).
+// take the error and runs off.
 TEST(PositionKf, TheBiasStateTakesTheOrientationsError) {
   PositionKfSettings paper;
   paper.earth = EarthFrame::kEnu;
@@ -510,8 +508,7 @@ TEST(PositionKf, TheBiasStateTakesTheOrientationsError) {
   EXPECT_LT(d.rmse, tracker);
   EXPECT_LT(d.rmse, 0.75 * p.rmse);
   EXPECT_GT(p.rmse, tracker);
-  EXPECT_GT(nb.rmse, 1.2 * tracker);
-  EXPECT_LT(d.rmse, 0.75 * nb.rmse);
+  EXPECT_GT(nb.rmse, 2.0 * tracker);
   EXPECT_LT(d.rmse, 0.95 * nba.rmse);
   EXPECT_GT(d.nees, 1.5);
   EXPECT_LT(d.nees, 4.5);

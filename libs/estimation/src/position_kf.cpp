@@ -254,18 +254,26 @@ void PositionKf::RollBackAccelerometer(double t, const Eigen::Vector3d& p, Posit
   std::vector<std::pair<VecN, MatN>> best_states, states;
   VecN best_x;
   MatN best_P;
-  int applied = 0, refused = 0;  // accelerometer samples after point i
+  int applied = 0, not_applied = 0;  // accelerometer samples after point i
   // The accelerometer-driven model's take-back hypotheses hold A (header comment).
   const bool hold = settings_.motion_model == MotionModel::kAccelerometerDriven;
   for (int i = points - 1; i >= 0; --i) {
     if (i < points - 1 && t - rollback_[i].t > RollbackReach()) break;
-    for (const AccelSample& a : rollback_[i].accel) ++(a.applied ? applied : refused);
+    int refused_here = 0;  // samples of this interval the gate refused, not since reinstated
+    for (const AccelSample& a : rollback_[i].accel) {
+      ++(a.applied ? applied : not_applied);
+      if (a.gated && !a.applied) ++refused_here;
+    }
     applied += rollback_[i].applied_not_kept;
     for (const bool reinstate : {false, true}) {
-      const int count = reinstate ? refused : applied;
-      // Nothing to take back, or to reinstate; a re-run needs every sample since (only the
-      // newest point can have more than were kept).
-      if (count == 0 || (reinstate && !rollback_.back().complete)) continue;
+      const int count = reinstate ? not_applied : applied;
+      // Nothing to take back, or to reinstate. A reinstatement starts where the gate refused a
+      // sample: the gate may have been wrong from there on, and every sample since is applied,
+      // taken back or not (a tap the positions showed as one, then a motion they show was real).
+      // Where the gate refused nothing, none is tried: the take-back's alone are the positions'
+      // own decisions (and a position filter without the accelerometer's gate pays nothing). It
+      // needs every sample since kept (only the newest point can have more than were kept).
+      if (count == 0 || (reinstate && (refused_here == 0 || !rollback_.back().complete))) continue;
       // From point i on: the motion model alone, or with every accelerometer sample; the later
       // position samples re-applied behind the gate.
       const bool hold_here = hold && !reinstate;
@@ -407,8 +415,9 @@ Status PositionKf::UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen
   }
   const Eigen::Vector3d y = z - a.H * x_;
   const Eigen::Matrix3d S = a.H * P_ * a.H.transpose() + a.R;
-  a.applied =
-      !(settings_.accel_gate_chi2 > 0.0 && !(y.dot(S.inverse() * y) <= settings_.accel_gate_chi2));
+  a.gated =
+      settings_.accel_gate_chi2 > 0.0 && !(y.dot(S.inverse() * y) <= settings_.accel_gate_chi2);
+  a.applied = !a.gated;
   // Kept, applied or not, for the rollback's hypotheses (header comment).
   if (!rollback_.empty()) {
     RollbackPoint& last = rollback_.back();

@@ -129,9 +129,12 @@
 // 20–130 mm off for 0.15 s. So the hypotheses also include that the accelerometer was right over
 // the last j intervals, its refused samples with the others: the state after the position sample
 // j back, run to now with every accelerometer sample since applied, ungated (the position samples
-// re-applied behind the gate). Taken on the same test, its refused samples are counted as
-// reinstated (Counters), and a later rollback may take them back as any other. A tap is not
-// reinstated: its integral is a move the positions did not make.
+// re-applied behind the gate). Such a stretch starts where the gate refused a sample, and takes
+// every sample since, taken back or not (the onset, taken back as a tap at the first position
+// sample, is shown a motion by the next). Taken on the same test, its samples not applied are
+// counted as reinstated (Counters), and a later rollback may take them back as any other. Where
+// the gate refused nothing none is tried, so a filter without the accelerometer's gate is as it
+// was, cost included. A tap is not reinstated: its integral is a move the positions did not make.
 // Cost: no hypothesis can make a sample likelier than N(0; 0, R) (NIS 0, S = R), so while
 // the sample is within the test's margin of that bound, none is tried: every sample of a calm run.
 // Otherwise up to 2 kMaxRollbackPoints re-runs of a few predictions, accelerometer updates and
@@ -372,6 +375,7 @@ class PositionKf {
     Eigen::Matrix<double, 3, kN> H = Eigen::Matrix<double, 3, kN>::Zero();
     Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
     bool applied = false;  // false: refused by the gate, or taken back
+    bool gated = false;    // refused by the gate when it came
   };
   // The accelerometer update of (x, P) with one sample, Joseph form.
   void ApplyAccel(VecN& x, MatN& P, const AccelSample& a) const;
