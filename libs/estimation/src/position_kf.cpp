@@ -255,6 +255,7 @@ void PositionKf::RollBackAccelerometer(double t, const Eigen::Vector3d& p, Posit
   VecN best_x;
   MatN best_P;
   int applied = 0, not_applied = 0;  // accelerometer samples after point i
+  bool complete = true;              // every one of them kept
   // The accelerometer-driven model's take-back hypotheses hold A (header comment).
   const bool hold = settings_.motion_model == MotionModel::kAccelerometerDriven;
   for (int i = points - 1; i >= 0; --i) {
@@ -265,6 +266,7 @@ void PositionKf::RollBackAccelerometer(double t, const Eigen::Vector3d& p, Posit
       if (a.gated && !a.applied) ++refused_here;
     }
     applied += rollback_[i].applied_not_kept;
+    complete = complete && rollback_[i].complete;
     for (const bool reinstate : {false, true}) {
       const int count = reinstate ? not_applied : applied;
       // Nothing to take back, or to reinstate. A reinstatement starts where the gate refused a
@@ -272,8 +274,8 @@ void PositionKf::RollBackAccelerometer(double t, const Eigen::Vector3d& p, Posit
       // taken back or not (a tap the positions showed as one, then a motion they show was real).
       // Where the gate refused nothing, none is tried: the take-back's alone are the positions'
       // own decisions (and a position filter without the accelerometer's gate pays nothing). It
-      // needs every sample since kept (only the newest point can have more than were kept).
-      if (count == 0 || (reinstate && (refused_here == 0 || !rollback_.back().complete))) continue;
+      // needs every sample since kept.
+      if (count == 0 || (reinstate && (refused_here == 0 || !complete))) continue;
       // From point i on: the motion model alone, or with every accelerometer sample; the later
       // position samples re-applied behind the gate.
       const bool hold_here = hold && !reinstate;

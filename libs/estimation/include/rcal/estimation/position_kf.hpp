@@ -177,8 +177,8 @@ inline constexpr int kMaxRollbackPoints = 8;
 
 /// Most accelerometer samples kept after one position sample for the rollback's hypotheses (the
 /// bound on their memory, about 0.5 MB a point, when the position sensor stops while the IMU
-/// streams). Beyond it the samples are counted but not kept, and no refused sample is reinstated
-/// until the next position sample: such a gap is longer than any span a rollback reaches.
+/// streams). Beyond it the samples are counted but not kept, and no stretch that holds them is
+/// reinstated (at 100 Hz such a gap is 10 s, far beyond any span a rollback reaches).
 inline constexpr int kMaxKeptAccelSamples = 1024;
 
 /// The longest step between accelerometer samples over which accel_delay extrapolates [s].
