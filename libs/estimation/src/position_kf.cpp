@@ -231,11 +231,16 @@ double PositionKf::RollbackReach() const {
 
 void PositionKf::KeepRollbackPoint(const Eigen::Vector3d& p) {
   if (!(settings_.accel_rollback_span > 0.0)) return;
-  rollback_.push_back({t_, p, x_, P_, {}});
+  // The new point's samples go where a dropped point's were (no allocation once running).
+  spare_accel_.clear();
+  rollback_.push_back({t_, p, x_, P_, std::move(spare_accel_)});
+  spare_accel_ = {};
   // Points older than the span can start no hypothesis once a newer one is there.
   while (rollback_.size() > 1 && (static_cast<int>(rollback_.size()) > kMaxRollbackPoints ||
-                                  t_ - rollback_.front().t > RollbackReach()))
+                                  t_ - rollback_.front().t > RollbackReach())) {
+    spare_accel_ = std::move(rollback_.front().accel);
     rollback_.erase(rollback_.begin());
+  }
 }
 
 void PositionKf::RollBackAccelerometer(double t, const Eigen::Vector3d& p, PositionInnovation& in) {
@@ -295,7 +300,8 @@ void PositionKf::RollBackAccelerometer(double t, const Eigen::Vector3d& p, Posit
         for (const AccelSample& a : rollback_[m].accel) {
           if (a.t > t_x) Predict(x, P, a.t - t_x);
           t_x = std::max(t_x, a.t);
-          ApplyAccel(x, P, a);
+          const Eigen::Vector3d y = a.z - a.H * x;
+          ApplyAccel(x, P, a, y, (a.H * P * a.H.transpose() + a.R).inverse());
         }
       }
       if (t > t_x) Predict(x, P, t - t_x, hold_here);
@@ -416,9 +422,8 @@ Status PositionKf::UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen
     a.R += Z * R_WE_covariance_ * Z.transpose();
   }
   const Eigen::Vector3d y = z - a.H * x_;
-  const Eigen::Matrix3d S = a.H * P_ * a.H.transpose() + a.R;
-  a.gated =
-      settings_.accel_gate_chi2 > 0.0 && !(y.dot(S.inverse() * y) <= settings_.accel_gate_chi2);
+  const Eigen::Matrix3d S_inv = (a.H * P_ * a.H.transpose() + a.R).inverse();
+  a.gated = settings_.accel_gate_chi2 > 0.0 && !(y.dot(S_inv * y) <= settings_.accel_gate_chi2);
   a.applied = !a.gated;
   // Kept, applied or not, for the rollback's hypotheses (header comment).
   if (!rollback_.empty()) {
@@ -435,15 +440,14 @@ Status PositionKf::UpdateAccel(double t, const Eigen::Vector3d& f_B, const Eigen
     has_last_z_ = false;   // nor is the next sample extrapolated along a refused one
     return GuardState(t);  // the prediction to t stands
   }
-  ApplyAccel(x_, P_, a);
+  ApplyAccel(x_, P_, a, y, S_inv);
   ++counters_.accel_samples;
   return GuardState(t);
 }
 
-void PositionKf::ApplyAccel(VecN& x, MatN& P, const AccelSample& a) const {
-  const Eigen::Vector3d y = a.z - a.H * x;
-  const Eigen::Matrix3d S = a.H * P * a.H.transpose() + a.R;
-  const Eigen::Matrix<double, kN, 3> K = P * a.H.transpose() * S.inverse();
+void PositionKf::ApplyAccel(VecN& x, MatN& P, const AccelSample& a, const Eigen::Vector3d& y,
+                            const Eigen::Matrix3d& S_inv) const {
+  const Eigen::Matrix<double, kN, 3> K = P * a.H.transpose() * S_inv;
   x += K * y;
   const MatN IKH = MatN::Identity() - K * a.H;
   P = IKH * P * IKH.transpose() + K * a.R * K.transpose();

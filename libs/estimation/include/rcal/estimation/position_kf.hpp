@@ -377,8 +377,9 @@ class PositionKf {
     bool applied = false;  // false: refused by the gate, or taken back
     bool gated = false;    // refused by the gate when it came
   };
-  // The accelerometer update of (x, P) with one sample, Joseph form.
-  void ApplyAccel(VecN& x, MatN& P, const AccelSample& a) const;
+  // The accelerometer update of (x, P) with one sample, its innovation y and S⁻¹, Joseph form.
+  void ApplyAccel(VecN& x, MatN& P, const AccelSample& a, const Eigen::Vector3d& y,
+                  const Eigen::Matrix3d& S_inv) const;
   // The accelerometer of the last intervals taken back, or its refused samples reinstated, when
   // the position sample p at t shows it wrong (header comment); `in` is the sample's innovation,
   // replaced when a hypothesis is taken.
@@ -432,6 +433,7 @@ class PositionKf {
     bool complete = true;            // every sample after it kept
   };
   std::vector<RollbackPoint> rollback_;
+  std::vector<AccelSample> spare_accel_;  // a dropped point's storage, for the next point
 };
 
 }  // namespace rcal::estimation
