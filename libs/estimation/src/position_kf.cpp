@@ -231,16 +231,11 @@ double PositionKf::RollbackReach() const {
 
 void PositionKf::KeepRollbackPoint(const Eigen::Vector3d& p) {
   if (!(settings_.accel_rollback_span > 0.0)) return;
-  // The new point's samples go where a dropped point's were (no allocation once running).
-  spare_accel_.clear();
-  rollback_.push_back({t_, p, x_, P_, std::move(spare_accel_)});
-  spare_accel_ = {};
+  rollback_.push_back({t_, p, x_, P_, {}});
   // Points older than the span can start no hypothesis once a newer one is there.
   while (rollback_.size() > 1 && (static_cast<int>(rollback_.size()) > kMaxRollbackPoints ||
-                                  t_ - rollback_.front().t > RollbackReach())) {
-    spare_accel_ = std::move(rollback_.front().accel);
+                                  t_ - rollback_.front().t > RollbackReach()))
     rollback_.erase(rollback_.begin());
-  }
 }
 
 void PositionKf::RollBackAccelerometer(double t, const Eigen::Vector3d& p, PositionInnovation& in) {

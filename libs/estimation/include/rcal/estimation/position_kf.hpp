@@ -433,7 +433,6 @@ class PositionKf {
     bool complete = true;            // every sample after it kept
   };
   std::vector<RollbackPoint> rollback_;
-  std::vector<AccelSample> spare_accel_;  // a dropped point's storage, for the next point
 };
 
 }  // namespace rcal::estimation
