@@ -14,6 +14,7 @@
 #include <optional>
 #include <vector>
 
+#include "rcal/estimation/aided_ins.hpp"
 #include "rcal/estimation/orientation_kf.hpp"
 #include "rcal/estimation/position_kf.hpp"
 #include "rcal/estimation/position_kf_bank.hpp"
@@ -186,6 +187,32 @@ void BM_PositionKfBankRate(benchmark::State& state) {
   RunPositionFilter(state, bank);
 }
 BENCHMARK(BM_PositionKfBankRate);
+
+// The tracker-aided INS (aided_ins.hpp, 18 error states): the IMU and a magnetometer heading every
+// sample, the position sensor at 20 Hz (every 5th); items = IMU samples.
+void BM_AidedInsRate(benchmark::State& state) {
+  const Stream& d = Data();
+  estimation::AidedInsSettings is;
+  is.earth = estimation::EarthFrame::kEnu;
+  estimation::AidedIns ins(is);
+  const int64_t n = static_cast<int64_t>(d.imu.size());
+  int64_t i = 0;
+  for (auto _ : state) {
+    const auto s = d.At(i);
+    const double t = transport::SensorSeconds(s.utime);
+    benchmark::DoNotOptimize(ins.UpdateImu(t, s.gyro_B, s.f_B).ok());
+    if (!ins.initialized())
+      benchmark::DoNotOptimize(ins.UpdateHeading(t, Eigen::Vector4d(1, 0, 0, 0)).ok());
+    else
+      benchmark::DoNotOptimize(ins.UpdateMagnetometer(t, s.m_B).ok());
+    if (i % 5 == 0 && d.pos[i % n].allFinite())
+      benchmark::DoNotOptimize(ins.UpdatePosition(t, d.pos[i % n]).ok());
+    benchmark::DoNotOptimize(ins.q_EB());
+    ++i;
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+BENCHMARK(BM_AidedInsRate);
 
 // The whole orientation node without a transport: decode-free OnImu (checks, filter, encode and
 // memq publish of the estimate): the highest IMU rate the orientation_kf process sustains.

@@ -362,6 +362,21 @@ TEST(OrientationKf, RefusesBadInputWithoutChangingState) {
 
 // Issue 11: one gyro sample of 1e300 rad/s (finite) made every later estimate NaN. Values beyond
 // the sensor's range are refused naming the field, and the state is unchanged.
+// last_mag_B: the field the heading row used (aided_ins.hpp levels it with its own tilt): at rest
+// with a steady field, the field itself (its low-pass of a constant); NaN for a sample the gate
+// refuses (the norm doubled: a magnet).
+TEST(OrientationKf, LastMagBIsTheFieldTheHeadingRowUsed) {
+  OrientationKf kf;
+  const Eigen::Vector3d w = Eigen::Vector3d::Zero(), f(0, 0, -kG), m(20, 0, 40);
+  double t = 0.0;
+  for (int k = 0; k < 300; ++k, t += 0.01) ASSERT_TRUE(kf.Update(t, w, f, m).ok());
+  ASSERT_TRUE(kf.last_mag_used());
+  EXPECT_LT((kf.last_mag_B() - m).norm(), 1e-6 * m.norm()) << kf.last_mag_B().transpose();
+  ASSERT_TRUE(kf.Update(t, w, f, 2.0 * m).ok());
+  EXPECT_FALSE(kf.last_mag_used());
+  EXPECT_FALSE(kf.last_mag_B().allFinite());
+}
+
 TEST(OrientationKf, RefusesValuesBeyondTheSensorRange) {
   OrientationKf kf;
   const Eigen::Vector3d w(0.01, 0, 0), f(0, 0, -kG), m(20, 0, 40);

@@ -9,9 +9,13 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
+#include <numbers>
+#include <regex>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "rcal_cli.hpp"
 
@@ -1158,10 +1162,13 @@ TEST(RcalCli, FuseTraceIsEverySampleTheScoresComeFrom) {
     std::stringstream ss(line);
     for (std::string c; std::getline(ss, c, ',');) header.push_back(c);
   }
-  ASSERT_EQ(header.size(), 19u);
+  ASSERT_EQ(header.size(), 30u);
   EXPECT_EQ(header[0], "t_s");
   EXPECT_EQ(header[2], "q_EB_w");
   EXPECT_EQ(header[12], "position_error_m");
+  EXPECT_EQ(header[19], "ins_q_EB_w");
+  EXPECT_EQ(header[23], "ins_total_error_rad");
+  EXPECT_EQ(header[29], "ins_position_error_m");
   // The file's rows: t_s and pos_x, pos_y, pos_z (columns 0 and 14–16; "nan" where occluded).
   std::vector<std::array<double, 4>> truth;
   {
@@ -1176,8 +1183,8 @@ TEST(RcalCli, FuseTraceIsEverySampleTheScoresComeFrom) {
       truth.push_back({v[0], v[14], v[15], v[16]});
     }
   }
-  double se[4] = {};
-  int n[4] = {}, rows = 0;
+  double se[4] = {}, se_ins[4] = {};
+  int n[4] = {}, n_ins[4] = {}, rows = 0;
   while (std::getline(in, line)) {
     std::vector<std::string> c;
     std::stringstream ss(line);
@@ -1194,10 +1201,20 @@ TEST(RcalCli, FuseTraceIsEverySampleTheScoresComeFrom) {
     if (std::isfinite(e)) {
       EXPECT_NEAR(e, at(12), 1e-8);
     }
+    // The tracker-aided INS's columns: its quaternion, errors, marker position and its error.
+    const double e_ins =
+        std::sqrt(std::pow(at(26) - px, 2) + std::pow(at(27) - py, 2) + std::pow(at(28) - pz, 2));
+    if (std::isfinite(e_ins)) {
+      EXPECT_NEAR(e_ins, at(29), 1e-8);
+      EXPECT_NEAR(std::sqrt(at(19) * at(19) + at(20) * at(20) + at(21) * at(21) + at(22) * at(22)),
+                  1.0, 1e-8);
+    }
     if (at(1) == 1) {
       for (int k = 0; k < 4; ++k) {
         const double err = at(k < 3 ? 6 + k : 12);
         if (std::isfinite(err)) se[k] += err * err, ++n[k];
+        const double err_ins = at(k < 3 ? 23 + k : 29);
+        if (std::isfinite(err_ins)) se_ins[k] += err_ins * err_ins, ++n_ins[k];
       }
     }
     ++rows;
@@ -1208,6 +1225,56 @@ TEST(RcalCli, FuseTraceIsEverySampleTheScoresComeFrom) {
                           o.at("inclination_rmse_rad"), j.at("position_rmse_movement_m")};
   for (int k = 0; k < 4; ++k) EXPECT_NEAR(std::sqrt(se[k] / n[k]), want[k], 1e-6 * want[k]) << k;
   EXPECT_EQ(n[0], o.at("samples").get<int>());
+  const json& a = j.at("aided_ins");
+  const double want_ins[4] = {a.at("total_rmse_rad"), a.at("heading_rmse_rad"),
+                              a.at("inclination_rmse_rad"), a.at("position_rmse_movement_m")};
+  for (int k = 0; k < 4; ++k)
+    EXPECT_NEAR(std::sqrt(se_ins[k] / n_ins[k]), want_ins[k], 1e-6 * want_ins[k]) << "INS " << k;
+  EXPECT_EQ(n_ins[0], a.at("samples").get<int>());
+}
+
+// The tracker-aided INS's settings chosen by leave-one-trial-out (rcal fuse-loo --ins, its
+// shipped grid of 12): every fold chooses what ships (BroadInsSettings: magnetometer heading σ
+// 0.6 rad, accelerometer noise 0.02 m/s²/√Hz, no adaptation), so held out equals in-sample; its
+// in-sample figures are rcal fuse's (the same tracker draws); and held out, the INS is at or below
+// VQF in total on every trial, its mean under half of VQF's (the orientation KF alone: 0.94×).
+// VQF is an IMU-only filter: the INS has the tracker too (README).
+TEST(RcalCli, FuseLooChoosesTheTrackerAidedInsSettingsHeldOut) {
+  const fs::path d = TempDir("fuse_loo_ins");
+  const Result r =
+      RunRcal("fuse-loo ../shared/data/broad --ins --jobs 2 --json " + (d / "loo.json").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json j = ReadJson(d / "loo.json");
+  EXPECT_EQ(j.at("estimator"), "tracker-aided INS");
+  const std::vector<std::string> shipped = {"ins.mag_heading_sigma=0.6",
+                                            "ins.accel_noise_density=0.02",
+                                            "ins.accel_noise_adaptation_tau=0"};
+  EXPECT_EQ(j.at("in_sample_settings").get<std::vector<std::string>>(), shipped);
+  const json golden = ReadJson(RCAL_SOURCE_DIR "/tests/tools/golden/fuse_broad.json");
+  // VQF's total per trial, from the data's README (as fuse-loo reads it).
+  std::map<std::string, double> vqf;
+  {
+    std::ifstream in(RCAL_SHARED_DIR "/data/broad/README.md");
+    const std::regex row(R"(^\| (\d\d) \| ([0-9.]+) / )");
+    for (std::string line; std::getline(in, line);) {
+      std::smatch m;
+      if (std::regex_search(line, m, row)) vqf[m[1]] = std::stod(m[2]);
+    }
+  }
+  double sum = 0.0, sum_vqf = 0.0;
+  for (const auto& [t, f] : j.at("trials").items()) {
+    EXPECT_EQ(f.at("leave_one_out_settings").get<std::vector<std::string>>(), shipped) << t;
+    const double held_out = f.at("leave_one_out").at("total_rmse_rad");
+    EXPECT_NEAR(f.at("in_sample").at("total_rmse_rad").get<double>(),
+                golden.at(t).at("aided_ins").at("total_rmse_rad").get<double>(), 1e-9)
+        << t;
+    ASSERT_TRUE(vqf.count(t)) << t;
+    EXPECT_LE(held_out * 180.0 / std::numbers::pi, vqf.at(t)) << t;
+    sum += held_out * 180.0 / std::numbers::pi;
+    sum_vqf += vqf.at(t);
+  }
+  EXPECT_EQ(j.at("trials").size(), 16u);
+  EXPECT_LT(sum / sum_vqf, 0.5);  // measured: 0.42
 }
 
 // rcal fuse --set NAME=VALUE: the whole value must be one finite number (std::stod took "0.1abc"
@@ -1253,7 +1320,7 @@ TEST(RcalCli, FuseSetTakesOnlyWholeFiniteNumbersAndTheJsonNamesUnits) {
   for (const auto& [key, value] : s.items()) {
     bool named = false;
     for (const char* end : {"_m_s2", "_rad", "_s", "_rad_s", "_sqrt_hz", "_sqrt_s", "_chi2",
-                            "_fraction", "_m", "_factor", "_order"})
+                            "_fraction", "_m", "_factor", "_order", "_flag", "_count"})
       named |= key.size() > std::string(end).size() &&
                key.compare(key.size() - std::string(end).size(), std::string::npos, end) == 0;
     EXPECT_TRUE(named) << key;

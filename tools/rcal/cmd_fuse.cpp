@@ -27,9 +27,11 @@
 
 #include "accel_lag_json.hpp"
 #include "command.hpp"
+#include "fuse_ins.hpp"
 #include "fuse_settings.hpp"
 #include "rcal/discrepancy/imu_scoring.hpp"
 #include "rcal/estimation/accel_lag.hpp"
+#include "rcal/estimation/aided_ins.hpp"
 #include "rcal/estimation/fqa.hpp"
 #include "rcal/estimation/orientation_kf.hpp"
 #include "rcal/estimation/position_kf.hpp"
@@ -66,7 +68,9 @@ constexpr const char* kTraceHeader =
     "t_s,movement,q_EB_w,q_EB_x,q_EB_y,q_EB_z,total_error_rad,heading_error_rad,"
     "inclination_error_rad,p_WM_W_x_m,p_WM_W_y_m,p_WM_W_z_m,position_error_m,"
     "paper_model_error_m,accelerometer_driven_error_m,accelerometer_driven_weight,"
-    "accelerometer_driven_noise_scale,accel_used,mag_used\n";
+    "accelerometer_driven_noise_scale,accel_used,mag_used,ins_q_EB_w,ins_q_EB_x,ins_q_EB_y,"
+    "ins_q_EB_z,ins_total_error_rad,ins_heading_error_rad,ins_inclination_error_rad,"
+    "ins_p_EM_E_x_m,ins_p_EM_E_y_m,ins_p_EM_E_z_m,ins_position_error_m\n";
 
 // BROAD scoring (discrepancy/imu_scoring.hpp, shared with `rcal analyze` on IMU streams).
 using discrepancy::AngleErrors;
@@ -119,19 +123,20 @@ int RunFuse(const FuseOptions& opt) {
   est::PositionKfBank bank(bank_settings);
   const est::PositionKf& pkf = bank.filters()[0];
   const est::PositionKf& driven = bank.filters()[1];
+  // The tracker-aided INS (aided_ins.hpp): the IMU integrated and corrected by the same position
+  // samples, its heading taken from the orientation KF.
+  est::AidedIns ins(settings.ins);
   est::FqaSettings fqa_settings;
   fqa_settings.earth = est::EarthFrame::kEnu;
   fqa_settings.m_ref_E = est::MagneticNorth(est::EarthFrame::kEnu);
 
-  std::mt19937_64 rng(opt.seed);
-  std::normal_distribution<double> pos_noise(0.0, opt.pos_noise_m);
-  const double pos_period = 1.0 / opt.pos_rate_hz;
-  double next_pos_t = -std::numeric_limits<double>::infinity();
+  BroadTracker tracker(opt.pos_rate_hz, opt.pos_noise_m, opt.seed);
 
   // What the accelerometer's lag is measured from (accel_lag.hpp): the IMU stream with the
   // filter's attitude and the position sensor's samples, never the truth.
   est::AccelLagData lag_data;
-  OrientationScore kf_score, fqa_score;
+  OrientationScore kf_score, fqa_score, ins_score;
+  Rms ins_pos_moving;  // the INS's marker position against the truth, movement samples
   Rms pos_all, pos_moving, paper_all, paper_moving, driven_all, driven_moving;
   double driven_weight = 0.0;  // Σ μ_driven over the scored rows
   long refused = 0, fqa_failed = 0, pos_samples = 0, non_finite = 0;
@@ -168,26 +173,31 @@ int RunFuse(const FuseOptions& opt) {
     lag_data.R_EB.push_back(okf.R_EB());
     lag_data.omega_B.push_back(okf.omega_B());
     const Eigen::Vector3d& p_truth = trial.p_truth[k];
-    if (t_k >= next_pos_t - 1e-9 && p_truth.allFinite()) {
-      next_pos_t = (std::isfinite(next_pos_t) ? next_pos_t : t_k) + pos_period;
-      const Eigen::Vector3d noise = sim::Draw3(pos_noise, rng);
-      (void)bank.UpdatePosition(t_k, p_truth + noise);
+    const std::optional<Eigen::Vector3d> p_sensor = tracker.Sample(t_k, p_truth);
+    if (p_sensor) {
+      (void)bank.UpdatePosition(t_k, *p_sensor);
       lag_data.t_position.push_back(t_k);
-      lag_data.p_WM_W.push_back(p_truth + noise);
+      lag_data.p_WM_W.push_back(*p_sensor);
       ++pos_samples;
     }
+    StepAidedIns(ins, okf, t_k, gyro, f_B, settings.ins_heading_from_kf != 0, p_sensor);
     // This sample's errors against the truth, once for the scores, the plots and the trace (NaN
     // where there is no truth or no estimate).
     constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
     const Eigen::Vector4d& q_truth = trial.q_truth[k];
     const bool moving = trial.movement[k] == 1, has_q = q_truth.allFinite();
     const AngleErrors e = has_q ? BroadErrors(okf.q_EB(), q_truth) : AngleErrors{kNan, kNan, kNan};
+    const AngleErrors e_ins = has_q && ins.initialized() ? BroadErrors(ins.q_EB(), q_truth)
+                                                         : AngleErrors{kNan, kNan, kNan};
     if (has_q) {
       const std::optional<AngleErrors> e_fqa_k =
           q_fqa ? std::optional(BroadErrors(*q_fqa, q_truth)) : std::nullopt;
       if (moving) {
         kf_score.Add(e);
         if (e_fqa_k) fqa_score.Add(*e_fqa_k);
+        // The INS is scored once it has started (the first position sample); never non-finite
+        // (it resets instead, aided_ins.hpp).
+        if (ins.initialized()) ins_score.Add(e_ins);
       }
       plot_t.push_back(t_k);
       e_tot.push_back(e.total * kRadToDeg);
@@ -205,6 +215,9 @@ int RunFuse(const FuseOptions& opt) {
       all->Add(err);
       if (moving) mov->Add(err);
     }
+    const double ins_pos_err =
+        ins.initialized() && p_truth.allFinite() ? (ins.p_EM_E() - p_truth).norm() : kNan;
+    if (moving && std::isfinite(ins_pos_err)) ins_pos_moving.Add(ins_pos_err);
     const double bank_err = error_of(bank);
     if (bank.initialized() && p_truth.allFinite()) {
       driven_weight += bank.probabilities()[1];
@@ -228,7 +241,12 @@ int RunFuse(const FuseOptions& opt) {
     for (double v : {bank_err, filter_err[0], filter_err[1]}) cell(v);
     cell(bank.initialized() ? bank.probabilities()[1] : kNan);
     cell(driven.initialized() ? driven.accel_noise_scale() : kNan);
-    trace << ',' << okf.last_accel_used() << ',' << okf.last_mag_used() << '\n';
+    trace << ',' << okf.last_accel_used() << ',' << okf.last_mag_used();
+    for (int i = 0; i < 4; ++i) cell(ins.initialized() ? ins.q_EB()(i) : kNan);
+    for (double v : {e_ins.total, e_ins.heading, e_ins.inclination}) cell(v);
+    for (int i = 0; i < 3; ++i) cell(ins.initialized() ? ins.p_EM_E()(i) : kNan);
+    cell(ins_pos_err);
+    trace << '\n';
   }
 
   const auto& oc = okf.counters();
@@ -245,6 +263,7 @@ int RunFuse(const FuseOptions& opt) {
   };
   row("orientation KF", kf_score);
   row("FQA alone", fqa_score);
+  row("tracker-aided INS", ins_score);
   md << "\nMovement samples scored: " << kf_score.total.n << ". Position RMSE (position KF vs "
      << "truth): " << Fixed(pos_moving.value() * 1e3, 2) << " mm during movement, "
      << Fixed(pos_all.value() * 1e3, 2) << " mm overall (sensor: " << opt.pos_rate_hz << " Hz, "
@@ -281,6 +300,21 @@ int RunFuse(const FuseOptions& opt) {
   j["samples"] = n;
   j["orientation_kf"] = ScoreJson(kf_score);
   j["fqa"] = ScoreJson(fqa_score);
+  {
+    const est::AidedInsState& x = ins.state();
+    const auto& c = ins.counters();
+    nlohmann::json a = ScoreJson(ins_score);
+    a["lever_arm_BM_B_m"] = {x.r_BM_B.x(), x.r_BM_B.y(), x.r_BM_B.z()};
+    a["gyro_bias_B_rad_s"] = {x.b_g_B.x(), x.b_g_B.y(), x.b_g_B.z()};
+    a["accel_bias_B_m_s2"] = {x.b_a_B.x(), x.b_a_B.y(), x.b_a_B.z()};
+    a["position_rmse_movement_m"] = ins_pos_moving.value();
+    a["positions"] = c.positions;
+    a["position_rejected"] = c.position_rejected;
+    a["reanchored"] = c.reanchored;
+    a["reinitialised"] = c.reinitialised;
+    a["resets"] = c.resets;
+    j["aided_ins"] = a;
+  }
   j["position_rmse_m"] = pos_all.value();
   j["position_rmse_movement_m"] = pos_moving.value();
   j["position_paper_model"] = {{"rmse_m", paper_all.value()},

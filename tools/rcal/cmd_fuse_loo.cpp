@@ -25,9 +25,11 @@
 #include <vector>
 
 #include "command.hpp"
+#include "fuse_ins.hpp"
 #include "fuse_settings.hpp"
 #include "rcal/discrepancy/imu_scoring.hpp"
 #include "rcal/discrepancy/loo_tuning.hpp"
+#include "rcal/estimation/aided_ins.hpp"
 #include "rcal/estimation/orientation_kf.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/imu_csv.hpp"
@@ -44,6 +46,7 @@ struct LooOptions {
   std::vector<std::string> overrides;  // NAME=VALUE applied to every candidate
   std::string json;
   int jobs = 1;
+  bool ins = false;  // score the tracker-aided INS instead of the orientation KF
 };
 
 // The shipped grid: the accelerometer's trust and its weighting by motion, the magnetometer's
@@ -52,6 +55,13 @@ struct LooOptions {
 std::vector<std::string> ShippedGrid() {
   return {"mag_lowpass_tau=3,6,9", "tilt_sigma=0.008,0.015", "heading_sigma=0.15,0.2",
           "tilt_motion_accel=0,10"};
+}
+
+// The tracker-aided INS's shipped grid (--ins): the magnetometer's weight against the heading
+// the positions give, the accelerometer's noise and its adaptation (12 candidates).
+std::vector<std::string> ShippedInsGrid() {
+  return {"ins.mag_heading_sigma=0.3,0.6,1", "ins.accel_noise_density=0.02,0.05",
+          "ins.accel_noise_adaptation_tau=0,10"};
 }
 
 struct Axis {
@@ -98,13 +108,23 @@ std::map<std::string, std::array<double, 3>> VqfFigures(const std::filesystem::p
   return out;
 }
 
-discrepancy::OrientationScore Score(const io::ImuCsv& trial, const est::OrientationKfSettings& s) {
-  est::OrientationKf kf(s);
+// The orientation KF's score on a trial, or with ins the tracker-aided INS's, fed as rcal fuse
+// feeds it (fuse_ins.hpp: its default tracker, 20 Hz, 1 mm, seed 1).
+discrepancy::OrientationScore Score(const io::ImuCsv& trial, const FuseSettings& s, bool ins) {
+  est::OrientationKf kf(s.orientation);
+  est::AidedIns aided(s.ins);
+  BroadTracker tracker(20.0, 1e-3, 1);
   discrepancy::OrientationScore score;
   for (std::size_t k = 0; k < trial.t.size(); ++k) {
     if (!kf.Update(trial.t[k], trial.gyro[k], trial.accel[k], trial.mag_uT[k])) continue;
-    if (trial.movement[k] == 1 && trial.q_truth[k].allFinite())
+    if (ins && kf.q_EB().allFinite())
+      StepAidedIns(aided, kf, trial.t[k], trial.gyro[k], trial.accel[k], s.ins_heading_from_kf != 0,
+                   tracker.Sample(trial.t[k], trial.p_truth[k]));
+    if (trial.movement[k] != 1 || !trial.q_truth[k].allFinite()) continue;
+    if (!ins)
       score.Add(discrepancy::BroadErrors(kf.q_EB(), trial.q_truth[k]));
+    else if (aided.initialized())
+      score.Add(discrepancy::BroadErrors(aided.q_EB(), trial.q_truth[k]));
   }
   return score;
 }
@@ -117,15 +137,17 @@ std::string Deg3(const discrepancy::OrientationScore& s) {
 }
 
 int RunFuseLoo(const LooOptions& opt) {
-  const std::vector<Axis> axes = ParseGrid(opt.grid.empty() ? ShippedGrid() : opt.grid);
+  const std::vector<std::string> grid =
+      !opt.grid.empty() ? opt.grid : (opt.ins ? ShippedInsGrid() : ShippedGrid());
+  const std::vector<Axis> axes = ParseGrid(grid);
   long n_cand = 1;
   for (const Axis& a : axes) n_cand *= static_cast<long>(a.values.size());
   // Every candidate's settings first: a bad name or value is refused before any trial is read.
-  std::vector<est::OrientationKfSettings> cand;
+  std::vector<FuseSettings> cand;
   for (long c = 0; c < n_cand; ++c) {
     auto kv = opt.overrides;
     for (const auto& s : Candidate(axes, c)) kv.push_back(s);
-    cand.push_back(BroadSettingsWith(kv).orientation);
+    cand.push_back(BroadSettingsWith(kv));
   }
   const std::filesystem::path dir = ResolvePath(opt.data);
   std::vector<std::filesystem::path> files;
@@ -142,8 +164,10 @@ int RunFuseLoo(const LooOptions& opt) {
   std::vector<std::string> ids;
   for (const auto& f : files) {
     trials.push_back(io::LoadImuCsv(f));
-    if (!trials.back().has_truth || !trials.back().has_movement)
-      throw std::runtime_error("fuse-loo: " + f.string() + ": missing the truth or movement");
+    if (!trials.back().has_truth || !trials.back().has_movement ||
+        (opt.ins && !trials.back().has_position))
+      throw std::runtime_error("fuse-loo: " + f.string() + ": missing the truth, movement" +
+                               (opt.ins ? " or position" : "") + " columns");
     ids.push_back(f.filename().string().substr(6, 2));
   }
   const int n_trials = static_cast<int>(trials.size());
@@ -154,7 +178,7 @@ int RunFuseLoo(const LooOptions& opt) {
   std::atomic<long> next{0};
   auto worker = [&] {
     for (long i; (i = next++) < n_cand * n_trials;)
-      scores[i] = Score(trials[i % n_trials], cand[i / n_trials]);
+      scores[i] = Score(trials[i % n_trials], cand[i / n_trials], opt.ins);
   };
   std::vector<std::future<void>> pool;
   for (int k = 1; k < opt.jobs; ++k) pool.push_back(std::async(std::launch::async, worker));
@@ -173,12 +197,14 @@ int RunFuseLoo(const LooOptions& opt) {
     return s;
   };
   std::ostringstream md;
-  md << "Settings chosen in-sample (all " << n_trials
+  md << (opt.ins ? "The tracker-aided INS (heading: the magnetometer and the positions). " : "")
+     << "Settings chosen in-sample (all " << n_trials
      << " trials): " << join(Candidate(axes, choice.in_sample)) << "\n\n"
      << "| trial | in-sample: total / heading / inclination [deg] | leave-one-out | VQF | "
         "leave-one-out settings |\n| --- | ---: | ---: | ---: | --- |\n";
   nlohmann::json j;
-  j["grid"] = opt.grid.empty() ? ShippedGrid() : opt.grid;
+  j["grid"] = grid;
+  j["estimator"] = opt.ins ? "tracker-aided INS" : "orientation KF";
   j["in_sample_settings"] = Candidate(axes, choice.in_sample);
   double sum_vqf = 0.0;
   int n_vqf = 0;
@@ -228,6 +254,9 @@ const RegisterCommand kRegisterFuseLoo(
       sub.add_option("--set", opt->overrides, "NAME=VALUE for every candidate (as rcal fuse)");
       sub.add_option("--json", opt->json, "write the figures (rad) and choices to this file");
       sub.add_option("--jobs", opt->jobs, "worker threads (the figures do not depend on it)");
+      sub.add_flag("--ins", opt->ins,
+                   "score the tracker-aided INS (IMU + the simulated tracker, rcal fuse's) "
+                   "instead of the orientation KF; its own shipped grid");
       return [opt] { return RunFuseLoo(*opt); };
     });
 

@@ -64,6 +64,25 @@ std::vector<Field> PositionFields(est::PositionKfSettings& s) {
           {"pos.accel_delay", "s", &s.accel_delay}};
 }
 
+std::vector<Field> InsFields(est::AidedInsSettings& s, int& heading_from_kf) {
+  return {
+      {"ins.heading_from_kf", "flag", nullptr, &heading_from_kf, 0, 1},
+      {"ins.mag_heading_sigma", "rad", &s.mag_heading_sigma},
+      {"ins.accel_delay", "s", &s.accel_delay},
+      {"ins.accel_noise_adaptation_tau", "s", &s.accel_noise_adaptation_tau},
+      {"ins.gyro_noise_density", "rad_s_sqrt_hz", &s.gyro_noise_density},
+      {"ins.attitude_process_noise", "rad_sqrt_s", &s.attitude_process_noise},
+      {"ins.accel_noise_density", "m_s2_sqrt_hz", &s.accel_noise_density},
+      {"ins.gyro_bias_random_walk", "rad_s_sqrt_s", &s.gyro_bias_random_walk},
+      {"ins.accel_bias_random_walk", "m_s2_sqrt_s", &s.accel_bias_random_walk},
+      {"ins.heading_sigma", "rad", &s.heading_sigma},
+      {"ins.position_gate_chi2", "", &s.position_gate_chi2},
+      {"ins.max_consecutive_rejections", "count", nullptr, &s.max_consecutive_rejections, 0, 1000},
+      {"ins.lever_arm_sigma", "m", &s.lever_arm_sigma},
+      {"ins.initial_attitude_sigma", "rad", &s.initial_attitude_sigma},
+      {"ins.initial_accel_bias_sigma", "m_s2", &s.initial_accel_bias_sigma}};
+}
+
 // The whole of `text` as one finite number (no spaces, no trailing characters, no hex), else an
 // error naming the setting.
 double ParseSetting(const std::string& name, const std::string& text) {
@@ -86,11 +105,11 @@ std::vector<Field> ImuFields(io::ImuCsvSettings& s) {
           {"imu.mag_range", "uT", &s.mag_range_uT}};
 }
 
-void ApplyOverrides(const std::vector<std::string>& overrides, est::OrientationKfSettings& o,
-                    est::PositionKfSettings& p, io::ImuCsvSettings& imu) {
-  auto fields = OrientationFields(o);
-  for (const Field& f : PositionFields(p)) fields.push_back(f);
-  for (const Field& f : ImuFields(imu)) fields.push_back(f);
+void ApplyOverrides(const std::vector<std::string>& overrides, FuseSettings& s) {
+  auto fields = OrientationFields(s.orientation);
+  for (const Field& f : PositionFields(s.position)) fields.push_back(f);
+  for (const Field& f : InsFields(s.ins, s.ins_heading_from_kf)) fields.push_back(f);
+  for (const Field& f : ImuFields(s.imu)) fields.push_back(f);
   for (const auto& kv : overrides) {
     const auto eq = kv.find('=');
     if (eq == std::string::npos)
@@ -151,11 +170,28 @@ est::PositionKfSettings BroadPositionSettings(double pos_noise_m) {
   return s;
 }
 
+// The tracker-aided INS on BROAD: ENU, the simulated tracker's σ, the accelerometer's lag the
+// position KF takes out (the IMU's, measured), and the three settings `rcal fuse-loo --ins` chose
+// on all sixteen trials from its shipped grid; the rest the AidedInsSettings defaults.
+est::AidedInsSettings BroadInsSettings(double pos_noise_m) {
+  est::AidedInsSettings s;
+  s.earth = est::EarthFrame::kEnu;
+  s.position_sigma = pos_noise_m;
+  s.accel_delay = BroadPositionSettings(pos_noise_m).accel_delay;
+  s.mag_heading_sigma = 0.6;
+  s.accel_noise_density = 0.02;
+  return s;
+}
+
 }  // namespace
 
 FuseSettings BroadSettingsWith(const std::vector<std::string>& overrides, double pos_noise_m) {
-  FuseSettings s{BroadOrientationSettings(), BroadPositionSettings(pos_noise_m), {}};
-  ApplyOverrides(overrides, s.orientation, s.position, s.imu);
+  FuseSettings s{BroadOrientationSettings(),
+                 BroadPositionSettings(pos_noise_m),
+                 {},
+                 BroadInsSettings(pos_noise_m),
+                 0};
+  ApplyOverrides(overrides, s);
   return s;
 }
 
@@ -164,6 +200,7 @@ nlohmann::json SettingsJson(const FuseSettings& s) {
   nlohmann::json js;
   for (const Field& f : OrientationFields(c.orientation)) js[f.key()] = f.get();
   for (const Field& f : PositionFields(c.position)) js[f.key()] = f.get();
+  for (const Field& f : InsFields(c.ins, c.ins_heading_from_kf)) js[f.key()] = f.get();
   return js;
 }
 

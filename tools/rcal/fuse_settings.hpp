@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "rcal/estimation/aided_ins.hpp"
 #include "rcal/estimation/orientation_kf.hpp"
 #include "rcal/estimation/position_kf.hpp"
 #include "rcal/io/imu_csv.hpp"
@@ -15,7 +16,11 @@ namespace rcal::tool {
 struct FuseSettings {
   estimation::OrientationKfSettings orientation;
   estimation::PositionKfSettings position;
-  io::ImuCsvSettings imu;  ///< sensor ranges the trial is checked against
+  io::ImuCsvSettings imu;            ///< sensor ranges the trial is checked against
+  estimation::AidedInsSettings ins;  ///< the tracker-aided INS (aided_ins.hpp)
+  /// The INS's heading: 0 the magnetometer field the orientation KF accepted, levelled with the
+  /// INS's tilt; 1 the orientation KF's heading.
+  int ins_heading_from_kf = 0;
 };
 
 /// The BROAD settings with `overrides` applied: each NAME=VALUE, NAME as in the JSON settings

@@ -192,6 +192,8 @@ Status OrientationKf::Update(double t, const Eigen::Vector3d& gyro_B, const Eige
   if (!use.mag) ++counters_.mag_rejected;
   last_accel_used_ = use.accel;
   last_mag_used_ = use.mag;
+  last_mag_B_ =
+      use.mag ? m_meas_B : Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
   if (!(q_EB_.allFinite() && omega_B_.allFinite() && bias_B_.allFinite() && P_.allFinite() &&
         q_IB_.allFinite() && f_I_lp_.allFinite() && m_I_lp_.allFinite())) {
     // Never publish or build on a NaN state: start over at the next sample.

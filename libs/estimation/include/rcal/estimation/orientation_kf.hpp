@@ -55,6 +55,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
 
@@ -237,6 +238,10 @@ class OrientationKf {
   /// Whether the last sample's accelerometer / magnetometer were used.
   bool last_accel_used() const { return last_accel_used_; }
   bool last_mag_used() const { return last_mag_used_; }
+  /// The field the last sample's heading row used, m_B [the magnetometer's unit]: the accepted
+  /// samples low-passed in the strapdown frame, turned to the body now; NaN when the last sample's
+  /// magnetometer was not used. Another filter can level it with its own tilt (aided_ins.hpp).
+  const Eigen::Vector3d& last_mag_B() const { return last_mag_B_; }
   bool still() const { return still_count_ >= settings_.still_samples; }
   const Counters& counters() const { return counters_; }
   const OrientationKfSettings& settings() const { return settings_; }
@@ -306,6 +311,7 @@ class OrientationKf {
   double last_heading_nis_ = 0.0;
   bool last_accel_used_ = false;
   bool last_mag_used_ = false;
+  Eigen::Vector3d last_mag_B_ = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
   int still_count_ = 0;
   bool been_still_ = false;  // still() once since the start (the bias is then learned)
   double mag_ref_norm_ = 0.0;

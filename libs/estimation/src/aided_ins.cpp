@@ -1,0 +1,385 @@
+#include "rcal/estimation/aided_ins.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+
+#include "rcal/geometry/so3.hpp"
+
+namespace rcal::estimation {
+namespace {
+
+using geometry::Exp;
+using geometry::Log;
+using geometry::Skew;
+using Vec3 = Eigen::Vector3d;
+using Mat3 = Eigen::Matrix3d;
+
+// Error-state blocks (header comment's order).
+constexpr int kTheta = 0, kVel = 3, kPos = 6, kBg = 9, kBa = 12, kLever = 15;
+
+std::string Num(double v) {
+  std::ostringstream o;
+  o << v;
+  return o.str();
+}
+
+bool WithinRange(const Vec3& v, double range) {
+  return v.allFinite() && v.cwiseAbs().maxCoeff() <= range;
+}
+
+}  // namespace
+
+AidedInsState Boxplus(const AidedInsState& x, const AidedInsVector& dx) {
+  AidedInsState y = x;
+  y.R_EB = Exp(dx.segment<3>(kTheta)) * x.R_EB;
+  y.v_EB_E += dx.segment<3>(kVel);
+  y.p_EB_E += dx.segment<3>(kPos);
+  y.b_g_B += dx.segment<3>(kBg);
+  y.b_a_B += dx.segment<3>(kBa);
+  y.r_BM_B += dx.segment<3>(kLever);
+  return y;
+}
+
+AidedInsVector Boxminus(const AidedInsState& y, const AidedInsState& x) {
+  AidedInsVector d;
+  d.segment<3>(kTheta) = Log(y.R_EB * x.R_EB.transpose());
+  d.segment<3>(kVel) = y.v_EB_E - x.v_EB_E;
+  d.segment<3>(kPos) = y.p_EB_E - x.p_EB_E;
+  d.segment<3>(kBg) = y.b_g_B - x.b_g_B;
+  d.segment<3>(kBa) = y.b_a_B - x.b_a_B;
+  d.segment<3>(kLever) = y.r_BM_B - x.r_BM_B;
+  return d;
+}
+
+AidedInsState PropagateAidedIns(const AidedInsState& x, const Vec3& gyro_B, const Vec3& f_prev_B,
+                                const Vec3& f_B, const Vec3& g_E, double dt) {
+  AidedInsState y = x;
+  y.R_EB = x.R_EB * Exp((gyro_B - x.b_g_B) * dt);
+  // The trapezoid of the specific force turned into E at both ends of the step.
+  const Vec3 a_E = 0.5 * (x.R_EB * (f_prev_B - x.b_a_B) + y.R_EB * (f_B - x.b_a_B)) + g_E;
+  y.p_EB_E = x.p_EB_E + x.v_EB_E * dt + 0.5 * a_E * dt * dt;
+  y.v_EB_E = x.v_EB_E + a_E * dt;
+  return y;
+}
+
+AidedInsMatrix AidedInsTransition(const AidedInsState& x, const Vec3& gyro_B, const Vec3& f_prev_B,
+                                  const Vec3& f_B, double dt) {
+  const Vec3 w_dt = (gyro_B - x.b_g_B) * dt;
+  const Mat3 R_k = x.R_EB * Exp(w_dt);
+  const Mat3 R_mean = 0.5 * (x.R_EB + R_k);
+  const Vec3 f_corr_B = f_B - x.b_a_B;
+  const Vec3 f_E = 0.5 * (x.R_EB * (f_prev_B - x.b_a_B) + R_k * f_corr_B);
+  // R_k' = Exp(δθ) R_k Exp(−J_r(ωΔt) Δt δb_g): the bias turns R_k on the right.
+  const Mat3 dRk_dbg = -R_k * geometry::RightJacobian(w_dt) * dt;  // δθ_k per δb_g
+  // δa_E = −[f_E]× δθ − R̄ δb_a + ½ R_k [f_B − b_a]× J_r Δt δb_g  (R_k's part of the mean).
+  Eigen::Matrix<double, 3, 18> da = Eigen::Matrix<double, 3, 18>::Zero();
+  da.block<3, 3>(0, kTheta) = -Skew(f_E);
+  da.block<3, 3>(0, kBa) = -R_mean;
+  da.block<3, 3>(0, kBg) = -0.5 * Skew(R_k * f_corr_B) * dRk_dbg;
+  AidedInsMatrix F = AidedInsMatrix::Identity();
+  F.block<3, 3>(kTheta, kBg) = dRk_dbg;
+  F.block<3, 3>(kVel, kVel).setIdentity();
+  F.block<3, 18>(kVel, 0) += da * dt;
+  F.block<3, 3>(kPos, kVel) = Mat3::Identity() * dt;
+  F.block<3, 18>(kPos, 0) += da * (0.5 * dt * dt);
+  return F;
+}
+
+Vec3 MarkerPosition(const AidedInsState& x) {
+  return x.p_EB_E + x.R_EB * x.r_BM_B;
+}
+
+Eigen::Matrix<double, 3, 18> MarkerPositionJacobian(const AidedInsState& x) {
+  Eigen::Matrix<double, 3, 18> H = Eigen::Matrix<double, 3, 18>::Zero();
+  H.block<3, 3>(0, kTheta) = -Skew(x.R_EB * x.r_BM_B);
+  H.block<3, 3>(0, kPos).setIdentity();
+  H.block<3, 3>(0, kLever) = x.R_EB;
+  return H;
+}
+
+AidedIns::AidedIns(const AidedInsSettings& settings) : settings_(settings) {
+  const AidedInsSettings& s = settings_;
+  // Each setting's domain, named in the error: a NaN, a negative σ or a zero time is refused.
+  const auto require = [](bool ok, const char* name, double v, const char* domain) {
+    if (!ok)
+      throw std::invalid_argument(std::string("aided_ins: ") + name + " must be " + domain +
+                                  ", got " + Num(v));
+  };
+  for (const auto& [name, v] : {std::pair{"gravity", s.gravity},
+                                {"position_sigma", s.position_sigma},
+                                {"heading_sigma", s.heading_sigma},
+                                {"mag_heading_sigma", s.mag_heading_sigma},
+                                {"initial_attitude_sigma", s.initial_attitude_sigma},
+                                {"initial_velocity_sigma", s.initial_velocity_sigma},
+                                {"initial_gyro_bias_sigma", s.initial_gyro_bias_sigma},
+                                {"initial_accel_bias_sigma", s.initial_accel_bias_sigma},
+                                {"gyro_range", s.gyro_range},
+                                {"accel_range", s.accel_range},
+                                {"max_step", s.max_step}})
+    require(std::isfinite(v) && v > 0.0, name, v, "finite and positive");
+  for (const auto& [name, v] : {std::pair{"gyro_noise_density", s.gyro_noise_density},
+                                {"attitude_process_noise", s.attitude_process_noise},
+                                {"accel_noise_density", s.accel_noise_density},
+                                {"gyro_bias_random_walk", s.gyro_bias_random_walk},
+                                {"accel_bias_random_walk", s.accel_bias_random_walk},
+                                {"lever_arm_sigma", s.lever_arm_sigma},
+                                {"position_gate_chi2", s.position_gate_chi2},
+                                {"accel_noise_adaptation_tau", s.accel_noise_adaptation_tau}})
+    require(std::isfinite(v) && v >= 0.0, name, v, "finite and ≥ 0");
+  require(s.accel_delay >= 0.0 && s.accel_delay <= kMaxAccelDelay, "accel_delay [s]", s.accel_delay,
+          "in [0, kMaxAccelDelay = 0.05] s");
+  require(std::isfinite(s.accel_noise_max_scale) && s.accel_noise_max_scale >= 1.0,
+          "accel_noise_max_scale", s.accel_noise_max_scale, "finite and ≥ 1");
+  require(s.max_consecutive_rejections >= 0, "max_consecutive_rejections",
+          s.max_consecutive_rejections, "≥ 0");
+  require(s.lever_arm_B.allFinite(), "lever_arm_B", s.lever_arm_B.norm(), "finite");
+  g_E_ = -settings_.gravity * UpVector(settings_.earth);
+  Reset();
+}
+
+void AidedIns::Reset() {
+  initialized_ = false;
+  has_time_ = false;
+  has_attitude_ = has_position_ = false;
+  t_ = 0.0;
+  x_ = AidedInsState{};
+  q_EB_ = Eigen::Vector4d(1, 0, 0, 0);
+  P_.setIdentity();
+  last_position_nis_ = 0.0;
+  consecutive_rejections_ = 0;
+  accel_noise_scale_ = 1.0;
+  has_last_position_t_ = false;
+  const std::int64_t resets = counters_.resets;
+  counters_ = {};
+  counters_.resets = resets;
+}
+
+Status AidedIns::Refuse(const std::string& why) {
+  ++counters_.input_rejected;
+  return Status::Error("aided_ins: " + why);
+}
+
+Status AidedIns::UpdateImu(double t, const Vec3& gyro_B, const Vec3& f_B) {
+  if (!std::isfinite(t)) return Refuse("t is not finite");
+  if (has_time_ && !(t > t_))
+    return Refuse("t = " + Num(t) + " s does not follow the last sample's " + Num(t_) + " s");
+  if (!WithinRange(gyro_B, settings_.gyro_range))
+    return Refuse("gyro_B is not finite or beyond ±" + Num(settings_.gyro_range) + " rad/s");
+  if (!WithinRange(f_B, settings_.accel_range))
+    return Refuse("f_B is not finite or beyond ±" + Num(settings_.accel_range) + " m/s²");
+  const double dt = has_time_ ? t - t_ : 0.0;
+  t_ = t;
+  has_time_ = true;
+  // The accelerometer's lag (settings): the sample is the specific force of t − δ in the body of
+  // then, Exp(−δω) f_B in the body's axes now; extrapolated to t along the previous one (turned
+  // into the same axes by the step's rotation, Exp(−ωΔt)).
+  Vec3 f_now_B = f_B;
+  if (const double delay = settings_.accel_delay; delay > 0.0) {
+    const Vec3 w_B = gyro_B - x_.b_g_B;
+    const Vec3 f_then_B = Exp(-delay * w_B) * f_B;
+    if (initialized_ && dt > 0.0 && dt <= settings_.max_step)
+      f_now_B = f_then_B + (delay / dt) * (f_then_B - Exp(-dt * w_B) * f_then_B_);
+    else
+      f_now_B = f_then_B;
+    f_then_B_ = f_then_B;
+  }
+  if (!initialized_) {
+    f_prev_B_ = f_now_B;
+    return Status::Ok();
+  }
+  if (dt > settings_.max_step) {
+    // The strapdown integral over a gap is no estimate: start again from the next sources.
+    const std::int64_t reinitialised = counters_.reinitialised + 1;
+    Reset();
+    counters_.reinitialised = reinitialised;
+    t_ = t;
+    has_time_ = true;
+    return Status::Ok();
+  }
+  const AidedInsMatrix F = AidedInsTransition(x_, gyro_B, f_prev_B_, f_now_B, dt);
+  x_ = PropagateAidedIns(x_, gyro_B, f_prev_B_, f_now_B, g_E_, dt);
+  f_prev_B_ = f_now_B;
+  P_ = F * P_ * F.transpose();
+  P_.block<3, 3>(kTheta, kTheta).diagonal().array() +=
+      (std::pow(settings_.gyro_noise_density, 2) + std::pow(settings_.attitude_process_noise, 2)) *
+      dt;
+  P_.block<3, 3>(kVel, kVel).diagonal().array() +=
+      accel_noise_scale_ * std::pow(settings_.accel_noise_density, 2) * dt;
+  P_.block<3, 3>(kBg, kBg).diagonal().array() += std::pow(settings_.gyro_bias_random_walk, 2) * dt;
+  P_.block<3, 3>(kBa, kBa).diagonal().array() += std::pow(settings_.accel_bias_random_walk, 2) * dt;
+  ++counters_.imu_samples;
+  Commit();
+  return Status::Ok();
+}
+
+Status AidedIns::CheckMeasurementTime(double t, const char* what) {
+  std::ostringstream o;
+  o << what << ": t ";
+  if (!std::isfinite(t)) {
+    o << "is not finite";
+    return Refuse(o.str());
+  }
+  if (!has_time_ || std::abs(t - t_) > 1e-9) {
+    o << "= " << t << " s is not the last IMU sample's time";
+    if (has_time_) o << " (" << t_ << " s)";
+    return Refuse(o.str());
+  }
+  return Status::Ok();
+}
+
+void AidedIns::TryInitialise() {
+  if (initialized_ || !has_attitude_ || !has_position_) return;
+  x_ = AidedInsState{};
+  x_.R_EB = R_init_;
+  x_.r_BM_B = settings_.lever_arm_B;
+  x_.p_EB_E = p_init_ - R_init_ * settings_.lever_arm_B;
+  P_.setZero();
+  const auto set = [&](int block, double sigma) {
+    P_.block<3, 3>(block, block).diagonal().setConstant(sigma * sigma);
+  };
+  set(kTheta, settings_.initial_attitude_sigma);
+  set(kVel, settings_.initial_velocity_sigma);
+  // The position is the marker's: the IMU's inherits the lever arm's uncertainty.
+  set(kPos, settings_.position_sigma);
+  set(kBg, settings_.initial_gyro_bias_sigma);
+  set(kBa, settings_.initial_accel_bias_sigma);
+  set(kLever, settings_.lever_arm_sigma);
+  const Mat3 R = R_init_;
+  P_.block<3, 3>(kPos, kPos) += R * P_.block<3, 3>(kLever, kLever) * R.transpose();
+  P_.block<3, 3>(kPos, kLever) = -R * P_.block<3, 3>(kLever, kLever);
+  P_.block<3, 3>(kLever, kPos) = P_.block<3, 3>(kPos, kLever).transpose();
+  initialized_ = true;
+  Commit();
+}
+
+Status AidedIns::UpdatePosition(double t, const Vec3& p_EM_E) {
+  if (Status s = CheckMeasurementTime(t, "position"); !s) return s;
+  if (!p_EM_E.allFinite()) return Refuse("position: p_EM_E is not finite");
+  if (!initialized_) {
+    p_init_ = p_EM_E;
+    has_position_ = true;
+    TryInitialise();
+    return Status::Ok();
+  }
+  const Eigen::Matrix<double, 3, 18> H = MarkerPositionJacobian(x_);
+  const Vec3 y = p_EM_E - MarkerPosition(x_);
+  const Mat3 R = Mat3::Identity() * settings_.position_sigma * settings_.position_sigma;
+  bool gated = false;
+  double gate = settings_.position_gate_chi2;
+  if (settings_.max_consecutive_rejections > 0 &&
+      consecutive_rejections_ >= settings_.max_consecutive_rejections) {
+    // Re-anchor (settings): the integral went wrong, the tracker did not.
+    P_.block<3, 3>(kVel, kVel).diagonal().array() += std::pow(settings_.initial_velocity_sigma, 2);
+    P_.block<3, 3>(kPos, kPos) += y * y.transpose();
+    gate = 0.0;
+    ++counters_.reanchored;
+  }
+  last_position_nis_ = Correct<3>(H, y, R, gate, &gated);
+  consecutive_rejections_ = gated ? consecutive_rejections_ + 1 : 0;
+  // Covariance matching (settings): a stochastic-approximation step toward E[NIS] = 3.
+  if (const double tau = settings_.accel_noise_adaptation_tau;
+      tau > 0.0 && has_last_position_t_ && std::isfinite(last_position_nis_)) {
+    const double a = std::min(1.0, (t - last_position_t_) / tau);
+    const double step = a * (std::min(last_position_nis_, 30.0) / 3.0 - 1.0);
+    accel_noise_scale_ =
+        std::clamp(accel_noise_scale_ * std::exp(step), 1.0, settings_.accel_noise_max_scale);
+  }
+  last_position_t_ = t;
+  has_last_position_t_ = true;
+  if (gated)
+    ++counters_.position_rejected;
+  else
+    ++counters_.positions;
+  return Status::Ok();
+}
+
+Status AidedIns::UpdateHeading(double t, const Eigen::Vector4d& q_EB_ref) {
+  if (Status s = CheckMeasurementTime(t, "heading"); !s) return s;
+  if (!q_EB_ref.allFinite() || std::abs(q_EB_ref.norm() - 1.0) > 1e-3)
+    return Refuse("heading: q_EB_ref is not a finite unit quaternion");
+  const Mat3 R_ref = geometry::QuatToMatrix(q_EB_ref);
+  if (!initialized_) {
+    R_init_ = R_ref;
+    has_attitude_ = true;
+    TryInitialise();
+    return Status::Ok();
+  }
+  // The angle about the earth's z axis of R_ref R̂ᵀ (exact for a rotation about z; the tilt
+  // between the two is left out).
+  const Mat3 E = R_ref * x_.R_EB.transpose();
+  CorrectHeading(std::atan2(E(1, 0) - E(0, 1), E(0, 0) + E(1, 1)), settings_.heading_sigma);
+  ++counters_.headings;
+  return Status::Ok();
+}
+
+Status AidedIns::UpdateMagnetometer(double t, const Vec3& m_B) {
+  if (Status s = CheckMeasurementTime(t, "magnetometer"); !s) return s;
+  if (!m_B.allFinite() || m_B.norm() <= 0.0)
+    return Refuse("magnetometer: m_B is not finite and non-zero");
+  if (!initialized_) return Refuse("magnetometer: the filter has no attitude yet (UpdateHeading)");
+  const Vec3 up_E = UpVector(settings_.earth);
+  const Vec3 m_E = x_.R_EB * m_B;
+  const Vec3 h_E = m_E - m_E.dot(up_E) * up_E;
+  if (h_E.norm() < 0.1 * m_E.norm())
+    return Refuse("magnetometer: the field is nearly vertical, its heading is undefined");
+  // The rotation about E's z axis that takes the levelled field to magnetic north.
+  const Vec3 n_E = MagneticNorth(settings_.earth);
+  CorrectHeading(std::atan2(h_E.cross(n_E).z(), h_E.dot(n_E)), settings_.mag_heading_sigma);
+  ++counters_.mag_headings;
+  return Status::Ok();
+}
+
+void AidedIns::CorrectHeading(double y_rad, double sigma_rad) {
+  // A rotation about E's z axis: H = e_zᵀ on δθ.
+  Eigen::Matrix<double, 1, 18> H = Eigen::Matrix<double, 1, 18>::Zero();
+  H(0, kTheta + 2) = 1.0;
+  const Eigen::Matrix<double, 1, 1> y = Eigen::Matrix<double, 1, 1>::Constant(y_rad);
+  const Eigen::Matrix<double, 1, 1> R =
+      Eigen::Matrix<double, 1, 1>::Constant(sigma_rad * sigma_rad);
+  bool gated = false;
+  (void)Correct<1>(H, y, R, 0.0, &gated);
+}
+
+template <int M>
+double AidedIns::Correct(const Eigen::Matrix<double, M, 18>& H,
+                         const Eigen::Matrix<double, M, 1>& y, const Eigen::Matrix<double, M, M>& R,
+                         double gate_chi2, bool* gated) {
+  const Eigen::Matrix<double, 18, M> PHt = P_ * H.transpose();
+  // M ≤ 3: the fixed-size inverse is closed-form.
+  const Eigen::Matrix<double, M, M> S_inv = (H * PHt + R).inverse();
+  const double nis = y.dot(S_inv * y);
+  *gated = gate_chi2 > 0.0 && !(nis <= gate_chi2);
+  if (*gated) return nis;
+  const Eigen::Matrix<double, 18, M> K = PHt * S_inv;
+  const AidedInsMatrix IKH = AidedInsMatrix::Identity() - K * H;
+  P_ = IKH * P_ * IKH.transpose() + K * R * K.transpose();
+  x_ = Boxplus(x_, K * y);
+  Commit();
+  return nis;
+}
+
+void AidedIns::Commit() {
+  P_ = 0.5 * (P_ + P_.transpose());
+  const bool finite = x_.R_EB.allFinite() && x_.v_EB_E.allFinite() && x_.p_EB_E.allFinite() &&
+                      x_.b_g_B.allFinite() && x_.b_a_B.allFinite() && x_.r_BM_B.allFinite() &&
+                      P_.allFinite();
+  if (!finite) {
+    const std::int64_t resets = counters_.resets + 1;
+    const double t = t_;
+    const bool has_time = has_time_;
+    Reset();
+    counters_.resets = resets;
+    t_ = t;
+    has_time_ = has_time;
+    return;
+  }
+  Eigen::Vector4d q = geometry::MatrixToQuat(x_.R_EB);
+  if (q.dot(q_EB_) < 0.0) q = -q;
+  q_EB_ = q;
+}
+
+}  // namespace rcal::estimation

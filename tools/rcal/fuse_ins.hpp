@@ -1,0 +1,53 @@
+// What `rcal fuse` and `rcal fuse-loo --ins` share: the position sensor simulated from a BROAD
+// trial's truth, and one step of the tracker-aided INS (aided_ins.hpp) fed by the orientation KF.
+// Both draw the same samples in the same order, so fuse-loo's in-sample figures are fuse's.
+#pragma once
+
+#include <Eigen/Core>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <optional>
+#include <random>
+
+#include "rcal/estimation/aided_ins.hpp"
+#include "rcal/estimation/orientation_kf.hpp"
+#include "rcal/sim/draw.hpp"
+
+namespace rcal::tool {
+
+/// The simulated tracker: one sample every 1/rate_hz [s] on the grid of the first finite truth
+/// position, the truth plus white noise of noise_m [m] per axis from a generator seeded with seed.
+class BroadTracker {
+ public:
+  BroadTracker(double rate_hz, double noise_m, std::uint64_t seed)
+      : rng_(seed), noise_(0.0, noise_m), period_(1.0 / rate_hz) {}
+  /// The sample at t [s] if one is due and the truth p_truth [m] is finite.
+  std::optional<Eigen::Vector3d> Sample(double t, const Eigen::Vector3d& p_truth) {
+    if (!(t >= next_t_ - 1e-9) || !p_truth.allFinite()) return std::nullopt;
+    next_t_ = (std::isfinite(next_t_) ? next_t_ : t) + period_;
+    return Eigen::Vector3d(p_truth + sim::Draw3(noise_, rng_));
+  }
+
+ private:
+  std::mt19937_64 rng_;
+  std::normal_distribution<double> noise_;
+  double period_;
+  double next_t_ = -std::numeric_limits<double>::infinity();
+};
+
+/// One IMU sample into the INS after the orientation KF has taken it: the IMU, its heading (the
+/// KF's attitude until the INS starts and with heading_from_kf; else the field the KF's heading
+/// row accepted, levelled with the INS's own tilt) and the tracker's sample if there is one.
+inline void StepAidedIns(estimation::AidedIns& ins, const estimation::OrientationKf& okf, double t,
+                         const Eigen::Vector3d& gyro_B, const Eigen::Vector3d& f_B,
+                         bool heading_from_kf, const std::optional<Eigen::Vector3d>& p_EM_E) {
+  (void)ins.UpdateImu(t, gyro_B, f_B);
+  if (!ins.initialized() || heading_from_kf)
+    (void)ins.UpdateHeading(t, okf.q_EB());
+  else if (okf.last_mag_B().allFinite())
+    (void)ins.UpdateMagnetometer(t, okf.last_mag_B());
+  if (p_EM_E) (void)ins.UpdatePosition(t, *p_EM_E);
+}
+
+}  // namespace rcal::tool
