@@ -188,8 +188,8 @@ void BM_PositionKfBankRate(benchmark::State& state) {
 }
 BENCHMARK(BM_PositionKfBankRate);
 
-// The tracker-aided INS (aided_ins.hpp, 18 error states): the IMU and a magnetometer heading every
-// sample, the position sensor at 20 Hz (every 5th); items = IMU samples.
+// The tracker-aided INS (aided_ins.hpp, 21 error states, the frame known): the IMU and a
+// magnetometer heading every sample, the position sensor at 20 Hz (every 5th); items = IMU samples.
 void BM_AidedInsRate(benchmark::State& state) {
   const Stream& d = Data();
   estimation::AidedInsSettings is;

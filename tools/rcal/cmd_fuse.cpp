@@ -70,7 +70,7 @@ constexpr const char* kTraceHeader =
     "paper_model_error_m,accelerometer_driven_error_m,accelerometer_driven_weight,"
     "accelerometer_driven_noise_scale,accel_used,mag_used,ins_q_EB_w,ins_q_EB_x,ins_q_EB_y,"
     "ins_q_EB_z,ins_total_error_rad,ins_heading_error_rad,ins_inclination_error_rad,"
-    "ins_p_EM_E_x_m,ins_p_EM_E_y_m,ins_p_EM_E_z_m,ins_position_error_m\n";
+    "ins_p_WM_W_x_m,ins_p_WM_W_y_m,ins_p_WM_W_z_m,ins_position_error_m\n";
 
 // BROAD scoring (discrepancy/imu_scoring.hpp, shared with `rcal analyze` on IMU streams).
 using discrepancy::AngleErrors;
@@ -216,7 +216,7 @@ int RunFuse(const FuseOptions& opt) {
       if (moving) mov->Add(err);
     }
     const double ins_pos_err =
-        ins.initialized() && p_truth.allFinite() ? (ins.p_EM_E() - p_truth).norm() : kNan;
+        ins.initialized() && p_truth.allFinite() ? (ins.p_WM_W() - p_truth).norm() : kNan;
     if (moving && std::isfinite(ins_pos_err)) ins_pos_moving.Add(ins_pos_err);
     const double bank_err = error_of(bank);
     if (bank.initialized() && p_truth.allFinite()) {
@@ -244,7 +244,7 @@ int RunFuse(const FuseOptions& opt) {
     trace << ',' << okf.last_accel_used() << ',' << okf.last_mag_used();
     for (int i = 0; i < 4; ++i) cell(ins.initialized() ? ins.q_EB()(i) : kNan);
     for (double v : {e_ins.total, e_ins.heading, e_ins.inclination}) cell(v);
-    for (int i = 0; i < 3; ++i) cell(ins.initialized() ? ins.p_EM_E()(i) : kNan);
+    for (int i = 0; i < 3; ++i) cell(ins.initialized() ? ins.p_WM_W()(i) : kNan);
     cell(ins_pos_err);
     trace << '\n';
   }

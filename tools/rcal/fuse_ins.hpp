@@ -41,13 +41,13 @@ class BroadTracker {
 /// row accepted, levelled with the INS's own tilt) and the tracker's sample if there is one.
 inline void StepAidedIns(estimation::AidedIns& ins, const estimation::OrientationKf& okf, double t,
                          const Eigen::Vector3d& gyro_B, const Eigen::Vector3d& f_B,
-                         bool heading_from_kf, const std::optional<Eigen::Vector3d>& p_EM_E) {
+                         bool heading_from_kf, const std::optional<Eigen::Vector3d>& p_WM_W) {
   (void)ins.UpdateImu(t, gyro_B, f_B);
   if (!ins.initialized() || heading_from_kf)
     (void)ins.UpdateHeading(t, okf.q_EB());
   else if (okf.last_mag_B().allFinite())
     (void)ins.UpdateMagnetometer(t, okf.last_mag_B());
-  if (p_EM_E) (void)ins.UpdatePosition(t, *p_EM_E);
+  if (p_WM_W) (void)ins.UpdatePosition(t, *p_WM_W);
 }
 
 }  // namespace rcal::tool

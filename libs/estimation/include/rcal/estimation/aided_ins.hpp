@@ -12,14 +12,20 @@
 // bias, while the heading still needs another source.
 //
 // Frames and conventions (as OrientationKf and PositionKf): E the earth frame (NED or ENU, z
-// vertical), B the IMU's body frame, M the marker. The position sensor's frame W is taken as E
-// (the position KF's default R_WE = I; a tracker turned against E must be turned first).
+// vertical), B the IMU's body frame, M the marker, W the position sensor's frame (a tracker's own
+// axes and origin). R_WE turns earth axes into the tracker's (SetWorldFromEarth; the identity until
+// told, the position KF's default); the positions p_EB_E are in earth axes about W's origin, so
+// the marker the tracker sees is p_WM_W = R_WE (p_EB_E + R_EB r_BM_B).
 // q_EB [w,x,y,z] (Hamilton) body → earth; p_EB_E the IMU's position and v_EB_E its velocity [m,
 // m/s], b_g,B [rad/s] and b_a,B [m/s²] the gyro and accelerometer biases, r_BM_B [m] the lever arm
 // IMU → marker in the body frame. Gravity g_E = −g·up_E.
-// Nominal state x = (R_EB, v, p, b_g, b_a, r); error state δx (18) = [δθ_E, δv, δp, δb_g, δb_a,
-// δr], the attitude error on the left in the earth frame, R_EB = Exp(δθ_E) R̂_EB (OrientationKf's
-// convention), the others additive: x = x̂ ⊞ δx (Boxplus).
+// Nominal state x = (R_EB, v, p, b_g, b_a, r, R_WE); error state δx (21) = [δθ_E, δv, δp, δb_g,
+// δb_a, δr, δφ_W], the attitude error on the left in the earth frame, R_EB = Exp(δθ_E) R̂_EB
+// (OrientationKf's convention), the tracker frame's on the left in W, R_WE = Exp(δφ_W) R̂_WE, the
+// others additive: x = x̂ ⊞ δx (Boxplus). The frame is constant; its covariance is what
+// SetWorldFromEarth is told (zero: known). A frame known only roughly is learned: its tilt from
+// gravity, which the positions see in the tracker's axes, its heading from the magnetometer's
+// heading against the heading the positions give (the tool accelerating sideways).
 // IMU step over (t_{k−1}, t_k] with the sample at t_k (a sampled gyro's rate over the interval
 // ending at its stamp, as OrientationKf):
 //   ω = ω_m − b_g,   R_k = R_{k−1} Exp(ω Δt),
@@ -33,11 +39,12 @@
 //   δv_k = δv − [f_E]× Δt δθ − R̄ Δt δb_a + ½ [R_k f̃_k]× R_k J_r Δt² δb_g,
 //          f_E = ½ (R_{k−1} f̃_{k−1} + R_k f̃_k), f̃ = f − b_a, R̄ = ½ (R_{k−1} + R_k),
 //   δp_k = δp + Δt δv + ½ Δt (δv_k − δv),
-// and P ← Φ P Φᵀ + Q, Q = diag((σ_g² + σ_θ²) Δt I, σ_a² Δt I, 0, σ_bg² Δt I, σ_ba² Δt I, 0).
-// Measurements (Joseph form):
-//   marker position  z = p_EM_E,  h = p + R_EB r,  H = [−[R̂ r̂]×, 0, I, 0, 0, R̂]  (behind a χ²
-//                    gate on its 3 dof; after max_consecutive_rejections gated samples the next
-//                    is taken with the position's and velocity's covariance grown, settings);
+// and P ← Φ P Φᵀ + Q, Q = diag((σ_g² + σ_θ²) Δt I, σ_a² Δt I, 0, σ_bg² Δt I, σ_ba² Δt I, 0, 0).
+// Measurements (P ← P − K S Kᵀ with the optimal gain, symmetrised; M ≤ 3 rows each):
+//   marker position  z = p_WM_W,  h = R_WE (p + R_EB r),
+//                    H = [−R̂_WE [R̂ r̂]×, 0, R̂_WE, 0, 0, R̂_WE R̂, −[ĥ]×]  (behind a χ² gate on its
+//                    3 dof; after max_consecutive_rejections gated samples the next is taken with
+//                    the position's and velocity's covariance grown, settings);
 //   heading          from another attitude source (the orientation KF, whose heading comes from
 //                    the magnetometer): y = the angle about up_E of R_ref R̂_EBᵀ, H = e_zᵀ on δθ,
 //                    σ heading_sigma. Only its heading is used: the tilt is this filter's own.
@@ -47,7 +54,8 @@
 //                    filter's tilt, not the orientation KF's, whose tilt error about north turns
 //                    into tan(dip) times as much heading error.
 // Initialisation: the first heading source's attitude and the first marker position (v = 0, its
-// σ initial_velocity_sigma): until both have come the filter only keeps the time.
+// σ initial_velocity_sigma; p = R_WEᵀ z − R r, its covariance from the sensor's, the lever arm's
+// and the frame's): until both have come the filter only keeps the time.
 // Bad input (non-finite values, values beyond the sensor's range, time not increasing, a
 // measurement not at the IMU's last time) is refused with a Status naming the field and counted;
 // the state is then unchanged. A state that still goes non-finite is never kept: the filter resets,
@@ -125,15 +133,19 @@ struct AidedInsSettings {
 /// The nominal state (header comment).
 struct AidedInsState {
   Eigen::Matrix3d R_EB = Eigen::Matrix3d::Identity();
-  Eigen::Vector3d v_EB_E = Eigen::Vector3d::Zero();  ///< [m/s]
-  Eigen::Vector3d p_EB_E = Eigen::Vector3d::Zero();  ///< [m]
-  Eigen::Vector3d b_g_B = Eigen::Vector3d::Zero();   ///< [rad/s]
-  Eigen::Vector3d b_a_B = Eigen::Vector3d::Zero();   ///< [m/s²]
-  Eigen::Vector3d r_BM_B = Eigen::Vector3d::Zero();  ///< [m]
+  Eigen::Vector3d v_EB_E = Eigen::Vector3d::Zero();    ///< [m/s]
+  Eigen::Vector3d p_EB_E = Eigen::Vector3d::Zero();    ///< [m]
+  Eigen::Vector3d b_g_B = Eigen::Vector3d::Zero();     ///< [rad/s]
+  Eigen::Vector3d b_a_B = Eigen::Vector3d::Zero();     ///< [m/s²]
+  Eigen::Vector3d r_BM_B = Eigen::Vector3d::Zero();    ///< [m]
+  Eigen::Matrix3d R_WE = Eigen::Matrix3d::Identity();  ///< earth axes → the tracker's
 };
 
-using AidedInsVector = Eigen::Matrix<double, 18, 1>;
-using AidedInsMatrix = Eigen::Matrix<double, 18, 18>;
+/// The error state's dimension and its blocks' first rows (header comment's order).
+inline constexpr int kAidedInsStates = 21;
+using AidedInsVector = Eigen::Matrix<double, kAidedInsStates, 1>;
+using AidedInsMatrix = Eigen::Matrix<double, kAidedInsStates, kAidedInsStates>;
+using AidedInsRow3 = Eigen::Matrix<double, 3, kAidedInsStates>;
 
 /// x ⊞ δx and its inverse y ⊟ x (header comment: attitude on the left, earth frame).
 AidedInsState Boxplus(const AidedInsState& x, const AidedInsVector& dx);
@@ -146,9 +158,11 @@ AidedInsState PropagateAidedIns(const AidedInsState& x, const Eigen::Vector3d& g
 AidedInsMatrix AidedInsTransition(const AidedInsState& x, const Eigen::Vector3d& gyro_B,
                                   const Eigen::Vector3d& f_prev_B, const Eigen::Vector3d& f_B,
                                   double dt);
-/// The marker's position p_EM_E = p + R_EB r [m] and its Jacobian on δx (3×18).
+/// The marker in earth axes about W's origin, p_EM_E = p + R_EB r [m].
 Eigen::Vector3d MarkerPosition(const AidedInsState& x);
-Eigen::Matrix<double, 3, 18> MarkerPositionJacobian(const AidedInsState& x);
+/// The marker as the tracker sees it, p_WM_W = R_WE (p + R_EB r) [m], and its Jacobian on δx.
+Eigen::Vector3d TrackerPosition(const AidedInsState& x);
+AidedInsRow3 TrackerPositionJacobian(const AidedInsState& x);
 
 class AidedIns {
  public:
@@ -167,14 +181,21 @@ class AidedIns {
   /// Throws std::invalid_argument naming a setting outside its domain (a NaN, a negative σ, a
   /// zero time step, accel_delay beyond kMaxAccelDelay).
   explicit AidedIns(const AidedInsSettings& settings = {});
-  /// Forgets the state and the counters (but `resets`).
+  /// Forgets the state and the counters (but `resets`); the tracker's frame as told stays.
   void Reset();
 
   /// One IMU sample at t [s] (strictly increasing): gyro ω_m [rad/s] and specific force f_B
   /// [m/s²], body frame.
   Status UpdateImu(double t, const Eigen::Vector3d& gyro_B, const Eigen::Vector3d& f_B);
-  /// The marker's position p_EM_E [m] measured at t, the IMU's last sample time [s].
-  Status UpdatePosition(double t, const Eigen::Vector3d& p_EM_E);
+  /// The tracker's frame: R_WE turns earth axes into its axes, with the covariance [rad²] of the
+  /// rotation error δφ_W (R_WE = Exp(δφ_W) R̂_WE): zero, the frame is known; else it is learned
+  /// (header comment). Before the first position only; refused (naming why) when R_WE is not a
+  /// rotation or the covariance not a finite symmetric one with a non-negative diagonal.
+  Status SetWorldFromEarth(const Eigen::Matrix3d& R_WE,
+                           const Eigen::Matrix3d& covariance = Eigen::Matrix3d::Zero());
+  /// The marker's position p_WM_W [m] in the tracker's frame, measured at t, the IMU's last
+  /// sample time [s].
+  Status UpdatePosition(double t, const Eigen::Vector3d& p_WM_W);
   /// Another source's attitude q_EB [w,x,y,z] at t (the IMU's last sample time): its heading
   /// about up_E is applied; before initialisation its whole attitude is the initial one.
   Status UpdateHeading(double t, const Eigen::Vector4d& q_EB_ref);
@@ -188,9 +209,11 @@ class AidedIns {
   const AidedInsState& state() const { return x_; }
   /// q_EB [w,x,y,z], sign continuous from sample to sample.
   const Eigen::Vector4d& q_EB() const { return q_EB_; }
-  /// The marker's position p_EM_E [m].
-  Eigen::Vector3d p_EM_E() const { return MarkerPosition(x_); }
-  /// Error-state covariance (18×18, header comment's order and units).
+  /// The marker's position in the tracker's frame, p_WM_W [m].
+  Eigen::Vector3d p_WM_W() const { return TrackerPosition(x_); }
+  /// The tracker's frame R_WE as estimated (as told when its covariance is zero).
+  const Eigen::Matrix3d& R_WE() const { return x_.R_WE; }
+  /// Error-state covariance (21×21, header comment's order and units).
   const AidedInsMatrix& P() const { return P_; }
   /// The accelerometer noise's adaptive factor λ [-] (1 when the adaptation is off).
   double accel_noise_scale() const { return accel_noise_scale_; }
@@ -207,8 +230,9 @@ class AidedIns {
   void CorrectHeading(double y_rad, double sigma_rad);
   // KF update on δx; returns the NIS (NaN: not applied, the state went non-finite).
   template <int M>
-  double Correct(const Eigen::Matrix<double, M, 18>& H, const Eigen::Matrix<double, M, 1>& y,
-                 const Eigen::Matrix<double, M, M>& R, double gate_chi2, bool* gated);
+  double Correct(const Eigen::Matrix<double, M, kAidedInsStates>& H,
+                 const Eigen::Matrix<double, M, 1>& y, const Eigen::Matrix<double, M, M>& R,
+                 double gate_chi2, bool* gated);
   void Commit();
 
   AidedInsSettings settings_;
@@ -218,7 +242,9 @@ class AidedIns {
   double t_ = 0.0;
   bool has_attitude_ = false, has_position_ = false;
   Eigen::Matrix3d R_init_ = Eigen::Matrix3d::Identity();
-  Eigen::Vector3d p_init_ = Eigen::Vector3d::Zero();
+  Eigen::Vector3d p_init_ = Eigen::Vector3d::Zero();    // the first marker position, W [m]
+  Eigen::Matrix3d R_WE_ = Eigen::Matrix3d::Identity();  // the frame as told, and its covariance
+  Eigen::Matrix3d R_WE_covariance_ = Eigen::Matrix3d::Zero();
   Eigen::Vector3d f_prev_B_ = Eigen::Vector3d::Zero();  // the last specific force, lag removed
   Eigen::Vector3d f_then_B_ = Eigen::Vector3d::Zero();  // the last sample turned to its time t − δ
   double accel_noise_scale_ = 1.0;
