@@ -124,7 +124,7 @@ int RunFuse(const FuseOptions& opt) {
   const est::PositionKf& pkf = bank.filters()[0];
   const est::PositionKf& driven = bank.filters()[1];
   // The tracker-aided INS (aided_ins.hpp): the IMU integrated and corrected by the same position
-  // samples, its heading taken from the orientation KF.
+  // samples; its heading from the field the orientation KF accepted (fuse_ins.hpp).
   est::AidedIns ins(settings.ins);
   est::FqaSettings fqa_settings;
   fqa_settings.earth = est::EarthFrame::kEnu;

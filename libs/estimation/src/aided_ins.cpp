@@ -7,6 +7,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "number_text.hpp"
 #include "rcal/geometry/so3.hpp"
 
 namespace rcal::estimation {
@@ -22,11 +23,7 @@ using Mat3 = Eigen::Matrix3d;
 constexpr int kTheta = 0, kVel = 3, kPos = 6, kBg = 9, kBa = 12, kLever = 15, kFrame = 18;
 constexpr int kN = kAidedInsStates;
 
-std::string Num(double v) {
-  std::ostringstream o;
-  o << v;
-  return o.str();
-}
+using detail::Num;
 
 bool WithinRange(const Vec3& v, double range) {
   return v.allFinite() && v.cwiseAbs().maxCoeff() <= range;
@@ -58,21 +55,23 @@ AidedInsVector Boxminus(const AidedInsState& y, const AidedInsState& x) {
   return d;
 }
 
-AidedInsState PropagateAidedIns(const AidedInsState& x, const Vec3& gyro_B, const Vec3& f_prev_B,
-                                const Vec3& f_B, const Vec3& g_E, double dt) {
+namespace {
+
+// One IMU step given its rotation R_k = R_{k−1} Exp(ω Δt) (ω Δt = w_dt), formed once per sample
+// for the state, its transition and the accelerometer's lag.
+AidedInsState PropagateWith(const AidedInsState& x, const Mat3& R_k, const Vec3& f_prev_B,
+                            const Vec3& f_B, const Vec3& g_E, double dt) {
   AidedInsState y = x;
-  y.R_EB = x.R_EB * Exp((gyro_B - x.b_g_B) * dt);
+  y.R_EB = R_k;
   // The trapezoid of the specific force turned into E at both ends of the step.
-  const Vec3 a_E = 0.5 * (x.R_EB * (f_prev_B - x.b_a_B) + y.R_EB * (f_B - x.b_a_B)) + g_E;
+  const Vec3 a_E = 0.5 * (x.R_EB * (f_prev_B - x.b_a_B) + R_k * (f_B - x.b_a_B)) + g_E;
   y.p_EB_E = x.p_EB_E + x.v_EB_E * dt + 0.5 * a_E * dt * dt;
   y.v_EB_E = x.v_EB_E + a_E * dt;
   return y;
 }
 
-AidedInsMatrix AidedInsTransition(const AidedInsState& x, const Vec3& gyro_B, const Vec3& f_prev_B,
-                                  const Vec3& f_B, double dt) {
-  const Vec3 w_dt = (gyro_B - x.b_g_B) * dt;
-  const Mat3 R_k = x.R_EB * Exp(w_dt);
+AidedInsMatrix TransitionWith(const AidedInsState& x, const Mat3& R_k, const Vec3& w_dt,
+                              const Vec3& f_prev_B, const Vec3& f_B, double dt) {
   const Mat3 R_mean = 0.5 * (x.R_EB + R_k);
   const Vec3 f_corr_B = f_B - x.b_a_B;
   const Vec3 f_E = 0.5 * (x.R_EB * (f_prev_B - x.b_a_B) + R_k * f_corr_B);
@@ -85,11 +84,23 @@ AidedInsMatrix AidedInsTransition(const AidedInsState& x, const Vec3& gyro_B, co
   da.block<3, 3>(0, kBg) = -0.5 * Skew(R_k * f_corr_B) * dRk_dbg;
   AidedInsMatrix F = AidedInsMatrix::Identity();
   F.block<3, 3>(kTheta, kBg) = dRk_dbg;
-  F.block<3, 3>(kVel, kVel).setIdentity();
   F.block<3, kN>(kVel, 0) += da * dt;
   F.block<3, 3>(kPos, kVel) = Mat3::Identity() * dt;
   F.block<3, kN>(kPos, 0) += da * (0.5 * dt * dt);
   return F;
+}
+
+}  // namespace
+
+AidedInsState PropagateAidedIns(const AidedInsState& x, const Vec3& gyro_B, const Vec3& f_prev_B,
+                                const Vec3& f_B, const Vec3& g_E, double dt) {
+  return PropagateWith(x, x.R_EB * Exp((gyro_B - x.b_g_B) * dt), f_prev_B, f_B, g_E, dt);
+}
+
+AidedInsMatrix AidedInsTransition(const AidedInsState& x, const Vec3& gyro_B, const Vec3& f_prev_B,
+                                  const Vec3& f_B, double dt) {
+  const Vec3 w_dt = (gyro_B - x.b_g_B) * dt;
+  return TransitionWith(x, x.R_EB * Exp(w_dt), w_dt, f_prev_B, f_B, dt);
 }
 
 Vec3 MarkerPosition(const AidedInsState& x) {
@@ -167,6 +178,14 @@ void AidedIns::Reset() {
   counters_.resets = resets;
 }
 
+void AidedIns::ResetKeepingTime() {
+  const double t = t_;
+  const bool has_time = has_time_;
+  Reset();
+  t_ = t;
+  has_time_ = has_time;
+}
+
 Status AidedIns::Refuse(const std::string& why) {
   ++counters_.input_rejected;
   return Status::Error("aided_ins: " + why);
@@ -183,15 +202,17 @@ Status AidedIns::UpdateImu(double t, const Vec3& gyro_B, const Vec3& f_B) {
   const double dt = has_time_ ? t - t_ : 0.0;
   t_ = t;
   has_time_ = true;
+  // The step's rotation, once: for the lag's extrapolation, the state and its transition.
+  const Vec3 w_dt = (gyro_B - x_.b_g_B) * dt;
+  const Mat3 step = Exp(w_dt);
   // The accelerometer's lag (settings): the sample is the specific force of t − δ in the body of
   // then, Exp(−δω) f_B in the body's axes now; extrapolated to t along the previous one (turned
-  // into the same axes by the step's rotation, Exp(−ωΔt)).
+  // into the same axes by the step's rotation, Exp(ωΔt)ᵀ).
   Vec3 f_now_B = f_B;
   if (const double delay = settings_.accel_delay; delay > 0.0) {
-    const Vec3 w_B = gyro_B - x_.b_g_B;
-    const Vec3 f_then_B = Exp(-delay * w_B) * f_B;
+    const Vec3 f_then_B = Exp(-delay * (gyro_B - x_.b_g_B)) * f_B;
     if (initialized_ && dt > 0.0 && dt <= settings_.max_step)
-      f_now_B = f_then_B + (delay / dt) * (f_then_B - Exp(-dt * w_B) * f_then_B_);
+      f_now_B = f_then_B + (delay / dt) * (f_then_B - step.transpose() * f_then_B_);
     else
       f_now_B = f_then_B;
     f_then_B_ = f_then_B;
@@ -203,14 +224,13 @@ Status AidedIns::UpdateImu(double t, const Vec3& gyro_B, const Vec3& f_B) {
   if (dt > settings_.max_step) {
     // The strapdown integral over a gap is no estimate: start again from the next sources.
     const std::int64_t reinitialised = counters_.reinitialised + 1;
-    Reset();
+    ResetKeepingTime();
     counters_.reinitialised = reinitialised;
-    t_ = t;
-    has_time_ = true;
     return Status::Ok();
   }
-  const AidedInsMatrix F = AidedInsTransition(x_, gyro_B, f_prev_B_, f_now_B, dt);
-  x_ = PropagateAidedIns(x_, gyro_B, f_prev_B_, f_now_B, g_E_, dt);
+  const Mat3 R_k = x_.R_EB * step;
+  const AidedInsMatrix F = TransitionWith(x_, R_k, w_dt, f_prev_B_, f_now_B, dt);
+  x_ = PropagateWith(x_, R_k, f_prev_B_, f_now_B, g_E_, dt);
   f_prev_B_ = f_now_B;
   // Φ differs from I only in the rows of δθ, δv and δp (the first 9): Φ P Φᵀ by blocks costs
   // 0.43× the dense product (BM_AidedInsRate).
@@ -409,13 +429,8 @@ void AidedIns::Commit() {
                       x_.b_g_B.allFinite() && x_.b_a_B.allFinite() && x_.r_BM_B.allFinite() &&
                       x_.R_WE.allFinite() && P_.allFinite();
   if (!finite) {
-    const std::int64_t resets = counters_.resets + 1;
-    const double t = t_;
-    const bool has_time = has_time_;
-    Reset();
-    counters_.resets = resets;
-    t_ = t;
-    has_time_ = has_time;
+    ResetKeepingTime();  // `resets` survives a Reset
+    ++counters_.resets;
     return;
   }
   Eigen::Vector4d q = geometry::MatrixToQuat(x_.R_EB);

@@ -7,11 +7,14 @@
 #include <sstream>
 #include <string>
 
+#include "number_text.hpp"
 #include "rcal/estimation/low_pass.hpp"
 #include "rcal/geometry/so3.hpp"
 
 namespace rcal::estimation {
 namespace {
+
+using detail::Num;
 
 using geometry::QuatMultiply;
 using geometry::QuatToMatrix;
@@ -30,13 +33,6 @@ Eigen::Vector4d QuatExp(const Eigen::Vector3d& v) {
 std::string Vec(const Eigen::Vector3d& v) {
   std::ostringstream o;
   o << "[" << v.x() << ", " << v.y() << ", " << v.z() << "]";
-  return o.str();
-}
-
-std::string Num(double v) {
-  std::ostringstream o;
-  o.precision(17);
-  o << v;
   return o.str();
 }
 

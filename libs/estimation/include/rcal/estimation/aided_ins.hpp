@@ -224,6 +224,8 @@ class AidedIns {
 
  private:
   Status Refuse(const std::string& why);
+  // Reset, the last IMU time kept (the next sample then steps from it).
+  void ResetKeepingTime();
   Status CheckMeasurementTime(double t, const char* what);
   void TryInitialise();
   // A heading innovation y [rad] about E's z axis with σ [rad].
