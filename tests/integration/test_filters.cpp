@@ -3,7 +3,7 @@
 // filters run offline on the same file read independently: sample for sample, at two replay
 // speeds (the filters run on sensor time, so speed must not matter). And: malformed and
 // wrong-type messages on live channels are rejected, counted in HEALTH, and the processes keep
-// running.
+// running. The tracker-aided INS (aided_ins) on the same replay against the library.
 #include <Eigen/Geometry>
 #include <cmath>
 #include <limits>
@@ -11,12 +11,14 @@
 #include <optional>
 
 #include "netns.hpp"
+#include "rcal/estimation/aided_ins.hpp"
 #include "rcal/estimation/orientation_kf.hpp"
 #include "rcal/estimation/position_kf.hpp"
 #include "rcal/estimation/position_kf_bank.hpp"
 #include "rcal/health_t.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/csv_table.hpp"
+#include "rcal/transport/aided_ins_node.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/filter_nodes.hpp"
 #include "rcal/transport/lcm_transport.hpp"
@@ -450,6 +452,103 @@ TEST_F(Filters, TheCellFileGivesEarthFrameSigmaAndChannels) {
     Reaped(p);
     EXPECT_NE(io::ReadFile((dir_ / log).string()).find("sensors.imu: absent"), std::string::npos)
         << exe;
+  }
+}
+
+// The tracker-aided INS live: sensor_acquisition --source replay → aided_ins as real processes
+// over UDP multicast, against the library run offline on the file read independently
+// (estimation::StepAfterOrientationKf after each row, the 20 Hz position after it), at two replay
+// speeds: every INS_ORIENTATION up to the tracker's last sample, equal to 1e-12. Later IMU samples
+// wait for a tracker sample that never comes (the stream ended): none is published.
+TEST_F(Filters, TheAidedInsReplayMatchesTheLibrary) {
+  RCAL_IN_NAMESPACE("Filters.TheAidedInsReplayMatchesTheLibrary");
+  std::map<int64_t, orientation_estimate_t> ref;
+  int64_t last_position = 0;
+  {
+    const auto table = io::CsvTable::Load(kTrial);
+    estimation::OrientationKfSettings os;
+    os.earth = estimation::EarthFrame::kEnu;
+    estimation::AidedInsSettings is;  // aided_ins's defaults: fuse-loo --ins's choice
+    is.earth = estimation::EarthFrame::kEnu;
+    is.mag_heading_sigma = 0.6;
+    is.accel_noise_density = 0.02;
+    estimation::OrientationKf okf(os);
+    estimation::AidedIns ins(is);
+    double next_pos_t = -INFINITY;
+    for (int k = 0; k < std::min(kRows, table.rows()); ++k) {
+      auto c = [&](const char* name) { return table.At(k, name); };
+      const double t_s = c("t_s");
+      const int64_t utime = std::llround(t_s * 1e6);
+      const double t = transport::SensorSeconds(utime);
+      const Eigen::Vector3d gyro(c("gyr_x"), c("gyr_y"), c("gyr_z")),
+          f(c("acc_x"), c("acc_y"), c("acc_z"));
+      if (!okf.Update(t, gyro, f, 1e-6 * Eigen::Vector3d(c("mag_x"), c("mag_y"), c("mag_z"))))
+        continue;
+      ASSERT_TRUE(estimation::StepAfterOrientationKf(ins, okf, t, gyro, f, false));
+      if (ins.initialized()) ref[utime] = transport::ToOrientationEstimate(ins, utime);
+      const Eigen::Vector3d p(c("pos_x"), c("pos_y"), c("pos_z"));
+      if (p.allFinite() && t_s >= next_pos_t - 1e-9) {
+        next_pos_t = (std::isfinite(next_pos_t) ? next_pos_t : t_s) + 1.0 / 20;
+        ASSERT_TRUE(ins.UpdatePosition(t, p));
+        last_position = utime;
+      }
+    }
+    ASSERT_GT(ins.counters().positions, 500);
+  }
+  size_t expected = 0;
+  for (const auto& [utime, m] : ref) expected += utime <= last_position ? 1 : 0;
+  ASSERT_GT(expected, 2000u);
+  for (const char* speed : {"4", "16"}) {
+    SCOPED_TRACE(std::string("speed ") + speed);
+    constexpr int kAttempts = 3;
+    for (int attempt = 1; attempt <= kAttempts; ++attempt) {
+      const std::string tag = std::string(speed) + "_" + std::to_string(attempt) + ".log";
+      Listener l(ch::kInsOrientation, ch::kInsToolPosition);
+      const pid_t ins =
+          Start({RCAL_AIDED_INS, "--earth", "enu", "--lcm-url", kUrl}, "aided_ins_" + tag);
+      ASSERT_TRUE(l.WaitFor([&] { return l.health.count("aided_ins") > 0; }));
+      const pid_t src = Start({RCAL_SENSOR_ACQUISITION, "--source", "replay", kTrial, "--max-rows",
+                               std::to_string(kRows), "--speed", speed, "--lcm-url", kUrl},
+                              "sensor_acquisition_ins_" + tag);
+      bool src_done = false;
+      ASSERT_TRUE(l.WaitFor([&] {
+        if (l.orientation.size() >= expected) return true;
+        if (!src_done && !Running(src)) {
+          src_done = true;
+          Reaped(src);
+        }
+        return src_done && std::chrono::steady_clock::now() - l.last_arrival > 3s;
+      }));
+      if (!src_done) {
+        EXPECT_EQ(Wait(src), 0);
+        Reaped(src);
+      }
+      for (int i = 0; i < 10; ++i) l.t.HandleTimeout(20);
+      EXPECT_EQ(Stop(ins), 0);
+      for (int i = 0; i < 10; ++i) l.t.HandleTimeout(20);  // its final HEALTH
+      if (l.orientation.size() < expected) {
+        const std::string what = "INS orientations " + std::to_string(l.orientation.size()) +
+                                 " of " + std::to_string(expected) + "; " + l.Counts();
+        ASSERT_GT(l.Counted(), 0) << "lost, and counted nowhere: " << what;
+        std::printf("attempt %d: losses counted, run repeated: %s\n", attempt, what.c_str());
+        ASSERT_LT(attempt, kAttempts) << "every attempt lost datagrams: " << what;
+        continue;
+      }
+      EXPECT_EQ(l.duplicates, 0);
+      EXPECT_EQ(l.orientation.size(), expected);
+      for (const auto& [utime, m] : l.orientation) {
+        const auto r = ref.find(utime);
+        ASSERT_NE(r, ref.end()) << "an INS_ORIENTATION the library has not: " << utime;
+        ASSERT_LE(utime, last_position);
+        ExpectSame(m.q_EI, r->second.q_EI, 4, "q_EI", utime);
+        ExpectSame(m.covariance, r->second.covariance, 9, "covariance", utime);
+        ExpectSame(m.gyro_bias, r->second.gyro_bias, 3, "gyro_bias", utime);
+      }
+      // Its marker: one per update, at least one per IMU step it integrated.
+      EXPECT_GT(l.tool.size(), expected);
+      EXPECT_EQ(l.health["aided_ins"].rejected, 0) << l.health["aided_ins"].last_error;
+      break;
+    }
   }
 }
 

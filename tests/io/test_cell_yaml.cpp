@@ -277,6 +277,8 @@ TEST(CellYaml, DefaultsAreTodaysSettings) {
   EXPECT_EQ(c.joints, ch::kJoints);
   EXPECT_EQ(c.orientation, ch::kOrientation);
   EXPECT_EQ(c.tool_position, ch::kToolPosition);
+  EXPECT_EQ(c.ins_orientation, ch::kInsOrientation);
+  EXPECT_EQ(c.ins_tool_position, ch::kInsToolPosition);
   EXPECT_EQ(c.pose_measurement, ch::kPoseMeasurement);
   EXPECT_EQ(c.kinematic_params, ch::kKinematicParams);
   EXPECT_EQ(c.calibration_status, ch::kCalibrationStatus);

@@ -24,8 +24,8 @@ TEST(ProcessTable, TheShippedTableStartsTheLoggerFirst) {
   const auto t = LoadProcessTable(RCAL_SOURCE_DIR "/config/processes.yaml");
   ASSERT_GE(t.processes.size(), 4u);
   EXPECT_EQ(t.processes.front().name, "logger");
-  for (const char* name :
-       {"ekf_identifier", "sensor_acquisition", "ik_corrector", "orientation_kf", "position_kf"}) {
+  for (const char* name : {"ekf_identifier", "sensor_acquisition", "ik_corrector", "orientation_kf",
+                           "position_kf", "aided_ins"}) {
     bool found = false;
     for (const auto& p : t.processes) found |= p.name == name && p.argv.at(0) == name;
     EXPECT_TRUE(found) << name;

@@ -36,17 +36,13 @@ class BroadTracker {
   double next_t_ = -std::numeric_limits<double>::infinity();
 };
 
-/// One IMU sample into the INS after the orientation KF has taken it: the IMU, its heading (the
-/// KF's attitude until the INS starts and with heading_from_kf; else the field the KF's heading
-/// row accepted, levelled with the INS's own tilt) and the tracker's sample if there is one.
+/// One IMU sample into the INS after the orientation KF has taken it
+/// (estimation::StepAfterOrientationKf: what the aided_ins process runs) and the tracker's sample
+/// if there is one, at the IMU's time.
 inline void StepAidedIns(estimation::AidedIns& ins, const estimation::OrientationKf& okf, double t,
                          const Eigen::Vector3d& gyro_B, const Eigen::Vector3d& f_B,
                          bool heading_from_kf, const std::optional<Eigen::Vector3d>& p_WM_W) {
-  (void)ins.UpdateImu(t, gyro_B, f_B);
-  if (!ins.initialized() || heading_from_kf)
-    (void)ins.UpdateHeading(t, okf.q_EB());
-  else if (okf.last_mag_B().allFinite())
-    (void)ins.UpdateMagnetometer(t, okf.last_mag_B());
+  if (!estimation::StepAfterOrientationKf(ins, okf, t, gyro_B, f_B, heading_from_kf)) return;
   if (p_WM_W) (void)ins.UpdatePosition(t, *p_WM_W);
 }
 

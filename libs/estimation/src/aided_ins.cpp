@@ -1,5 +1,7 @@
 #include "rcal/estimation/aided_ins.hpp"
 
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -111,6 +113,42 @@ Vec3 TrackerPosition(const AidedInsState& x) {
   return x.R_WE * MarkerPosition(x);
 }
 
+Vec3 TrackerVelocity(const AidedInsState& x, const Vec3& omega_B) {
+  return x.R_WE * (x.v_EB_E + x.R_EB * omega_B.cross(x.r_BM_B));
+}
+
+AidedInsRow3 TrackerVelocityJacobian(const AidedInsState& x, const Vec3& omega_B) {
+  // u = R_EB (ω × r): δθ → −[u]×, δr → R_EB [ω]×, δb_g → R_EB [r]× (ω = ω_m − b_g); δv → R_WE;
+  // δφ → −[R_WE (v + u)]×.
+  const Vec3 u_E = x.R_EB * omega_B.cross(x.r_BM_B);
+  AidedInsRow3 J = AidedInsRow3::Zero();
+  J.block<3, 3>(0, kTheta) = -x.R_WE * Skew(u_E);
+  J.block<3, 3>(0, kVel) = x.R_WE;
+  J.block<3, 3>(0, kBg) = x.R_WE * x.R_EB * Skew(x.r_BM_B);
+  J.block<3, 3>(0, kLever) = x.R_WE * x.R_EB * Skew(omega_B);
+  J.block<3, 3>(0, kFrame) = -Skew(x.R_WE * (x.v_EB_E + u_E));
+  return J;
+}
+
+Vec3 TrackerPositionBefore(const AidedInsState& x, double tau, const Vec3& omega_B,
+                           const Vec3& a_E) {
+  const Mat3 R_then = x.R_EB * Exp(-tau * omega_B);
+  return x.R_WE * (x.p_EB_E - tau * x.v_EB_E + 0.5 * tau * tau * a_E + R_then * x.r_BM_B);
+}
+
+AidedInsRow3 TrackerPositionBeforeJacobian(const AidedInsState& x, double tau, const Vec3& omega_B,
+                                           const Vec3& a_E) {
+  // As TrackerPositionJacobian with R_then = R_EB Exp(−ω τ) (δθ on the left turns it as R_EB),
+  // and −τ R_WE on δv.
+  AidedInsState then = x;
+  then.R_EB = x.R_EB * Exp(-tau * omega_B);
+  AidedInsRow3 H = TrackerPositionJacobian(then);
+  H.block<3, 3>(0, kVel) = -tau * x.R_WE;
+  // δφ turns the whole of h, which is the marker then.
+  H.block<3, 3>(0, kFrame) = -Skew(TrackerPositionBefore(x, tau, omega_B, a_E));
+  return H;
+}
+
 AidedInsRow3 TrackerPositionJacobian(const AidedInsState& x) {
   // h = R_WE (p + R_EB r): δp → R_WE, δθ → −R_WE [R r]×, δr → R_WE R, δφ → −[h]×.
   AidedInsRow3 H = AidedInsRow3::Zero();
@@ -173,6 +211,9 @@ void AidedIns::Reset() {
   consecutive_rejections_ = 0;
   accel_noise_scale_ = 1.0;
   has_last_position_t_ = false;
+  step_dt_ = 0.0;
+  step_omega_B_.setZero();
+  step_a_E_.setZero();
   const std::int64_t resets = counters_.resets;
   counters_ = {};
   counters_.resets = resets;
@@ -217,8 +258,16 @@ Status AidedIns::UpdateImu(double t, const Vec3& gyro_B, const Vec3& f_B) {
       f_now_B = f_then_B;
     f_then_B_ = f_then_B;
   }
+  // The step a position within it is taken back along (before initialisation, and over a gap, a
+  // position only starts the filter: nothing is taken back).
+  const auto record_step = [&](const Vec3& omega_B, const Vec3& a_E) {
+    step_dt_ = dt;
+    step_omega_B_ = omega_B;
+    step_a_E_ = a_E;
+  };
   if (!initialized_) {
     f_prev_B_ = f_now_B;
+    record_step(Vec3::Zero(), Vec3::Zero());
     return Status::Ok();
   }
   if (dt > settings_.max_step) {
@@ -226,9 +275,12 @@ Status AidedIns::UpdateImu(double t, const Vec3& gyro_B, const Vec3& f_B) {
     const std::int64_t reinitialised = counters_.reinitialised + 1;
     ResetKeepingTime();
     counters_.reinitialised = reinitialised;
+    record_step(Vec3::Zero(), Vec3::Zero());
     return Status::Ok();
   }
   const Mat3 R_k = x_.R_EB * step;
+  record_step(gyro_B - x_.b_g_B,
+              0.5 * (x_.R_EB * (f_prev_B_ - x_.b_a_B) + R_k * (f_now_B - x_.b_a_B)) + g_E_);
   const AidedInsMatrix F = TransitionWith(x_, R_k, w_dt, f_prev_B_, f_now_B, dt);
   x_ = PropagateWith(x_, R_k, f_prev_B_, f_now_B, g_E_, dt);
   f_prev_B_ = f_now_B;
@@ -310,13 +362,60 @@ Status AidedIns::SetWorldFromEarth(const Mat3& R_WE, const Mat3& covariance) {
   if (!covariance.allFinite() || (covariance - covariance.transpose()).norm() > 1e-12 ||
       (covariance.diagonal().array() < 0.0).any())
     return Refuse("world frame: its covariance is not finite, symmetric and non-negative");
-  R_WE_ = R_WE;
-  R_WE_covariance_ = covariance;
+  R_WE_ = R_WE_reference_ = R_WE;
+  R_WE_covariance_ = R_WE_reference_covariance_ = covariance;
+  return Status::Ok();
+}
+
+Status AidedIns::UpdateWorldFromEarth(const Mat3& R_WE, const Mat3& covariance) {
+  if (!initialized_)
+    return Refuse("world frame: no state yet to update (SetWorldFromEarth tells the frame then)");
+  if (R_WE_covariance_.isZero())
+    return Refuse("world frame: told as known exactly (zero covariance), it is not updated");
+  if (!R_WE.allFinite() || (R_WE * R_WE.transpose() - Mat3::Identity()).norm() > 1e-6 ||
+      R_WE.determinant() < 0.0)
+    return Refuse("world frame: R_WE is not a rotation");
+  const Eigen::LLT<Mat3> llt(covariance);
+  if (!covariance.allFinite() || (covariance - covariance.transpose()).norm() > 1e-12 ||
+      llt.info() != Eigen::Success)
+    return Refuse("world frame: its covariance is not finite, symmetric and positive definite");
+  // Both estimates about the current frame, R = Exp(x) R̂_WE.
+  const Mat3 I_new = llt.solve(Mat3::Identity());
+  const Vec3 x_new = Log(R_WE * x_.R_WE.transpose());
+  const Eigen::LLT<Mat3> llt_prev(R_WE_reference_covariance_);
+  const Mat3 I_prev = llt_prev.info() == Eigen::Success ? Mat3(llt_prev.solve(Mat3::Identity()))
+                                                        : Mat3(Mat3::Zero());
+  const Vec3 x_prev = Log(R_WE_reference_ * x_.R_WE.transpose());
+  // The reference for the next estimate, and the frame a re-initialisation starts from.
+  R_WE_ = R_WE_reference_ = R_WE;
+  R_WE_covariance_ = R_WE_reference_covariance_ = covariance;
+  const Mat3 dI = 0.5 * (I_new - I_prev + (I_new - I_prev).transpose());
+  const Eigen::SelfAdjointEigenSolver<Mat3> eig(dI);
+  if (!(eig.eigenvalues().minCoeff() > 1e-9 * eig.eigenvalues().cwiseAbs().maxCoeff())) {
+    ++counters_.frame_uninformative;
+    return Status::Ok();
+  }
+  const Mat3 R_z = eig.eigenvectors() * eig.eigenvalues().cwiseInverse().asDiagonal() *
+                   eig.eigenvectors().transpose();
+  const Vec3 z = R_z * (I_new * x_new - I_prev * x_prev);
+  AidedInsRow3 H = AidedInsRow3::Zero();
+  H.block<3, 3>(0, kFrame).setIdentity();
+  bool gated = false;
+  (void)Correct<3>(H, z, R_z, 0.0, &gated);
+  ++counters_.frame_updates;
   return Status::Ok();
 }
 
 Status AidedIns::UpdatePosition(double t, const Vec3& p_WM_W) {
-  if (Status s = CheckMeasurementTime(t, "position"); !s) return s;
+  if (!std::isfinite(t)) return Refuse("position: t is not finite");
+  // τ: how long before the IMU's last sample the tracker saw the marker, within the last step.
+  const double tau = t_ - t;
+  if (!has_time_ || tau < -1e-9 || tau > step_dt_ + 1e-9) {
+    std::ostringstream o;
+    o << "position: t = " << t << " s is not within the last IMU step";
+    if (has_time_) o << " (" << t_ - step_dt_ << " s to " << t_ << " s)";
+    return Refuse(o.str());
+  }
   if (!p_WM_W.allFinite()) return Refuse("position: p_WM_W is not finite");
   if (!initialized_) {
     p_init_ = p_WM_W;
@@ -324,8 +423,9 @@ Status AidedIns::UpdatePosition(double t, const Vec3& p_WM_W) {
     TryInitialise();
     return Status::Ok();
   }
-  const AidedInsRow3 H = TrackerPositionJacobian(x_);
-  const Vec3 y = p_WM_W - TrackerPosition(x_);
+  const double tau_s = std::max(tau, 0.0);
+  const AidedInsRow3 H = TrackerPositionBeforeJacobian(x_, tau_s, step_omega_B_, step_a_E_);
+  const Vec3 y = p_WM_W - TrackerPositionBefore(x_, tau_s, step_omega_B_, step_a_E_);
   const Mat3 R = Mat3::Identity() * settings_.position_sigma * settings_.position_sigma;
   bool gated = false;
   double gate = settings_.position_gate_chi2;
@@ -354,6 +454,14 @@ Status AidedIns::UpdatePosition(double t, const Vec3& p_WM_W) {
   else
     ++counters_.positions;
   return Status::Ok();
+}
+
+Eigen::Matrix<double, 6, 6> AidedIns::marker_covariance() const {
+  Eigen::Matrix<double, 6, kN> J;
+  J.topRows<3>() = TrackerPositionJacobian(x_);
+  J.bottomRows<3>() = TrackerVelocityJacobian(x_, step_omega_B_);
+  const Eigen::Matrix<double, 6, 6> C = J * P_ * J.transpose();
+  return 0.5 * (C + C.transpose());
 }
 
 Status AidedIns::UpdateHeading(double t, const Eigen::Vector4d& q_EB_ref) {
@@ -436,6 +544,17 @@ void AidedIns::Commit() {
   Eigen::Vector4d q = geometry::MatrixToQuat(x_.R_EB);
   if (q.dot(q_EB_) < 0.0) q = -q;
   q_EB_ = q;
+}
+
+Status StepAfterOrientationKf(AidedIns& ins, const OrientationKf& okf, double t, const Vec3& gyro_B,
+                              const Vec3& f_B, bool heading_from_kf) {
+  if (Status s = ins.UpdateImu(t, gyro_B, f_B); !s) return s;
+  if (!okf.initialized()) return Status::Ok();
+  if (!ins.initialized() || heading_from_kf)
+    (void)ins.UpdateHeading(t, okf.q_EB());
+  else if (okf.last_mag_B().allFinite())
+    (void)ins.UpdateMagnetometer(t, okf.last_mag_B());
+  return Status::Ok();
 }
 
 }  // namespace rcal::estimation

@@ -341,6 +341,8 @@ void ReadChannels(const Reader& r, const YAML::Node& n, const std::string& p, Ce
       {"joints", &c->joints},
       {"orientation", &c->orientation},
       {"tool_position", &c->tool_position},
+      {"ins_orientation", &c->ins_orientation},
+      {"ins_tool_position", &c->ins_tool_position},
       {"pose_measurement", &c->pose_measurement},
       {"kinematic_params", &c->kinematic_params},
       {"calibration_status", &c->calibration_status},

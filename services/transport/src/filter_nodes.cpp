@@ -161,6 +161,24 @@ tool_position_estimate_t ToToolPositionEstimate(const estimation::PositionKfBank
   return ToolPositionEstimate(kf, utime);
 }
 
+std::optional<WorldFromEarth> WorldFromEarthFromMessage(const kinematic_params_t& msg,
+                                                        const kinematics::KinematicModel& model,
+                                                        std::string* error) {
+  const auto x = ParamsFromMessage(msg, model, error);
+  if (!x) return std::nullopt;
+  const auto n = static_cast<size_t>(model.num_params());
+  if (msg.sigmas.size() != n)
+    return Fail<WorldFromEarth>(error,
+                                "kinematic_params.sigmas: " + std::to_string(msg.sigmas.size()) +
+                                    " values, model has " + std::to_string(n));
+  const Eigen::Map<const Eigen::VectorXd> sigma(msg.sigmas.data(), static_cast<Eigen::Index>(n));
+  if (!sigma.allFinite() || sigma.minCoeff() < 0.0 || sigma.maxCoeff() > 1e3)
+    return Fail<WorldFromEarth>(error,
+                                "kinematic_params.sigmas: not finite, negative or beyond 1e3");
+  return WorldFromEarth{model.EarthFromWorld(*x).transpose(),
+                        model.WorldFromEarthCovariance(*x, sigma)};
+}
+
 // ---- orientation node -------------------------------------------------------------------------
 
 OrientationKfNode::OrientationKfNode(Transport& t,
@@ -240,12 +258,39 @@ int64_t PositionKfNode::ImuWatermark() const {
   return stopped ? *last_imu_ - o_.orientation_wait_us : INT64_MIN;
 }
 
+MergingNode::MergingNode(Transport& t, const std::string& name, std::string health_channel)
+    : t_(t), health_(name), health_channel_(std::move(health_channel)) {}
+
+void MergingNode::Announce() {
+  health_.Published();
+  t_.Publish(health_channel_, health_.Message(0));
+}
+
+void MergingNode::Reject(const std::string& reason) {
+  health_.Rejected(reason);
+  health_.Tick(latest_, t_, health_channel_);
+}
+
+void MergingNode::OnUndecodable(const std::string& reason) {
+  health_.Received();
+  Reject(reason);
+}
+
+bool MergingNode::Admit(estimation::TimeGate& gate, int64_t utime, const char* field) {
+  const auto verdict = health_.Gate(gate, utime, field);
+  if (!estimation::Usable(verdict)) {
+    health_.Tick(latest_, t_, health_channel_);
+    return false;
+  }
+  if (verdict == estimation::TimeVerdict::kResynchronised) StartOver();
+  return true;
+}
+
 PositionKfNode::PositionKfNode(Transport& t, const estimation::PositionKfBankSettings& settings,
                                Options options)
-    : t_(t),
+    : MergingNode(t, options.name, options.health_channel),
       o_(std::move(options)),
       kf_(settings),
-      health_(o_.name),
       imu_gate_(o_.time),
       orientation_gate_(o_.time),
       position_gate_(o_.time) {
@@ -278,18 +323,9 @@ void PositionKfNode::OnKinematicParams(const kinematic_params_t& msg) {
     return;
   }
   std::string error;
-  const auto x = ParamsFromMessage(msg, *o_.model, &error);
-  if (!x) return Reject(error);
-  const auto n = static_cast<size_t>(o_.model->num_params());
-  if (msg.sigmas.size() != n)
-    return Reject("kinematic_params.sigmas: " + std::to_string(msg.sigmas.size()) +
-                  " values, model has " + std::to_string(n));
-  const Eigen::Map<const Eigen::VectorXd> sigma(msg.sigmas.data(), static_cast<Eigen::Index>(n));
-  if (!sigma.allFinite() || sigma.minCoeff() < 0.0 || sigma.maxCoeff() > 1e3)
-    return Reject("kinematic_params.sigmas: not finite, negative or beyond 1e3");
-  if (const auto s = kf_.SetWorldFromEarth(o_.model->EarthFromWorld(*x).transpose(),
-                                           o_.model->WorldFromEarthCovariance(*x, sigma));
-      !s)
+  const auto frame = WorldFromEarthFromMessage(msg, *o_.model, &error);
+  if (!frame) return Reject(error);
+  if (const auto s = kf_.SetWorldFromEarth(frame->R_WE, frame->covariance); !s)
     return Reject("kinematic_params.values: the earth frame's " + s.error());
   ++world_from_earth_updates_;
   // Told in HEALTH: from the first heartbeat saying so, every estimate is in the identifier's
@@ -298,33 +334,7 @@ void PositionKfNode::OnKinematicParams(const kinematic_params_t& msg) {
                    (world_from_earth_updates_ == 1 ? " estimate)" : " estimates)"));
 }
 
-void PositionKfNode::Announce() {
-  health_.Published();
-  t_.Publish(o_.health_channel, health_.Message(0));
-}
-
-void PositionKfNode::Reject(const std::string& reason) {
-  health_.Rejected(reason);
-  health_.Tick(latest_, t_, o_.health_channel);
-}
-
-void PositionKfNode::OnUndecodable(const std::string& reason) {
-  health_.Received();
-  Reject(reason);
-}
-
-bool PositionKfNode::Admit(estimation::TimeGate& gate, int64_t utime, const char* field) {
-  const auto verdict = health_.Gate(gate, utime, field);
-  if (!estimation::Usable(verdict)) {
-    health_.Tick(latest_, t_, o_.health_channel);
-    return false;
-  }
-  if (verdict == estimation::TimeVerdict::kResynchronised) StartOver();
-  return true;
-}
-
 void PositionKfNode::StartOver() {
-  // One stream's time base moved: the queued samples and the filter belong to the old one.
   kf_.Reset();
   pending_accel_.clear();
   early_orientation_.clear();

@@ -45,6 +45,11 @@
 //                    H = [−R̂_WE [R̂ r̂]×, 0, R̂_WE, 0, 0, R̂_WE R̂, −[ĥ]×]  (behind a χ² gate on its
 //                    3 dof; after max_consecutive_rejections gated samples the next is taken with
 //                    the position's and velocity's covariance grown, settings);
+//                    a sample stamped within the last IMU step, τ = t_k − t ∈ [0, Δt_k], is the
+//                    marker then: the step's constant acceleration a_E and rate ω taken back,
+//                    h = R_WE (p − v τ + ½ a_E τ² + R_EB Exp(−ω τ) r), the same H with
+//                    R_EB Exp(−ω τ) for R_EB and −τ R_WE on δv (a_E and ω as given: their own
+//                    errors enter at O(τ²) and O(τ |r|));
 //   heading          from another attitude source (the orientation KF, whose heading comes from
 //                    the magnetometer): y = the angle about up_E of R_ref R̂_EBᵀ, H = e_zᵀ on δθ,
 //                    σ heading_sigma. Only its heading is used: the tilt is this filter's own.
@@ -57,15 +62,16 @@
 // σ initial_velocity_sigma; p = R_WEᵀ z − R r, its covariance from the sensor's, the lever arm's
 // and the frame's): until both have come the filter only keeps the time.
 // Bad input (non-finite values, values beyond the sensor's range, time not increasing, a
-// measurement not at the IMU's last time) is refused with a Status naming the field and counted;
-// the state is then unchanged. A state that still goes non-finite is never kept: the filter resets,
-// counts it and initialises again.
+// measurement not at the IMU's last time, a position not within the last IMU step) is refused with
+// a Status naming the field and counted; the state is then unchanged. A state that still goes
+// non-finite is never kept: the filter resets, counts it and initialises again.
 #pragma once
 
 #include <Eigen/Core>
 #include <cstdint>
 
 #include "rcal/estimation/fqa.hpp"
+#include "rcal/estimation/orientation_kf.hpp"
 #include "rcal/estimation/position_kf.hpp"
 #include "rcal/estimation/result.hpp"
 
@@ -163,19 +169,34 @@ Eigen::Vector3d MarkerPosition(const AidedInsState& x);
 /// The marker as the tracker sees it, p_WM_W = R_WE (p + R_EB r) [m], and its Jacobian on δx.
 Eigen::Vector3d TrackerPosition(const AidedInsState& x);
 AidedInsRow3 TrackerPositionJacobian(const AidedInsState& x);
+/// The marker's velocity as the tracker sees it, v_WM_W = R_WE (v + R_EB (ω_B × r)) [m/s], with
+/// ω_B the body's rate less the gyro bias [rad/s], and its Jacobian on δx (ω_B = ω_m − b_g: δb_g
+/// turns it by −δb_g).
+Eigen::Vector3d TrackerVelocity(const AidedInsState& x, const Eigen::Vector3d& omega_B);
+AidedInsRow3 TrackerVelocityJacobian(const AidedInsState& x, const Eigen::Vector3d& omega_B);
+/// The marker as the tracker saw it τ [s] before x's time, within an IMU step of rate ω_B [rad/s]
+/// (bias removed) and constant acceleration a_E [m/s²] (gravity included): R_WE (p − v τ + ½ a_E
+/// τ² + R_EB Exp(−ω_B τ) r), and its Jacobian on δx (ω_B and a_E as given). τ = 0: the above.
+Eigen::Vector3d TrackerPositionBefore(const AidedInsState& x, double tau,
+                                      const Eigen::Vector3d& omega_B, const Eigen::Vector3d& a_E);
+AidedInsRow3 TrackerPositionBeforeJacobian(const AidedInsState& x, double tau,
+                                           const Eigen::Vector3d& omega_B,
+                                           const Eigen::Vector3d& a_E);
 
 class AidedIns {
  public:
   struct Counters {
-    std::int64_t imu_samples = 0;        ///< IMU steps integrated
-    std::int64_t positions = 0;          ///< marker positions applied
-    std::int64_t position_rejected = 0;  ///< refused by the χ² gate
-    std::int64_t reanchored = 0;         ///< taken after max_consecutive_rejections
-    std::int64_t headings = 0;           ///< headings applied (UpdateHeading)
-    std::int64_t mag_headings = 0;       ///< magnetometer headings applied
-    std::int64_t input_rejected = 0;     ///< refused calls (bad input, time)
-    std::int64_t reinitialised = 0;      ///< IMU gaps beyond max_step
-    std::int64_t resets = 0;             ///< state went non-finite: reset
+    std::int64_t imu_samples = 0;          ///< IMU steps integrated
+    std::int64_t positions = 0;            ///< marker positions applied
+    std::int64_t position_rejected = 0;    ///< refused by the χ² gate
+    std::int64_t reanchored = 0;           ///< taken after max_consecutive_rejections
+    std::int64_t headings = 0;             ///< headings applied (UpdateHeading)
+    std::int64_t frame_updates = 0;        ///< frame estimates applied (UpdateWorldFromEarth)
+    std::int64_t frame_uninformative = 0;  ///< frame estimates without new information
+    std::int64_t mag_headings = 0;         ///< magnetometer headings applied
+    std::int64_t input_rejected = 0;       ///< refused calls (bad input, time)
+    std::int64_t reinitialised = 0;        ///< IMU gaps beyond max_step
+    std::int64_t resets = 0;               ///< state went non-finite: reset
   };
 
   /// Throws std::invalid_argument naming a setting outside its domain (a NaN, a negative σ, a
@@ -193,8 +214,22 @@ class AidedIns {
   /// rotation or the covariance not a finite symmetric one with a non-negative diagonal.
   Status SetWorldFromEarth(const Eigen::Matrix3d& R_WE,
                            const Eigen::Matrix3d& covariance = Eigen::Matrix3d::Zero());
-  /// The marker's position p_WM_W [m] in the tracker's frame, measured at t, the IMU's last
-  /// sample time [s].
+  /// A cumulative estimate of the tracker's frame from another estimator (the identifier, whose
+  /// every estimate holds all its earlier ones' information): R_WE and its covariance [rad²].
+  /// Only the information gained since the previous estimate (or since SetWorldFromEarth's frame)
+  /// is applied, as a measurement of δφ_W, so the same data count once (the channel filter's
+  /// decorrelation): with x the estimates about R̂_WE (x = Log(R R̂_WEᵀ)) and I = C⁻¹,
+  ///   ΔI = I_k − I_{k−1},  z = ΔI⁻¹ (I_k x_k − I_{k−1} x_{k−1}),  R_z = ΔI⁻¹,  H = I on δφ_W.
+  /// An estimate that carries no new information (ΔI not positive definite: the other estimator
+  /// forgot some, or said the same) is applied as nothing and becomes the reference for the next.
+  /// Refused (naming why) before initialisation (SetWorldFromEarth is the frame then), for a frame
+  /// told as known exactly (zero covariance), and for a non-rotation or a covariance that is not
+  /// finite, symmetric and positive definite.
+  Status UpdateWorldFromEarth(const Eigen::Matrix3d& R_WE, const Eigen::Matrix3d& covariance);
+  /// The marker's position p_WM_W [m] in the tracker's frame, measured at t [s]: the IMU's last
+  /// sample time, or within the step that ended there (t_{k−1} ≤ t ≤ t_k; a tracker's stamps
+  /// need not fall on the IMU's). Apply each position after the first IMU sample at or after
+  /// its time (AidedInsNode orders the streams so); an older one is refused, naming the step.
   Status UpdatePosition(double t, const Eigen::Vector3d& p_WM_W);
   /// Another source's attitude q_EB [w,x,y,z] at t (the IMU's last sample time): its heading
   /// about up_E is applied; before initialisation its whole attitude is the initial one.
@@ -211,6 +246,12 @@ class AidedIns {
   const Eigen::Vector4d& q_EB() const { return q_EB_; }
   /// The marker's position in the tracker's frame, p_WM_W [m].
   Eigen::Vector3d p_WM_W() const { return TrackerPosition(x_); }
+  /// The marker's velocity in the tracker's frame, v_WM_W [m/s] (TrackerVelocity with the last
+  /// step's rate).
+  Eigen::Vector3d v_WM_W() const { return TrackerVelocity(x_, step_omega_B_); }
+  /// The covariance of [p_WM_W; v_WM_W] [m², m²/s, m²/s²], J P Jᵀ with J their Jacobians (the
+  /// gyro's noise on the last step's rate left out).
+  Eigen::Matrix<double, 6, 6> marker_covariance() const;
   /// The tracker's frame R_WE as estimated (as told when its covariance is zero).
   const Eigen::Matrix3d& R_WE() const { return x_.R_WE; }
   /// Error-state covariance (21×21, header comment's order and units).
@@ -247,9 +288,17 @@ class AidedIns {
   Eigen::Vector3d p_init_ = Eigen::Vector3d::Zero();    // the first marker position, W [m]
   Eigen::Matrix3d R_WE_ = Eigen::Matrix3d::Identity();  // the frame as told, and its covariance
   Eigen::Matrix3d R_WE_covariance_ = Eigen::Matrix3d::Zero();
+  // The other estimator's last frame estimate and its covariance (UpdateWorldFromEarth).
+  Eigen::Matrix3d R_WE_reference_ = Eigen::Matrix3d::Identity();
+  Eigen::Matrix3d R_WE_reference_covariance_ = Eigen::Matrix3d::Zero();
   Eigen::Vector3d f_prev_B_ = Eigen::Vector3d::Zero();  // the last specific force, lag removed
   Eigen::Vector3d f_then_B_ = Eigen::Vector3d::Zero();  // the last sample turned to its time t − δ
   double accel_noise_scale_ = 1.0;
+  // The last integrated step: its length [s], rate ω_B less the bias [rad/s] and constant
+  // acceleration in E, gravity included [m/s²] (a position within it is taken back along it).
+  double step_dt_ = 0.0;
+  Eigen::Vector3d step_omega_B_ = Eigen::Vector3d::Zero();
+  Eigen::Vector3d step_a_E_ = Eigen::Vector3d::Zero();
   double last_position_t_ = 0.0;
   bool has_last_position_t_ = false;
   AidedInsState x_;
@@ -259,5 +308,15 @@ class AidedIns {
   int consecutive_rejections_ = 0;
   Counters counters_;
 };
+
+/// One IMU sample into the INS after the orientation KF has taken it (its Update at the same t,
+/// accepted): the IMU step, then a heading: the KF's attitude until the INS has started, and
+/// always with heading_from_kf; else the field the KF's heading row accepted
+/// (OrientationKf::last_mag_B), levelled with the INS's own tilt (none while it has accepted
+/// none). What `rcal fuse` and the aided_ins process run, so that both give the same estimates.
+/// Returns the IMU step's status; a refused heading is counted in the INS and not an error here.
+Status StepAfterOrientationKf(AidedIns& ins, const OrientationKf& okf, double t,
+                              const Eigen::Vector3d& gyro_B, const Eigen::Vector3d& f_B,
+                              bool heading_from_kf);
 
 }  // namespace rcal::estimation

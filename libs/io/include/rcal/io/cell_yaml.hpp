@@ -101,6 +101,7 @@
 //     joint_margin: 0.1                    # [rad | m] joints beyond the limits by more: refused
 //   channels:                              # optional: LCM channel names (defaults: CellChannels)
 //     imu: IMU                             # and position, joints, orientation, tool_position,
+//                                          # ins_orientation, ins_tool_position,
 //                                          # pose_measurement, kinematic_params,
 //                                          # calibration_status, ik_request, ik_command, health,
 //                                          # supervisor_state, clock_offset, next_poses,
@@ -270,6 +271,8 @@ struct IdentifierSpec {
 struct CellChannels {
   std::string imu = "IMU", position = "POSITION", joints = "JOINTS";
   std::string orientation = "ORIENTATION", tool_position = "TOOL_POSITION";
+  /// The tracker-aided INS's attitude and marker (aided_ins).
+  std::string ins_orientation = "INS_ORIENTATION", ins_tool_position = "INS_TOOL_POSITION";
   std::string pose_measurement = "POSE_MEASUREMENT", kinematic_params = "KINEMATIC_PARAMS";
   std::string calibration_status = "CALIBRATION_STATUS";
   std::string ik_request = "IK_REQUEST", ik_command = "IK_COMMAND";

@@ -91,6 +91,19 @@ tool_position_estimate_t ToToolPositionEstimate(const estimation::PositionKf& kf
 tool_position_estimate_t ToToolPositionEstimate(const estimation::PositionKfBank& kf,
                                                 int64_t utime);
 
+/// The identifier's estimate of the earth frame, as the position sensor's frame takes it: R_WE
+/// (world ← earth) = R_EW(x)ᵀ and the covariance [rad²] of its error from the message's sigmas
+/// (KinematicModel::WorldFromEarthCovariance). `msg` is an estimate of `model` (its model_id is
+/// the caller's to check). Refused, naming the field: values the model does not take, sigmas of
+/// another count, not finite, negative or beyond 1e3.
+struct WorldFromEarth {
+  Eigen::Matrix3d R_WE;
+  Eigen::Matrix3d covariance;
+};
+std::optional<WorldFromEarth> WorldFromEarthFromMessage(const kinematic_params_t& msg,
+                                                        const kinematics::KinematicModel& model,
+                                                        std::string* error);
+
 /// Sensor time [s] of a utime [µs]: the one conversion every filter node and offline reference
 /// uses, so that both feed the filter bit-identical times.
 inline double SensorSeconds(int64_t utime) {
@@ -143,6 +156,33 @@ class OrientationKfNode {
 /// The host's steady (monotonic) clock [µs]: only to tell a stopped stream from a late one.
 int64_t SteadyNowUs();
 
+/// What the nodes that merge several streams (PositionKfNode, AidedInsNode) share: HEALTH, whose
+/// heartbeat after a refusal follows the latest sensor time any stream has reached, the refusals
+/// (counted, with the reason naming the field) and each stream's time gate.
+class MergingNode {
+ public:
+  /// As OrientationKfNode::Announce().
+  void Announce();
+  /// As OrientationKfNode::Finish().
+  void Finish() { health_.Final(t_, health_channel_); }
+  /// Bytes on a subscribed channel that did not decode: received, rejected.
+  void OnUndecodable(const std::string& reason);
+  const Health& health() const { return health_; }
+
+ protected:
+  MergingNode(Transport& t, const std::string& name, std::string health_channel);
+  ~MergingNode() = default;
+  void Reject(const std::string& reason);
+  // Offers utime to `gate`; false when refused. On a re-synchronisation the node starts over.
+  bool Admit(estimation::TimeGate& gate, int64_t utime, const char* field);
+  // One stream's time base moved: the queued samples and the filters belong to the old one.
+  virtual void StartOver() = 0;
+  Transport& t_;
+  Health health_;
+  std::string health_channel_;
+  int64_t latest_ = 0;  // the latest sensor time any stream reached [µs]
+};
+
 /// IMU + ORIENTATION + POSITION → PositionKf → TOOL_POSITION, HEALTH at 1 Hz of sensor time.
 ///
 /// The accelerometer of IMU sample k needs the orientation estimate at the same utime, which
@@ -163,7 +203,7 @@ int64_t SteadyNowUs();
 /// accelerometer update gets ω_B = its gyro sample less the paired orientation's gyro bias (the
 /// lever arm's rotational terms; an orientation with a non-finite bias is refused). One
 /// TOOL_POSITION per applied update, once initialised.
-class PositionKfNode {
+class PositionKfNode : public MergingNode {
  public:
   struct Options {
     std::string name = "position_kf";
@@ -204,10 +244,6 @@ class PositionKfNode {
   PositionKfNode(Transport& t, const estimation::PositionKfSettings& settings)
       : PositionKfNode(t, settings, Options{}) {}
 
-  /// As OrientationKfNode::Announce().
-  void Announce();
-  /// As OrientationKfNode::Finish().
-  void Finish() { health_.Final(t_, o_.health_channel); }
   void OnImu(const imu_sample_t& msg);
   void OnOrientation(const orientation_estimate_t& msg);
   void OnPosition(const position_sample_t& msg);
@@ -215,7 +251,6 @@ class PositionKfNode {
   /// HEALTH's activity says where R_WE comes from: "R_WE: fixed" (no model with an earth frame),
   /// "R_WE: the cell's, awaiting the identifier's", then "R_WE: the identifier's (N estimates)".
   void OnKinematicParams(const kinematic_params_t& msg);
-  void OnUndecodable(const std::string& reason);
 
   /// The models' filters and their weights.
   const estimation::PositionKfBank& bank() const { return kf_; }
@@ -224,12 +259,10 @@ class PositionKfNode {
   /// KINEMATIC_PARAMS R_WE was taken from, and those of another model (ignored).
   int64_t world_from_earth_updates() const { return world_from_earth_updates_; }
   int64_t ignored_params() const { return ignored_params_; }
-  const Health& health() const { return health_; }
   /// Accelerometer samples dropped because their orientation never came.
   int64_t unpaired_accel() const { return unpaired_accel_; }
 
  private:
-  void Reject(const std::string& reason);
   void Flush(int64_t watermark);
   // Sensor time up to which every accelerometer sample is settled (paired with its orientation,
   // or known never to get one): both streams have reached it. INT64_MIN before both have begun.
@@ -238,16 +271,11 @@ class PositionKfNode {
   // orientation_wait_us while the orientation stream is stopped, else none.
   int64_t ImuWatermark() const;
   void Applied(int64_t utime);
-  // Offers utime to `gate`; false when refused. On a re-synchronisation the filter starts over.
-  bool Admit(estimation::TimeGate& gate, int64_t utime, const char* field);
-  void StartOver();
+  void StartOver() override;
   void FilterFailed(const std::string& reason, int64_t resets_before);
-  Transport& t_;
   Options o_;
   estimation::PositionKfBank kf_;
-  Health health_;
   std::optional<int64_t> last_imu_, last_orientation_, last_position_, last_applied_;
-  int64_t latest_ = 0;
   std::optional<int64_t> last_orientation_arrival_us_;  // host steady clock [µs]
   // An IMU sample as the position filter uses it: specific force [m/s²] and rate [rad/s], body.
   struct AccelSample {
