@@ -26,6 +26,9 @@
 //   rt/rcal/tool_pose_with_covariance  geometry_msgs/PoseWithCovarianceStamped  the marker's
 //                                                  position and the IMU's orientation in the world
 //                                                  (the position sensor's frame), best effort
+// The tool pose (rt/rcal/tool_pose and its ROS 2 twin) comes from TOOL_POSITION and ORIENTATION
+// (position_kf, orientation_kf), or with --tool-pose-from ins from INS_TOOL_POSITION and
+// INS_ORIENTATION (aided_ins, the tracker-aided INS: the same message types, the same frames).
 //
 // Cyclone binds to loopback only (config/cyclonedds-loopback.xml) unless CYCLONEDDS_URI is set,
 // e.g. to config/cyclonedds-network.xml. Bad input (fails to decode, NaN, sizes that disagree,
@@ -286,6 +289,12 @@ int main(int argc, char** argv) {
   app.add_option("--dds-domain", o.dds_domain, "DDS domain id (-1: Cyclone's default, 0)")
       ->capture_default_str();
   app.add_option("--name", o.name, "process name in HEALTH")->capture_default_str();
+  std::string tool_pose_from = "filters";
+  app.add_option("--tool-pose-from", tool_pose_from,
+                 "the tool pose's source: filters (TOOL_POSITION and ORIENTATION: position_kf "
+                 "and orientation_kf) or ins (INS_TOOL_POSITION and INS_ORIENTATION: aided_ins)")
+      ->check(CLI::IsMember({"filters", "ins"}))
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   if (cell_opt->count() > 0) {
     try {
@@ -301,6 +310,10 @@ int main(int argc, char** argv) {
     spdlog::error("--robot-id: empty (give --cell or --robot-id)");
     return 2;
   }
+  if (tool_pose_from == "ins") {
+    o.channels.orientation = o.channels.ins_orientation;
+    o.channels.tool_position = o.channels.ins_tool_position;
+  }
 
   try {
     rcal::services::InstallStopHandlers();
@@ -313,9 +326,11 @@ int main(int argc, char** argv) {
                                "): " + dds_strretcode(participant.get()));
     rcal::transport::LcmTransport t(o.lcm_url);
     // Logged before the start-up HEALTH goes out, so whoever sees that heartbeat finds this line.
-    spdlog::info("dds_bridge for robot '{}': LCM {} -> DDS domain {} (CYCLONEDDS_URI {})",
-                 o.robot_id, t.url(), o.dds_domain < 0 ? "default" : std::to_string(o.dds_domain),
-                 uri);
+    spdlog::info(
+        "dds_bridge for robot '{}': LCM {} -> DDS domain {} (CYCLONEDDS_URI {}); tool pose from "
+        "{} and {}",
+        o.robot_id, t.url(), o.dds_domain < 0 ? "default" : std::to_string(o.dds_domain), uri,
+        o.channels.tool_position, o.channels.orientation);
     Bridge bridge(o, t, participant.get());
     if (const int rc =
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });

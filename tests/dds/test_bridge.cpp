@@ -176,10 +176,10 @@ class DdsBridge : public ::testing::Test {
     waitpid(p, nullptr, 0);
     std::erase(pids_, p);
   }
-  pid_t Publisher(int version, const std::string& robot = kRobot) {
+  pid_t Publisher(int version, const std::string& robot = kRobot, bool ins = false) {
     return Start({RCAL_DDS_TEST_PUBLISHER, "--lcm-url", kUrl, "--version", std::to_string(version),
-                  "--robot-id", robot},
-                 "publisher" + std::to_string(version) + robot);
+                  "--robot-id", robot, "--ins", ins ? "1" : "0"},
+                 "publisher" + std::to_string(version) + robot + (ins ? "_ins" : ""));
   }
   // Runs rcal_dds_echo to completion; returns its output lines.
   std::vector<std::string> Echo(const std::string& topic, int count, const std::string& name) {
@@ -312,6 +312,63 @@ TEST_F(DdsBridge, LateSubscriberGetsLatestExactValuesAndBridgeSurvivesPublisherR
   for (const auto& id : robot_ids) EXPECT_EQ(id, kRobot);
 
   // SIGINT (how the supervisor stops it) ends the bridge cleanly.
+  kill(bridge, SIGINT);
+  EXPECT_EQ(Wait(bridge), 0) << ReadAll(dir_ / "bridge.err");
+  std::erase(pids_, bridge);
+}
+
+// --tool-pose-from ins: the tool pose comes from aided_ins's channels (INS_TOOL_POSITION,
+// INS_ORIENTATION), exactly as from the filters'; the filters' own channels are then not the
+// bridge's (a publisher on them brings no pose).
+TEST_F(DdsBridge, TheToolPoseCanComeFromTheTrackerAidedIns) {
+  RCAL_IN_NAMESPACE("DdsBridge.TheToolPoseCanComeFromTheTrackerAidedIns");
+  setenv("CYCLONEDDS_URI", LoopbackConfigUri().c_str(), 1);
+  transport::LcmTransport lcm(kUrl);
+  std::optional<health_t> health;
+  lcm.Subscribe<health_t>(transport::channels::kHealth, [&](const health_t& h) {
+    if (h.process == "dds_bridge") health = h;
+  });
+  const pid_t bridge = Start({RCAL_DDS_BRIDGE, "--robot-id", kRobot, "--lcm-url", kUrl,
+                              "--dds-domain", std::to_string(kDomain), "--tool-pose-from", "ins"},
+                             "bridge");
+  ASSERT_TRUE(WaitFor([&] {
+    lcm.HandleTimeout(50);
+    return health.has_value();
+  })) << ReadAll(dir_ / "bridge.err");
+  EXPECT_NE(
+      ReadAll(dir_ / "bridge.out").find("tool pose from INS_TOOL_POSITION and INS_ORIENTATION"),
+      std::string::npos)
+      << ReadAll(dir_ / "bridge.out");
+  EntityGuard participant(dds_create_participant(kDomain, nullptr, nullptr));
+  ASSERT_GT(participant.get(), 0);
+  Reader<ToolPose> pose(participant.get(), kToolPoseTopic, StreamQos());
+  int poses = 0, poses_with_orientation = 0;
+  double x = 0.0;
+  auto take = [&] {
+    pose.Take([&](const ToolPose& d) {
+      ++poses;
+      poses_with_orientation += d.has_orientation;
+      x = d.position[0];
+    });
+  };
+  // The filters' channels: nothing reaches DDS for a second and a half.
+  pid_t publisher = Publisher(1, kRobot, false);
+  const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(1500);
+  while (std::chrono::steady_clock::now() < until) {
+    take();
+    lcm.HandleTimeout(50);
+  }
+  EXPECT_EQ(poses, 0);
+  Kill(publisher);
+  // aided_ins's channels: the poses, with their orientation, the publisher's values.
+  publisher = Publisher(1, kRobot, true);
+  ASSERT_TRUE(WaitFor([&] {
+    take();
+    lcm.HandleTimeout(20);
+    return poses >= 3 && poses_with_orientation >= 1;
+  })) << ReadAll(dir_ / "bridge.err");
+  Kill(publisher);
+  EXPECT_NEAR(x, testing::TestToolPosition(1, 0).p[0], 0.1);  // 0.5 + version + 1e-3 k
   kill(bridge, SIGINT);
   EXPECT_EQ(Wait(bridge), 0) << ReadAll(dir_ / "bridge.err");
   std::erase(pids_, bridge);
