@@ -50,6 +50,9 @@
 //                    h = R_WE (p − v τ + ½ a_E τ² + R_EB Exp(−ω τ) r), the same H with
 //                    R_EB Exp(−ω τ) for R_EB and −τ R_WE on δv (a_E and ω as given: their own
 //                    errors enter at O(τ²) and O(τ |r|));
+//   tracker frame    another estimator's cumulative estimate of R_WE (the identifier's): only the
+//                    information it gained since its previous one, H = I on δφ_W
+//                    (UpdateWorldFromEarth);
 //   heading          from another attitude source (the orientation KF, whose heading comes from
 //                    the magnetometer): y = the angle about up_E of R_ref R̂_EBᵀ, H = e_zᵀ on δθ,
 //                    σ heading_sigma. Only its heading is used: the tilt is this filter's own.
@@ -202,7 +205,8 @@ class AidedIns {
   /// Throws std::invalid_argument naming a setting outside its domain (a NaN, a negative σ, a
   /// zero time step, accel_delay beyond kMaxAccelDelay).
   explicit AidedIns(const AidedInsSettings& settings = {});
-  /// Forgets the state and the counters (but `resets`); the tracker's frame as told stays.
+  /// Forgets the state and the counters (but `resets`); the tracker's frame as told (or as
+  /// UpdateWorldFromEarth last gave it) stays.
   void Reset();
 
   /// One IMU sample at t [s] (strictly increasing): gyro ω_m [rad/s] and specific force f_B
@@ -285,8 +289,10 @@ class AidedIns {
   double t_ = 0.0;
   bool has_attitude_ = false, has_position_ = false;
   Eigen::Matrix3d R_init_ = Eigen::Matrix3d::Identity();
-  Eigen::Vector3d p_init_ = Eigen::Vector3d::Zero();    // the first marker position, W [m]
-  Eigen::Matrix3d R_WE_ = Eigen::Matrix3d::Identity();  // the frame as told, and its covariance
+  Eigen::Vector3d p_init_ = Eigen::Vector3d::Zero();  // the first marker position, W [m]
+  // The frame as told, or the other estimator's latest, and its covariance: what a
+  // re-initialisation starts from.
+  Eigen::Matrix3d R_WE_ = Eigen::Matrix3d::Identity();
   Eigen::Matrix3d R_WE_covariance_ = Eigen::Matrix3d::Zero();
   // The other estimator's last frame estimate and its covariance (UpdateWorldFromEarth).
   Eigen::Matrix3d R_WE_reference_ = Eigen::Matrix3d::Identity();
