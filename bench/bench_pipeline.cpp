@@ -19,6 +19,7 @@
 #include "rcal/estimation/position_kf.hpp"
 #include "rcal/estimation/position_kf_bank.hpp"
 #include "rcal/io/csv_table.hpp"
+#include "rcal/transport/aided_ins_node.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/filter_nodes.hpp"
 #include "rcal/transport/lcm_transport.hpp"
@@ -273,6 +274,37 @@ void BM_PositionNodeRate(benchmark::State& state) {
   state.counters["rejected"] = static_cast<double>(node.health().rejected());
 }
 BENCHMARK(BM_PositionNodeRate);
+
+// The tracker-aided INS node without a transport (aided_ins's): per IMU sample its IMU message
+// (checks, the time gate, the orientation KF and the INS step, encode and publish of
+// INS_ORIENTATION and INS_TOOL_POSITION), plus a POSITION message every 5th sample (20 Hz at
+// 100 Hz IMU; the IMU samples wait for it, as live); items = IMU samples.
+void BM_AidedInsNodeRate(benchmark::State& state) {
+  const Stream& d = Data();
+  transport::LcmTransport t("memq://");
+  estimation::AidedInsSettings is;
+  is.earth = estimation::EarthFrame::kEnu;
+  transport::AidedInsNode node(t, Enu(), is, {});
+  const int64_t n = static_cast<int64_t>(d.imu.size());
+  int64_t i = 0;
+  for (auto _ : state) {
+    const auto s = d.At(i);
+    node.OnImu(transport::ToMessage(s));
+    if (i % 5 == 0 && d.pos[i % n].allFinite()) {
+      transport::PositionSample p;
+      p.utime = s.utime;
+      p.p = d.pos[i % n];
+      p.covariance = 1e-6 * Eigen::Matrix3d::Identity();
+      node.OnPosition(transport::ToMessage(p));
+    }
+    while (t.HandleTimeout(0) > 0) {
+    }
+    ++i;
+  }
+  state.SetItemsProcessed(state.iterations());
+  state.counters["rejected"] = static_cast<double>(node.health().rejected());
+}
+BENCHMARK(BM_AidedInsNodeRate);
 
 }  // namespace
 
