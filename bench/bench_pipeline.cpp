@@ -231,6 +231,17 @@ void BM_OrientationNodeRate(benchmark::State& state) {
 }
 BENCHMARK(BM_OrientationNodeRate);
 
+// The tracker's sample at IMU sample i, every 5th (20 Hz at 100 Hz), as a POSITION message.
+std::optional<position_sample_t> PositionMessage(const Stream& d, int64_t i) {
+  const int64_t n = static_cast<int64_t>(d.imu.size());
+  if (i % 5 != 0 || !d.pos[i % n].allFinite()) return std::nullopt;
+  transport::PositionSample p;
+  p.utime = d.At(i).utime;
+  p.p = d.pos[i % n];
+  p.covariance = 1e-6 * Eigen::Matrix3d::Identity();
+  return transport::ToMessage(p);
+}
+
 // The position node without a transport: per IMU sample its IMU and ORIENTATION messages (the
 // pairing by utime, the ordered flush, the accelerometer update, encode and publish), plus a
 // POSITION message every 5th sample (20 Hz at 100 Hz IMU); items = IMU samples. position_kf's
@@ -259,13 +270,7 @@ void BM_PositionNodeRate(benchmark::State& state) {
     auto o = ori[i % n];
     o.utime = s.utime;
     node.OnOrientation(o);
-    if (i % 5 == 0 && d.pos[i % n].allFinite()) {
-      transport::PositionSample p;
-      p.utime = s.utime;
-      p.p = d.pos[i % n];
-      p.covariance = 1e-6 * Eigen::Matrix3d::Identity();
-      node.OnPosition(transport::ToMessage(p));
-    }
+    if (const auto p = PositionMessage(d, i)) node.OnPosition(*p);
     while (t.HandleTimeout(0) > 0) {
     }
     ++i;
@@ -285,18 +290,10 @@ void BM_AidedInsNodeRate(benchmark::State& state) {
   estimation::AidedInsSettings is;
   is.earth = estimation::EarthFrame::kEnu;
   transport::AidedInsNode node(t, Enu(), is, {});
-  const int64_t n = static_cast<int64_t>(d.imu.size());
   int64_t i = 0;
   for (auto _ : state) {
-    const auto s = d.At(i);
-    node.OnImu(transport::ToMessage(s));
-    if (i % 5 == 0 && d.pos[i % n].allFinite()) {
-      transport::PositionSample p;
-      p.utime = s.utime;
-      p.p = d.pos[i % n];
-      p.covariance = 1e-6 * Eigen::Matrix3d::Identity();
-      node.OnPosition(transport::ToMessage(p));
-    }
+    node.OnImu(transport::ToMessage(d.At(i)));
+    if (const auto p = PositionMessage(d, i)) node.OnPosition(*p);
     while (t.HandleTimeout(0) > 0) {
     }
     ++i;

@@ -1,11 +1,14 @@
 // The GRB3016 from config/, its identifiable base set and simulated measurements (Table 3 truth).
 #pragma once
 
+#include <cmath>
+#include <memory>
 #include <vector>
 
 #include "rcal/io/robot_urdf.hpp"
 #include "rcal/kinematics/identifiability.hpp"
 #include "rcal/sim/pose_sim.hpp"
+#include "rcal/transport/adapters.hpp"
 
 namespace rcal::transport::testing {
 
@@ -27,5 +30,24 @@ struct Grb3016 {
                               sim::PoseNoise{}, rng);
   }
 };
+
+/// A one-joint arm whose model has an earth frame (earth_rx, earth_ry, earth_rz), the identifier's
+/// R_EW: what the filter nodes take the tracker's frame from.
+inline std::shared_ptr<const kinematics::KinematicModel> OneJointWithEarthFrame() {
+  kinematics::ModelBuilder b("earth");
+  b.DhLink(0.15, -M_PI / 2, 0.25, 0.0, {"j1", kinematics::JointType::kRevolute, -3.0, 3.0})
+      .MarkerOffset(Eigen::Vector3d(0.03, 0, 0.12))
+      .EarthFrame(Eigen::Vector3d::Zero());
+  return std::make_shared<const kinematics::KinematicModel>(b.Build());
+}
+
+/// Another robot's KINEMATIC_PARAMS (its own model id): not the cell's, ignored by the nodes.
+inline kinematic_params_t ForeignParams() {
+  kinematics::ModelBuilder b("other");
+  b.DhLink(0.1, 0.0, 0.0, 0.0, {"j1", kinematics::JointType::kRevolute, -3.0, 3.0});
+  const kinematics::KinematicModel other = b.Build();
+  return ToKinematicParams(other, other.Nominal(), Eigen::VectorXd::Zero(other.num_params()), {},
+                           "other-robot", 1'000'000, 3);
+}
 
 }  // namespace rcal::transport::testing

@@ -16,6 +16,7 @@
 #include <random>
 #include <vector>
 
+#include "fixture.hpp"
 #include "rcal/geometry/so3.hpp"
 #include "rcal/health_t.hpp"
 #include "rcal/sim/draw.hpp"
@@ -336,11 +337,7 @@ TEST(AidedInsNode, WithoutATrackerTheImuGoesInAfterTheWait) {
 // (AidedIns::UpdateWorldFromEarth); another model's estimate is counted and left, one that names
 // the wrong parameters refused and named.
 TEST(AidedInsNode, AGuessedFrameWaitsForTheIdentifiersEstimate) {
-  kinematics::ModelBuilder b("earth");
-  b.DhLink(0.15, -M_PI / 2, 0.25, 0.0, {"j1", kinematics::JointType::kRevolute, -3.0, 3.0})
-      .MarkerOffset(Eigen::Vector3d(0.03, 0, 0.12))
-      .EarthFrame(Eigen::Vector3d::Zero());
-  auto model = std::make_shared<const kinematics::KinematicModel>(b.Build());
+  const auto model = testing::OneJointWithEarthFrame();
   Eigen::VectorXd x = model->Nominal();
   x(model->FindParameter("earth_rz")) = 0.3;
   const Eigen::VectorXd sigma = Eigen::VectorXd::Constant(model->num_params(), 1e-3);
@@ -353,12 +350,7 @@ TEST(AidedInsNode, AGuessedFrameWaitsForTheIdentifiersEstimate) {
                         "earth-robot", 1'000'000, 5);
   kinematic_params_t wrong = params;
   wrong.names[0] = "not_a1";
-  kinematics::ModelBuilder other_b("other");
-  other_b.DhLink(0.1, 0.0, 0.0, 0.0, {"j1", kinematics::JointType::kRevolute, -3.0, 3.0});
-  const kinematics::KinematicModel other = other_b.Build();
-  const kinematic_params_t foreign =
-      ToKinematicParams(other, other.Nominal(), Eigen::VectorXd::Zero(other.num_params()), {},
-                        "other-robot", 1'000'000, 3);
+  const kinematic_params_t foreign = testing::ForeignParams();
 
   Stream s = MakeStream(4);
   // The tracker's axes are where the identifier finds them: p_WM_W = R_WE p_EM_E.

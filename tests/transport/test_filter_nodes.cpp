@@ -10,6 +10,7 @@
 #include <memory>
 #include <vector>
 
+#include "fixture.hpp"
 #include "rcal/geometry/so3.hpp"
 #include "rcal/health_t.hpp"
 #include "rcal/transport/adapters.hpp"
@@ -363,11 +364,7 @@ TEST(PositionKfNode, ABankPublishesTheMixtureOfItsModels) {
 // an error); a message naming the wrong parameters, or with a NaN σ, is refused, named, and
 // changes nothing.
 TEST(PositionKfNode, TheIdentifiersEarthFrameTurnsTheAccelerations) {
-  kinematics::ModelBuilder b("earth");
-  b.DhLink(0.15, -M_PI / 2, 0.25, 0.0, {"j1", kinematics::JointType::kRevolute, -3.0, 3.0})
-      .MarkerOffset(Eigen::Vector3d(0.03, 0, 0.12))
-      .EarthFrame(Eigen::Vector3d::Zero());
-  auto model = std::make_shared<const kinematics::KinematicModel>(b.Build());
+  const auto model = testing::OneJointWithEarthFrame();
   Eigen::VectorXd x = model->Nominal();
   x(model->FindParameter("earth_rz")) = 0.87;  // the tracker turned about the vertical
   x(model->FindParameter("earth_rx")) = -0.01;
@@ -382,12 +379,7 @@ TEST(PositionKfNode, TheIdentifiersEarthFrameTurnsTheAccelerations) {
   nan_sigma.sigmas[2] = NAN;
   const Eigen::Matrix3d C_WE = model->WorldFromEarthCovariance(x, sigma);
   EXPECT_NEAR(C_WE.trace(), 3e-6, 1e-8);
-  kinematics::ModelBuilder other_b("other");
-  other_b.DhLink(0.1, 0.0, 0.0, 0.0, {"j1", kinematics::JointType::kRevolute, -3.0, 3.0});
-  const kinematics::KinematicModel other = other_b.Build();
-  const kinematic_params_t foreign =
-      ToKinematicParams(other, other.Nominal(), Eigen::VectorXd::Zero(other.num_params()), {},
-                        "other-robot", 1'000'000, 3);
+  const kinematic_params_t foreign = testing::ForeignParams();
 
   const estimation::PositionKfSettings settings = EnuPositionKfSettings();
   LcmTransport t("memq://");

@@ -9,6 +9,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "frame_checks.hpp"
 #include "number_text.hpp"
 #include "rcal/geometry/so3.hpp"
 
@@ -356,11 +357,8 @@ void AidedIns::TryInitialise() {
 Status AidedIns::SetWorldFromEarth(const Mat3& R_WE, const Mat3& covariance) {
   if (initialized_ || has_position_)
     return Refuse("world frame: R_WE is set before the first position sample");
-  if (!R_WE.allFinite() || (R_WE * R_WE.transpose() - Mat3::Identity()).norm() > 1e-6 ||
-      R_WE.determinant() < 0.0)
-    return Refuse("world frame: R_WE is not a rotation");
-  if (!covariance.allFinite() || (covariance - covariance.transpose()).norm() > 1e-12 ||
-      (covariance.diagonal().array() < 0.0).any())
+  if (!detail::IsRotation(R_WE)) return Refuse("world frame: R_WE is not a rotation");
+  if (!detail::IsCovariance(covariance))
     return Refuse("world frame: its covariance is not finite, symmetric and non-negative");
   R_WE_ = R_WE_reference_ = R_WE;
   R_WE_covariance_ = R_WE_reference_covariance_ = covariance;
@@ -372,12 +370,9 @@ Status AidedIns::UpdateWorldFromEarth(const Mat3& R_WE, const Mat3& covariance) 
     return Refuse("world frame: no state yet to update (SetWorldFromEarth tells the frame then)");
   if (R_WE_covariance_.isZero())
     return Refuse("world frame: told as known exactly (zero covariance), it is not updated");
-  if (!R_WE.allFinite() || (R_WE * R_WE.transpose() - Mat3::Identity()).norm() > 1e-6 ||
-      R_WE.determinant() < 0.0)
-    return Refuse("world frame: R_WE is not a rotation");
+  if (!detail::IsRotation(R_WE)) return Refuse("world frame: R_WE is not a rotation");
   const Eigen::LLT<Mat3> llt(covariance);
-  if (!covariance.allFinite() || (covariance - covariance.transpose()).norm() > 1e-12 ||
-      llt.info() != Eigen::Success)
+  if (!detail::IsCovariance(covariance) || llt.info() != Eigen::Success)
     return Refuse("world frame: its covariance is not finite, symmetric and positive definite");
   // Both estimates about the current frame, R = Exp(x) R̂_WE.
   const Mat3 I_new = llt.solve(Mat3::Identity());

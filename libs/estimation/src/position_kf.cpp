@@ -9,6 +9,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "frame_checks.hpp"
 #include "rcal/geometry/so3.hpp"
 
 namespace rcal::estimation {
@@ -120,13 +121,8 @@ Eigen::Vector3d PositionKf::WorldAcceleration(const Eigen::Vector3d& f_B,
 
 Status PositionKf::SetWorldFromEarth(const Eigen::Matrix3d& R_WE,
                                      const Eigen::Matrix3d& covariance) {
-  const bool rotation = R_WE.allFinite() &&
-                        (R_WE * R_WE.transpose() - Eigen::Matrix3d::Identity()).norm() <= 1e-6 &&
-                        R_WE.determinant() > 0.0;
-  const bool cov_ok =
-      covariance.allFinite() &&
-      (covariance - covariance.transpose()).norm() <= 1e-9 * std::max(1.0, covariance.norm()) &&
-      covariance.diagonal().minCoeff() >= 0.0;
+  const bool rotation = detail::IsRotation(R_WE);
+  const bool cov_ok = detail::IsCovariance(covariance);
   if (rotation && cov_ok) {
     R_WE_ = R_WE;
     R_WE_covariance_ = covariance;
