@@ -311,6 +311,7 @@ int RunFuse(const FuseOptions& opt) {
     a["positions"] = c.positions;
     a["position_rejected"] = c.position_rejected;
     a["reanchored"] = c.reanchored;
+    a["shocks_taken"] = c.shocks_taken;
     a["reinitialised"] = c.reinitialised;
     a["resets"] = c.resets;
     j["aided_ins"] = a;

@@ -70,6 +70,7 @@ std::vector<Field> InsFields(est::AidedInsSettings& s, int& heading_from_kf) {
       {"ins.mag_heading_sigma", "rad", &s.mag_heading_sigma},
       {"ins.accel_delay", "s", &s.accel_delay},
       {"ins.accel_noise_adaptation_tau", "s", &s.accel_noise_adaptation_tau},
+      {"ins.accel_shock_sigma", "fraction", &s.accel_shock_sigma},
       {"ins.gyro_noise_density", "rad_s_sqrt_hz", &s.gyro_noise_density},
       {"ins.attitude_process_noise", "rad_sqrt_s", &s.attitude_process_noise},
       {"ins.accel_noise_density", "m_s2_sqrt_hz", &s.accel_noise_density},
@@ -171,7 +172,7 @@ est::PositionKfSettings BroadPositionSettings(double pos_noise_m) {
 }
 
 // The tracker-aided INS on BROAD: ENU, the simulated tracker's σ, the accelerometer's lag the
-// position KF takes out (the IMU's, measured), and the three settings `rcal fuse-loo --ins` chose
+// position KF takes out (the IMU's, measured), and the four settings `rcal fuse-loo --ins` chose
 // on all sixteen trials from its shipped grid; the rest the AidedInsSettings defaults.
 est::AidedInsSettings BroadInsSettings(double pos_noise_m) {
   est::AidedInsSettings s;
@@ -180,6 +181,8 @@ est::AidedInsSettings BroadInsSettings(double pos_noise_m) {
   s.accel_delay = BroadPositionSettings(pos_noise_m).accel_delay;
   s.mag_heading_sigma = 0.6;
   s.accel_noise_density = 0.02;
+  s.accel_noise_adaptation_tau = 0.0;
+  s.accel_shock_sigma = 2.0;
   return s;
 }
 

@@ -187,7 +187,8 @@ AidedIns::AidedIns(const AidedInsSettings& settings) : settings_(settings) {
                                 {"accel_bias_random_walk", s.accel_bias_random_walk},
                                 {"lever_arm_sigma", s.lever_arm_sigma},
                                 {"position_gate_chi2", s.position_gate_chi2},
-                                {"accel_noise_adaptation_tau", s.accel_noise_adaptation_tau}})
+                                {"accel_noise_adaptation_tau", s.accel_noise_adaptation_tau},
+                                {"accel_shock_sigma", s.accel_shock_sigma}})
     require(std::isfinite(v) && v >= 0.0, name, v, "finite and ≥ 0");
   require(s.accel_delay >= 0.0 && s.accel_delay <= kMaxAccelDelay, "accel_delay [s]", s.accel_delay,
           "in [0, kMaxAccelDelay = 0.05] s");
@@ -210,6 +211,7 @@ void AidedIns::Reset() {
   P_.setIdentity();
   last_position_nis_ = 0.0;
   consecutive_rejections_ = 0;
+  shock_covariance_.setZero();
   accel_noise_scale_ = 1.0;
   has_last_position_t_ = false;
   step_dt_ = 0.0;
@@ -282,6 +284,15 @@ Status AidedIns::UpdateImu(double t, const Vec3& gyro_B, const Vec3& f_B) {
   const Mat3 R_k = x_.R_EB * step;
   record_step(gyro_B - x_.b_g_B,
               0.5 * (x_.R_EB * (f_prev_B_ - x_.b_a_B) + R_k * (f_now_B - x_.b_a_B)) + g_E_);
+  // The shock hypothesis (settings): the force's change across the step in E, as a velocity
+  // error; the earlier ones carried along δp_k = δp + Δt δv.
+  if (const double kappa = settings_.accel_shock_sigma; kappa > 0.0) {
+    const double change = (R_k * (f_now_B - x_.b_a_B) - x_.R_EB * (f_prev_B_ - x_.b_a_B)).norm();
+    Eigen::Matrix2d F2;
+    F2 << 1.0, dt, 0.0, 1.0;
+    shock_covariance_ = F2 * shock_covariance_ * F2.transpose();
+    shock_covariance_(1, 1) += std::pow(kappa * change * dt, 2);
+  }
   const AidedInsMatrix F = TransitionWith(x_, R_k, w_dt, f_prev_B_, f_now_B, dt);
   x_ = PropagateWith(x_, R_k, f_prev_B_, f_now_B, g_E_, dt);
   f_prev_B_ = f_now_B;
@@ -433,6 +444,22 @@ Status AidedIns::UpdatePosition(double t, const Vec3& p_WM_W) {
     ++counters_.reanchored;
   }
   last_position_nis_ = Correct<3>(H, y, R, gate, &gated);
+  if (gated && shock_covariance_(1, 1) > 0.0) {
+    // The accelerometer-shock hypothesis (settings): the same sample, with the velocity and
+    // position errors the force's changes since the last position taken may have made.
+    const AidedInsMatrix P_before = P_;
+    const Mat3 I3 = Mat3::Identity();
+    P_.block<3, 3>(kPos, kPos) += shock_covariance_(0, 0) * I3;
+    P_.block<3, 3>(kPos, kVel) += shock_covariance_(0, 1) * I3;
+    P_.block<3, 3>(kVel, kPos) += shock_covariance_(1, 0) * I3;
+    P_.block<3, 3>(kVel, kVel) += shock_covariance_(1, 1) * I3;
+    last_position_nis_ = Correct<3>(H, y, R, gate, &gated);
+    if (gated)
+      P_ = P_before;
+    else
+      ++counters_.shocks_taken;
+  }
+  if (!gated) shock_covariance_.setZero();
   consecutive_rejections_ = gated ? consecutive_rejections_ + 1 : 0;
   // Covariance matching (settings): a stochastic-approximation step toward E[NIS] = 3.
   if (const double tau = settings_.accel_noise_adaptation_tau;

@@ -43,8 +43,12 @@
 // Measurements (P ← P − K S Kᵀ with the optimal gain, symmetrised; M ≤ 3 rows each):
 //   marker position  z = p_WM_W,  h = R_WE (p + R_EB r),
 //                    H = [−R̂_WE [R̂ r̂]×, 0, R̂_WE, 0, 0, R̂_WE R̂, −[ĥ]×]  (behind a χ² gate on its
-//                    3 dof; after max_consecutive_rejections gated samples the next is taken with
-//                    the position's and velocity's covariance grown, settings);
+//                    3 dof; a gated sample is tried again under the accelerometer-shock
+//                    hypothesis, P + Σ_s ⊗ I₃ on (δp, δv) with Σ_s the covariance of one axis's
+//                    [δp, δv] that the force's changes since the last position taken may have made,
+//                    Σ_s ← F Σ_s Fᵀ + diag(0, (κ |Δf_E| Δt)²), F = [1 Δt; 0 1], and taken if it
+//                    then passes; after max_consecutive_rejections gated samples the next is taken
+//                    with the position's and velocity's covariance grown, settings);
 //                    a sample stamped within the last IMU step, τ = t_k − t ∈ [0, Δt_k], is the
 //                    marker then: the step's constant acceleration a_E and rate ω taken back,
 //                    h = R_WE (p − v τ + ½ a_E τ² + R_EB Exp(−ω τ) r), the same H with
@@ -104,6 +108,19 @@ struct AidedInsSettings {
   /// 0 = off.
   double accel_noise_adaptation_tau = 0.0;
   double accel_noise_max_scale = 1e4;  ///< [-]
+  /// The accelerometer-shock hypothesis [-] (0 = off): σ of a step's specific-force integral as a
+  /// fraction κ of the force's change across the step. A position the χ² gate refuses is tried
+  /// again under the hypothesis that the integral went wrong since the last position taken: each
+  /// step a velocity error of variance (κ |R_k f̃_k − R_{k−1} f̃_{k−1}| Δt)² per axis, carried into
+  /// the position to now; the sample is taken when its NIS then passes the gate. The trapezoid
+  /// takes the force as linear between samples; what it did in between is unknown by about that
+  /// change. Where the samples are a smooth motion's the hypothesis explains little; where they
+  /// alias a shock (a tap: 30–150 m/s² from one 10 ms sample to the next, while the tool's
+  /// velocity changed by a fifth of what the samples integrate to) it explains the tracker, and
+  /// the velocity takes the correction. A tracker's own outlier after smooth samples stays
+  /// refused. 2 is `rcal fuse-loo --ins`'s choice on BROAD (README; 2–5 are alike there, 1 too
+  /// little for its taps).
+  double accel_shock_sigma = 2.0;
   /// Bias random walks: gyro [rad/s/√s], accelerometer [m/s²/√s].
   double gyro_bias_random_walk = 1e-4;
   double accel_bias_random_walk = 1e-3;
@@ -193,6 +210,7 @@ class AidedIns {
     std::int64_t positions = 0;            ///< marker positions applied
     std::int64_t position_rejected = 0;    ///< refused by the χ² gate
     std::int64_t reanchored = 0;           ///< taken after max_consecutive_rejections
+    std::int64_t shocks_taken = 0;         ///< gated, then taken as an accelerometer shock
     std::int64_t headings = 0;             ///< headings applied (UpdateHeading)
     std::int64_t frame_updates = 0;        ///< frame estimates applied (UpdateWorldFromEarth)
     std::int64_t frame_uninformative = 0;  ///< frame estimates without new information
@@ -312,6 +330,9 @@ class AidedIns {
   AidedInsMatrix P_ = AidedInsMatrix::Identity();
   double last_position_nis_ = 0.0;
   int consecutive_rejections_ = 0;
+  // The accelerometer-shock hypothesis since the last position taken (settings): the covariance
+  // of one axis's [δp, δv] its force changes may have made [m², m²/s, m²/s²].
+  Eigen::Matrix2d shock_covariance_ = Eigen::Matrix2d::Zero();
   Counters counters_;
 };
 
