@@ -3,9 +3,9 @@
 //   e = q_est ⊗ q_truth⁻¹ (both IMU → ENU), total = 2 acos|e_w|, heading = 2 atan|e_z/e_w|,
 //   inclination = 2 acos √(e_w² + e_z²); RMSE over the samples with movement = 1 and finite truth.
 // The position sensor is simulated from the truth position: decimated to --pos-rate Hz with
-// --pos-noise m of white noise per axis (seeded). Figures in files are SI (rad, m); the
-// Markdown table printed for people is in degrees and millimetres; --trace writes every sample's
-// estimates and errors.
+// --pos-noise m of white noise per axis (seeded), silent over --pos-occlusion's spans. Figures in
+// files are SI (rad, m); the Markdown table printed for people is in degrees and millimetres;
+// --trace writes every sample's estimates and errors.
 #include <spdlog/spdlog.h>
 
 #include <Eigen/Core>
@@ -56,6 +56,8 @@ struct FuseOptions {
   std::uint64_t seed = 1;
   double pos_rate_hz = 20.0;
   double pos_noise_m = 1e-3;
+  // The tracker occluded for the first [1] s of every [0] s of the trial's time (BroadTracker).
+  std::vector<double> pos_occlusion;
   std::vector<std::string> overrides;  // NAME=VALUE for the settings below
 };
 
@@ -96,6 +98,10 @@ std::string Fixed(double v, int digits) {
 int RunFuse(const FuseOptions& opt) {
   // The settings first: a bad --set is refused before a trial is read.
   const FuseSettings settings = BroadSettingsWith(opt.overrides, opt.pos_noise_m);
+  if (opt.pos_occlusion.size() == 2 && !(opt.pos_occlusion[1] < opt.pos_occlusion[0]))
+    throw std::runtime_error("fuse: --pos-occlusion: LENGTH " + Fixed(opt.pos_occlusion[1], 3) +
+                             " s must be shorter than PERIOD " + Fixed(opt.pos_occlusion[0], 3) +
+                             " s (the tracker would never see the marker)");
   const est::OrientationKfSettings& okf_settings = settings.orientation;
   const est::PositionKfSettings& pkf_settings = settings.position;
   const io::ImuCsvSettings& imu_settings = settings.imu;
@@ -130,7 +136,10 @@ int RunFuse(const FuseOptions& opt) {
   fqa_settings.earth = est::EarthFrame::kEnu;
   fqa_settings.m_ref_E = est::MagneticNorth(est::EarthFrame::kEnu);
 
-  BroadTracker tracker(opt.pos_rate_hz, opt.pos_noise_m, opt.seed);
+  const bool occluded = opt.pos_occlusion.size() == 2;
+  BroadTracker tracker(opt.pos_rate_hz, opt.pos_noise_m, opt.seed,
+                       occluded ? opt.pos_occlusion[0] : 0.0,
+                       occluded ? opt.pos_occlusion[1] : 0.0);
 
   // What the accelerometer's lag is measured from (accel_lag.hpp): the IMU stream with the
   // filter's attitude and the position sensor's samples, never the truth.
@@ -338,6 +347,9 @@ int RunFuse(const FuseOptions& opt) {
                           {"noise_m", opt.pos_noise_m},
                           {"seed", opt.seed},
                           {"samples", pos_samples}};
+  if (occluded)
+    j["position_sensor"]["occlusion"] = {{"period_s", opt.pos_occlusion[0]},
+                                         {"length_s", opt.pos_occlusion[1]}};
   j["rejected"] = {{"accelerometer", oc.accel_rejected},
                    {"accelerometer_gated", oc.accel_gated},
                    {"magnetometer", oc.mag_rejected},
@@ -409,6 +421,11 @@ const RegisterCommand kRegisterFuse(
       sub.add_option("--seed", opt->seed, "seed of the simulated position-sensor noise");
       sub.add_option("--pos-rate", opt->pos_rate_hz, "position sensor rate [Hz]");
       sub.add_option("--pos-noise", opt->pos_noise_m, "position sensor noise per axis [m]");
+      sub.add_option("--pos-occlusion", opt->pos_occlusion,
+                     "PERIOD LENGTH [s]: the position sensor silent for the first LENGTH of every "
+                     "PERIOD of the trial's time (an occluded marker); its other samples unchanged")
+          ->expected(2)
+          ->check(cli::PositiveNumber);
       sub.add_option(
           "--set", opt->overrides,
           "override a filter setting, NAME=VALUE in SI units, NAME as in the JSON "

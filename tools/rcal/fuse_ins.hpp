@@ -18,21 +18,34 @@ namespace rcal::tool {
 
 /// The simulated tracker: one sample every 1/rate_hz [s] on the grid of the first finite truth
 /// position, the truth plus white noise of noise_m [m] per axis from a generator seeded with seed.
+/// Occluded (occlusion_length_s > 0): silent over the first occlusion_length_s of every
+/// occlusion_period_s of the trial's time [s]; the samples it would have given are drawn and
+/// dropped, so every other sample is the unoccluded tracker's.
 class BroadTracker {
  public:
-  BroadTracker(double rate_hz, double noise_m, std::uint64_t seed)
-      : rng_(seed), noise_(0.0, noise_m), period_(1.0 / rate_hz) {}
-  /// The sample at t [s] if one is due and the truth p_truth [m] is finite.
+  BroadTracker(double rate_hz, double noise_m, std::uint64_t seed, double occlusion_period_s = 0.0,
+               double occlusion_length_s = 0.0)
+      : rng_(seed),
+        noise_(0.0, noise_m),
+        period_(1.0 / rate_hz),
+        occlusion_period_(occlusion_period_s),
+        occlusion_length_(occlusion_length_s) {}
+  /// The sample at t [s] if one is due, the truth p_truth [m] is finite and the marker not
+  /// occluded.
   std::optional<Eigen::Vector3d> Sample(double t, const Eigen::Vector3d& p_truth) {
     if (!(t >= next_t_ - 1e-9) || !p_truth.allFinite()) return std::nullopt;
     next_t_ = (std::isfinite(next_t_) ? next_t_ : t) + period_;
-    return Eigen::Vector3d(p_truth + sim::Draw3(noise_, rng_));
+    const Eigen::Vector3d p = p_truth + sim::Draw3(noise_, rng_);
+    if (occlusion_length_ > 0.0 && std::fmod(t, occlusion_period_) < occlusion_length_)
+      return std::nullopt;
+    return p;
   }
 
  private:
   std::mt19937_64 rng_;
   std::normal_distribution<double> noise_;
   double period_;
+  double occlusion_period_, occlusion_length_;
   double next_t_ = -std::numeric_limits<double>::infinity();
 };
 
