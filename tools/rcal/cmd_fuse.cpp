@@ -286,6 +286,14 @@ int RunFuse(const FuseOptions& opt) {
      << pc.accel_rejected << ", χ² " << pkf_settings.accel_gate_chi2 << "), refused input "
      << refused << "; zero-rate updates " << oc.zero_rate_updates << " of " << oc.samples
      << " samples.\n";
+  {
+    const auto& ic = ins.counters();
+    md << "Tracker-aided INS: marker " << Fixed(ins_pos_moving.value() * 1e3, 2)
+       << " mm during movement; positions taken " << ic.positions << " (of them " << ic.shocks_taken
+       << " as the accelerometer's shock, κ " << settings.ins.accel_shock_sigma
+       << "), refused by its χ² gate " << ic.position_rejected << ", re-anchored " << ic.reanchored
+       << ".\n";
+  }
   // The accelerometer's lag, measured from this recording (reported; pos.accel_delay applies one).
   est::AccelLagSettings lag_settings;
   lag_settings.earth = pkf_settings.earth;
