@@ -393,8 +393,14 @@ TEST(AidedInsNode, AGuessedFrameWaitsForTheIdentifiersEstimate) {
   EXPECT_EQ(node.ignored_params(), 1);
   EXPECT_EQ(node.frame_estimates(), 2);
   EXPECT_EQ(node.ins().counters().frame_updates, 1);
+  // The refined frame moved the marker: a few positions refused, said with where R_WE comes from.
+  const auto& c = node.ins().counters();
+  EXPECT_GT(c.position_rejected, 0);
   EXPECT_EQ(node.health().activity(),
-            "R_WE: the identifier's (2 estimates; 60 positions unused before)");
+            "R_WE: the identifier's (2 estimates; 60 positions unused before); positions: " +
+                std::to_string(c.position_rejected) + " refused by the χ² gate, " +
+                std::to_string(c.shocks_taken) + " taken as the accelerometer's shock, " +
+                std::to_string(c.reanchored) + " re-anchored");
   EXPECT_TRUE(node.ins().initialized());
   EXPECT_LT(geometry::AngleBetween(node.ins().R_WE(), R_WE), 2e-3);
   EXPECT_EQ(node.health().rejected(), 1) << node.health().last_error();

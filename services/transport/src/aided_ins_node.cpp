@@ -62,23 +62,38 @@ AidedInsNode::AidedInsNode(Transport& t, const estimation::OrientationKfSettings
     t_.Subscribe<kinematic_params_t>(
         o_.kinematic_params_channel, [this](const kinematic_params_t& m) { OnKinematicParams(m); },
         undecodable);
-  SayFrame();
+  SayActivity();
 }
 
-void AidedInsNode::SayFrame() {
+void AidedInsNode::SayActivity() {
+  std::string a;
   if (frame_estimates_ > 0)
-    health_.Activity("R_WE: the identifier's (" + std::to_string(frame_estimates_) +
-                     (frame_estimates_ == 1 ? " estimate" : " estimates") + "; " +
-                     std::to_string(positions_awaiting_frame_) + " positions unused before)");
+    a = "R_WE: the identifier's (" + std::to_string(frame_estimates_) +
+        (frame_estimates_ == 1 ? " estimate" : " estimates") + "; " +
+        std::to_string(positions_awaiting_frame_) + " positions unused before)";
   else if (frame_known_)
-    health_.Activity(frame_fixed_ ? "R_WE: fixed" : "R_WE: the cell's prior, learned");
+    a = frame_fixed_ ? "R_WE: fixed" : "R_WE: the cell's prior, learned";
   else
-    health_.Activity("R_WE: awaiting the identifier's (" +
-                     std::to_string(positions_awaiting_frame_) + " positions unused)");
+    a = "R_WE: awaiting the identifier's (" + std::to_string(positions_awaiting_frame_) +
+        " positions unused)";
+  said_positions_ = PositionCounts();
+  const auto [gated, shocks, reanchored] = said_positions_;
+  if (gated > 0 || shocks > 0 || reanchored > 0)
+    a += "; positions: " + std::to_string(gated) + " refused by the χ² gate, " +
+         std::to_string(shocks) + " taken as the accelerometer's shock, " +
+         std::to_string(reanchored) + " re-anchored";
+  health_.Activity(std::move(a));
+}
+
+std::array<int64_t, 3> AidedInsNode::PositionCounts() const {
+  const auto& c = ins_.counters();
+  return {earlier_positions_[0] + c.position_rejected, earlier_positions_[1] + c.shocks_taken,
+          earlier_positions_[2] + c.reanchored};
 }
 
 void AidedInsNode::StartOver() {
-  // The tracker's frame as told stays in the INS.
+  // The tracker's frame as told stays in the INS; HEALTH keeps counting its positions.
+  earlier_positions_ = PositionCounts();
   okf_.Reset();
   ins_.Reset();
   pending_imu_.clear();
@@ -129,7 +144,7 @@ void AidedInsNode::OnPosition(const position_sample_t& msg) {
   latest_ = std::max(latest_, msg.utime);
   if (!frame_known_) {
     ++positions_awaiting_frame_;
-    SayFrame();
+    SayActivity();
     health_.Tick(latest_, t_, o_.health_channel);
     return;
   }
@@ -171,7 +186,7 @@ void AidedInsNode::OnKinematicParams(const kinematic_params_t& msg) {
   }
   frame_known_ = true;
   ++frame_estimates_;
-  SayFrame();
+  SayActivity();
 }
 
 void AidedInsNode::Failed(const std::string& reason, int64_t resets_before) {
@@ -216,6 +231,7 @@ void AidedInsNode::ApplyPosition(int64_t utime, const Eigen::Vector3d& p_WM_W) {
   const int64_t resets = ins_.counters().resets;
   if (const auto st = ins_.UpdatePosition(SensorSeconds(utime), p_WM_W); !st)
     return Failed("position_sample: " + st.error(), resets);
+  if (PositionCounts() != said_positions_) SayActivity();
   // Published at the state's time, the IMU's last sample's.
   Publish(*last_stepped_, false);
 }

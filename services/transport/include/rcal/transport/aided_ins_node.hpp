@@ -30,6 +30,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <map>
@@ -119,7 +120,9 @@ class AidedInsNode : public MergingNode {
   void ApplyPosition(int64_t utime, const Eigen::Vector3d& p_WM_W);
   void Publish(int64_t utime, bool attitude);
   void Failed(const std::string& reason, int64_t resets_before);
-  void SayFrame();
+  // HEALTH's activity: where R_WE comes from and, once there are any, the positions the INS did
+  // not simply take (refused by its χ² gate, taken as the accelerometer's shock, re-anchored).
+  void SayActivity();
 
   Options o_;
   estimation::OrientationKf okf_;
@@ -131,6 +134,10 @@ class AidedInsNode : public MergingNode {
   std::map<int64_t, ImuSample> pending_imu_;
   std::multimap<int64_t, Eigen::Vector3d> pending_position_;
   int64_t positions_awaiting_frame_ = 0, ignored_params_ = 0, frame_estimates_ = 0;
+  // The INS's position counters (gated, shocks taken, re-anchored): the activity's last, and
+  // those of the INS's runs before the last StartOver (its counters start again from zero).
+  std::array<int64_t, 3> said_positions_{0, 0, 0}, earlier_positions_{0, 0, 0};
+  std::array<int64_t, 3> PositionCounts() const;
 };
 
 }  // namespace rcal::transport
