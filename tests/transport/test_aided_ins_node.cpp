@@ -13,7 +13,9 @@
 #include <cmath>
 #include <map>
 #include <memory>
+#include <optional>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "fixture.hpp"
@@ -329,6 +331,48 @@ TEST(AidedInsNode, WithoutATrackerTheImuGoesInAfterTheWait) {
   EXPECT_NE(node.health().last_error().find("not within the last IMU step"), std::string::npos)
       << node.health().last_error();
   EXPECT_EQ(node.health().rejected(), 1);
+}
+
+// HEALTH's activity says the positions the INS refused, took as shocks or re-anchored, over the
+// node's life. The tracker is re-registered twice (5 cm in x, in each motion), and the IMU is
+// silent for 0.5 s at the rest between the motions, which re-initialises the INS (its own
+// counters start again): the activity's counts are both stretches', the INS's the second's.
+TEST(AidedInsNode, HealthSaysThePositionsTheInsRefusedOverItsLife) {
+  Stream s = MakeStream(1);  // rest 0–5 s, motion 5–15 s, rest 15–20 s, motion 20–30 s, rest
+  const auto silent = [](int64_t utime) { return utime >= Utime(16.0) && utime < Utime(16.5); };
+  std::erase_if(s.imu, [&](const Sample& x) { return silent(x.utime); });
+  std::erase_if(s.tracker, [&](const position_sample_t& m) { return silent(m.utime); });
+  for (position_sample_t& m : s.tracker)
+    m.p[0] += 0.05 * ((m.utime > Utime(10.0)) + (m.utime > Utime(25.0)));
+  LcmTransport t("memq://");
+  AidedInsNode node(t, OkfSettings(), InsSettings(), StillClock());
+  std::optional<estimation::AidedIns::Counters> before_gap;
+  Feed(
+      s, 0,
+      [&](const imu_sample_t& m) {
+        if (!before_gap && m.utime >= Utime(16.5)) before_gap = node.ins().counters();
+        node.OnImu(m);
+      },
+      [&](const position_sample_t& m) { node.OnPosition(m); });
+  ASSERT_TRUE(before_gap);
+  const auto& c1 = *before_gap;
+  const auto& c2 = node.ins().counters();
+  EXPECT_EQ(c2.reinitialised, 1);      // the IMU's silence
+  ASSERT_GE(c1.position_rejected, 3);  // each jump, refused until re-anchored
+  ASSERT_GE(c2.position_rejected, 3);
+  ASSERT_GE(c1.reanchored, 1);
+  ASSERT_GE(c2.reanchored, 1);
+  EXPECT_EQ(node.health().rejected(), 0) << node.health().last_error();
+  const std::string said =
+      "; positions: " + std::to_string(c1.position_rejected + c2.position_rejected) +
+      " refused by the χ² gate, " + std::to_string(c1.shocks_taken + c2.shocks_taken) +
+      " taken as the accelerometer's shock, " + std::to_string(c1.reanchored + c2.reanchored) +
+      " re-anchored";
+  const std::string& activity = node.health().activity();
+  ASSERT_GE(activity.size(), said.size()) << activity;
+  EXPECT_EQ(activity.substr(activity.size() - said.size()), said) << activity;
+  std::printf("%s; the INS's own: %ld refused, %ld re-anchored\n", activity.c_str(),
+              static_cast<long>(c2.position_rejected), static_cast<long>(c2.reanchored));
 }
 
 // A guessed tracker frame (a cell's earth_from_world: guess): positions are not used and the INS

@@ -12,6 +12,12 @@ void Put3(const Eigen::Vector3d& v, double* out) {
   for (int i = 0; i < 3; ++i) out[i] = v(i);
 }
 
+// What became of the positions the INS did not simply take: refused, shocks, re-anchored.
+std::array<int64_t, 3> PositionCounters(const estimation::AidedIns& ins) {
+  const auto& c = ins.counters();
+  return {c.position_rejected, c.shocks_taken, c.reanchored};
+}
+
 }  // namespace
 
 orientation_estimate_t ToOrientationEstimate(const estimation::AidedIns& ins, int64_t utime) {
@@ -76,7 +82,7 @@ void AidedInsNode::SayActivity() {
   else
     a = "R_WE: awaiting the identifier's (" + std::to_string(positions_awaiting_frame_) +
         " positions unused)";
-  said_positions_ = PositionCounts();
+  said_positions_ = position_totals_;
   const auto [gated, shocks, reanchored] = said_positions_;
   if (gated > 0 || shocks > 0 || reanchored > 0)
     a += "; positions: " + std::to_string(gated) + " refused by the χ² gate, " +
@@ -85,15 +91,8 @@ void AidedInsNode::SayActivity() {
   health_.Activity(std::move(a));
 }
 
-std::array<int64_t, 3> AidedInsNode::PositionCounts() const {
-  const auto& c = ins_.counters();
-  return {earlier_positions_[0] + c.position_rejected, earlier_positions_[1] + c.shocks_taken,
-          earlier_positions_[2] + c.reanchored};
-}
-
 void AidedInsNode::StartOver() {
-  // The tracker's frame as told stays in the INS; HEALTH keeps counting its positions.
-  earlier_positions_ = PositionCounts();
+  // The tracker's frame as told stays in the INS.
   okf_.Reset();
   ins_.Reset();
   pending_imu_.clear();
@@ -229,9 +228,14 @@ void AidedInsNode::StepImu(int64_t utime, const ImuSample& s) {
 
 void AidedInsNode::ApplyPosition(int64_t utime, const Eigen::Vector3d& p_WM_W) {
   const int64_t resets = ins_.counters().resets;
-  if (const auto st = ins_.UpdatePosition(SensorSeconds(utime), p_WM_W); !st)
-    return Failed("position_sample: " + st.error(), resets);
-  if (PositionCounts() != said_positions_) SayActivity();
+  const auto before = PositionCounters(ins_);
+  const auto st = ins_.UpdatePosition(SensorSeconds(utime), p_WM_W);
+  // Added to the node's totals: what this sample added, or all the INS counts if it reset.
+  const auto after = PositionCounters(ins_);
+  for (int i = 0; i < 3; ++i)
+    position_totals_[i] += after[i] >= before[i] ? after[i] - before[i] : after[i];
+  if (!st) return Failed("position_sample: " + st.error(), resets);
+  if (position_totals_ != said_positions_) SayActivity();
   // Published at the state's time, the IMU's last sample's.
   Publish(*last_stepped_, false);
 }

@@ -134,10 +134,9 @@ class AidedInsNode : public MergingNode {
   std::map<int64_t, ImuSample> pending_imu_;
   std::multimap<int64_t, Eigen::Vector3d> pending_position_;
   int64_t positions_awaiting_frame_ = 0, ignored_params_ = 0, frame_estimates_ = 0;
-  // The INS's position counters (gated, shocks taken, re-anchored): the activity's last, and
-  // those of the INS's runs before the last StartOver (its counters start again from zero).
-  std::array<int64_t, 3> said_positions_{0, 0, 0}, earlier_positions_{0, 0, 0};
-  std::array<int64_t, 3> PositionCounts() const;
+  // The positions the INS refused by its gate, took as shocks and re-anchored, over the node's
+  // life (the INS's own counters start again at each of its resets), and what the activity said.
+  std::array<int64_t, 3> position_totals_{0, 0, 0}, said_positions_{0, 0, 0};
 };
 
 }  // namespace rcal::transport
