@@ -56,7 +56,8 @@ struct FuseOptions {
   std::uint64_t seed = 1;
   double pos_rate_hz = 20.0;
   double pos_noise_m = 1e-3;
-  // The tracker occluded for the first [1] s of every [0] s of the trial's time (BroadTracker).
+  // PERIOD, LENGTH [s]: the tracker silent for the first LENGTH of every PERIOD of the trial's
+  // time (BroadTracker); empty: never.
   std::vector<double> pos_occlusion;
   std::vector<std::string> overrides;  // NAME=VALUE for the settings below
 };
@@ -98,7 +99,8 @@ std::string Fixed(double v, int digits) {
 int RunFuse(const FuseOptions& opt) {
   // The settings first: a bad --set is refused before a trial is read.
   const FuseSettings settings = BroadSettingsWith(opt.overrides, opt.pos_noise_m);
-  if (opt.pos_occlusion.size() == 2 && !(opt.pos_occlusion[1] < opt.pos_occlusion[0]))
+  const bool occluded = opt.pos_occlusion.size() == 2;
+  if (occluded && !(opt.pos_occlusion[1] < opt.pos_occlusion[0]))
     throw std::runtime_error("fuse: --pos-occlusion: LENGTH " + Fixed(opt.pos_occlusion[1], 3) +
                              " s must be shorter than PERIOD " + Fixed(opt.pos_occlusion[0], 3) +
                              " s (the tracker would never see the marker)");
@@ -136,7 +138,6 @@ int RunFuse(const FuseOptions& opt) {
   fqa_settings.earth = est::EarthFrame::kEnu;
   fqa_settings.m_ref_E = est::MagneticNorth(est::EarthFrame::kEnu);
 
-  const bool occluded = opt.pos_occlusion.size() == 2;
   BroadTracker tracker(opt.pos_rate_hz, opt.pos_noise_m, opt.seed,
                        occluded ? opt.pos_occlusion[0] : 0.0,
                        occluded ? opt.pos_occlusion[1] : 0.0);

@@ -238,9 +238,15 @@ int RunFuseLoo(const LooOptions& opt) {
   j["in_sample_settings"] = Candidate(axes, choice.in_sample);
   double sum_vqf = 0.0;
   int n_vqf = 0;
+  // Held out, a fold's choice may fail its trial (an INS marker that ran off there): the mean
+  // attitude is then still the figure to expect, and the trials it failed are named.
+  double held_out_sum = 0.0;
+  std::vector<std::string> run_off;
   for (int t = 0; t < n_trials; ++t) {
     const auto& in = scores[choice.in_sample * n_trials + t];
     const auto& lo = scores[choice.held_out[t] * n_trials + t];
+    held_out_sum += lo.attitude.total.value();
+    if (!std::isfinite(lo.Cost())) run_off.push_back(ids[t]);
     std::string v = "–";
     if (auto it = vqf.find(ids[t]); it != vqf.end()) {
       char b[64];
@@ -271,15 +277,6 @@ int RunFuseLoo(const LooOptions& opt) {
     j["trials"][ids[t]] = {{"in_sample", rad(in)},
                            {"leave_one_out", rad(lo)},
                            {"leave_one_out_settings", Candidate(axes, choice.held_out[t])}};
-  }
-  // Held out, a fold's choice may fail its trial (an INS marker that ran off there): the mean
-  // attitude is then still the figure to expect, and the trials it failed are named.
-  double held_out_sum = 0.0;
-  std::vector<std::string> run_off;
-  for (int t = 0; t < n_trials; ++t) {
-    const TrialScore& lo = scores[choice.held_out[t] * n_trials + t];
-    held_out_sum += lo.attitude.total.value();
-    if (!std::isfinite(lo.Cost())) run_off.push_back(ids[t]);
   }
   const double held_out_mean = held_out_sum / n_trials;
   md << "\nMean total RMSE: in-sample " << choice.in_sample_mean * kRadToDeg << "°, leave-one-out "
