@@ -117,6 +117,7 @@ int main(int argc, char** argv) {
                              &options.ranges);
       if (app.count("--position-sigma") == 0) ins.position_sigma = cell.position.sigma.maxCoeff();
       if (app.count("--accel-delay") == 0) ins.accel_delay = cell.imu->accel_delay;
+      ins.max_step = estimation::MaxStepForRate(cell.imu->rate);  // a slow IMU is not silent
       if (app.count("--marker-id") == 0) options.marker_id = cell.position.markers.front();
       // The cell's lever arm is to its first marker, in the IMU's mounting frame; the filter works
       // in the axes the samples come in (r_B = R_ISᵀ r_I).
@@ -146,6 +147,7 @@ int main(int argc, char** argv) {
     }
     orientation.earth = ins.earth;
     orientation.gravity = ins.gravity;
+    orientation.max_step = ins.max_step;
     orientation.gyro_range = options.ranges.gyro;
     orientation.accel_range = options.ranges.accel;
     ins.gyro_range = options.ranges.gyro;

@@ -102,6 +102,7 @@ int main(int argc, char** argv) {
       const io::CellSpec cell = io::LoadCellSpec(services::RepoPath(cell_path));
       services::ApplyCellImu(cell, app, "orientation_kf", &settings.earth, &earth,
                              &settings.gravity, &options.ranges);
+      settings.max_step = estimation::MaxStepForRate(cell.imu->rate);  // a slow IMU is not silent
       options.imu_channel = cell.channels.imu;
       options.orientation_channel = cell.channels.orientation;
       options.health_channel = cell.channels.health;

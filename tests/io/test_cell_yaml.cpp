@@ -137,6 +137,19 @@ TEST(CellYaml, PandaCellHasSevenJointsAnImuAndPriors) {
   EXPECT_EQ(c.pipeline.orientation.gyro_noise_density, 1.5e-4);
   EXPECT_EQ(c.pipeline.orientation.gyro_range, 34.9);
   EXPECT_EQ(c.pipeline.position.position_sigma, 3e-5);
+  EXPECT_EQ(c.pipeline.orientation.max_step, 0.1);  // 100 Hz: the filter's own
+}
+
+// An IMU slower than 30 Hz: the orientation KF's longest step is three of its periods
+// (estimation::MaxStepForRate), so its every step is not taken for a silence.
+TEST(CellYaml, ASlowImuGivesTheOrientationKfThreeOfItsPeriods) {
+  std::string text = ReadFile(CellPath("panda.yaml"));
+  Replace(text, "    id: mems-imu-sim\n    rate: 100", "    id: mems-imu-sim\n    rate: 10");
+  CellSpec spec = ParseCellYaml(text, "panda.yaml");
+  spec.robot.file = CellPath("panda.yaml").parent_path() / spec.robot.file;
+  ASSERT_TRUE(spec.imu);
+  ASSERT_EQ(spec.imu->rate, 10.0);
+  EXPECT_NEAR(BuildCell(spec).pipeline.orientation.max_step, 0.3, 1e-15);
 }
 
 // The robot file's own set-up entries give way to the cell's.

@@ -336,7 +336,8 @@ TEST(AidedInsNode, WithoutATrackerTheImuGoesInAfterTheWait) {
 // HEALTH's activity says the positions the INS refused, took as shocks or re-anchored, over the
 // node's life. The tracker is re-registered twice (5 cm in x, in each motion), and the IMU is
 // silent for 0.5 s at the rest between the motions, which re-initialises the INS (its own
-// counters start again): the activity's counts are both stretches', the INS's the second's.
+// counters start again): the activity's counts are both stretches', the INS's the second's, and
+// it says the silence.
 TEST(AidedInsNode, HealthSaysThePositionsTheInsRefusedOverItsLife) {
   Stream s = MakeStream(1);  // rest 0–5 s, motion 5–15 s, rest 15–20 s, motion 20–30 s, rest
   const auto silent = [](int64_t utime) { return utime >= Utime(16.0) && utime < Utime(16.5); };
@@ -367,7 +368,8 @@ TEST(AidedInsNode, HealthSaysThePositionsTheInsRefusedOverItsLife) {
       "; positions: " + std::to_string(c1.position_rejected + c2.position_rejected) +
       " refused by the χ² gate, " + std::to_string(c1.shocks_taken + c2.shocks_taken) +
       " taken as the accelerometer's shock, " + std::to_string(c1.reanchored + c2.reanchored) +
-      " re-anchored";
+      " re-anchored; attitude started again from the sensors after 1 IMU silence longer than "
+      "0.1 s";
   const std::string& activity = node.health().activity();
   ASSERT_GE(activity.size(), said.size()) << activity;
   EXPECT_EQ(activity.substr(activity.size() - said.size()), said) << activity;

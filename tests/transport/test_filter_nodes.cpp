@@ -6,7 +6,9 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
+#include <cstdio>
 #include <memory>
 #include <vector>
 
@@ -136,6 +138,35 @@ TEST(OrientationKfNode, GapsInTheStreamAreCounted) {
   for (int k = 0; k < 100; ++k)
     if (k != 40 && k != 41 && k != 77) node.OnImu(Imu(k * kPeriod, k));
   EXPECT_EQ(node.health().gaps(), 3);
+}
+
+// An IMU silent for 0.3 s: the filter starts its attitude again from the next sample
+// (OrientationKfSettings::max_step) and HEALTH's activity says so. After a restarted driver the
+// filter's own count starts over; the node's is the process's life.
+TEST(OrientationKfNode, HealthSaysTheImuSilencesTheFilterStartedAgainAfter) {
+  LcmTransport t("memq://");
+  Outputs out(t);
+  OrientationKfNode::Options o;
+  o.time.resync_samples = 5;
+  OrientationKfNode node(t, estimation::OrientationKfSettings{}, o);
+  for (int k = 0; k < 200; ++k)
+    if (k < 100 || k >= 130) node.OnImu(Imu(50'000'000 + k * kPeriod, k));
+  EXPECT_EQ(node.filter().counters().reinitialised, 1);
+  EXPECT_EQ(node.health().activity(),
+            "attitude started again from the sensors after 1 IMU silence longer than 0.1 s");
+  // The driver starts over at 0 (4 refused, the filter starts again at the 5th), then falls
+  // silent once more.
+  for (int k = 0; k < 200; ++k)
+    if (k < 100 || k >= 130) node.OnImu(Imu(k * kPeriod, k));
+  Drain(t);
+  EXPECT_EQ(node.health().resyncs(), 1);
+  EXPECT_EQ(node.filter().counters().reinitialised, 1);
+  EXPECT_EQ(node.health().activity(),
+            "attitude started again from the sensors after 2 IMU silences longer than 0.1 s");
+  ASSERT_FALSE(out.health.empty());
+  EXPECT_EQ(out.health.back().activity, node.health().activity());
+  // A sample every step, silence or not, became an estimate.
+  EXPECT_EQ(out.orientation.size(), 170u + 166u);
 }
 
 TEST(ImuFromMessage, ValuesBeyondTheSensorRangeAreRefusedNamingTheField) {
@@ -354,6 +385,55 @@ TEST(PositionKfNode, ABankPublishesTheMixtureOfItsModels) {
                        mu[1] * node.bank().filters()[1].p_WM_W()))
                   .norm(),
               0.0, 1e-15);
+}
+
+// HEALTH's activity says, per filter of the bank, the positions it refused by its χ² gate and its
+// re-initialisations, counted over the node's life. The tracker is re-registered 5 cm away in each
+// of two stretches; between them every stream starts over (a restarted driver), and so do the
+// filters' own counters: the activity's counts are both stretches', the filters' the second's.
+TEST(PositionKfNode, HealthSaysThePositionsEachFilterRefusedOverItsLife) {
+  estimation::PositionKfBankSettings bank_settings;
+  bank_settings.models = estimation::DefaultBankModels(EnuPositionKfSettings());
+  LcmTransport t("memq://");
+  PositionKfNode::Options o;
+  o.time.resync_samples = 5;
+  PositionKfNode node(t, bank_settings, o);
+  const auto counts = [&] {
+    std::vector<std::array<int64_t, 2>> c;
+    for (const auto& f : node.bank().filters())
+      c.push_back({f.counters().position_rejected, f.counters().reinitialised});
+    return c;
+  };
+  std::vector<std::array<int64_t, 2>> first;
+  for (const int64_t start : {int64_t{50'000'000}, int64_t{0}}) {
+    for (int k = 0; k < 400; ++k) {
+      const int64_t u = start + k * kPeriod;
+      node.OnImu(Imu(u, k));
+      node.OnOrientation(OrientationAt(u));
+      position_sample_t p = PositionAt(u, k);
+      if (k >= 200) p.p[0] += 0.05;
+      if (k % 5 == 0) node.OnPosition(p);
+      Drain(t);
+    }
+    if (first.empty()) first = counts();
+  }
+  const auto second = counts();
+  ASSERT_EQ(first.size(), 2u);
+  for (size_t i = 0; i < 2; ++i) {
+    EXPECT_GE(first[i][0], 1) << "filter " << i;  // the jump was refused before it was taken
+    EXPECT_GE(second[i][0], 1) << "filter " << i;
+  }
+  const auto said = [&](int k) {
+    return std::to_string(first[0][k] + second[0][k]) + ", " +
+           std::to_string(first[1][k] + second[1][k]);
+  };
+  EXPECT_EQ(node.health().activity(),
+            "R_WE: fixed; positions (white jerk, accelerometer-driven): " + said(0) +
+                " refused by the χ² gate; " + said(1) + " re-initialised");
+  std::printf("%s; the filters' own: %ld, %ld refused, %ld, %ld re-initialised\n",
+              node.health().activity().c_str(), static_cast<long>(second[0][0]),
+              static_cast<long>(second[1][0]), static_cast<long>(second[0][1]),
+              static_cast<long>(second[1][1]));
 }
 
 // The position sensor's frame (issue 17, item 2): position_kf turns accelerations by R_WE, the

@@ -1194,7 +1194,8 @@ ImuAnalysis AnalyzeImuStream(const ImuStreamData& data, const ImuAnalysisSetting
   }
 
   spdlog::info("imu analysis: base filter (trusts every sample, constant gyro bias)");
-  const est::OrientationKfSettings base_f = BaseFilter(s);
+  est::OrientationKfSettings base_f = BaseFilter(s);
+  base_f.max_step = est::MaxStepForRate(c.rate, base_f.max_step);  // a slow IMU is not silent
   const std::vector<Eigen::Vector4d> q_base = RunOrientationFilter(data, base_f);
 
   const ImuCandidate gb = TestGyroBias(c, alpha_c, a);

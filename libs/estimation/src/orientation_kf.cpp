@@ -2,6 +2,7 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -48,6 +49,11 @@ Eigen::Matrix<double, 7, 7> PaperPhiOri(const Eigen::Vector4d& q, double dt) {
       -q(2), q(1), q(0);
   Phi.block<4, 3>(0, 4) *= h;
   return Phi;
+}
+
+double MaxStepForRate(double rate_hz, double max_step) {
+  if (!(std::isfinite(rate_hz) && rate_hz > 0.0)) return max_step;
+  return std::max(max_step, 3.0 / rate_hz);
 }
 
 OrientationKf::OrientationKf(const OrientationKfSettings& settings) : settings_(settings) {
@@ -149,6 +155,19 @@ Status OrientationKf::Update(double t, const Eigen::Vector3d& gyro_B, const Eige
   fqa.earth = settings_.earth;
   fqa.m_ref_E = MagneticNorth(settings_.earth);
   if (!initialized_) return Initialize(t, gyro_B, f_B, m_B, fqa);
+  if (settings_.max_step > 0.0 && t - t_ > settings_.max_step) {
+    // An IMU silence (settings): the attitude starts again from this sample. The gyro's bias,
+    // which a silence does not change, and the magnetic reference are kept; whether the sensor
+    // rests is not known.
+    const Eigen::Vector3d bias_B = bias_B_;
+    const Eigen::Matrix3d P_bb = P_.bottomRightCorner<3, 3>();
+    if (Status s = Initialize(t, gyro_B, f_B, m_B, fqa); !s.ok()) return s;
+    bias_B_ = bias_B;
+    P_.bottomRightCorner<3, 3>() = P_bb;
+    still_count_ = 0;
+    ++counters_.reinitialised;
+    return Status::Ok();
+  }
 
   const double dt = t - t_;
   t_ = t;

@@ -807,6 +807,7 @@ BuiltCell BuildCell(const CellSpec& spec) {
     ps.orientation.gravity = ps.position.gravity = ps.still.gravity = spec.imu->gravity;
     ps.orientation.gyro_range = spec.imu->gyro_range;
     ps.orientation.accel_range = spec.imu->accel_range;
+    ps.orientation.max_step = estimation::MaxStepForRate(spec.imu->rate);  // a slow IMU: no silence
     ps.accel_bias_sigma = spec.imu->accel_bias_sigma;
     ps.accel_bias_random_walk = spec.imu->accel_bias_random_walk;
     ps.position.accel_delay = spec.imu->accel_delay;

@@ -88,6 +88,7 @@ void AidedInsNode::SayActivity() {
     a += "; positions: " + std::to_string(gated) + " refused by the χ² gate, " +
          std::to_string(shocks) + " taken as the accelerometer's shock, " +
          std::to_string(reanchored) + " re-anchored";
+  if (silences_ > 0) a += "; " + ImuSilencesActivity(silences_, ins_.settings().max_step);
   health_.Activity(std::move(a));
 }
 
@@ -217,10 +218,15 @@ void AidedInsNode::StepImu(int64_t utime, const ImuSample& s) {
   if (const auto st = okf_.Update(t, s.gyro_B, s.f_B, s.m_B); !st)
     return Reject("imu_sample: " + st.error());
   const int64_t resets = ins_.counters().resets;
+  const int64_t reinitialised = ins_.counters().reinitialised;
   if (const auto st =
           estimation::StepAfterOrientationKf(ins_, okf_, t, s.gyro_B, s.f_B, o_.heading_from_kf);
       !st)
     return Failed("imu_sample: " + st.error(), resets);
+  if (ins_.counters().reinitialised != reinitialised) {
+    ++silences_;
+    SayActivity();
+  }
   last_stepped_ = utime;
   Publish(utime, true);
   health_.Tick(utime, t_, o_.health_channel);

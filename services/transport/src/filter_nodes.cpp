@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 
 #include "rcal/transport/adapters.hpp"
@@ -181,6 +182,13 @@ std::optional<WorldFromEarth> WorldFromEarthFromMessage(const kinematic_params_t
 
 // ---- orientation node -------------------------------------------------------------------------
 
+std::string ImuSilencesActivity(int64_t silences, double max_step) {
+  char seconds[32];
+  std::snprintf(seconds, sizeof seconds, "%g", max_step);
+  return "attitude started again from the sensors after " + std::to_string(silences) +
+         (silences == 1 ? " IMU silence" : " IMU silences") + " longer than " + seconds + " s";
+}
+
 OrientationKfNode::OrientationKfNode(Transport& t,
                                      const estimation::OrientationKfSettings& settings,
                                      Options options)
@@ -223,11 +231,14 @@ void OrientationKfNode::OnImu(const imu_sample_t& msg) {
   // A source that started over (a restarted driver): so does the filter.
   if (verdict == estimation::TimeVerdict::kResynchronised) kf_.Reset();
   const int64_t resets = kf_.counters().resets;
+  const int64_t reinitialised = kf_.counters().reinitialised;
   const auto status = kf_.Update(SensorSeconds(msg.utime), s->gyro_B, s->f_B, s->m_B);
   if (!status) {
     if (kf_.counters().resets != resets) health_.FilterReset("imu_sample: " + status.error());
     return Reject("imu_sample: " + status.error());
   }
+  if (kf_.counters().reinitialised != reinitialised)
+    health_.Activity(ImuSilencesActivity(++silences_, kf_.settings().max_step));
   const orientation_estimate_t out = ToOrientationEstimate(kf_, msg.utime);
   // Belt and braces: the filter resets on a non-finite state, so this never refuses.
   const bool finite = Eigen::Map<const Eigen::Vector4d>(out.q_EI).allFinite() &&
@@ -309,10 +320,36 @@ PositionKfNode::PositionKfNode(Transport& t, const estimation::PositionKfBankSet
     t_.Subscribe<kinematic_params_t>(
         o_.kinematic_params_channel, [this](const kinematic_params_t& m) { OnKinematicParams(m); },
         undecodable);
-    health_.Activity("R_WE: the cell's, awaiting the identifier's");
+    frame_activity_ = "R_WE: the cell's, awaiting the identifier's";
   } else {
-    health_.Activity("R_WE: fixed");
+    frame_activity_ = "R_WE: fixed";
   }
+  position_totals_.assign(kf_.filters().size(), {0, 0});
+  SayActivity();
+}
+
+void PositionKfNode::SayActivity() {
+  std::string a = frame_activity_;
+  bool any = false;
+  for (const auto& t : position_totals_) any = any || t[0] > 0 || t[1] > 0;
+  if (any) {
+    // "; positions (white jerk, accelerometer-driven): 3, 5 refused by the χ² gate; 0, 1
+    // re-initialised": the bank's filters in its order.
+    std::string models, refused, reinitialised;
+    for (size_t i = 0; i < position_totals_.size(); ++i) {
+      const char* sep = i == 0 ? "" : ", ";
+      models += sep;
+      models +=
+          kf_.filters()[i].settings().motion_model == estimation::MotionModel::kAccelerometerDriven
+              ? "accelerometer-driven"
+              : "white jerk";
+      refused += sep + std::to_string(position_totals_[i][0]);
+      reinitialised += sep + std::to_string(position_totals_[i][1]);
+    }
+    a += "; positions (" + models + "): " + refused + " refused by the χ² gate; " + reinitialised +
+         " re-initialised";
+  }
+  health_.Activity(std::move(a));
 }
 
 void PositionKfNode::OnKinematicParams(const kinematic_params_t& msg) {
@@ -330,8 +367,9 @@ void PositionKfNode::OnKinematicParams(const kinematic_params_t& msg) {
   ++world_from_earth_updates_;
   // Told in HEALTH: from the first heartbeat saying so, every estimate is in the identifier's
   // frame (a replay or a test scores from there; an operator sees the frame was found).
-  health_.Activity("R_WE: the identifier's (" + std::to_string(world_from_earth_updates_) +
-                   (world_from_earth_updates_ == 1 ? " estimate)" : " estimates)"));
+  frame_activity_ = "R_WE: the identifier's (" + std::to_string(world_from_earth_updates_) +
+                    (world_from_earth_updates_ == 1 ? " estimate)" : " estimates)");
+  SayActivity();
 }
 
 void PositionKfNode::StartOver() {
@@ -474,7 +512,24 @@ void PositionKfNode::Flush(int64_t watermark) {
         continue;
       }
       const int64_t resets = kf_.resets();
+      const auto counts = [this](size_t i) {
+        const auto& c = kf_.filters()[i].counters();
+        return std::array<int64_t, 2>{c.position_rejected, c.reinitialised};
+      };
+      std::vector<std::array<int64_t, 2>> before(position_totals_.size());
+      for (size_t i = 0; i < before.size(); ++i) before[i] = counts(i);
       const auto status = kf_.UpdatePosition(SensorSeconds(utime), p);
+      // Added to the node's totals: what this sample added, or all a filter counts if it reset.
+      bool changed = false;
+      for (size_t i = 0; i < before.size(); ++i) {
+        const auto after = counts(i);
+        for (int k = 0; k < 2; ++k) {
+          const int64_t added = after[k] >= before[i][k] ? after[k] - before[i][k] : after[k];
+          position_totals_[i][k] += added;
+          changed = changed || added > 0;
+        }
+      }
+      if (changed) SayActivity();
       if (!status) {
         FilterFailed("position_sample: " + status.error(), resets);
         continue;

@@ -338,6 +338,7 @@ class PositionKf {
   /// sample a rollback may reach, at most kMaxKeptAccelSamples after each.
   int kept_accel_samples() const;
   const Counters& counters() const { return counters_; }
+  const PositionKfSettings& settings() const { return settings_; }
 
   /// World-frame acceleration a_W = R_WE (R_EB f_B − g·up_E) [m/s²] (what the accelerometer
   /// update uses).

@@ -121,7 +121,8 @@ class AidedInsNode : public MergingNode {
   void Publish(int64_t utime, bool attitude);
   void Failed(const std::string& reason, int64_t resets_before);
   // HEALTH's activity: where R_WE comes from and, once there are any, the positions the INS did
-  // not simply take (refused by its χ² gate, taken as the accelerometer's shock, re-anchored).
+  // not simply take (refused by its χ² gate, taken as the accelerometer's shock, re-anchored) and
+  // the IMU silences it started again after.
   void SayActivity();
 
   Options o_;
@@ -137,6 +138,8 @@ class AidedInsNode : public MergingNode {
   // The positions the INS refused by its gate, took as shocks and re-anchored, over the node's
   // life (the INS's own counters start again at each of its resets), and what the activity said.
   std::array<int64_t, 3> position_totals_{0, 0, 0}, said_positions_{0, 0, 0};
+  // IMU silences the INS re-initialised after (AidedInsSettings::max_step), over the node's life.
+  int64_t silences_ = 0;
 };
 
 }  // namespace rcal::transport

@@ -16,6 +16,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <map>
@@ -114,6 +115,11 @@ inline double SensorSeconds(int64_t utime) {
 
 /// IMU → OrientationKf → ORIENTATION (one estimate per accepted IMU sample, once initialised),
 /// HEALTH at 1 Hz of sensor time.
+/// HEALTH's activity for a filter that started its attitude again after `silences` IMU silences
+/// longer than max_step [s] (OrientationKfSettings::max_step): "attitude started again from the
+/// sensors after N IMU silence(s) longer than X s".
+std::string ImuSilencesActivity(int64_t silences, double max_step);
+
 class OrientationKfNode {
  public:
   struct Options {
@@ -151,6 +157,9 @@ class OrientationKfNode {
   estimation::OrientationKf kf_;
   Health health_;
   estimation::TimeGate gate_;
+  // IMU silences the filter started again after (OrientationKfSettings::max_step) over the
+  // node's life: the filter's own count starts over with it (a restarted driver).
+  int64_t silences_ = 0;
 };
 
 /// The host's steady (monotonic) clock [µs]: only to tell a stopped stream from a late one.
@@ -273,8 +282,15 @@ class PositionKfNode : public MergingNode {
   void Applied(int64_t utime);
   void StartOver() override;
   void FilterFailed(const std::string& reason, int64_t resets_before);
+  // HEALTH's activity: where R_WE comes from and, once there are any, the positions each of the
+  // bank's filters refused by its χ² gate and the times it re-initialised.
+  void SayActivity();
   Options o_;
   estimation::PositionKfBank kf_;
+  std::string frame_activity_;  // where R_WE comes from
+  // Per filter of the bank: positions refused by its gate and its re-initialisations over the
+  // node's life (a filter's own counters start again at each of its resets).
+  std::vector<std::array<int64_t, 2>> position_totals_;
   std::optional<int64_t> last_imu_, last_orientation_, last_position_, last_applied_;
   std::optional<int64_t> last_orientation_arrival_us_;  // host steady clock [µs]
   // An IMU sample as the position filter uses it: specific force [m/s²] and rate [rad/s], body.
