@@ -34,9 +34,10 @@ int main(int argc, char** argv) {
   transport::AidedInsNode::Options options;
   estimation::OrientationKfSettings orientation;
   estimation::AidedInsSettings ins;
-  // Chosen by `rcal fuse-loo --ins` on BROAD's sixteen trials, as 13 of its 16 folds (README).
+  // Chosen by `rcal fuse-loo --ins` on BROAD's sixteen trials, as 15 of its 16 folds (README).
   ins.mag_heading_sigma = 0.6;
   ins.accel_noise_density = 0.02;
+  ins.accel_noise_adaptation_tau = 3.0;
   CLI::App app{
       "aided_ins: the tracker-aided INS on the IMU and the position sensor.\n"
       "Subscribes IMU, POSITION (and KINEMATIC_PARAMS for a guessed tracker frame); publishes\n"
@@ -57,6 +58,11 @@ int main(int argc, char** argv) {
                  "accelerometer noise density with what the model leaves out [m/s²/√Hz] (rcal "
                  "fuse-loo --ins chose 0.02 on BROAD)")
       ->check(CLI::Range(1e-6, 100.0))
+      ->capture_default_str();
+  app.add_option("--accel-noise-adaptation-tau", ins.accel_noise_adaptation_tau,
+                 "time constant of the accelerometer noise's adaptation to the position "
+                 "innovations [s] (0: off; rcal fuse-loo --ins chose 3 on BROAD)")
+      ->check(CLI::Range(0.0, 1e4))
       ->capture_default_str();
   app.add_option(
          "--accel-shock-sigma", ins.accel_shock_sigma,

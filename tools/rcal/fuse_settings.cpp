@@ -181,7 +181,7 @@ est::AidedInsSettings BroadInsSettings(double pos_noise_m) {
   s.accel_delay = BroadPositionSettings(pos_noise_m).accel_delay;
   s.mag_heading_sigma = 0.6;
   s.accel_noise_density = 0.02;
-  s.accel_noise_adaptation_tau = 0.0;
+  s.accel_noise_adaptation_tau = 3.0;
   s.accel_shock_sigma = 2.0;
   return s;
 }
