@@ -105,7 +105,8 @@ struct AidedInsSettings {
   /// log λ ← log λ + a (min(NIS, 30)/3 − 1), λ in [1, accel_noise_max_scale], and the velocity's
   /// process noise is λ accel_noise_density² Δt. Real accelerometer errors grow with the motion
   /// (vibration the samples alias, taps, scale errors) by factors no constant density fits.
-  /// 0 = off.
+  /// 0 = off. 3 s is `rcal fuse-loo --ins`'s choice on BROAD, which the aided_ins process ships
+  /// (README: it holds trial 27's vibration, whose aliased samples are otherwise taken for tilt).
   double accel_noise_adaptation_tau = 0.0;
   double accel_noise_max_scale = 1e4;  ///< [-]
   /// The accelerometer-shock hypothesis [-] (0 = off): σ of a step's specific-force integral as a
