@@ -165,6 +165,8 @@ Status OrientationKf::Update(double t, const Eigen::Vector3d& gyro_B, const Eige
     bias_B_ = bias_B;
     P_.bottomRightCorner<3, 3>() = P_bb;
     still_count_ = 0;
+    // No heading row used this sample: the field from before the silence is another body's.
+    last_mag_B_.setConstant(std::numeric_limits<double>::quiet_NaN());
     ++counters_.reinitialised;
     return Status::Ok();
   }
