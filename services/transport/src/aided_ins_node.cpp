@@ -238,8 +238,7 @@ void AidedInsNode::ApplyPosition(int64_t utime, const Eigen::Vector3d& p_WM_W) {
   const auto st = ins_.UpdatePosition(SensorSeconds(utime), p_WM_W);
   // Added to the node's totals: what this sample added, or all the INS counts if it reset.
   const auto after = PositionCounters(ins_);
-  for (int i = 0; i < 3; ++i)
-    position_totals_[i] += after[i] >= before[i] ? after[i] - before[i] : after[i];
+  for (int i = 0; i < 3; ++i) position_totals_[i] += CounterAdded(before[i], after[i]);
   if (!st) return Failed("position_sample: " + st.error(), resets);
   if (position_totals_ != said_positions_) SayActivity();
   // Published at the state's time, the IMU's last sample's.

@@ -325,6 +325,7 @@ PositionKfNode::PositionKfNode(Transport& t, const estimation::PositionKfBankSet
     frame_activity_ = "R_WE: fixed";
   }
   position_totals_.assign(kf_.filters().size(), {0, 0});
+  position_counts_before_ = position_totals_;
   SayActivity();
 }
 
@@ -516,15 +517,15 @@ void PositionKfNode::Flush(int64_t watermark) {
         const auto& c = kf_.filters()[i].counters();
         return std::array<int64_t, 2>{c.position_rejected, c.reinitialised};
       };
-      std::vector<std::array<int64_t, 2>> before(position_totals_.size());
-      for (size_t i = 0; i < before.size(); ++i) before[i] = counts(i);
+      for (size_t i = 0; i < position_counts_before_.size(); ++i)
+        position_counts_before_[i] = counts(i);
       const auto status = kf_.UpdatePosition(SensorSeconds(utime), p);
-      // Added to the node's totals: what this sample added, or all a filter counts if it reset.
+      // Added to the node's totals: what this sample added to each filter's (CounterAdded).
       bool changed = false;
-      for (size_t i = 0; i < before.size(); ++i) {
+      for (size_t i = 0; i < position_totals_.size(); ++i) {
         const auto after = counts(i);
         for (int k = 0; k < 2; ++k) {
-          const int64_t added = after[k] >= before[i][k] ? after[k] - before[i][k] : after[k];
+          const int64_t added = CounterAdded(position_counts_before_[i][k], after[k]);
           position_totals_[i][k] += added;
           changed = changed || added > 0;
         }

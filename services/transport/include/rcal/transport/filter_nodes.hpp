@@ -115,6 +115,13 @@ inline double SensorSeconds(int64_t utime) {
 
 /// IMU → OrientationKf → ORIENTATION (one estimate per accepted IMU sample, once initialised),
 /// HEALTH at 1 Hz of sensor time.
+/// What a filter's counter added since it read `before`: after − before, or all of `after` when
+/// the filter started over in between (its counters zeroed by a reset). A node keeps its own
+/// totals over its life with it.
+inline int64_t CounterAdded(int64_t before, int64_t after) {
+  return after >= before ? after - before : after;
+}
+
 /// HEALTH's activity for a filter that started its attitude again after `silences` IMU silences
 /// longer than max_step [s] (OrientationKfSettings::max_step): "attitude started again from the
 /// sensors after N IMU silence(s) longer than X s".
@@ -291,6 +298,8 @@ class PositionKfNode : public MergingNode {
   // Per filter of the bank: positions refused by its gate and its re-initialisations over the
   // node's life (a filter's own counters start again at each of its resets).
   std::vector<std::array<int64_t, 2>> position_totals_;
+  // The filters' own counts read before each position update (a buffer: no allocation per sample).
+  std::vector<std::array<int64_t, 2>> position_counts_before_;
   std::optional<int64_t> last_imu_, last_orientation_, last_position_, last_applied_;
   std::optional<int64_t> last_orientation_arrival_us_;  // host steady clock [µs]
   // An IMU sample as the position filter uses it: specific force [m/s²] and rate [rad/s], body.
