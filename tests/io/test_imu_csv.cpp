@@ -200,5 +200,29 @@ TEST(ImuCsv, EveryBroadTrialInAnotherUnitIsRefusedNamingTheUnit) {
   EXPECT_NE(msg.find("accelerometer in milli-g (× 0.00980665)?"), std::string::npos) << msg;
 }
 
+// The rate a filter's longest step is set from (rcal fuse): the median step, which an IMU's
+// silence does not slow, where the mean over the stream would.
+TEST(ImuCsv, SampleRateIsTheMedianStepsAndAGapDoesNotSlowIt) {
+  const auto stream = [](double period_s, int rows, int gap_after, double gap_s) {
+    std::string s = kHeader;
+    double t = 0.0;
+    for (int r = 1; r <= rows; ++r) {
+      t += period_s + (r == gap_after + 1 ? gap_s : 0.0);
+      s += Row(t);
+    }
+    return ParseImuCsv(s, "stream.csv");
+  };
+  EXPECT_NEAR(SampleRate(stream(0.01, 200, -1, 0.0)), 100.0, 1e-6);
+  EXPECT_NEAR(SampleRate(stream(0.2, 50, -1, 0.0)), 5.0, 1e-6);
+  // 100 Hz silent for 1 s after 100 rows: 199 steps over 2.99 s, 66.6 Hz by the mean.
+  const ImuCsv gapped = stream(0.01, 200, 100, 1.0);
+  EXPECT_NEAR(SampleRate(gapped), 100.0, 1e-6);
+  EXPECT_LT(static_cast<double>(gapped.t.size() - 1) / (gapped.t.back() - gapped.t.front()), 67.0);
+  EXPECT_TRUE(std::isnan(SampleRate(stream(0.01, 1, -1, 0.0))));
+  // A real trial: BROAD's 100 Hz files.
+  EXPECT_NEAR(SampleRate(LoadImuCsv(testing::SharedDir() / "data/broad/broad_01_100hz.csv")), 100.0,
+              1e-3);
+}
+
 }  // namespace
 }  // namespace rcal::io

@@ -98,7 +98,7 @@ std::string Fixed(double v, int digits) {
 
 int RunFuse(const FuseOptions& opt) {
   // The settings first: a bad --set is refused before a trial is read.
-  const FuseSettings settings = BroadSettingsWith(opt.overrides, opt.pos_noise_m);
+  FuseSettings settings = BroadSettingsWith(opt.overrides, opt.pos_noise_m);
   const bool occluded = opt.pos_occlusion.size() == 2;
   if (occluded && !(opt.pos_occlusion[1] < opt.pos_occlusion[0]))
     throw std::runtime_error("fuse: --pos-occlusion: LENGTH " + Fixed(opt.pos_occlusion[1], 3) +
@@ -116,6 +116,10 @@ int RunFuse(const FuseOptions& opt) {
                                   std::pair{trial.has_position, "truth position pos_x..pos_z"},
                                   std::pair{trial.has_movement, "movement"}})
     if (!has) throw std::runtime_error("fuse: " + path + ": missing the " + what + " columns");
+  // A slow IMU's steps are not silences (fuse_settings.hpp): the filters' longest step from the
+  // stream's own rate.
+  const double imu_rate_hz = io::SampleRate(trial);
+  SetMaxStepForRate(settings, imu_rate_hz);
 
   est::OrientationKf okf(okf_settings);
   // The position estimate: a bank (position_kf_bank.hpp) of the paper's motion model (these
@@ -286,7 +290,10 @@ int RunFuse(const FuseOptions& opt) {
      << pc.position_rejected << " of " << pos_samples << " (the position KF's accelerometer gate "
      << pc.accel_rejected << ", χ² " << pkf_settings.accel_gate_chi2 << "), refused input "
      << refused << "; zero-rate updates " << oc.zero_rate_updates << " of " << oc.samples
-     << " samples.\n";
+     << " samples.\n"
+     << "IMU: " << Fixed(imu_rate_hz, 1) << " Hz (median step); attitude started again after a "
+     << "step beyond " << Fixed(okf_settings.max_step, 3) << " s: orientation KF "
+     << oc.reinitialised << ", INS " << ins.counters().reinitialised << ".\n";
   {
     const auto& ic = ins.counters();
     md << "Tracker-aided INS: marker " << Fixed(ins_pos_moving.value() * 1e3, 2)
@@ -317,6 +324,9 @@ int RunFuse(const FuseOptions& opt) {
   j["trial"] = path;
   j["samples"] = n;
   j["orientation_kf"] = ScoreJson(kf_score);
+  j["orientation_kf"]["reinitialised"] = oc.reinitialised;
+  j["orientation_kf"]["max_step_s"] = okf_settings.max_step;
+  j["imu_rate_hz"] = imu_rate_hz;
   j["fqa"] = ScoreJson(fqa_score);
   {
     const est::AidedInsState& x = ins.state();
@@ -331,6 +341,7 @@ int RunFuse(const FuseOptions& opt) {
     a["reanchored"] = c.reanchored;
     a["shocks_taken"] = c.shocks_taken;
     a["reinitialised"] = c.reinitialised;
+    a["max_step_s"] = settings.ins.max_step;
     a["resets"] = c.resets;
     j["aided_ins"] = a;
   }

@@ -146,7 +146,9 @@ struct TrialScore {
 
 // The orientation KF's score on a trial, or with ins the tracker-aided INS's, fed as rcal fuse
 // feeds it (fuse_ins.hpp: its default tracker, 20 Hz, 1 mm, seed 1).
-TrialScore Score(const io::ImuCsv& trial, const FuseSettings& s, bool ins) {
+TrialScore Score(const io::ImuCsv& trial, const FuseSettings& candidate, bool ins) {
+  FuseSettings s = candidate;
+  SetMaxStepForRate(s, io::SampleRate(trial));  // as rcal fuse
   est::OrientationKf kf(s.orientation);
   est::AidedIns aided(s.ins);
   BroadTracker tracker(20.0, 1e-3, 1);

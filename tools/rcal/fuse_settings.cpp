@@ -214,4 +214,9 @@ nlohmann::json ImuRangesJson(const FuseSettings& s) {
   return js;
 }
 
+void SetMaxStepForRate(FuseSettings& s, double rate_hz) {
+  s.orientation.max_step = est::MaxStepForRate(rate_hz, s.orientation.max_step);
+  s.ins.max_step = est::MaxStepForRate(rate_hz, s.ins.max_step);
+}
+
 }  // namespace rcal::tool

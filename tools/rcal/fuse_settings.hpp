@@ -30,6 +30,12 @@ struct FuseSettings {
 FuseSettings BroadSettingsWith(const std::vector<std::string>& overrides,
                                double pos_noise_m = 1e-3);
 
+/// The longest IMU step the orientation KF and the INS integrate, for a stream sampled at
+/// rate_hz [Hz] (io::SampleRate): three of its periods where that is longer than their max_step
+/// (estimation::MaxStepForRate), so that a slow IMU is not taken for a silent one and restarted
+/// at every sample. A rate that is not finite and positive leaves the settings.
+void SetMaxStepForRate(FuseSettings& s, double rate_hz);
+
 /// Every overridable filter setting, key name_unit → value (SI).
 nlohmann::json SettingsJson(const FuseSettings& s);
 /// The sensor ranges, key name_unit → value (the magnetometer's in µT, the file's unit).

@@ -295,4 +295,12 @@ ImuCsv LoadImuCsv(const std::filesystem::path& path, const ImuCsvSettings& setti
   return ParseImuCsv(ReadFile(path), path.string(), settings);
 }
 
+double SampleRate(const ImuCsv& stream) {
+  std::vector<double> steps;
+  steps.reserve(stream.t.size());
+  for (std::size_t k = 1; k < stream.t.size(); ++k) steps.push_back(stream.t[k] - stream.t[k - 1]);
+  // The parser has checked the time strictly increasing and finite: every step is positive.
+  return 1.0 / numeric::Median(std::move(steps));
+}
+
 }  // namespace rcal::io

@@ -63,4 +63,8 @@ ImuCsv ParseImuCsv(const std::string& text, const std::string& source,
 /// Reads a file: ParseImuCsv of its text.
 ImuCsv LoadImuCsv(const std::filesystem::path& path, const ImuCsvSettings& settings = {});
 
+/// The stream's sampling rate [Hz]: 1 / the median step between rows (a gap, where the IMU fell
+/// silent, does not slow it as it would the mean). NaN with fewer than two rows.
+double SampleRate(const ImuCsv& stream);
+
 }  // namespace rcal::io
