@@ -22,6 +22,7 @@
 
 #include "rcal/geometry/so3.hpp"
 #include "rcal/io/cell_yaml.hpp"
+#include "rcal/services/aided_ins_defaults.hpp"
 #include "rcal/services/cell_imu.hpp"
 #include "rcal/services/common.hpp"
 #include "rcal/services/time_options.hpp"
@@ -33,11 +34,8 @@ int main(int argc, char** argv) {
   std::string lcm_url, earth = "ned";
   transport::AidedInsNode::Options options;
   estimation::OrientationKfSettings orientation;
-  estimation::AidedInsSettings ins;
-  // Chosen by `rcal fuse-loo --ins` on BROAD's sixteen trials, as 15 of its 16 folds (README).
-  ins.mag_heading_sigma = 0.6;
-  ins.accel_noise_density = 0.02;
-  ins.accel_noise_adaptation_tau = 3.0;
+  // `rcal fuse-loo --ins`'s choice on BROAD (aided_ins_defaults.hpp), unless the command line says.
+  estimation::AidedInsSettings ins = services::AidedInsProcessDefaults();
   CLI::App app{
       "aided_ins: the tracker-aided INS on the IMU and the position sensor.\n"
       "Subscribes IMU, POSITION (and KINEMATIC_PARAMS for a guessed tracker frame); publishes\n"
@@ -69,6 +67,12 @@ int main(int argc, char** argv) {
          "κ of the accelerometer-shock hypothesis a gated position is tried under: a step's "
          "integral uncertain by κ times the force's change across it [-] (0: off; rcal "
          "fuse-loo --ins chose 2 on BROAD)")
+      ->check(CLI::Range(0.0, 100.0))
+      ->capture_default_str();
+  app.add_option("--accel-change-sigma", ins.accel_change_sigma,
+                 "the accelerometer weighted by motion: a step's integral uncertain by this "
+                 "fraction of the force's change across it, at every step [-] (0: off; rcal "
+                 "fuse-loo --ins chose 0.1 on BROAD)")
       ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
   app.add_option("--accel-delay", ins.accel_delay,
@@ -167,11 +171,11 @@ int main(int argc, char** argv) {
     spdlog::info(
         "aided_ins on {} (earth {}, tracker σ {} m, frame: {}; lever arm r_B [{}, {}, {}] m ± {} "
         "m, accelerometer lag {} s, magnetometer heading σ {} rad, accelerometer noise {} "
-        "m/s²/√Hz, shock hypothesis κ {}) → {}, {}",
+        "m/s²/√Hz, weighted by motion {}, shock hypothesis κ {}) → {}, {}",
         t.url(), earth, ins.position_sigma, frame, ins.lever_arm_B.x(), ins.lever_arm_B.y(),
         ins.lever_arm_B.z(), ins.lever_arm_sigma, ins.accel_delay, ins.mag_heading_sigma,
-        ins.accel_noise_density, ins.accel_shock_sigma, options.orientation_channel,
-        options.tool_position_channel);
+        ins.accel_noise_density, ins.accel_change_sigma, ins.accel_shock_sigma,
+        options.orientation_channel, options.tool_position_channel);
     if (const int rc =
             rcal::services::ServeUntilStopped([&](int ms) { return t.HandleTimeout(ms); });
         rc != 0)

@@ -18,6 +18,7 @@
 #include "rcal/health_t.hpp"
 #include "rcal/io/atomic_file.hpp"
 #include "rcal/io/csv_table.hpp"
+#include "rcal/services/aided_ins_defaults.hpp"
 #include "rcal/transport/aided_ins_node.hpp"
 #include "rcal/transport/channels.hpp"
 #include "rcal/transport/filter_nodes.hpp"
@@ -468,10 +469,9 @@ TEST_F(Filters, TheAidedInsReplayMatchesTheLibrary) {
     const auto table = io::CsvTable::Load(kTrial);
     estimation::OrientationKfSettings os;
     os.earth = estimation::EarthFrame::kEnu;
-    estimation::AidedInsSettings is;  // aided_ins's defaults: fuse-loo --ins's choice
+    // aided_ins's defaults (fuse-loo --ins's choice), the process's earth frame.
+    estimation::AidedInsSettings is = services::AidedInsProcessDefaults();
     is.earth = estimation::EarthFrame::kEnu;
-    is.mag_heading_sigma = 0.6;
-    is.accel_noise_density = 0.02;
     estimation::OrientationKf okf(os);
     estimation::AidedIns ins(is);
     double next_pos_t = -INFINITY;

@@ -1347,7 +1347,7 @@ TEST(RcalCli, FuseLooChoosesTheTrackerAidedInsSettingsHeldOut) {
   EXPECT_EQ(j.at("objective"), "vqf-ratio");
   const std::vector<std::string> shipped = {
       "ins.mag_heading_sigma=0.6", "ins.accel_noise_density=0.02",
-      "ins.accel_noise_adaptation_tau=3", "ins.accel_shock_sigma=2"};
+      "ins.accel_noise_adaptation_tau=3", "ins.accel_change_sigma=0.1"};
   EXPECT_EQ(j.at("in_sample_settings").get<std::vector<std::string>>(), shipped);
   const json golden = ReadJson(RCAL_SOURCE_DIR "/tests/tools/golden/fuse_broad.json");
   // VQF's total, heading and inclination per trial [deg], from the data's README (as fuse-loo
@@ -1366,12 +1366,17 @@ TEST(RcalCli, FuseLooChoosesTheTrackerAidedInsSettingsHeldOut) {
   for (const auto& [t, v] : vqf3) vqf[t] = v[0];
   double sum = 0.0, sum_vqf = 0.0;
   int folds_shipped = 0;
-  std::vector<std::string> above_vqf;  // in-sample: trial and figure above VQF's
+  // Trial and figure above VQF's, in-sample and held out.
+  std::vector<std::string> above_vqf, above_vqf_held_out;
   for (const auto& [t, f] : j.at("trials").items()) {
     const char* figures[] = {"total_rmse_rad", "heading_rmse_rad", "inclination_rmse_rad"};
-    for (int k = 0; k < 3; ++k)
+    for (int k = 0; k < 3; ++k) {
       if (f.at("in_sample").at(figures[k]).get<double>() * 180.0 / std::numbers::pi > vqf3.at(t)[k])
         above_vqf.push_back(t + " " + figures[k]);
+      if (f.at("leave_one_out").at(figures[k]).get<double>() * 180.0 / std::numbers::pi >
+          vqf3.at(t)[k])
+        above_vqf_held_out.push_back(t + " " + figures[k]);
+    }
     folds_shipped += f.at("leave_one_out_settings").get<std::vector<std::string>>() == shipped;
     const json& in = f.at("in_sample");
     EXPECT_NEAR(in.at("total_rmse_rad").get<double>(),
@@ -1393,9 +1398,12 @@ TEST(RcalCli, FuseLooChoosesTheTrackerAidedInsSettingsHeldOut) {
   EXPECT_TRUE(j.at("leave_one_out_marker_run_off").empty());
   EXPECT_NEAR(j.at("leave_one_out_mean_total_rmse_rad").get<double>() * 180.0 / std::numbers::pi,
               sum / 16.0, 1e-9);
-  EXPECT_LT(sum / sum_vqf, 0.5);  // measured: 0.45
-  // In-sample, only trial 15's inclination is above VQF's (0.54° against 0.42°).
+  EXPECT_LT(sum / sum_vqf, 0.5);  // measured: 0.44
+  // In-sample and held out, only trial 15's inclination is above VQF's (0.54° against 0.42°):
+  // held out, 27's fold leaves the adaptation off, and the weighting by motion keeps its
+  // inclination at 0.75° against VQF's 0.77° (1.00° without it, stop 56).
   EXPECT_EQ(above_vqf, std::vector<std::string>{"15 inclination_rmse_rad"});
+  EXPECT_EQ(above_vqf_held_out, std::vector<std::string>{"15 inclination_rmse_rad"});
 }
 
 // rcal fuse --set NAME=VALUE: the whole value must be one finite number (std::stod took "0.1abc"

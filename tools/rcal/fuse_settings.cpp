@@ -71,6 +71,7 @@ std::vector<Field> InsFields(est::AidedInsSettings& s, int& heading_from_kf) {
       {"ins.accel_delay", "s", &s.accel_delay},
       {"ins.accel_noise_adaptation_tau", "s", &s.accel_noise_adaptation_tau},
       {"ins.accel_shock_sigma", "fraction", &s.accel_shock_sigma},
+      {"ins.accel_change_sigma", "fraction", &s.accel_change_sigma},
       {"ins.gyro_noise_density", "rad_s_sqrt_hz", &s.gyro_noise_density},
       {"ins.attitude_process_noise", "rad_sqrt_s", &s.attitude_process_noise},
       {"ins.accel_noise_density", "m_s2_sqrt_hz", &s.accel_noise_density},
@@ -172,7 +173,7 @@ est::PositionKfSettings BroadPositionSettings(double pos_noise_m) {
 }
 
 // The tracker-aided INS on BROAD: ENU, the simulated tracker's σ, the accelerometer's lag the
-// position KF takes out (the IMU's, measured), and the four settings `rcal fuse-loo --ins` chose
+// position KF takes out (the IMU's, measured), and the five settings `rcal fuse-loo --ins` chose
 // on all sixteen trials from its shipped grid; the rest the AidedInsSettings defaults.
 est::AidedInsSettings BroadInsSettings(double pos_noise_m) {
   est::AidedInsSettings s;
@@ -183,6 +184,7 @@ est::AidedInsSettings BroadInsSettings(double pos_noise_m) {
   s.accel_noise_density = 0.02;
   s.accel_noise_adaptation_tau = 3.0;
   s.accel_shock_sigma = 2.0;
+  s.accel_change_sigma = 0.1;
   return s;
 }
 

@@ -188,7 +188,8 @@ AidedIns::AidedIns(const AidedInsSettings& settings) : settings_(settings) {
                                 {"lever_arm_sigma", s.lever_arm_sigma},
                                 {"position_gate_chi2", s.position_gate_chi2},
                                 {"accel_noise_adaptation_tau", s.accel_noise_adaptation_tau},
-                                {"accel_shock_sigma", s.accel_shock_sigma}})
+                                {"accel_shock_sigma", s.accel_shock_sigma},
+                                {"accel_change_sigma", s.accel_change_sigma}})
     require(std::isfinite(v) && v >= 0.0, name, v, "finite and ≥ 0");
   require(s.accel_delay >= 0.0 && s.accel_delay <= kMaxAccelDelay, "accel_delay [s]", s.accel_delay,
           "in [0, kMaxAccelDelay = 0.05] s");
@@ -284,14 +285,17 @@ Status AidedIns::UpdateImu(double t, const Vec3& gyro_B, const Vec3& f_B) {
   const Mat3 R_k = x_.R_EB * step;
   record_step(gyro_B - x_.b_g_B,
               0.5 * (x_.R_EB * (f_prev_B_ - x_.b_a_B) + R_k * (f_now_B - x_.b_a_B)) + g_E_);
-  // The shock hypothesis (settings): the force's change across the step in E, as a velocity
-  // error; the earlier ones carried along δp_k = δp + Δt δv.
+  // The force's change across the step in E: the shock hypothesis's and the motion weighting's
+  // measure of what the trapezoid may have missed (settings).
+  const double force_change =
+      (R_k * (f_now_B - x_.b_a_B) - x_.R_EB * (f_prev_B_ - x_.b_a_B)).norm();
+  // The shock hypothesis (settings): that change as a velocity error; the earlier ones carried
+  // along δp_k = δp + Δt δv.
   if (const double kappa = settings_.accel_shock_sigma; kappa > 0.0) {
-    const double change = (R_k * (f_now_B - x_.b_a_B) - x_.R_EB * (f_prev_B_ - x_.b_a_B)).norm();
     Eigen::Matrix2d F2;
     F2 << 1.0, dt, 0.0, 1.0;
     shock_covariance_ = F2 * shock_covariance_ * F2.transpose();
-    shock_covariance_(1, 1) += std::pow(kappa * change * dt, 2);
+    shock_covariance_(1, 1) += std::pow(kappa * force_change * dt, 2);
   }
   const AidedInsMatrix F = TransitionWith(x_, R_k, w_dt, f_prev_B_, f_now_B, dt);
   x_ = PropagateWith(x_, R_k, f_prev_B_, f_now_B, g_E_, dt);
@@ -307,7 +311,8 @@ Status AidedIns::UpdateImu(double t, const Vec3& gyro_B, const Vec3& f_B) {
       (std::pow(settings_.gyro_noise_density, 2) + std::pow(settings_.attitude_process_noise, 2)) *
       dt;
   P_.block<3, 3>(kVel, kVel).diagonal().array() +=
-      accel_noise_scale_ * std::pow(settings_.accel_noise_density, 2) * dt;
+      accel_noise_scale_ * std::pow(settings_.accel_noise_density, 2) * dt +
+      std::pow(settings_.accel_change_sigma * force_change * dt, 2);
   P_.block<3, 3>(kBg, kBg).diagonal().array() += std::pow(settings_.gyro_bias_random_walk, 2) * dt;
   P_.block<3, 3>(kBa, kBa).diagonal().array() += std::pow(settings_.accel_bias_random_walk, 2) * dt;
   ++counters_.imu_samples;

@@ -39,7 +39,9 @@
 //   δv_k = δv − [f_E]× Δt δθ − R̄ Δt δb_a + ½ [R_k f̃_k]× R_k J_r Δt² δb_g,
 //          f_E = ½ (R_{k−1} f̃_{k−1} + R_k f̃_k), f̃ = f − b_a, R̄ = ½ (R_{k−1} + R_k),
 //   δp_k = δp + Δt δv + ½ Δt (δv_k − δv),
-// and P ← Φ P Φᵀ + Q, Q = diag((σ_g² + σ_θ²) Δt I, σ_a² Δt I, 0, σ_bg² Δt I, σ_ba² Δt I, 0, 0).
+// and P ← Φ P Φᵀ + Q, Q = diag((σ_g² + σ_θ²) Δt I, (λ σ_a² Δt + (c |Δf_E| Δt)²) I, 0, σ_bg² Δt I,
+// σ_ba² Δt I, 0, 0), λ the accelerometer noise's adaptive factor and c |Δf_E| its weighting by
+// motion (settings).
 // Measurements (P ← P − K S Kᵀ with the optimal gain, symmetrised; M ≤ 3 rows each):
 //   marker position  z = p_WM_W,  h = R_WE (p + R_EB r),
 //                    H = [−R̂_WE [R̂ r̂]×, 0, R̂_WE, 0, 0, R̂_WE R̂, −[ĥ]×]  (behind a χ² gate on its
@@ -119,9 +121,21 @@ struct AidedInsSettings {
   /// alias a shock (a tap: 30–150 m/s² from one 10 ms sample to the next, while the tool's
   /// velocity changed by a fifth of what the samples integrate to) it explains the tracker, and
   /// the velocity takes the correction. A tracker's own outlier after smooth samples stays
-  /// refused. 2 is `rcal fuse-loo --ins`'s choice on BROAD (README; 2–5 are alike there, 1 too
-  /// little for its taps).
+  /// refused. 2 was `rcal fuse-loo --ins`'s choice on BROAD (README; 2–5 are alike there, 1 too
+  /// little for its taps); with accel_change_sigma it changes nothing on the untapped trials, so
+  /// its grid keeps it at 2 rather than let the fold without the tapped trial turn it off.
   double accel_shock_sigma = 2.0;
+  /// The accelerometer weighted by motion [-] (0 = off): each step's velocity noise gains
+  /// (c |R_k f̃_k − R_{k−1} f̃_{k−1}| Δt)² per axis, the step's specific-force integral uncertain by
+  /// a fraction c of the force's change across it. The shock hypothesis's model (accel_shock_sigma)
+  /// at every step and a fraction of its size: the trapezoid is exact for a force linear between
+  /// samples, and what the force did in between (vibration the samples alias, a shock's ringing)
+  /// goes with how much it changed. A constant density that covers a vibrating tool distrusts the
+  /// calm one; this covers each step by its own motion. 0.1 is `rcal fuse-loo --ins`'s choice on
+  /// BROAD, which the aided_ins process ships (README: with it every held-out fold keeps trial 27's
+  /// phone vibration at or below VQF, where the adaptation above needs 27 among the trials it is
+  /// chosen on).
+  double accel_change_sigma = 0.0;
   /// Bias random walks: gyro [rad/s/√s], accelerometer [m/s²/√s].
   double gyro_bias_random_walk = 1e-4;
   double accel_bias_random_walk = 1e-3;
