@@ -1,6 +1,7 @@
 #include "fuse_settings.hpp"
 
 #include "rcal/estimation/position_kf_bank.hpp"
+#include "rcal/services/aided_ins_defaults.hpp"
 
 #include <algorithm>
 #include <charconv>
@@ -173,18 +174,14 @@ est::PositionKfSettings BroadPositionSettings(double pos_noise_m) {
 }
 
 // The tracker-aided INS on BROAD: ENU, the simulated tracker's σ, the accelerometer's lag the
-// position KF takes out (the IMU's, measured), and the five settings `rcal fuse-loo --ins` chose
-// on all sixteen trials from its shipped grid; the rest the AidedInsSettings defaults.
+// position KF takes out (the IMU's, measured), and what `rcal fuse-loo --ins` chose on all sixteen
+// trials from its shipped grid. The choice is the aided_ins process's own defaults, one definition
+// (services::AidedInsProcessDefaults), so that the process runs the filter this tool scores.
 est::AidedInsSettings BroadInsSettings(double pos_noise_m) {
-  est::AidedInsSettings s;
+  est::AidedInsSettings s = services::AidedInsProcessDefaults();
   s.earth = est::EarthFrame::kEnu;
   s.position_sigma = pos_noise_m;
   s.accel_delay = BroadPositionSettings(pos_noise_m).accel_delay;
-  s.mag_heading_sigma = 0.6;
-  s.accel_noise_density = 0.02;
-  s.accel_noise_adaptation_tau = 3.0;
-  s.accel_shock_sigma = 2.0;
-  s.accel_change_sigma = 0.1;
   return s;
 }
 

@@ -1,7 +1,8 @@
 // The aided_ins process's INS settings before its command line: the AidedInsSettings defaults
 // with what `rcal fuse-loo --ins` chose on BROAD's sixteen trials (README, "With the tracker").
-// One definition, so that the process and the tests that replay it against the library run the
-// same filter. Header-only.
+// One definition, so that the process, the tests that replay it against the library and `rcal
+// fuse` (BroadInsSettings, which adds BROAD's frame, tracker σ and accelerometer lag) run the same
+// filter. Header-only.
 #pragma once
 
 #include "rcal/estimation/aided_ins.hpp"
@@ -16,6 +17,7 @@ inline estimation::AidedInsSettings AidedInsProcessDefaults() {
   s.accel_noise_density = 0.02;        // [m/s²/√Hz]
   s.accel_noise_adaptation_tau = 3.0;  // [s]
   s.accel_change_sigma = 0.1;          // [-]
+  s.accel_shock_sigma = 2.0;           // κ [-]: in every candidate, not chosen (cmd_fuse_loo.cpp)
   return s;
 }
 
