@@ -294,6 +294,15 @@ int RunFuse(const FuseOptions& opt) {
      << "IMU: " << Fixed(imu_rate_hz, 1) << " Hz (median step); attitude started again after a "
      << "step beyond " << Fixed(okf_settings.max_step, 3) << " s: orientation KF "
      << oc.reinitialised << ", INS " << ins.counters().reinitialised << ".\n";
+  if (okf_settings.estimate_hard_iron) {
+    // A magnet fixed to the IMU, found from the field's norm (mag_hard_iron.hpp).
+    const auto& hc = okf.hard_iron().counters();
+    md << "Hard iron: offset taken off " << hc.applied << " magnetometer samples ("
+       << Fixed(100.0 * static_cast<double>(hc.applied) / std::max<double>(1.0, hc.samples), 1)
+       << " %); fit started again " << hc.restarts
+       << " times; last fit b_B = " << Fixed(okf.hard_iron().b_B().norm(), 2) << " µT, field "
+       << Fixed(okf.hard_iron().r(), 2) << " µT.\n";
+  }
   {
     const auto& ic = ins.counters();
     md << "Tracker-aided INS: marker " << Fixed(ins_pos_moving.value() * 1e3, 2)
@@ -388,6 +397,15 @@ int RunFuse(const FuseOptions& opt) {
   j["gyro_bias_final_rad_s"] = {okf.bias_B().x(), okf.bias_B().y(), okf.bias_B().z()};
   j["lever_arm_B_m"] = {pkf.lever_arm_B().x(), pkf.lever_arm_B().y(), pkf.lever_arm_B().z()};
   j["mag_reference"] = {{"norm_uT", okf.mag_ref_norm()}, {"dip_rad", okf.mag_ref_dip()}};
+  {
+    const est::MagHardIron& hi = okf.hard_iron();
+    j["mag_hard_iron"] = {{"applied_samples", hi.counters().applied},
+                          {"gated", hi.counters().gated},
+                          {"restarts", hi.counters().restarts},
+                          {"last_b_B_uT", {hi.b_B().x(), hi.b_B().y(), hi.b_B().z()}},
+                          {"last_field_norm_uT", hi.r()},
+                          {"last_b_sigma_uT", hi.b_sigma()}};
+  }
   if (lag)
     j["accel_lag"] = AccelLagJson(*lag);
   else

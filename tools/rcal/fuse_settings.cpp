@@ -22,8 +22,9 @@ struct Field {
   double* value;
   int* integer = nullptr;  // instead of value: a whole-number setting in [lo, hi] (an order)
   int lo = 0, hi = 0;
+  bool* flag = nullptr;  // instead of value: a switch, 0 or 1
   std::string key() const { return *unit ? std::string(name) + "_" + unit : std::string(name); }
-  double get() const { return integer ? *integer : *value; }
+  double get() const { return flag ? (*flag ? 1.0 : 0.0) : integer ? *integer : *value; }
 };
 std::vector<Field> OrientationFields(est::OrientationKfSettings& s) {
   return {{"gravity", "m_s2", &s.gravity},
@@ -38,6 +39,10 @@ std::vector<Field> OrientationFields(est::OrientationKfSettings& s) {
           {"accel_lowpass_order", "", nullptr, &s.accel_lowpass_order, 1, 2},
           {"mag_lowpass_tau", "s", &s.mag_lowpass_tau},
           {"mag_delay", "s", &s.mag_delay},
+          {"mag_hard_iron", "flag", nullptr, nullptr, 0, 0, &s.estimate_hard_iron},
+          {"mag_hard_iron_floor", "fraction", &s.hard_iron.apply_floor},
+          {"mag_hard_iron_noise", "fraction", &s.hard_iron.noise},
+          {"mag_hard_iron_random_walk", "per_sqrt_s", &s.hard_iron.random_walk},
           {"tilt_motion_accel", "m_s2", &s.tilt_motion_accel},
           {"tilt_motion_rate", "rad_s", &s.tilt_motion_rate},
           {"mag_evidence_inflation", "factor", &s.mag_evidence_inflation},
@@ -123,6 +128,13 @@ void ApplyOverrides(const std::vector<std::string>& overrides, FuseSettings& s) 
                                  [&](const Field& f) { return name == f.name || name == f.key(); });
     if (it == fields.end()) throw std::runtime_error("fuse: --set: unknown setting '" + name + "'");
     const double v = ParseSetting(name, kv.substr(eq + 1));
+    if (it->flag) {
+      if (v != 0.0 && v != 1.0)
+        throw std::runtime_error("fuse: --set " + name + ": '" + kv.substr(eq + 1) +
+                                 "' is not 0 or 1");
+      *it->flag = v == 1.0;
+      continue;
+    }
     if (!it->integer) {
       *it->value = v;
       continue;
@@ -145,6 +157,7 @@ est::OrientationKfSettings BroadOrientationSettings() {
   s.mag_lowpass_tau = 6.0;
   s.tilt_sigma = 0.008;
   s.heading_sigma = 0.15;
+  s.estimate_hard_iron = true;  // the default, written for the JSON's reader: a magnet on the tool
   return s;
 }
 
@@ -194,6 +207,8 @@ FuseSettings BroadSettingsWith(const std::vector<std::string>& overrides, double
                  BroadInsSettings(pos_noise_m),
                  0};
   ApplyOverrides(overrides, s);
+  if (est::Status st = est::CheckMagHardIronSettings(s.orientation.hard_iron); !st.ok())
+    throw std::runtime_error("fuse: --set " + st.error());
   return s;
 }
 

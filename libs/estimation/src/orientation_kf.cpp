@@ -73,6 +73,7 @@ void OrientationKf::Reset() {
   f_I_out2_.setZero();
   m_I_lp_.setZero();
   P_.setIdentity();
+  hard_iron_ = MagHardIron(settings_.hard_iron);
   const std::int64_t resets = counters_.resets;
   counters_ = {};
   counters_.resets = resets;
@@ -149,8 +150,13 @@ double OrientationKf::Correct(const Eigen::MatrixXd& H, const Eigen::VectorXd& y
 }
 
 Status OrientationKf::Update(double t, const Eigen::Vector3d& gyro_B, const Eigen::Vector3d& f_B,
-                             const Eigen::Vector3d& m_B, std::optional<bool> at_rest) {
-  if (Status s = CheckInput(t, gyro_B, f_B, m_B); !s.ok()) return s;
+                             const Eigen::Vector3d& m_meas_raw_B, std::optional<bool> at_rest) {
+  if (Status s = CheckInput(t, gyro_B, f_B, m_meas_raw_B); !s.ok()) return s;
+  // A magnet fixed to the sensor is taken off before anything uses the field (settings). A zero
+  // field, which the fit refuses, is left as it is.
+  Eigen::Vector3d m_B = m_meas_raw_B;
+  if (settings_.estimate_hard_iron && hard_iron_.Update(t, m_meas_raw_B).ok())
+    m_B -= hard_iron_.offset_B();
   FqaSettings fqa;
   fqa.earth = settings_.earth;
   fqa.m_ref_E = MagneticNorth(settings_.earth);

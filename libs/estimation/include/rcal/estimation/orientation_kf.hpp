@@ -26,6 +26,8 @@
 //   Ordering (2) before (3) makes ω_k the rate over the interval ending at t_k, as a sampled
 //   gyro measures it; propagating with ω̂_{k−1} (Eq. 20 read literally) lags the gyro by one
 //   sample, which costs several degrees on fast motion.
+// Hard iron (beyond the paper, estimate_hard_iron): m_B ← m_B − b̂_B first, b̂_B learned from the
+// field's norm alone (mag_hard_iron.hpp).
 // Magnetometer delay (beyond the paper): m_B is first turned to the gyro's time with the rate,
 // m_B ← Exp(ω̂_B mag_delay)ᵀ m_B (settings).
 // FQA inputs (beyond the paper): f_B and the accepted m_B are first low-passed (time constants
@@ -62,6 +64,7 @@
 #include <string>
 
 #include "rcal/estimation/fqa.hpp"
+#include "rcal/estimation/mag_hard_iron.hpp"
 #include "rcal/estimation/result.hpp"
 
 namespace rcal::estimation {
@@ -125,6 +128,11 @@ struct OrientationKfSettings {
   /// by ω̂ mag_delay since). Uncompensated, a lag δ puts the field δ|ω| rad off in fast rotation:
   /// its dip then fails the gate and its heading is wrong. 0 = as stamped.
   double mag_delay = 0.0;
+  /// Learn a hard-iron offset (a magnet fixed to the sensor) from the field's norm and take it
+  /// off every magnetometer sample before anything else uses it (mag_hard_iron.hpp: applied only
+  /// once it is known and beyond a floor the magnetometer's own errors do not reach).
+  bool estimate_hard_iron = true;
+  MagHardIronSettings hard_iron;
   /// See the header comment. false: one FQA(acc, mag) quaternion as in the paper.
   bool decoupled_fqa = true;
   /// Accelerometer weighted by motion: the tilt rows' standard deviation grows with the motion
@@ -263,6 +271,8 @@ class OrientationKf {
   bool still() const { return still_count_ >= settings_.still_samples; }
   const Counters& counters() const { return counters_; }
   const OrientationKfSettings& settings() const { return settings_; }
+  /// The hard-iron fit (estimate_hard_iron; untouched when off).
+  const MagHardIron& hard_iron() const { return hard_iron_; }
   /// Reference field norm and dip [rad] in use (0 until learned).
   double mag_ref_norm() const { return mag_ref_norm_; }
   double mag_ref_dip() const { return mag_ref_dip_; }
@@ -322,6 +332,7 @@ class OrientationKf {
   Eigen::Vector3d f_I_out2_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d m_I_lp_ = Eigen::Vector3d::Zero();  // low-passed m in I
   Mat9 P_ = Mat9::Identity();
+  MagHardIron hard_iron_;
   Counters counters_;
   double tilt_sigma_k_ = 0.0;  // this sample's tilt and heading σ [rad] (motion, evidence)
   double heading_sigma_k_ = 0.0;
