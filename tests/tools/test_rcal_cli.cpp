@@ -1433,9 +1433,22 @@ TEST(RcalCli, FuseSetTakesOnlyWholeFiniteNumbersAndTheJsonNamesUnits) {
     EXPECT_NE(r.output.find("accel_lowpass_order"), std::string::npos) << r.output;
     EXPECT_NE(r.output.find("whole number from 1 to 2"), std::string::npos) << r.output;
   }
+  // A switch takes 0 or 1; the hard iron's settings are checked by the library's own rule.
+  for (const char* bad : {"2", "0.5", "-1"}) {
+    const Result r = RunRcal(fuse + "--set mag_hard_iron=" + bad);
+    EXPECT_NE(r.exit_code, 0) << "'" << bad << "': " << r.output;
+    EXPECT_NE(r.output.find("mag_hard_iron: '"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("is not 0 or 1"), std::string::npos) << r.output;
+  }
+  for (const char* bad : {"mag_hard_iron_floor=-0.1", "mag_hard_iron_noise=0"}) {
+    const Result r = RunRcal(fuse + "--set " + bad);
+    EXPECT_NE(r.exit_code, 0) << bad << ": " << r.output;
+    EXPECT_NE(r.output.find("mag_hard_iron."), std::string::npos) << r.output;
+  }
   const Result ok = RunRcal(fuse +
                             "--set tilt_sigma=0.02 --set pos.accel_sigma_m_s2=2 --set "
-                            "heading_sigma_rad=5e-2 --set accel_lowpass_order=2 --json " +
+                            "heading_sigma_rad=5e-2 --set accel_lowpass_order=2 --set "
+                            "mag_hard_iron=0 --json " +
                             (d / "f.json").string());
   ASSERT_EQ(ok.exit_code, 0) << ok.output;
   const json j = ReadJson(d / "f.json");
@@ -1445,6 +1458,7 @@ TEST(RcalCli, FuseSetTakesOnlyWholeFiniteNumbersAndTheJsonNamesUnits) {
   EXPECT_EQ(s.at("pos.accel_sigma_m_s2").get<double>(), 2.0);
   EXPECT_EQ(s.at("gravity_m_s2").get<double>(), 9.81);
   EXPECT_EQ(s.at("accel_lowpass_order").get<int>(), 2);
+  EXPECT_EQ(s.at("mag_hard_iron_flag").get<int>(), 0);
   // Every key ends in its unit; the dimensionless ones say what they are.
   for (const auto& [key, value] : s.items()) {
     bool named = false;

@@ -157,7 +157,6 @@ est::OrientationKfSettings BroadOrientationSettings() {
   s.mag_lowpass_tau = 6.0;
   s.tilt_sigma = 0.008;
   s.heading_sigma = 0.15;
-  s.estimate_hard_iron = true;  // the default, written for the JSON's reader: a magnet on the tool
   return s;
 }
 

@@ -43,19 +43,6 @@ Status CheckMagHardIronSettings(const MagHardIronSettings& s) {
 MagHardIron::MagHardIron(const MagHardIronSettings& settings)
     : settings_(settings), settings_status_(CheckMagHardIronSettings(settings)) {}
 
-void MagHardIron::Reset() {
-  started_ = false;
-  t_ = 0.0;
-  m0_ = 0.0;
-  b_B_.setZero();
-  r_ = 0.0;
-  P_.setZero();
-  gated_time_ = 0.0;
-  known_time_ = 0.0;
-  applied_ = false;
-  counters_ = {};
-}
-
 void MagHardIron::Start(double t, const Eigen::Vector3d& m_B) {
   t_ = t;
   // No offset known: the sample is taken as the earth's field. A restart (the sphere's centre
@@ -102,8 +89,9 @@ Status MagHardIron::Update(double t, const Eigen::Vector3d& m_B) {
   }
   Eigen::Vector4d H;
   H << -v / n, -1.0;
+  const double R = std::pow(settings_.noise * m0_, 2);
   const double y = r_ - n;  // innovation of 0 = |m − b| − r
-  const double S = H.dot(P_ * H) + std::pow(settings_.noise * m0_, 2);
+  const double S = H.dot(P_ * H) + R;
   if (y * y / S > settings_.gate_chi2) {
     ++counters_.gated;
     gated_time_ += dt;
@@ -117,10 +105,11 @@ Status MagHardIron::Update(double t, const Eigen::Vector3d& m_B) {
     // Iterated EKF: the measurement relinearised about the updated state, as Gauss–Newton on
     // the prior and this sample. Right after a (re)start b̂ may be tens of µT from b, where one
     // linearisation about b̂ = 0 takes a wrong step and a covariance that no longer covers it.
-    const double R = std::pow(settings_.noise * m0_, 2);
+    // The first pass is the gate's linearisation about the prior.
     const Eigen::Vector4d x_prior(b_B_.x(), b_B_.y(), b_B_.z(), r_);
-    Eigen::Vector4d x = x_prior, K = Eigen::Vector4d::Zero();
-    for (int i = 0; i < kIterations; ++i) {
+    Eigen::Vector4d K = P_ * H / S;
+    Eigen::Vector4d x = x_prior + K * y;
+    for (int i = 1; i < kIterations; ++i) {
       const Eigen::Vector3d v_i = m_B - x.head<3>();
       const double n_i = v_i.norm();
       if (n_i <= 0.0) break;

@@ -75,9 +75,6 @@ class MagHardIron {
 
   explicit MagHardIron(const MagHardIronSettings& settings = {});
 
-  /// Forgets the fit and the counters.
-  void Reset();
-
   /// One magnetometer sample m_B [the sensor's unit] at time t [s], non-decreasing. A
   /// non-finite or zero sample, or a time that goes back, is refused and changes nothing; with
   /// settings CheckMagHardIronSettings refuses, every sample is refused with its error.
